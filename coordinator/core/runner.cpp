@@ -1,0 +1,78 @@
+#include "coordinator/core/runner.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace demfdm::coord {
+namespace {
+double seconds_since(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+}  // namespace
+
+Runner::Runner(std::vector<schema::Stage> stages, Driver& driver, std::map<std::string, double> dt_stable)
+    : stages_(std::move(stages)), driver_(driver), dt_stable_(std::move(dt_stable)) {}
+
+double Runner::stage_dt(const schema::Stage& st) const {
+  double dt = std::numeric_limits<double>::infinity();
+  for (auto& r : st.nodes) {
+    auto it = dt_stable_.find(r);
+    if (it != dt_stable_.end() && it->second > 0) dt = std::min(dt, it->second);
+  }
+  return std::isfinite(dt) ? dt : 0.0;
+}
+
+RunSummary Runner::run() {
+  RunSummary sum;
+  auto run_start = std::chrono::steady_clock::now();
+  std::int64_t step = 0;  // next global coupling step
+  for (std::size_t si = 0; si < stages_.size(); ++si) {
+    const auto& st = stages_[si];
+    auto idx = static_cast<std::int32_t>(si);
+    StageSummary ss;
+    ss.name = st.name;
+    ss.action = st.action;
+    ss.first_step = step;
+    auto t0 = std::chrono::steady_clock::now();
+    ss.begin = driver_.command(Cmd::StageBegin, st.nodes, step - 1, idx, st.name, stage_dt(st), {});
+    for (auto& [r, rep] : ss.begin)
+      if (rep.dt_stable > 0) dt_stable_[r] = rep.dt_stable;
+    std::int64_t end = step + st.steps;  // exclusive
+    bool done = false;
+    while (step < end) {
+      std::int64_t last = std::min(end - 1, step + st.steps_per_grant - 1);
+      double dt = stage_dt(st);
+      std::vector<double> values;
+      if (kinematics_) values = kinematics_(st, last, dt);
+      auto reps = driver_.command(Cmd::Grant, st.nodes, last, idx, st.name, dt, values);
+      step = last + 1;
+      bool all_done = true;
+      for (auto& [r, rep] : reps) {
+        if (rep.dt_stable > 0) dt_stable_[r] = rep.dt_stable;
+        ss.compute_s[r] += rep.compute_s;
+        ss.wait_s[r] += rep.wait_s;
+        if (rep.status != Status::StageDone) all_done = false;
+      }
+      if (observer_) observer_(st, last, reps);
+      if (st.until_done && all_done) {
+        done = true;
+        break;
+      }
+    }
+    ss.last_step = step - 1;
+    ss.criterion_met = done || !st.until_done;
+    ss.ended_by = st.until_done ? (done ? "done" : "budget") : "steps";
+    ss.end = driver_.command(Cmd::StageEnd, st.nodes, step - 1, idx, st.name, stage_dt(st), {});
+    ss.wall_s = seconds_since(t0);
+    sum.stages.push_back(ss);
+    if (st.until_done && !done && st.fail_on_budget)
+      throw StageError("stage '" + st.name + "' (#" + std::to_string(si) + ") used its budget of " +
+                       std::to_string(st.steps) + " steps without every node reporting its exit criterion met");
+  }
+  sum.steps = step;
+  sum.wall_s = seconds_since(run_start);
+  return sum;
+}
+
+}  // namespace demfdm::coord

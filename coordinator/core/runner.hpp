@@ -1,0 +1,84 @@
+// The coordinator's stage machine, independent of the transport.
+//
+// A run is a list of stages (scene [[stage]]). For each stage the runner sends STAGE_BEGIN to
+// the stage's nodes, grants coupling steps (one per command in coupled stages, blocks of
+// steps_per_grant otherwise) until the budget is used or, with until = "done", every node has
+// reported its exit criterion met, then sends STAGE_END. The coupling-step length sent with
+// every grant is the smallest stable step the stage's nodes reported (each node advances
+// exactly that much per coupling step). The step counter is global over the run, so step k of
+// every node always pairs the same interface data.
+#pragma once
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "common/schema/scene_schema.hpp"
+
+namespace demfdm::coord {
+
+enum class Cmd : std::int32_t { StageBegin = 1, Grant = 2, StageEnd = 3, Shutdown = 4 };
+enum class Status : std::int32_t { Ok = 0, Failed = 1, StageDone = 2 };
+
+struct NodeReport {
+  Status status = Status::Ok;
+  double time = 0, dt_stable = 0, compute_s = 0, wait_s = 0;
+  std::map<std::string, double> values;
+  std::string text;
+};
+
+// Transport: sends a command to 'targets' and returns each one's report for it. Throws on a
+// dead or failed node (the message names it).
+class Driver {
+ public:
+  virtual ~Driver() = default;
+  virtual std::map<std::string, NodeReport> command(Cmd cmd, const std::vector<std::string>& targets,
+                                                    std::int64_t step, std::int32_t stage_index,
+                                                    const std::string& stage_name, double dt,
+                                                    const std::vector<double>& values) = 0;
+};
+
+struct StageSummary {
+  std::string name, action;
+  std::int64_t first_step = 0, last_step = -1;  // global coupling steps run
+  double wall_s = 0;
+  bool criterion_met = false;
+  std::string ended_by;                          // "steps", "done", "budget"
+  std::map<std::string, NodeReport> begin, end;  // STAGE_BEGIN / STAGE_END reports
+  std::map<std::string, double> compute_s, wait_s;  // per role, summed over the stage's grants
+};
+
+struct RunSummary {
+  std::vector<StageSummary> stages;
+  double wall_s = 0;
+  std::int64_t steps = 0;
+};
+
+struct StageError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+class Runner {
+ public:
+  // Called after every grant with the step and every node's report (for histories).
+  using Observer = std::function<void(const schema::Stage&, std::int64_t step, const std::map<std::string, NodeReport>&)>;
+  // Values sent with each grant (e.g. footing kinematics); empty by default.
+  using Kinematics = std::function<std::vector<double>(const schema::Stage&, std::int64_t step, double dt)>;
+
+  Runner(std::vector<schema::Stage> stages, Driver& driver, std::map<std::string, double> dt_stable);
+  void set_observer(Observer o) { observer_ = std::move(o); }
+  void set_kinematics(Kinematics k) { kinematics_ = std::move(k); }
+  RunSummary run();
+
+ private:
+  double stage_dt(const schema::Stage& st) const;
+  std::vector<schema::Stage> stages_;
+  Driver& driver_;
+  std::map<std::string, double> dt_stable_;
+  Observer observer_;
+  Kinematics kinematics_;
+};
+
+}  // namespace demfdm::coord

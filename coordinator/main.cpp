@@ -1,0 +1,222 @@
+// coordinator: validates the scene, starts the protocol, runs the stages, ends the run.
+//
+//   coordinator SCENE --check              validate only (exit 0, or 2 with one error line)
+//   coordinator SCENE --print-nodes        "role executable" lines for launch/run
+//   coordinator --help-scene [--markdown]  every scene key with unit, default and doc
+//   coordinator SCENE --run-id=N [--lcm-url=URL] [--run-dir=DIR] [-v]
+//
+// Exit codes: 0 finished, 2 bad command line or scene, 3 a node failed, died or went silent
+// (named in the message), 130 interrupted.
+#include <unistd.h>
+
+#include <csignal>
+#include <fstream>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+
+#include "common/log/log.hpp"
+#include "coordinator/core/runner.hpp"
+#include "messages/node_runtime.hpp"
+#include "messages/protocol.hpp"
+
+using namespace demfdm;
+
+namespace {
+
+const char* kUsage =
+    "usage: coordinator SCENE [--check | --print-nodes] [--run-id=N] [--lcm-url=URL] [--run-dir=DIR] [-v]\n"
+    "       coordinator --help-scene [--markdown]\n";
+
+// Adapts the bus endpoint to the stage machine's transport interface.
+class BusDriver : public coord::Driver {
+ public:
+  explicit BusDriver(proto::CoordinatorEndpoint& ep) : ep_(ep) {}
+  std::map<std::string, coord::NodeReport> command(coord::Cmd cmd, const std::vector<std::string>& targets,
+                                                   std::int64_t step, std::int32_t stage_index,
+                                                   const std::string& stage_name, double dt,
+                                                   const std::vector<double>& values) override {
+    auto raw = ep_.command(static_cast<std::int32_t>(cmd), targets, step, stage_index, stage_name, dt, values);
+    std::map<std::string, coord::NodeReport> out;
+    for (auto& [role, r] : raw) {
+      coord::NodeReport n;
+      n.status = static_cast<coord::Status>(r.status);
+      n.time = r.time;
+      n.dt_stable = r.dt_stable;
+      n.compute_s = r.compute_s;
+      n.wait_s = r.wait_s;
+      for (int i = 0; i < r.n_values; ++i) n.values[r.names[i]] = r.values[i];
+      n.text = r.text;
+      out[role] = n;
+    }
+    return out;
+  }
+
+ private:
+  proto::CoordinatorEndpoint& ep_;
+};
+
+// Per-stage history of every value the nodes report, one CSV per stage, one row per grant.
+class History {
+ public:
+  explicit History(std::string dir) : dir_(std::move(dir)) {}
+  void record(const schema::Stage& st, std::int64_t step, const std::map<std::string, coord::NodeReport>& reps) {
+    if (dir_.empty()) return;
+    if (st.name != current_) {
+      current_ = st.name;
+      out_.close();
+      cols_.clear();
+      for (auto& [role, r] : reps)
+        for (auto& [k, v] : r.values) cols_.push_back({role, k});
+      std::string path = dir_ + "/history_" + std::to_string(index_++) + "_" + st.name + ".csv";
+      out_.open(path);
+      out_ << "step";
+      for (auto& [role, r] : reps) out_ << "," << role << ".time_s";
+      for (auto& [role, k] : cols_) out_ << "," << role << "." << k;
+      out_ << "\n";
+    }
+    out_ << step;
+    out_ << std::setprecision(17);
+    for (auto& [role, r] : reps) out_ << "," << r.time;
+    for (auto& [role, k] : cols_) {
+      auto it = reps.find(role);
+      double v = std::nan("");
+      if (it != reps.end()) {
+        auto jt = it->second.values.find(k);
+        if (jt != it->second.values.end()) v = jt->second;
+      }
+      out_ << "," << v;
+    }
+    out_ << "\n";
+    out_.flush();
+  }
+
+ private:
+  std::string dir_, current_;
+  int index_ = 0;
+  std::ofstream out_;
+  std::vector<std::pair<std::string, std::string>> cols_;
+};
+
+void on_signal(int s) { proto::request_interrupt(s); }
+
+std::string summary_text(const config::Scene& scene, const coord::RunSummary& sum,
+                         const proto::CoordinatorEndpoint& ep, const bus::BusStats& bs) {
+  std::ostringstream os;
+  os << std::fixed << std::setprecision(3);
+  os << "scene: " << scene.origin() << " (hash " << std::hex << scene.hash() << std::dec << ")\n";
+  os << "nodes:\n";
+  for (auto& [r, n] : ep.nodes())
+    os << "  " << r << ": " << n.solver << " pid " << n.pid << " on " << n.host << " (" << n.build_id << ")\n";
+  os << "stages:\n";
+  for (auto& s : sum.stages) {
+    os << "  " << s.name << " [" << s.action << "]: steps " << s.first_step << ".." << s.last_step << " ("
+       << (s.last_step - s.first_step + 1) << "), wall " << s.wall_s << " s, ended by " << s.ended_by << "\n";
+    for (auto& [r, c] : s.compute_s) {
+      double w = s.wait_s.count(r) ? s.wait_s.at(r) : 0.0;
+      double tot = c + w;
+      os << "    " << r << ": compute " << c << " s, bus wait " << w << " s ("
+         << (tot > 0 ? 100.0 * w / tot : 0.0) << " %)\n";
+    }
+  }
+  os << "total: " << sum.steps << " coupling steps in " << sum.wall_s << " s\n";
+  os << "coordinator bus: published " << bs.published << ", accepted " << bs.accepted << ", foreign-run "
+     << bs.foreign_run << ", duplicates " << bs.duplicates << ", decode errors " << bs.decode_errors << "\n";
+  return os.str();
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::vector<std::string> pos;
+  node::Options opt;
+  try {
+    opt = node::parse_options(argc, argv, &pos, {"--check", "--print-nodes", "--help-scene", "--markdown", "--help", "-h"});
+  } catch (const std::exception& e) {
+    std::cerr << "coordinator: " << e.what() << "\n" << kUsage;
+    return 2;
+  }
+  auto flag = [&](const char* f) {
+    for (auto it = pos.begin(); it != pos.end(); ++it)
+      if (*it == f) {
+        pos.erase(it);
+        return true;
+      }
+    return false;
+  };
+  bool check = flag("--check"), print_nodes = flag("--print-nodes"), help_scene = flag("--help-scene"),
+       markdown = flag("--markdown"), help = flag("--help") || flag("-h");
+  if (help) {
+    std::cout << kUsage;
+    return 0;
+  }
+  if (help_scene) {
+    std::cout << (markdown ? schema::scene_schema().markdown() : schema::scene_schema().help_text());
+    return 0;
+  }
+  if (pos.size() != 1) {
+    std::cerr << "coordinator: expected one scene file, found " << pos.size() << " arguments\n" << kUsage;
+    return 2;
+  }
+  config::Scene scene;
+  try {
+    scene = config::Scene::load(pos[0], schema::scene_schema());
+  } catch (const config::Error& e) {
+    std::cerr << e.what() << "\n";
+    return 2;
+  }
+  auto roles = schema::roles(scene);
+  if (check) {
+    std::cout << pos[0] << ": OK (" << schema::stages(scene).size() << " stages; nodes:";
+    for (auto& r : roles) std::cout << " " << r << "=" << schema::executable(scene, r);
+    std::cout << ")\n";
+    return 0;
+  }
+  if (print_nodes) {
+    for (auto& r : roles) std::cout << r << " " << schema::executable(scene, r) << "\n";
+    return 0;
+  }
+
+  auto log = log::setup("coordinator", opt.run_dir, opt.verbose);
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+  std::unique_ptr<bus::Bus> bus;
+  std::unique_ptr<proto::CoordinatorEndpoint> ep;
+  try {
+    bus = std::make_unique<bus::Bus>(bus::resolve_url(opt.url), opt.run_id, "coordinator");
+    proto::Timeouts t;
+    t.heartbeat_s = scene.real("bus.heartbeat_s");  // defaults apply when [bus] is absent
+    t.peer_timeout_s = scene.real("bus.peer_timeout_s");
+    t.startup_s = scene.real("bus.startup_s");
+    t.resend_after_s = scene.real("bus.resend_after_s");
+    log->info("run {} on {}; scene {}; nodes: {}", opt.run_id, bus->url(), pos[0], roles.size());
+    ep = std::make_unique<proto::CoordinatorEndpoint>(*bus, t);
+    ep->start(scene.text(), scene.origin(), scene.hash(), roles);
+    std::map<std::string, double> dt;
+    for (auto& [r, n] : ep->nodes()) {
+      dt[r] = n.dt_stable;
+      log->info("hello from {}: {} pid {} on {} ({})", r, n.solver, n.pid, n.host, n.build_id);
+    }
+    BusDriver driver(*ep);
+    coord::Runner runner(schema::stages(scene), driver, dt);
+    History hist(opt.run_dir);
+    runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
+    auto sum = runner.run();
+    ep->shutdown("run finished");
+    auto text = summary_text(scene, sum, *ep, bus->stats());
+    log->info("run finished\n{}", text);
+    if (!opt.run_dir.empty()) std::ofstream(opt.run_dir + "/summary.txt") << text;
+    std::cout << text;
+    return 0;
+  } catch (const proto::ShutdownRequested& e) {
+    log->error("{}", e.what());
+    if (ep) ep->shutdown(e.what());
+    return 130;
+  } catch (const std::exception& e) {
+    log->error("run failed: {}", e.what());
+    std::cerr << "coordinator: run failed: " << e.what() << "\n";
+    if (ep) ep->shutdown(std::string("coordinator: ") + e.what());
+    if (!opt.run_dir.empty()) std::ofstream(opt.run_dir + "/summary.txt") << "FAILED: " << e.what() << "\n";
+    return 3;
+  }
+}

@@ -1,0 +1,208 @@
+#include "messages/node_runtime.hpp"
+
+#include <csignal>
+#include <cstdlib>
+#include <iostream>
+#include <unistd.h>
+
+#include "common/log/log.hpp"
+
+namespace demfdm::node {
+
+proto::InterfaceMesh Participant::interface_mesh() {
+  throw std::logic_error("this solver cannot play the continuum side of a coupled stage");
+}
+proto::Kinematics Participant::interface_kinematics() {
+  throw std::logic_error("this solver cannot play the continuum side of a coupled stage");
+}
+void Participant::apply_interface_forces(const proto::Forces&) {
+  throw std::logic_error("this solver cannot play the continuum side of a coupled stage");
+}
+void Participant::set_interface_mesh(const proto::InterfaceMesh&) {
+  throw std::logic_error("this solver cannot play the DEM side of a coupled stage");
+}
+void Participant::set_interface_kinematics(const proto::Kinematics&) {
+  throw std::logic_error("this solver cannot play the DEM side of a coupled stage");
+}
+proto::Forces Participant::interface_forces() {
+  throw std::logic_error("this solver cannot play the DEM side of a coupled stage");
+}
+
+Options parse_options(int argc, char** argv, std::vector<std::string>* positional,
+                      const std::vector<std::string>& flags) {
+  Options o;
+  auto value = [](const std::string& a, const std::string& key, std::string& out) {
+    if (a.rfind(key + "=", 0) == 0) {
+      out = a.substr(key.size() + 1);
+      return true;
+    }
+    return false;
+  };
+  for (int i = 1; i < argc; ++i) {
+    std::string a = argv[i], v;
+    if (value(a, "--lcm-url", v)) {
+      o.url = v;
+    } else if (value(a, "--run-id", v)) {
+      char* end = nullptr;
+      o.run_id = std::strtoll(v.c_str(), &end, 10);
+      if (v.empty() || *end != '\0')
+        throw std::invalid_argument("--run-id: expected an integer, found '" + v + "'");
+    } else if (value(a, "--run-dir", v)) {
+      o.run_dir = v;
+    } else if (a == "-v" || a == "--verbose") {
+      o.verbose = true;
+    } else if (std::find(flags.begin(), flags.end(), a) != flags.end() && positional) {
+      positional->push_back(a);
+    } else if (!a.empty() && a[0] == '-') {
+      throw std::invalid_argument("unknown option '" + a + "'");
+    } else if (positional) {
+      positional->push_back(a);
+    } else {
+      throw std::invalid_argument("unexpected argument '" + a + "'");
+    }
+  }
+  return o;
+}
+
+namespace {
+void on_signal(int s) { proto::request_interrupt(s); }
+}  // namespace
+
+int run_node(int argc, char** argv, const std::string& role, const std::string& solver, const Factory& make) {
+  Options opt;
+  try {
+    opt = parse_options(argc, argv);
+  } catch (const std::exception& e) {
+    std::cerr << solver << ": " << e.what() << "\nusage: " << solver
+              << " --run-id=N [--lcm-url=URL] [--run-dir=DIR] [-v]\n";
+    return 2;
+  }
+  auto log = log::setup(role, opt.run_dir, opt.verbose);
+  std::signal(SIGINT, on_signal);
+  std::signal(SIGTERM, on_signal);
+
+  std::unique_ptr<bus::Bus> bus;
+  std::unique_ptr<proto::NodeEndpoint> ep;
+  std::unique_ptr<Participant> part;
+  std::int64_t step = -1;
+  std::int32_t stage_index = -1;
+  try {
+    bus = std::make_unique<bus::Bus>(bus::resolve_url(opt.url), opt.run_id, role);
+    log->info("{} ({}) on {} run {} pid {}", role, solver, bus->url(), opt.run_id, ::getpid());
+    proto::Timeouts t;
+    ep = std::make_unique<proto::NodeEndpoint>(*bus, role, solver, t);
+    std::string text = ep->wait_scene();
+    Context ctx{opt, config::Scene(), role};
+    try {
+      ctx.scene = config::Scene::parse(text, ep->scene_origin(), schema::scene_schema());
+    } catch (const config::Error& e) {
+      log->error("scene rejected: {}", e.what());
+      return 2;
+    }
+    log->info("scene {} (hash {:016x}) received", ep->scene_origin(), ctx.scene.hash());
+    part = make(ctx);
+    auto stages = schema::stages(ctx.scene);
+    std::string scheme = ctx.scene.has("coupling") ? ctx.scene.string("coupling.scheme") : "serial";
+    bool parallel = scheme == "parallel";
+    bool mesh_done = false;
+    ep->hello(part->dt_stable());
+
+    for (;;) {
+      auto c = ep->next_command();
+      // Waiting for the command counts as bus wait, not compute.
+      double cmd_wait = ep->take_wait_s();
+      auto t0 = std::chrono::steady_clock::now();
+      auto compute = [&] {
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      };
+      if (c.command == demfdm::command_t::SHUTDOWN) {
+        log->info("shutdown: {}", c.text);
+        part->finish();
+        ep->heartbeat().stop();
+        return 0;
+      }
+      if (c.stage_index < 0 || c.stage_index >= static_cast<std::int32_t>(stages.size()))
+        throw proto::ProtocolError("command names stage " + std::to_string(c.stage_index) + ", the scene has " +
+                                   std::to_string(stages.size()));
+      const auto& st = stages[static_cast<std::size_t>(c.stage_index)];
+      stage_index = c.stage_index;
+      if (c.command == demfdm::command_t::STAGE_BEGIN) {
+        log->info("stage {} '{}' ({}) begins after step {}", c.stage_index, st.name, st.action, c.header.step);
+        auto values = part->stage_begin(st, c.header.step + 1);
+        step = c.header.step;
+        if (st.coupled) {
+          if (role == "continuum") {
+            if (!mesh_done) ep->send_mesh(part->interface_mesh());
+            auto k = part->interface_kinematics();
+            k.step = step;
+            ep->send_kin(k);
+          } else {
+            if (!mesh_done) part->set_interface_mesh(ep->wait_mesh());
+            if (parallel) {
+              part->set_interface_kinematics(ep->wait_kin(step));
+              auto f = part->interface_forces();
+              f.step = step;
+              ep->send_forces(f);
+            }
+          }
+          mesh_done = true;
+        }
+        double w = ep->take_wait_s();
+        ep->report(c.header.step, demfdm::report_t::OK, c.stage_index, part->time(), part->dt_stable(),
+                   compute() - w, w + cmd_wait, values);
+      } else if (c.command == demfdm::command_t::GRANT) {
+        for (std::int64_t k = step + 1; k <= c.header.step; ++k) {
+          if (st.coupled && role == "dem") part->set_interface_kinematics(ep->wait_kin(k - 1));
+          if (st.coupled && role == "continuum") part->apply_interface_forces(ep->wait_forces(parallel ? k - 1 : k));
+          part->advance(st, k, c.dt, c.values);
+          ep->heartbeat().tick();
+          if (st.coupled && role == "dem") {
+            auto f = part->interface_forces();
+            f.step = k;
+            ep->send_forces(f);
+          }
+          if (st.coupled && role == "continuum") {
+            auto kin = part->interface_kinematics();
+            kin.step = k;
+            ep->send_kin(kin);
+          }
+          step = k;
+        }
+        // Bus waits inside the grant (interface data) are not compute time.
+        double w = ep->take_wait_s();
+        auto status = part->criterion_met(st) ? demfdm::report_t::STAGE_DONE : demfdm::report_t::OK;
+        ep->report(c.header.step, status, c.stage_index, part->time(), part->dt_stable(), compute() - w, w + cmd_wait,
+                   part->step_values());
+      } else if (c.command == demfdm::command_t::STAGE_END) {
+        auto values = part->stage_end(st, c.header.step);
+        log->info("stage {} '{}' ends after step {}", c.stage_index, st.name, c.header.step);
+        double w = ep->take_wait_s();
+        ep->report(c.header.step, demfdm::report_t::OK, c.stage_index, part->time(), part->dt_stable(),
+                   compute() - w, w + cmd_wait, values);
+      }
+    }
+  } catch (const proto::ShutdownRequested& e) {
+    log->warn("{}", e.what());
+    if (part) part->finish();
+    return proto::interrupted() ? 130 : 0;
+  } catch (const std::exception& e) {
+    log->error("{} failed at step {}: {}", role, step + 1, e.what());
+    if (ep) {
+      try {
+        ep->report(step + 1, demfdm::report_t::FAILED, stage_index, part ? part->time() : 0.0, 0.0, 0.0, 0.0, {},
+                   role + " at step " + std::to_string(step + 1) + ": " + e.what());
+        bus->pump(0.05);
+      } catch (...) {
+      }
+    }
+    if (part) {
+      try {
+        part->finish();
+      } catch (...) {
+      }
+    }
+    return 3;
+  }
+}
+
+}  // namespace demfdm::node

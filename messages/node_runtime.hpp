@@ -1,0 +1,81 @@
+// The life of a node process, shared by every node executable (dem_node, fdm_node, another
+// continuum solver, the protocol test participants), so that each of them is only an adapter
+// from the protocol to its engine:
+//
+//   parse the command line -> open the bus -> receive the scene -> validate it -> build the
+//   participant -> hello -> follow commands (stage begin, grants, stage end) -> shutdown.
+//
+// Coupled stages follow one data schedule for every solver pair (messages/README.md):
+//   kin(j)   = continuum interface positions/velocities after its step j,
+//   force(j) = DEM interface forces computed in its step j.
+//   DEM, step k:        wait kin(k-1), move facets, advance, send force(k).
+//   continuum, step k:  wait force(k) (serial) or force(k-1) (parallel), advance, send kin(k).
+// At the first coupled stage the continuum sends its interface mesh; at every coupled stage
+// begin it sends kin(s0-1), and in the parallel scheme the DEM answers with force(s0-1).
+#pragma once
+
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "common/schema/scene_schema.hpp"
+#include "messages/protocol.hpp"
+
+namespace demfdm::node {
+
+struct Options {
+  std::string url;      // LCM URL (--lcm-url, else $LCM_DEFAULT_URL)
+  std::int64_t run_id = 0;
+  std::string run_dir;  // outputs and the node's log go here ("" = no files)
+  bool verbose = false;
+};
+
+// What an engine adapter implements. Called on the node's main thread only.
+class Participant {
+ public:
+  virtual ~Participant() = default;
+  // Largest coupling-step length this node can take now [s] (0: no preference).
+  virtual double dt_stable() const = 0;
+  virtual double time() const = 0;
+  // Stage set-up (the stage's action); returns values for the STAGE_BEGIN report.
+  virtual proto::Values stage_begin(const schema::Stage& stage, std::int64_t first_step) = 0;
+  // One coupling step of length dt (values: the coordinator's kinematics for this step).
+  virtual void advance(const schema::Stage& stage, std::int64_t step, double dt,
+                       const std::vector<double>& values) = 0;
+  // Values reported after each grant (e.g. footing force, unbalanced ratio).
+  virtual proto::Values step_values() = 0;
+  // With until = "done": has this node met the stage's exit criterion?
+  virtual bool criterion_met(const schema::Stage&) { return false; }
+  virtual proto::Values stage_end(const schema::Stage& stage, std::int64_t last_step) = 0;
+  // Flush outputs; called once before exit (also after an error, best effort).
+  virtual void finish() {}
+
+  // Coupling hooks, continuum role.
+  virtual proto::InterfaceMesh interface_mesh();
+  virtual proto::Kinematics interface_kinematics();
+  virtual void apply_interface_forces(const proto::Forces& f);
+  // Coupling hooks, DEM role.
+  virtual void set_interface_mesh(const proto::InterfaceMesh& m);
+  virtual void set_interface_kinematics(const proto::Kinematics& k);
+  virtual proto::Forces interface_forces();
+};
+
+struct Context {
+  Options options;
+  config::Scene scene;
+  std::string role;
+};
+
+using Factory = std::function<std::unique_ptr<Participant>(const Context&)>;
+
+// Runs a node to the end. Returns the process exit code: 0 finished, 2 bad command line or
+// scene, 3 protocol or engine failure (reported to the coordinator and logged), 130 interrupted.
+int run_node(int argc, char** argv, const std::string& role, const std::string& solver, const Factory& make);
+
+// Command-line parsing shared by the node executables and the coordinator.
+// Recognises --lcm-url=URL, --run-id=N, --run-dir=DIR, -v; throws std::invalid_argument on
+// anything else (the message names the argument).
+Options parse_options(int argc, char** argv, std::vector<std::string>* positional = nullptr,
+                      const std::vector<std::string>& flags = {});
+
+}  // namespace demfdm::node
