@@ -105,6 +105,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
     std::string scheme = ctx.scene.has("coupling") ? ctx.scene.string("coupling.scheme") : "serial";
     bool parallel = scheme == "parallel";
     bool mesh_done = false;
+    std::int64_t kin_applied = -2;  // DEM: step of the continuum kinematics last applied
     ep->hello(part->dt_stable());
 
     for (;;) {
@@ -140,6 +141,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
             if (!mesh_done) part->set_interface_mesh(ep->wait_mesh());
             if (parallel) {
               part->set_interface_kinematics(ep->wait_kin(step));
+              kin_applied = step;
               auto f = part->interface_forces();
               f.step = step;
               ep->send_forces(f);
@@ -152,7 +154,10 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
                    compute() - w, w + cmd_wait, values);
       } else if (c.command == demfdm::command_t::GRANT) {
         for (std::int64_t k = step + 1; k <= c.header.step; ++k) {
-          if (st.coupled && role == "dem") part->set_interface_kinematics(ep->wait_kin(k - 1));
+          if (st.coupled && role == "dem" && kin_applied != k - 1) {
+            part->set_interface_kinematics(ep->wait_kin(k - 1));
+            kin_applied = k - 1;
+          }
           if (st.coupled && role == "continuum") part->apply_interface_forces(ep->wait_forces(parallel ? k - 1 : k));
           part->advance(st, k, c.dt, c.values);
           ep->heartbeat().tick();

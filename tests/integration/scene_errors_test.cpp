@@ -1,0 +1,133 @@
+// Bad input gets one clear line `file:line:col: key: expected ..., found ...` and exit code 2
+// before anything starts; launch/run never overwrites an earlier run folder.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "tests/integration/process.hpp"
+
+namespace fs = std::filesystem;
+using namespace demfdm::testing;
+
+namespace {
+const std::string kBin = DEMFDM_BIN_DIR;
+const std::string kSrc = DEMFDM_SOURCE_DIR;
+
+const std::string kGood =
+    "[dem]\nexecutable = \"chain_dem\"\n[continuum]\nexecutable = \"chain_continuum\"\n"
+    "[coupling]\nscheme = \"serial\"\n[chain]\nn_masses = 20\nsplit = 10\n"
+    "[[stage]]\nname = \"wave\"\nsteps = 10\ncoupled = true\n";
+
+struct Check {
+  int code;
+  std::string out;
+};
+
+Check check_text(const std::string& name, const std::string& text) {
+  auto dir = fs::temp_directory_path() / ("demfdm-scenes-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  auto path = dir / (name + ".toml");
+  std::ofstream(path) << text;
+  auto out = dir / (name + ".out");
+  fs::remove(out);
+  auto p = spawn({kBin + "/coordinator", path.string(), "--check"}, {}, out.string());
+  auto st = wait_for(p, 30);
+  EXPECT_TRUE(st.has_value());
+  return {st ? exit_code(*st) : -1, read_file(out.string())};
+}
+
+std::string replace(std::string s, const std::string& from, const std::string& to) {
+  auto i = s.find(from);
+  EXPECT_NE(i, std::string::npos) << from;
+  return s.replace(i, from.size(), to);
+}
+
+struct Case {
+  const char* name;
+  std::string text;
+  const char* position;  // ":line:col:" expected
+  const char* message;   // expected substring
+};
+}  // namespace
+
+TEST(SceneErrors, GoodSceneValidates) {
+  auto c = check_text("good", kGood);
+  EXPECT_EQ(c.code, 0) << c.out;
+}
+
+TEST(SceneErrors, EachKindOfBadSceneGivesOneLineAndExitTwo) {
+  std::vector<Case> cases = {
+      {"unknown_key", replace(kGood, "scheme =", "schem ="), ":6:1:", "coupling.schem: unknown key; did you mean 'scheme'?"},
+      {"unknown_section", replace(kGood, "[coupling]", "[coupler]"), ":5:2:", "coupler: unknown section; did you mean 'coupling'?"},
+      {"wrong_type", replace(kGood, "n_masses = 20", "n_masses = \"twenty\""), ":8:12:", "chain.n_masses: expected"},
+      {"real_for_int", replace(kGood, "n_masses = 20", "n_masses = 20.5"), ":8:12:", "found"},
+      {"out_of_range", replace(kGood, "n_masses = 20", "n_masses = 1"), ":8:12:", "chain.n_masses: expected"},
+      {"bad_choice", replace(kGood, "\"serial\"", "\"implicit\""), ":6:10:", "expected one of 'serial', 'parallel'"},
+      {"missing_required_key", replace(kGood, "steps = 10\n", ""), ":10:1:", "stage[0].steps: missing required key"},
+      {"missing_required_section", replace(kGood, "[[stage]]\nname = \"wave\"\nsteps = 10\ncoupled = true\n", ""), ":1:1:", "stage"},
+      {"toml_syntax", replace(kGood, "split = 10", "split = = 10"), ":9:", "TOML syntax error"},
+      {"coupling_without_continuum", replace(kGood, "[continuum]\nexecutable = \"chain_continuum\"\n", ""), ":3:1:",
+       "coupling: expected both [dem] and [continuum]"},
+      {"unknown_role", replace(kGood, "coupled = true", "coupled = true\nnodes = [\"fem\"]"), ":14:", "stage[0].nodes: expected roles present"},
+      {"split_too_large", replace(kGood, "split = 10", "split = 20"), ":9:9:", "chain.split: expected an integer in [1, n_masses-1]"},
+      {"list_of_wrong_type", replace(kGood, "coupled = true", "coupled = true\nnodes = \"dem\""), ":14:", "stage[0].nodes: expected"},
+      {"no_node_at_all", "[[stage]]\nname = \"x\"\nsteps = 1\n", ":1:1:", "expected a [dem] or a [continuum] section"},
+  };
+  for (auto& c : cases) {
+    auto r = check_text(c.name, c.text);
+    SCOPED_TRACE(c.name);
+    EXPECT_EQ(r.code, 2) << r.out;
+    EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << "one line expected, got:\n" << r.out;
+    EXPECT_NE(r.out.find(std::string(c.name) + ".toml" + c.position), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find(c.message), std::string::npos) << r.out;
+  }
+}
+
+TEST(SceneErrors, MissingSceneFileIsNamed) {
+  auto out = fs::temp_directory_path() / ("demfdm-missing-" + std::to_string(getpid()) + ".out");
+  auto p = spawn({kBin + "/coordinator", "/nonexistent/scene.toml", "--check"}, {}, out.string());
+  auto st = wait_for(p, 10);
+  ASSERT_TRUE(st);
+  EXPECT_EQ(exit_code(*st), 2);
+  EXPECT_NE(read_file(out.string()).find("/nonexistent/scene.toml"), std::string::npos);
+}
+
+TEST(SceneErrors, BrokenSceneThroughLaunchRun) {
+  auto out = fs::temp_directory_path() / ("demfdm-broken-" + std::to_string(getpid()) + ".out");
+  auto runs = fs::temp_directory_path() / ("demfdm-broken-runs-" + std::to_string(getpid()));
+  auto p = spawn({"/bin/bash", kSrc + "/launch/run", kSrc + "/scenes/broken.toml", "--no-build", "--runs-root", runs.string()},
+                 {"DEMFDM_BUILD=" + fs::path(kBin).parent_path().string()}, out.string());
+  auto st = wait_for(p, 30);
+  ASSERT_TRUE(st);
+  EXPECT_EQ(exit_code(*st), 2);
+  auto text = read_file(out.string());
+  EXPECT_NE(text.find("broken.toml:13:1: coupling.schem: unknown key; did you mean 'scheme'?"), std::string::npos) << text;
+  EXPECT_FALSE(fs::exists(runs) && !fs::is_empty(runs)) << "nothing may start for a broken scene";
+}
+
+TEST(LaunchRun, WritesACompleteRunFolderAndNeverOverwritesOne) {
+  auto runs = fs::temp_directory_path() / ("demfdm-launch-" + std::to_string(getpid()));
+  fs::remove_all(runs);
+  auto dir = runs / "one";
+  fs::create_directories(runs);
+  auto out = runs / "launch.out";
+  std::vector<std::string> env = {"DEMFDM_BUILD=" + fs::path(kBin).parent_path().string()};
+  auto p = spawn({"/bin/bash", kSrc + "/launch/run", kSrc + "/scenes/chain_serial.toml", "--no-build", "--run-dir", dir.string()},
+                 env, out.string());
+  auto st = wait_for(p, 60);
+  ASSERT_TRUE(st);
+  ASSERT_EQ(exit_code(*st), 0) << read_file(out.string());
+  for (auto f : {"scene.toml", "coordinator.log", "dem.log", "continuum.log", "traffic.lcmlog", "summary.txt",
+                 "chain_dem.csv", "chain_continuum.csv"})
+    EXPECT_TRUE(fs::exists(dir / f)) << f;
+  EXPECT_GT(fs::file_size(dir / "traffic.lcmlog"), 1000u);
+  auto summary = read_file((dir / "summary.txt").string());
+  // A second run into the same folder is refused and the first run's files stay as they were.
+  auto p2 = spawn({"/bin/bash", kSrc + "/launch/run", kSrc + "/scenes/chain_serial.toml", "--no-build", "--run-dir", dir.string()},
+                  env, (runs / "launch2.out").string());
+  auto st2 = wait_for(p2, 30);
+  ASSERT_TRUE(st2);
+  EXPECT_EQ(exit_code(*st2), 2);
+  EXPECT_NE(read_file((runs / "launch2.out").string()).find("never overwritten"), std::string::npos);
+  EXPECT_EQ(read_file((dir / "summary.txt").string()), summary);
+}

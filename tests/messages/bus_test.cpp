@@ -1,0 +1,246 @@
+// Unit tests of the typed bus and the protocol endpoints on memq:// (one process, no network).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+
+#include "messages/bus.hpp"
+#include "messages/protocol.hpp"
+
+using namespace demfdm;
+
+namespace {
+std::shared_ptr<lcm::LCM> memq() {
+  auto l = std::make_shared<lcm::LCM>("memq://");
+  EXPECT_TRUE(l->good());
+  return l;
+}
+demfdm::report_t report(double v) {
+  demfdm::report_t r{};
+  r.header.step = 3;
+  r.n_values = 1;
+  r.names = {"x"};
+  r.values = {v};
+  return r;
+}
+}  // namespace
+
+TEST(Messages, EncodeDecodeRoundTripAndFingerprintsDiffer) {
+  auto r = report(1.5);
+  r.text = "hello";
+  std::vector<std::uint8_t> buf(r.getEncodedSize());
+  ASSERT_EQ(r.encode(buf.data(), 0, static_cast<int>(buf.size())), static_cast<int>(buf.size()));
+  demfdm::report_t back;
+  ASSERT_EQ(back.decode(buf.data(), 0, static_cast<int>(buf.size())), static_cast<int>(buf.size()));
+  EXPECT_EQ(back.values[0], 1.5);
+  EXPECT_EQ(back.text, "hello");
+  auto fp = bus::compiled_fingerprints();
+  std::set<std::int64_t> unique;
+  for (auto& f : fp) unique.insert(f.hash);
+  EXPECT_EQ(unique.size(), fp.size()) << "every message type must have its own fingerprint";
+}
+
+TEST(Bus, TypedPublishSubscribeFillsHeader) {
+  auto l = memq();
+  bus::Bus a(l, 7, "dem"), b(l, 7, "coordinator");
+  std::vector<demfdm::report_t> got;
+  b.subscribe<demfdm::report_t>("R", [&](const demfdm::report_t& r) { got.push_back(r); });
+  auto r = report(2.0);
+  auto seq1 = a.publish("R", r);
+  auto seq2 = a.publish("R", r);
+  b.pump(0.1);
+  ASSERT_EQ(got.size(), 2u);
+  EXPECT_EQ(got[0].header.sender, "dem");
+  EXPECT_EQ(got[0].header.run_id, 7);
+  EXPECT_EQ(got[0].header.msg_type, demfdm::msg_types_t::MSG_REPORT);
+  EXPECT_EQ(got[0].header.seq, seq1);
+  EXPECT_EQ(got[1].header.seq, seq2);
+  EXPECT_EQ(seq2, seq1 + 1);
+}
+
+TEST(Bus, RejectsForeignRunOwnEchoAndDuplicates) {
+  auto l = memq();
+  bus::Bus a(l, 7, "dem"), other_run(l, 8, "dem"), b(l, 7, "coordinator");
+  int n = 0;
+  b.subscribe<demfdm::report_t>("R", [&](const demfdm::report_t&) { ++n; });
+  a.subscribe<demfdm::report_t>("R", [&](const demfdm::report_t&) { ADD_FAILURE() << "own message delivered"; });
+  auto r = report(1);
+  a.publish("R", r);
+  a.republish("R", r);  // same seq: a duplicate
+  other_run.publish("R", r);
+  b.pump(0.1);
+  EXPECT_EQ(n, 1);
+  auto s = b.stats();
+  EXPECT_EQ(s.duplicates, 1);
+  EXPECT_EQ(s.foreign_run, 1);
+  EXPECT_GE(a.stats().own_echo, 1);
+}
+
+TEST(Bus, CorruptMessageIsCountedNotThrown) {
+  auto l = memq();
+  bus::Bus b(l, 7, "coordinator");
+  int n = 0;
+  b.subscribe<demfdm::report_t>("R", [&](const demfdm::report_t&) { ++n; });
+  // A report whose n_values length field is -1: lcm-gen's decode() would throw inside C code.
+  auto r = report(1);
+  r.header.run_id = 7;
+  r.header.sender = "dem";
+  r.header.msg_type = demfdm::msg_types_t::MSG_REPORT;
+  std::vector<std::uint8_t> buf(r.getEncodedSize());
+  r.encode(buf.data(), 0, static_cast<int>(buf.size()));
+  std::vector<std::uint8_t> junk(buf.begin(), buf.begin() + 20);  // truncated
+  l->publish("R", junk.data(), static_cast<unsigned>(junk.size()));
+  // And a message of another type on the channel.
+  demfdm::heartbeat_t hb{};
+  bus::Bus a(l, 7, "dem");
+  a.publish("R", hb);
+  EXPECT_NO_THROW(b.pump(0.1));
+  EXPECT_EQ(n, 0);
+  EXPECT_EQ(b.stats().decode_errors + b.stats().wrong_type, 2);
+}
+
+TEST(Bus, HandlerErrorIsRethrownFromPump) {
+  auto l = memq();
+  bus::Bus a(l, 7, "dem"), b(l, 7, "coordinator");
+  b.subscribe<demfdm::report_t>("R", [&](const demfdm::report_t&) { throw std::runtime_error("handler says no"); });
+  auto r = report(1);
+  a.publish("R", r);
+  EXPECT_THROW(
+      {
+        try {
+          b.pump(0.1);
+        } catch (const std::runtime_error& e) {
+          EXPECT_STREQ(e.what(), "handler says no");
+          throw;
+        }
+      },
+      std::runtime_error);
+}
+
+TEST(Bus, FaultInjectionDropsAndDuplicates) {
+  setenv("DEMFDM_FAULT", "drop:R:2,dup:R:3", 1);
+  auto l = memq();
+  bus::Bus a(l, 7, "dem");
+  unsetenv("DEMFDM_FAULT");
+  bus::Bus b(l, 7, "coordinator");
+  std::vector<double> got;
+  b.subscribe<demfdm::report_t>("R", [&](const demfdm::report_t& r) { got.push_back(r.values[0]); });
+  for (int i = 1; i <= 4; ++i) {
+    auto r = report(i);
+    a.publish("R", r);
+  }
+  b.pump(0.1);
+  EXPECT_EQ(got, (std::vector<double>{1, 3, 4}));  // 2 dropped; the duplicate of 3 filtered
+  EXPECT_EQ(b.stats().duplicates, 1);
+  EXPECT_EQ(a.stats().injected_drops, 1);
+  setenv("DEMFDM_FAULT", "explode:R", 1);
+  EXPECT_THROW(bus::Bus(l, 7, "x"), bus::BusError);
+  unsetenv("DEMFDM_FAULT");
+}
+
+TEST(Bus, UrlResolution) {
+  unsetenv("LCM_DEFAULT_URL");
+  EXPECT_EQ(bus::resolve_url("udpm://239.255.76.67:7000?ttl=0"), "udpm://239.255.76.67:7000?ttl=0&recv_buf_size=4194304");
+  EXPECT_EQ(bus::resolve_url("udpm://239.255.76.67:7000"), "udpm://239.255.76.67:7000?recv_buf_size=4194304");
+  EXPECT_EQ(bus::resolve_url("memq://"), "memq://");
+  setenv("LCM_DEFAULT_URL", "memq://", 1);
+  EXPECT_EQ(bus::resolve_url(""), "memq://");
+  unsetenv("LCM_DEFAULT_URL");
+}
+
+TEST(Protocol, ChunksCoverTheRangeOnce) {
+  auto c = proto::chunks(2500, 1000);
+  ASSERT_EQ(c.size(), 3u);
+  EXPECT_EQ(c[2].first, 2000u);
+  EXPECT_EQ(c[2].second, 500u);
+  EXPECT_EQ(proto::chunks(0).size(), 1u);
+}
+
+TEST(Protocol, InterfaceDataSurvivesChunkingAndMessagesStaySmall) {
+  auto l = memq();
+  bus::Bus cb(l, 9, "continuum"), db(l, 9, "dem");
+  proto::NodeEndpoint cont(cb, "continuum", "test"), dem(db, "dem", "test");
+  // Keep the coordinator "alive" for the endpoints' liveness check.
+  bus::Bus coord(l, 9, "coordinator");
+  proto::Heartbeat hb(coord, 0.05);
+  proto::Kinematics k;
+  k.step = 4;
+  const std::size_t n = 2345;
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    k.positions.push_back(0.001 * static_cast<double>(i));
+    k.velocities.push_back(-1.0 * static_cast<double>(i));
+  }
+  cont.send_kin(k);
+  auto got = dem.wait_kin(4);
+  EXPECT_EQ(got.positions, k.positions);
+  EXPECT_EQ(got.velocities, k.velocities);
+  // The largest chunk: 1000 points x 48 B + header.
+  demfdm::iface_kin_t m{};
+  m.n_points = 1000;
+  m.n_coords = 3000;
+  m.positions.assign(3000, 1.0);
+  m.velocities.assign(3000, 1.0);
+  EXPECT_LT(m.getEncodedSize(), 60000);
+  // Forces, with the total checked by the receiver side.
+  proto::Forces f;
+  f.step = 4;
+  f.forces.assign(3 * n, 0.5);
+  f.stiffness.assign(n, 2.0);
+  f.total = {0.5 * n, 0.5 * n, 0.5 * n};
+  dem.send_forces(f);
+  auto gf = cont.wait_forces(4);
+  EXPECT_EQ(gf.forces, f.forces);
+  EXPECT_EQ(gf.total, f.total);
+}
+
+TEST(Protocol, NonFiniteInterfaceDataStopsTheRunNamingTheSender) {
+  auto l = memq();
+  bus::Bus cb(l, 9, "continuum"), db(l, 9, "dem"), coord(l, 9, "coordinator");
+  proto::Heartbeat hb(coord, 0.05);
+  proto::NodeEndpoint cont(cb, "continuum", "test"), dem(db, "dem", "test");
+  proto::Kinematics k;
+  k.step = 1;
+  k.positions = {0, 0, std::nan("")};
+  k.velocities = {0, 0, 0};
+  cont.send_kin(k);
+  try {
+    dem.wait_kin(1);
+    FAIL() << "expected a ProtocolError";
+  } catch (const proto::ProtocolError& e) {
+    EXPECT_NE(std::string(e.what()).find("non-finite interface kinematics from continuum at step 1, point row 0"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(Protocol, LostMessageIsResentAfterNack) {
+  setenv("DEMFDM_FAULT", "drop:DEMFDM_IFACE_FORCE:1", 1);
+  auto l = memq();
+  bus::Bus db(l, 9, "dem");
+  unsetenv("DEMFDM_FAULT");
+  bus::Bus cb(l, 9, "continuum"), coord(l, 9, "coordinator");
+  proto::Heartbeat hb(coord, 0.05);
+  proto::NodeEndpoint cont(cb, "continuum", "test"), dem(db, "dem", "test");
+  proto::Forces f;
+  f.step = 2;
+  f.forces = {1, 2, 3};
+  f.stiffness = {4};
+  dem.send_forces(f);  // dropped
+  // The continuum waits, NACKs; whoever pumps dispatches the NACK to the DEM endpoint too.
+  auto got = cont.wait_forces(2);
+  EXPECT_EQ(got.forces, f.forces);
+  EXPECT_GE(cont.nacks_sent(), 1);
+  EXPECT_GE(dem.resends(), 1);
+}
+
+TEST(Protocol, SilentCoordinatorIsDetected) {
+  auto l = memq();
+  bus::Bus db(l, 9, "dem");
+  proto::Timeouts t;
+  t.peer_timeout_s = 0.3;
+  proto::NodeEndpoint dem(db, "dem", "test", t);
+  auto t0 = std::chrono::steady_clock::now();
+  EXPECT_THROW(dem.next_command(), proto::ProtocolError);
+  double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(s, 1.0);
+}
