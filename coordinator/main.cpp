@@ -32,11 +32,13 @@ const char* kUsage =
 class BusDriver : public coord::Driver {
  public:
   explicit BusDriver(proto::CoordinatorEndpoint& ep) : ep_(ep) {}
-  std::map<std::string, coord::NodeReport> command(coord::Cmd cmd, const std::vector<std::string>& targets,
-                                                   std::int64_t step, std::int32_t stage_index,
-                                                   const std::string& stage_name, double dt,
-                                                   const std::vector<double>& values) override {
-    auto raw = ep_.command(static_cast<std::int32_t>(cmd), targets, step, stage_index, stage_name, dt, values);
+  void post(coord::Cmd cmd, const std::vector<std::string>& targets, std::int64_t step, std::int32_t stage_index,
+            const std::string& stage_name, double dt, const std::vector<double>& values) override {
+    ep_.post(static_cast<std::int32_t>(cmd), targets, step, stage_index, stage_name, dt, values);
+  }
+  std::map<std::string, coord::NodeReport> collect(coord::Cmd cmd, const std::vector<std::string>& targets,
+                                                   std::int64_t step, std::int32_t stage_index) override {
+    auto raw = ep_.collect(static_cast<std::int32_t>(cmd), targets, step, stage_index);
     std::map<std::string, coord::NodeReport> out;
     for (auto& [role, r] : raw) {
       coord::NodeReport n;
@@ -198,7 +200,8 @@ int main(int argc, char** argv) {
       log->info("hello from {}: {} pid {} on {} ({})", r, n.solver, n.pid, n.host, n.build_id);
     }
     BusDriver driver(*ep);
-    coord::Runner runner(schema::stages(scene), driver, dt);
+    coord::Runner runner(schema::stages(scene), driver, dt,
+                         scene.has("coupling") ? scene.integer("coupling.window") : 1);
     History hist(opt.run_dir);
     runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
     auto sum = runner.run();

@@ -589,6 +589,13 @@ void CoordinatorEndpoint::check_alive(const std::vector<std::string>& roles) {
 std::map<std::string, demfdm::report_t> CoordinatorEndpoint::command(
     std::int32_t cmd, const std::vector<std::string>& targets, std::int64_t step, std::int32_t stage_index,
     const std::string& stage_name, double dt, const std::vector<double>& values, const std::string& text) {
+  post(cmd, targets, step, stage_index, stage_name, dt, values, text);
+  return collect(cmd, targets, step, stage_index);
+}
+
+void CoordinatorEndpoint::post(std::int32_t cmd, const std::vector<std::string>& targets, std::int64_t step,
+                               std::int32_t stage_index, const std::string& stage_name, double dt,
+                               const std::vector<double>& values, const std::string& text) {
   demfdm::command_t c;
   c.header.step = step;
   c.command = cmd;
@@ -601,14 +608,24 @@ std::map<std::string, demfdm::report_t> CoordinatorEndpoint::command(
   c.text = text;
   bus_.publish(bus::channel::kCommand, c);
   hb_.set_step(step);
+  outstanding_[{cmd, step}] = {c, targets};
+}
+
+std::map<std::string, demfdm::report_t> CoordinatorEndpoint::collect(std::int32_t cmd,
+                                                                     const std::vector<std::string>& targets,
+                                                                     std::int64_t step, std::int32_t stage_index) {
   std::vector<std::string> all;
   for (auto& [r, n] : nodes_) all.push_back(r);
-  auto key = [&](const std::string& r) { return std::make_pair(r + "#" + std::to_string(cmd), step); };
+  auto key = [](const std::string& r, std::int32_t c, std::int64_t s) {
+    return std::make_pair(r + "#" + std::to_string(c), s);
+  };
+  auto have = [&](const std::string& r) {
+    auto it = reports_.find(key(r, cmd, step));
+    return it != reports_.end() && it->second.stage_index == stage_index;
+  };
   auto done = [&] {
-    for (auto& r : targets) {
-      auto it = reports_.find(key(r));
-      if (it == reports_.end() || it->second.stage_index != stage_index) return false;
-    }
+    for (auto& r : targets)
+      if (!have(r)) return false;
     return true;
   };
   auto start = clock::now();
@@ -617,7 +634,7 @@ std::map<std::string, demfdm::report_t> CoordinatorEndpoint::command(
   while (!done()) {
     bus_.pump(std::min(0.01, interval));
     for (auto& r : targets) {
-      auto it = reports_.find(key(r));
+      auto it = reports_.find(key(r, cmd, step));
       if (it != reports_.end() && it->second.status == demfdm::report_t::FAILED)
         throw ProtocolError("node '" + r + "' failed at step " + std::to_string(step) + ": " + it->second.text);
     }
@@ -625,8 +642,14 @@ std::map<std::string, demfdm::report_t> CoordinatorEndpoint::command(
     throw_if_interrupted();
     check_alive(all);
     if (since(last) >= interval) {
-      // Resend as a new publication: the node answers a repeated command with its stored report.
-      bus_.publish(bus::channel::kCommand, c);
+      // Resend, as new publications, every outstanding command some target has not answered:
+      // a node answers a repeated command with its stored report and never runs it twice.
+      for (auto& [k, v] : outstanding_) {
+        bool missing = false;
+        for (auto& r : v.second)
+          if (!reports_.count(key(r, k.first, k.second))) missing = true;
+        if (missing) bus_.publish(bus::channel::kCommand, v.first);
+      }
       last = clock::now();
       interval = std::min(interval * 2, 0.4);
     }
@@ -634,14 +657,13 @@ std::map<std::string, demfdm::report_t> CoordinatorEndpoint::command(
   wait_s_ += since(start);
   std::map<std::string, demfdm::report_t> out;
   for (auto& r : targets) {
-    auto it = reports_.find(key(r));
-    if (it->second.status == demfdm::report_t::FAILED)
-      throw ProtocolError("node '" + r + "' failed at step " + std::to_string(step) + ": " + it->second.text);
-    out[r] = it->second;
+    auto& rep = reports_.at(key(r, cmd, step));
+    if (rep.status == demfdm::report_t::FAILED)
+      throw ProtocolError("node '" + r + "' failed at step " + std::to_string(step) + ": " + rep.text);
+    out[r] = rep;
+    reports_.erase(key(r, cmd, step));
   }
-  // Drop reports older than this step.
-  for (auto it = reports_.begin(); it != reports_.end();)
-    it = it->first.second < step - 2 ? reports_.erase(it) : std::next(it);
+  outstanding_.erase({cmd, step});
   return out;
 }
 

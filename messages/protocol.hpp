@@ -204,6 +204,12 @@ class CoordinatorEndpoint {
                                                   const std::string& stage_name, double dt,
                                                   const std::vector<double>& values,
                                                   const std::string& text = {});
+  // The two halves of command(): several commands may be posted before their reports are
+  // collected; collect() resends every outstanding command whose reports are late.
+  void post(std::int32_t cmd, const std::vector<std::string>& targets, std::int64_t step, std::int32_t stage_index,
+            const std::string& stage_name, double dt, const std::vector<double>& values, const std::string& text = {});
+  std::map<std::string, demfdm::report_t> collect(std::int32_t cmd, const std::vector<std::string>& targets,
+                                                  std::int64_t step, std::int32_t stage_index);
   // Tells every node to stop (best effort, repeated a few times).
   void shutdown(const std::string& reason);
   // Seconds spent waiting for reports (for the run summary).
@@ -217,6 +223,8 @@ class CoordinatorEndpoint {
   std::map<std::string, NodeInfo> nodes_;
   std::map<std::string, demfdm::hello_t> hellos_;
   std::map<std::pair<std::string, std::int64_t>, demfdm::report_t> reports_;
+  // Posted commands without all their reports: (command, step) -> (message, targets).
+  std::map<std::pair<std::int32_t, std::int64_t>, std::pair<demfdm::command_t, std::vector<std::string>>> outstanding_;
   double wait_s_ = 0;
 };
 

@@ -39,6 +39,11 @@ void declare_nodes(config::Section& root) {
              "serial: the continuum integrates step k with the DEM forces of step k (no lag); parallel: both "
              "nodes compute step k at once from each other's step k-1 data (one-step lag, both cores busy).");
   cpl.integer("interval", "-", 1, "DEM steps per coupling step (exchange every n DEM steps).").min(1).max(100000);
+  cpl.integer("window", "-", 4,
+              "Grants the coordinator keeps outstanding in coupled stages: the nodes are then paced by their "
+              "interface data alone. 1 = strict grant-report lockstep. Results do not depend on it; an "
+              "until = \"done\" stage ends window-1 steps after its criterion is met.")
+      .min(1).max(64);
 }
 
 void declare_output(config::Section& root) {

@@ -11,8 +11,9 @@ double seconds_since(std::chrono::steady_clock::time_point t) {
 }
 }  // namespace
 
-Runner::Runner(std::vector<schema::Stage> stages, Driver& driver, std::map<std::string, double> dt_stable)
-    : stages_(std::move(stages)), driver_(driver), dt_stable_(std::move(dt_stable)) {}
+Runner::Runner(std::vector<schema::Stage> stages, Driver& driver, std::map<std::string, double> dt_stable,
+               std::int64_t window)
+    : stages_(std::move(stages)), driver_(driver), dt_stable_(std::move(dt_stable)), window_(std::max<std::int64_t>(1, window)) {}
 
 double Runner::stage_dt(const schema::Stage& st) const {
   double dt = std::numeric_limits<double>::infinity();
@@ -39,13 +40,25 @@ RunSummary Runner::run() {
     for (auto& [r, rep] : ss.begin)
       if (rep.dt_stable > 0) dt_stable_[r] = rep.dt_stable;
     std::int64_t end = step + st.steps;  // exclusive
+    const std::int64_t window = st.coupled ? window_ : 1;
+    std::deque<std::int64_t> outstanding;  // last step of each posted, uncollected grant
+    std::int64_t next = step;              // first step not yet granted
     bool done = false;
-    while (step < end) {
-      std::int64_t last = std::min(end - 1, step + st.steps_per_grant - 1);
-      double dt = stage_dt(st);
-      std::vector<double> values;
-      if (kinematics_) values = kinematics_(st, last, dt);
-      auto reps = driver_.command(Cmd::Grant, st.nodes, last, idx, st.name, dt, values);
+    while (next < end || !outstanding.empty()) {
+      // Fill the window (not after the criterion was met).
+      while (!done && next < end && static_cast<std::int64_t>(outstanding.size()) < window) {
+        std::int64_t last = std::min(end - 1, next + st.steps_per_grant - 1);
+        double dt = stage_dt(st);
+        std::vector<double> values;
+        if (kinematics_) values = kinematics_(st, last, dt);
+        driver_.post(Cmd::Grant, st.nodes, last, idx, st.name, dt, values);
+        outstanding.push_back(last);
+        next = last + 1;
+      }
+      if (outstanding.empty()) break;
+      std::int64_t last = outstanding.front();
+      outstanding.pop_front();
+      auto reps = driver_.collect(Cmd::Grant, st.nodes, last, idx);
       step = last + 1;
       bool all_done = true;
       for (auto& [r, rep] : reps) {
@@ -55,10 +68,7 @@ RunSummary Runner::run() {
         if (rep.status != Status::StageDone) all_done = false;
       }
       if (observer_) observer_(st, last, reps);
-      if (st.until_done && all_done) {
-        done = true;
-        break;
-      }
+      if (st.until_done && all_done) done = true;  // collect what is still outstanding, post nothing more
     }
     ss.last_step = step - 1;
     ss.criterion_met = done || !st.until_done;

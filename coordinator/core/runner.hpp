@@ -7,8 +7,15 @@
 // every grant is the smallest stable step the stage's nodes reported (each node advances
 // exactly that much per coupling step). The step counter is global over the run, so step k of
 // every node always pairs the same interface data.
+//
+// Grant window: in coupled stages up to 'window' grants are outstanding at once (the nodes
+// are paced by their interface data, not by the coordinator's round trips). The runner always
+// fills the window before it collects the oldest report, so which grants were posted when a
+// report is read does not depend on timing: with until = "done" a stage whose criterion is met
+// at step j ends after step j + window - 1, the same in every run.
 #pragma once
 #include <chrono>
+#include <deque>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -29,15 +36,24 @@ struct NodeReport {
   std::string text;
 };
 
-// Transport: sends a command to 'targets' and returns each one's report for it. Throws on a
-// dead or failed node (the message names it).
+// Transport: post() sends a command to 'targets'; collect() waits for each one's report to
+// that command (resending outstanding commands as needed). Several grants may be posted
+// before their reports are collected (the grant window). Throws on a dead or failed node
+// (the message names it).
 class Driver {
  public:
   virtual ~Driver() = default;
-  virtual std::map<std::string, NodeReport> command(Cmd cmd, const std::vector<std::string>& targets,
-                                                    std::int64_t step, std::int32_t stage_index,
-                                                    const std::string& stage_name, double dt,
-                                                    const std::vector<double>& values) = 0;
+  virtual void post(Cmd cmd, const std::vector<std::string>& targets, std::int64_t step,
+                    std::int32_t stage_index, const std::string& stage_name, double dt,
+                    const std::vector<double>& values) = 0;
+  virtual std::map<std::string, NodeReport> collect(Cmd cmd, const std::vector<std::string>& targets,
+                                                    std::int64_t step, std::int32_t stage_index) = 0;
+  std::map<std::string, NodeReport> command(Cmd cmd, const std::vector<std::string>& targets, std::int64_t step,
+                                            std::int32_t stage_index, const std::string& stage_name, double dt,
+                                            const std::vector<double>& values) {
+    post(cmd, targets, step, stage_index, stage_name, dt, values);
+    return collect(cmd, targets, step, stage_index);
+  }
 };
 
 struct StageSummary {
@@ -67,7 +83,8 @@ class Runner {
   // Values sent with each grant (e.g. footing kinematics); empty by default.
   using Kinematics = std::function<std::vector<double>(const schema::Stage&, std::int64_t step, double dt)>;
 
-  Runner(std::vector<schema::Stage> stages, Driver& driver, std::map<std::string, double> dt_stable);
+  Runner(std::vector<schema::Stage> stages, Driver& driver, std::map<std::string, double> dt_stable,
+         std::int64_t window = 1);
   void set_observer(Observer o) { observer_ = std::move(o); }
   void set_kinematics(Kinematics k) { kinematics_ = std::move(k); }
   RunSummary run();
@@ -77,6 +94,7 @@ class Runner {
   std::vector<schema::Stage> stages_;
   Driver& driver_;
   std::map<std::string, double> dt_stable_;
+  std::int64_t window_ = 1;
   Observer observer_;
   Kinematics kinematics_;
 };

@@ -20,10 +20,15 @@ class FakeDriver : public coord::Driver {
   std::vector<Sent> sent;
   std::int64_t done_from = -1;           // nodes report StageDone for grants reaching this step
   std::map<std::string, double> dt_of;  // dt_stable each node reports
-  std::map<std::string, coord::NodeReport> command(coord::Cmd cmd, const std::vector<std::string>& targets,
-                                                   std::int64_t step, std::int32_t stage, const std::string&,
-                                                   double dt, const std::vector<double>& values) override {
+  int max_outstanding = 0, outstanding = 0;
+  void post(coord::Cmd cmd, const std::vector<std::string>& targets, std::int64_t step, std::int32_t stage,
+            const std::string&, double dt, const std::vector<double>& values) override {
     sent.push_back({cmd, targets, step, stage, dt, values});
+    max_outstanding = std::max(max_outstanding, ++outstanding);
+  }
+  std::map<std::string, coord::NodeReport> collect(coord::Cmd cmd, const std::vector<std::string>& targets,
+                                                   std::int64_t step, std::int32_t, const std::vector<double>& = {}) {
+    --outstanding;
     std::map<std::string, coord::NodeReport> out;
     for (auto& t : targets) {
       coord::NodeReport r;
@@ -34,6 +39,10 @@ class FakeDriver : public coord::Driver {
       out[t] = r;
     }
     return out;
+  }
+  std::map<std::string, coord::NodeReport> collect(coord::Cmd cmd, const std::vector<std::string>& targets,
+                                                   std::int64_t step, std::int32_t stage) override {
+    return collect(cmd, targets, step, stage, {});
   }
 };
 
@@ -113,4 +122,17 @@ TEST(Runner, CouplingStepIsTheSmallestStableStepOfTheStageNodes) {
   // Stage b has only the continuum: its own step.
   EXPECT_DOUBLE_EQ(d.sent.back().dt, 5e-8);
   EXPECT_EQ(kin_steps, (std::vector<std::int64_t>{0, 1, 2}));
+}
+
+TEST(Runner, GrantWindowKeepsGrantsOutstandingAndEndsDeterministically) {
+  auto sc = scene("[[stage]]\nname = \"load\"\nsteps = 100\ncoupled = true\nuntil = \"done\"\n");
+  FakeDriver d;
+  d.done_from = 20;
+  coord::Runner r(schema::stages(sc), d, {}, 4);
+  auto sum = r.run();
+  EXPECT_EQ(d.max_outstanding, 4);
+  // Criterion met in the report of step 20: grants up to 23 were already posted.
+  EXPECT_EQ(sum.stages[0].last_step, 23);
+  EXPECT_EQ(d.sent.back().cmd, coord::Cmd::StageEnd);
+  EXPECT_EQ(d.sent.back().step, 23);
 }

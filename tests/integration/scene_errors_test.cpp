@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <thread>
 
 #include "tests/integration/process.hpp"
 
@@ -130,4 +131,27 @@ TEST(LaunchRun, WritesACompleteRunFolderAndNeverOverwritesOne) {
   EXPECT_EQ(exit_code(*st2), 2);
   EXPECT_NE(read_file((runs / "launch2.out").string()).find("never overwritten"), std::string::npos);
   EXPECT_EQ(read_file((dir / "summary.txt").string()), summary);
+}
+
+TEST(LaunchRun, CtrlCStopsEveryProcess) {
+  auto runs = fs::temp_directory_path() / ("demfdm-sigint-" + std::to_string(getpid()));
+  fs::remove_all(runs);
+  fs::create_directories(runs);
+  auto dir = runs / "run";
+  auto scene = runs / "long.toml";
+  std::ofstream(scene) << "[dem]\nexecutable = \"chain_dem\"\n[continuum]\nexecutable = \"chain_continuum\"\n"
+                          "[coupling]\n[chain]\nrecord_every = 1000\n[[stage]]\nname = \"long\"\nsteps = 100000000\ncoupled = true\n";
+  auto p = spawn({"/bin/bash", kSrc + "/launch/run", scene.string(), "--no-build", "--run-dir", dir.string()},
+                 {"DEMFDM_BUILD=" + fs::path(kBin).parent_path().string()}, (runs / "out.txt").string());
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  ::kill(p.pid, SIGINT);
+  auto t0 = std::chrono::steady_clock::now();
+  auto st = wait_for(p, 10);
+  double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ASSERT_TRUE(st) << "launch/run did not stop after SIGINT";
+  EXPECT_EQ(exit_code(*st), 130) << read_file((runs / "out.txt").string());
+  EXPECT_LT(s, 5.0);
+  // No process of this run is left.
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  EXPECT_NE(std::system(("pgrep -f '[r]un-dir=" + dir.string() + "' >/dev/null").c_str()), 0) << "orphaned processes";
 }
