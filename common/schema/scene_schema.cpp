@@ -46,6 +46,73 @@ void declare_nodes(config::Section& root) {
       .min(1).max(64);
 }
 
+void declare_gravity(config::Section& root) {
+  auto& g = root.section("gravity",
+                         "Self-weight at N g (the centrifuge's g-level) for every node. Absent: no gravity, "
+                         "and no cost for it.",
+                         config::Presence::Optional);
+  g.real("level", "-", 1.0, "g-level N: gravity is (0, 0, -N g0).").min(0.0).max(10000.0);
+  g.real("g0", "m/s^2", 9.81, "Standard gravity g0.").min(0.0, true);
+}
+
+void declare_continuum(config::Section& root) {
+  auto& c = *root.find("continuum")->section;
+  c.choice("mode", {"dynamic", "static"}, std::string("dynamic"),
+           "FDM law of motion: dynamic = real masses and the critical time step (physics.md 6.6 option A); "
+           "static = mass-scaled, dt = 1 (option B, pseudo-static only).");
+  c.real("damping", "-", 0.8, "FDM local damping alpha_F (physics.md 5.6).").min(0.0).max(1.0, true);
+  c.boolean("large_strain", false, "Recompute zone geometry every step with the Jaumann rate (physics.md 5.8).");
+  c.choice("averaging", {"overlay", "zone"}, std::string("overlay"),
+           "Mixed-discretisation volumetric averaging over each 5-tetrahedron overlay (default) or all 10 "
+           "tetrahedra of a zone (physics.md 5.3, U15).");
+  c.real("timestep_safety", "-", 0.5, "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).")
+      .min(0.0, true).max(1.0);
+  c.real("static_mass_factor", "-", 1.0, "Multiplier on the static-mode inertial masses (5.6).").min(1.0);
+  c.choice("boundary", {"strongbox", "none"}, std::string("strongbox"),
+           "strongbox: fixed base, rollers on the four sides, free top (physics.md 5.10); none: all free.");
+  auto& m = c.section("mesh", "FDM mesh: a box of hexahedra around the DEM pocket (physics.md 5.1).",
+                      config::Presence::Optional);
+  m.reals("size", "m", std::vector<double>{16e-3, 16e-3, 16e-3}, "Box L x W x H.").length(3).min(0.0, true);
+  m.boolean("pocket", true, "Leave the inner box open for the DEM block (its faces are the coupling interface).");
+  m.reals("inner_size", "m", std::vector<double>{4e-3, 4e-3, 10e-3},
+          "Inner box L_D x W_D x H_D (the pocket, or a refined block when pocket = false); [0,0,0]: none.")
+      .length(3).min(0.0);
+  m.reals("inner_origin", "m", std::vector<double>{},
+          "Minimum corner of the inner box; empty: centred in x and y, top flush with the surface.");
+  m.real("size_near", "m", 0.5e-3, "Zone size in and next to the inner box.").min(0.0, true);
+  m.real("size_far", "m", 2e-3, "Largest zone size towards the outer boundary.").min(0.0, true);
+  m.real("growth", "-", 1.2, "Zone-to-zone size ratio away from the inner box.").min(1.0).max(2.0);
+  auto& mat = c.array("material",
+                      "Zone groups, applied in order (a later group overrides an earlier one where regions "
+                      "overlap). Absent: one elastic group with the defaults below.",
+                      config::Presence::Optional);
+  mat.choice("model", {"elastic", "mohr_coulomb"}, std::string("elastic"),
+             "Constitutive model (physics.md 5.4).");
+  mat.real("density", "kg/m^3", 1272.0, "Bulk density rho_b = (1-n) rho_s (physics.md 7.4).").min(0.0, true);
+  mat.real("young", "Pa", 2.0e9, "Young's modulus E (calibrate from the DEM UCS test).").min(0.0, true);
+  mat.real("poisson", "-", 0.25, "Poisson's ratio.").min(-1.0, true).max(0.5, true);
+  mat.real("cohesion", "Pa", 0.0, "Mohr-Coulomb cohesion c.").min(0.0);
+  mat.real("friction_deg", "deg", 30.0, "Mohr-Coulomb friction angle.").min(0.0).max(90.0, true);
+  mat.real("dilation_deg", "deg", 0.0, "Mohr-Coulomb dilation angle (<= friction).").min(0.0).max(90.0, true);
+  mat.real("tension", "Pa", -1.0, "Tension cut-off (tension positive); negative: the apex value c/tan(phi).");
+  mat.reals("region_lo", "m", std::vector<double>{}, "Minimum corner of the group's box; empty: every zone.");
+  mat.reals("region_hi", "m", std::vector<double>{}, "Maximum corner of the group's box; empty: every zone.");
+  auto& punch = c.section("punch",
+                          "A rigid circular punch on the FDM top surface (verification without DEM): the top "
+                          "gridpoints within the radius move down at a prescribed speed; the reaction is "
+                          "reported. Absent: none.",
+                          config::Presence::Optional);
+  punch.real("radius", "m", std::nullopt, "Punch radius a.").min(0.0, true);
+  punch.real("velocity", "m/s", std::nullopt, "Downward speed (dynamic mode) or displacement per step (static).")
+      .min(0.0);
+  punch.reals("centre", "m", std::vector<double>{}, "Centre [x, y]; empty: the centre of the top face.");
+  auto& out = c.section("output", "Continuum results (fdm.h5 + mesh.xmf, fdm_history.csv).",
+                        config::Presence::Optional);
+  out.integer("frame_every", "steps", 0, "HDF5 frame every n coupling steps; 0: only at the end of each stage.")
+      .min(0);
+  out.integer("history_every", "steps", 1, "fdm_history.csv row every n coupling steps; 0: none.").min(0);
+}
+
 void declare_output(config::Section& root) {
   auto& out = root.section("output", "What a run writes to its run folder.", config::Presence::Optional);
   out.boolean("traffic_log", true, "Record the bus traffic with lcm-logger (traffic.lcmlog).");
@@ -72,8 +139,14 @@ void declare_stages(config::Section& root) {
   auto& st = root.array("stage", "The run's stages, in order (staged initialisation, loading).",
                         config::Presence::Required);
   st.string("name", std::nullopt, "Stage name (logs, summary).");
-  st.choice("action", {"cycle"}, std::string("cycle"),
-            "What the nodes do in this stage. cycle: step the models as they are.");
+  st.choice("action", {"cycle", "equilibrium", "geostatic"}, std::string("cycle"),
+            "What the nodes do in this stage. cycle: step the models as they are; equilibrium: step until the "
+            "unbalanced-force ratio is below 'ratio' (use until = \"done\"); geostatic: assign the initial "
+            "stresses sigma_v = rho N g depth, sigma_h = K0 sigma_v (continuum), then as equilibrium.");
+  st.real("ratio", "-", 1e-5, "Equilibrium criterion: unbalanced-force ratio (FLAC3D ratio-average, physics.md 5.11).")
+      .min(0.0, true);
+  st.real("k0", "-", -1.0, "K0 for 'geostatic'; negative: nu/(1-nu) of each zone's material.");
+  st.boolean("reset_displacements", false, "Set continuum displacements to zero at the stage's start.");
   st.strings("nodes", std::vector<std::string>{}, "Roles taking part ('dem', 'continuum'); empty: all of the scene's.");
   st.integer("steps", "-", std::nullopt, "Step budget in coupling steps.").min(1);
   st.choice("until", {"steps", "done"}, std::string("steps"),
@@ -91,6 +164,8 @@ config::Schema build() {
   declare_run(root);
   declare_bus(root);
   declare_nodes(root);
+  declare_gravity(root);
+  declare_continuum(root);
   declare_output(root);
   declare_chain(root);
   declare_stages(root);

@@ -1,0 +1,114 @@
+// bench_dem: time the DEM cycle on the 25,835-sphere periodic packing of anchors.md
+// (LAMMPS dump: 9 header lines, box bounds on lines 6–8, then "x y z radius", SI).
+// Same physics as the LAMMPS reference: k_n = 2.55e5 N/m for every pair, k_s = k_n/2.4,
+// μ = tan 32°, ρ = 2650 kg/m³, periodic, 2,000 held steps with no neighbour rebuild.
+//
+// Usage: bench_dem [packing] [linear|softbond] [threads] [steps]
+//        bench_dem [packing]            → runs the four configurations in child processes
+// Output: one CSV line per configuration:
+//   model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib
+#include <sys/resource.h>
+#include <time.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/world.hpp"
+
+using namespace demfdm::dem;
+
+namespace {
+struct Packing {
+  Vec3 lo, hi;
+  std::vector<Vec3> x;
+  std::vector<double> r;
+};
+
+Packing load(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw std::runtime_error("cannot open packing file '" + path + "'");
+  Packing p;
+  std::string line;
+  for (int l = 1; l <= 9; ++l) {
+    std::getline(in, line);
+    if (l >= 6 && l <= 8) {
+      std::istringstream s(line);
+      s >> p.lo[l - 6] >> p.hi[l - 6];
+    }
+  }
+  double x, y, z, r;
+  while (in >> x >> y >> z >> r) {
+    p.x.push_back({x, y, z});
+    p.r.push_back(r);
+  }
+  return p;
+}
+
+double peak_rss_mib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / 1024.0;  // ru_maxrss is in KiB on Linux
+}
+
+int run(const std::string& file, const std::string& model, int threads, int steps) {
+  const Packing pk = load(file);
+  WorldParams p;
+  p.density = 2650.0;
+  p.threads = threads;
+  p.periodic.enabled = true;
+  p.periodic.origin = pk.lo;
+  p.periodic.length = pk.hi - pk.lo;
+  p.ball_ball.linear.kn_fixed = 2.55e5;
+  p.ball_ball.linear.kratio = 2.4;
+  p.ball_ball.linear.fric = 0.6248693519093275;
+  p.ball_ball.model = model == "softbond" ? ContactModel::kSoftBond : ContactModel::kLinear;
+  double rsum = 0;
+  for (double r : pk.r) rsum += r;
+  p.skin = 0.1 * 2.0 * 0.058e-3;  // 0.1 d50 (anchors.md second LAMMPS row uses the same)
+  (void)rsum;
+  World w(p);
+  for (std::size_t i = 0; i < pk.x.size(); ++i) w.add_ball(pk.x[i], pk.r[i]);
+  w.prepare();
+  if (model == "softbond") w.bond_ball_ball(-1.0, 0.0);  // bond every touching pair
+  w.step(20);  // warm-up (first-touch of all arrays)
+  const auto reb0 = w.rebuild_count();
+  timespec c0{}, c1{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
+  const auto t0 = std::chrono::steady_clock::now();
+  w.step(steps);
+  const auto t1 = std::chrono::steady_clock::now();
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
+  const double cpu = double(c1.tv_sec - c0.tv_sec) + 1e-9 * double(c1.tv_nsec - c0.tv_nsec);
+  const double sec = std::chrono::duration<double>(t1 - t0).count();
+  const auto z = coordination(w);
+  std::printf("%s,%d,%d,%.4f,%.4f,%.4e,%.4e,%lld,%zu,%.1f\n", model.c_str(), threads, steps, sec, cpu,
+              double(w.num_balls()) * steps / sec, double(w.num_balls()) * steps * threads / cpu,
+              static_cast<long long>(w.rebuild_count() - reb0), z.active, peak_rss_mib());
+  return 0;
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string file = argc > 1 ? argv[1] : "/work/shared/data/bench_packing_25835.txt";
+  try {
+    if (argc > 2) return run(file, argv[2], argc > 3 ? std::atoi(argv[3]) : 1, argc > 4 ? std::atoi(argv[4]) : 2000);
+    std::printf("model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib\n");
+    std::fflush(stdout);
+    for (const char* m : {"linear", "softbond"})
+      for (int t : {1, 2}) {
+        const std::string cmd = std::string("\"") + argv[0] + "\" \"" + file + "\" " + m + " " + std::to_string(t);
+        if (std::system(cmd.c_str()) != 0) return 1;
+      }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_dem: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,158 @@
+// One HDF5 results file per producing process, written frame by frame.
+//
+// Layout (output-recipe.md §3, verified with ParaView 5.11 and h5py 3.7):
+//   /                       attrs format="demfdm-results", format_version=1 (int64), producer,
+//                           run_id, scene_hash, length_unit="m", time_unit="s", FileInfo::extra
+//   /frames/NNNNNN          one group per output frame, NNNNNN = 6-digit output index from 0
+//                           (so name order = chronological order); attrs time (float64, s),
+//                           step (int64)
+//   /frames/NNNNNN/<a>/<b>  per-frame arrays [rows] or [rows, cols], written once each
+//   /<static path>          datasets written once (e.g. /mesh/node_coords, /xdmf/vertex_index)
+//   /history/<name>         1-D float64 time histories, unlimited, chunked, appended per row;
+//                           attr unit on the dataset and <name>_unit on /history
+//
+// File discipline (recipe §3 and §9 pitfalls 2, 13, 19):
+// * created with H5F_ACC_EXCL: an existing file is never overwritten;
+// * libver bounds EARLIEST..V18, so any HDF5 >= 1.8 reads the file;
+// * object-time tracking off in every group/dataset creation plist: two identical runs give
+//   byte-identical files;
+// * the file is open only between begin_frame() and end_frame() (and during a static write,
+//   attribute write or history flush): HDF5 1.10 locks open files, so readers such as h5py or
+//   ParaView can read the file between frames.
+//
+// Not thread-safe: one H5Frames per file, used by one thread.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "demfdm/io/array_view.hpp"
+#include "demfdm/io/params.hpp"
+
+namespace demfdm::io {
+
+/// Where a dataset lives and what it holds; what an XDMF DataItem needs to point at it.
+struct DatasetRef {
+  std::filesystem::path file;  // absolute path of the HDF5 file
+  std::string path;            // absolute HDF5 path, e.g. "/frames/000002/particles/position"
+  DType dtype = DType::kFloat64;
+  std::size_t rows = 0;
+  std::size_t cols = 1;        // 1 means a 1-D dataset [rows]
+};
+
+/// One column of the /history time series.
+struct HistoryColumn {
+  std::string name;  // dataset name under /history, e.g. "load"
+  std::string unit;  // unit text, e.g. "N" ("1" for dimensionless ratios)
+};
+
+class H5Frames {
+ public:
+  /// Creates `file` (H5F_ACC_EXCL) with its root attributes and closes it again.
+  /// Throws IoError when the file exists ("refusing to overwrite") or cannot be created,
+  /// std::invalid_argument on bad parameters.
+  static H5Frames create(const std::filesystem::path& file, const FileInfo& info,
+                         const H5StorageParams& storage = {});
+
+  H5Frames(H5Frames&&) noexcept;
+  H5Frames& operator=(H5Frames&&) noexcept;
+  H5Frames(const H5Frames&) = delete;
+  H5Frames& operator=(const H5Frames&) = delete;
+  /// Flushes buffered history rows and closes the file; errors are reported on stderr
+  /// because a destructor cannot throw. Call close() to receive them as exceptions.
+  ~H5Frames();
+
+  /// Writes a dataset that does not change between frames, at an absolute path outside
+  /// /frames and /history (e.g. "/mesh/zone_nodes"). Each path may be written once.
+  void write_static(std::string_view abs_path, const ArrayView& data);
+  template <class T, std::size_t E>
+  void write_static(std::string_view abs_path, std::span<T, E> data, std::size_t cols = 1) {
+    write_static(abs_path, ArrayView(data, cols));
+  }
+  template <class T>
+  void write_static(std::string_view abs_path, const std::vector<T>& data, std::size_t cols = 1) {
+    write_static(abs_path, ArrayView(data, cols));
+  }
+
+  /// Makes the int32 dataset `abs_path` (unlimited, chunked 65536, shuffle+gzip 1) hold at
+  /// least 0, 1, ..., n-1, growing it when n exceeds its length. This is the static vertex
+  /// index whose first N entries give the XDMF3 readers one Polyvertex cell per particle
+  /// (recipe §2, pitfall 5). Returns the reference with the current length.
+  DatasetRef ensure_index(std::string_view abs_path, std::size_t n);
+
+  /// String / int64 / float64 attribute on an existing object ("/" for the root).
+  /// An existing attribute of the same name is replaced.
+  void set_attribute(std::string_view object_path, std::string_view name, std::string_view value);
+  void set_attribute(std::string_view object_path, std::string_view name, std::int64_t value);
+  void set_attribute(std::string_view object_path, std::string_view name, double value);
+
+  /// Opens the file and creates /frames/NNNNNN (NNNNNN = frame_count()) with attributes
+  /// time [s] and step. Returns the frame index. Throws std::logic_error when a frame is open.
+  std::size_t begin_frame(std::int64_t step, double time);
+  /// Writes `data` at `name` relative to the open frame group ("particles/position").
+  /// Intermediate groups are created as needed. Each name may be written once per frame.
+  void write(std::string_view name, const ArrayView& data);
+  template <class T, std::size_t E>
+  void write(std::string_view name, std::span<T, E> data, std::size_t cols = 1) {
+    write(name, ArrayView(data, cols));
+  }
+  template <class T>
+  void write(std::string_view name, const std::vector<T>& data, std::size_t cols = 1) {
+    write(name, ArrayView(data, cols));
+  }
+  /// Closes the file. Throws std::logic_error when no frame is open.
+  void end_frame();
+
+  /// Creates /history/<name> for each column (once per file). Columns are appended together.
+  void declare_history(const std::vector<HistoryColumn>& columns);
+  /// Appends one sample (row.size() == number of declared columns). Rows are buffered and
+  /// written every H5StorageParams::history_flush_rows rows, or by flush_history()/close().
+  void append_history(std::span<const double> row);
+  void flush_history();
+
+  /// Flushes history and closes the file if open. Further calls throw std::logic_error.
+  void close();
+
+  /// Reference to a dataset written by this object: an absolute path names a static or
+  /// index dataset, a relative path one of the current (or most recently ended) frame.
+  /// Throws std::out_of_range when no such dataset was written.
+  DatasetRef ref(std::string_view path) const;
+
+  const std::filesystem::path& file() const noexcept { return file_; }
+  /// Number of frames begun so far (the next frame's index).
+  std::size_t frame_count() const noexcept { return frame_count_; }
+  bool frame_open() const noexcept { return frame_open_; }
+  /// "/frames/NNNNNN" of frame `index`.
+  static std::string frame_group(std::size_t index);
+
+ private:
+  H5Frames(std::filesystem::path file, const H5StorageParams& storage);
+
+  class OpenScope;  // opens the file for one call unless a frame holds it open
+  std::int64_t open_rdwr();
+  void close_file();
+  void write_dataset(std::int64_t fid, const std::string& abs_path, const ArrayView& data,
+                     bool allow_compress);
+  void flush_history_open(std::int64_t fid);
+
+  std::filesystem::path file_;
+  H5StorageParams storage_;
+  std::int64_t fid_ = -1;  // hid_t while open (hid_t is int64_t in HDF5 1.10), -1 when closed
+  bool closed_ = false;
+  bool frame_open_ = false;
+  std::size_t frame_count_ = 0;
+  std::string frame_path_;                          // group of the current/last frame
+  std::map<std::string, DatasetRef> frame_refs_;    // by name relative to frame_path_
+  std::map<std::string, DatasetRef> static_refs_;   // by absolute path
+  std::vector<HistoryColumn> history_;
+  std::size_t history_rows_on_disk_ = 0;
+  std::vector<double> history_buffer_;  // row-major, history_.size() values per row
+};
+
+}  // namespace demfdm::io

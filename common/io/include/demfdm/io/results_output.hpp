@@ -1,0 +1,115 @@
+// Per-process results writers: the HDF5 file of one producer plus its XDMF sidecars,
+// in the layout of output-recipe.md §3-§4.
+//
+//   ParticleOutput (dem_node): <dir>/dem.h5, <dir>/particles.xmf, <dir>/<link set>.xmf
+//     /xdmf/vertex_index                 int32 0..Nmax-1 (Polyvertex connectivity)
+//     /frames/NNNNNN/particles/position  [Np,3] float64 m
+//     /frames/NNNNNN/particles/<array>   [Np] or [Np,k] (radius, velocity, id, ...)
+//     /frames/NNNNNN/<links>/nodes       [Nb,2] int32, rows into this frame's particles
+//     /frames/NNNNNN/<links>/<array>     [Nb] or [Nb,k] (state uint8, force, ...)
+//   MeshOutput (fdm_node): <dir>/fdm.h5, <dir>/mesh.xmf
+//     /mesh/node_coords                  [Nn,3] float64 m, reference coordinates
+//     /mesh/zone_nodes                   [Nz,8] int64, VTK hexahedron order
+//     /frames/NNNNNN/nodes/<array>       [Nn] or [Nn,k] (displacement, velocity, ...)
+//     /frames/NNNNNN/zones/<array>       [Nz] or [Nz,k] (stress [Nz,6] xx yy zz xy yz xz, ...)
+//
+// Each write_frame() writes one HDF5 frame (file opened and closed around it) and then
+// atomically rewrites the sidecars. Frame times must increase strictly (a temporal
+// collection). Existing files (HDF5 or sidecar) are never overwritten.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "demfdm/io/array_view.hpp"
+#include "demfdm/io/h5_frames.hpp"
+#include "demfdm/io/params.hpp"
+#include "demfdm/io/xdmf_sidecar.hpp"
+
+namespace demfdm::io {
+
+/// Pairs of particles of one frame drawn as line cells (bonds, contacts).
+struct LinkFrame {
+  std::string name;                     // link set, declared at construction: "bonds", "contacts"
+  ArrayView nodes;                      // [Nb,2] int32, 0-based rows of this frame's particle arrays
+  // Per-link arrays [Nb] or [Nb,k]. Bonds: "state" uint8 with the recipe's codes 0 intact,
+  // 1 broken in tension, 2 broken in shear (its ParaView category colouring, §6, assumes
+  // them); the DEM maps its enum onto these only for output (physics.md §2.5).
+  std::vector<FieldArray> cell_arrays;
+};
+
+/// One DEM output frame. Array names become dataset and ParaView array names; recipe
+/// names: radius [Np] (m), velocity [Np,3] (m/s), id [Np] int64 (persistent particle id).
+struct ParticleFrame {
+  ArrayView position;                    // [Np,3] float64 [m] particle centres
+  std::vector<FieldArray> point_arrays;  // per-particle arrays, rows = Np
+  std::vector<LinkFrame> links;          // exactly the link sets declared at construction
+};
+
+class ParticleOutput {
+ public:
+  /// Creates <dir>/<h5_name> (exclusive) with root attribute producer=info.producer.
+  /// `link_sets` are the names of the link sets every frame carries; each gets <name>.xmf.
+  /// Throws IoError when a target file already exists, std::invalid_argument on bad names.
+  ParticleOutput(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage = {},
+                 std::vector<std::string> link_sets = {"bonds"}, const std::string& h5_name = "dem.h5");
+
+  /// Writes one frame and rewrites the sidecars; returns the frame index.
+  /// Validates all counts, and that every link node row is in [0, Np), before writing.
+  std::size_t write_frame(std::int64_t step, double time, const ParticleFrame& frame);
+
+  /// The results file, e.g. to add histories or attributes between frames.
+  H5Frames& h5() noexcept { return h5_; }
+  const XdmfSidecar& particles_sidecar() const noexcept { return particles_xmf_; }
+  const XdmfSidecar& link_sidecar(std::size_t i) const { return links_xmf_.at(i); }
+
+ private:
+  H5Frames h5_;
+  XdmfSidecar particles_xmf_;
+  std::vector<std::string> link_sets_;
+  std::vector<XdmfSidecar> links_xmf_;
+  bool has_time_ = false;
+  double last_time_ = 0.0;
+};
+
+/// One FDM output frame.
+struct MeshFrame {
+  // Per-node arrays [Nn] or [Nn,k]: displacement [Nn,3] (m; ParaView "Warp By Vector"),
+  // velocity [Nn,3] (m/s). A float64 [Nn,3] array named "position" (current coordinates)
+  // replaces /mesh/node_coords as the frame's geometry (recipe §3, large deformations).
+  std::vector<FieldArray> node_arrays;
+  // Per-zone arrays [Nz] or [Nz,k]: stress [Nz,6] (Pa, xx yy zz xy yz xz, tension positive,
+  // physics.md §0.2 sign convention), plastic state uint8 [Nz], ...
+  std::vector<FieldArray> zone_arrays;
+};
+
+class MeshOutput {
+ public:
+  /// Creates <dir>/<h5_name> (exclusive) with the static mesh: node_coords [Nn,3] float64 and
+  /// zone_nodes [Nz,8] int64 (or int32) in VTK hexahedron order (face 0-1-2-3 counter-
+  /// clockwise seen from face 4-5-6-7, node 4+i across from node i). Checks every index is
+  /// in [0, Nn) and every zone has a positive corner Jacobian at node 0
+  /// ((x1-x0) x (x3-x0)) . (x4-x0) > 0 in the reference coordinates, which catches mirrored
+  /// (wrong-order) zones.
+  MeshOutput(const std::filesystem::path& dir, const FileInfo& info, const ArrayView& node_coords,
+             const ArrayView& zone_nodes, const H5StorageParams& storage = {}, const std::string& h5_name = "fdm.h5");
+
+  std::size_t write_frame(std::int64_t step, double time, const MeshFrame& frame);
+
+  H5Frames& h5() noexcept { return h5_; }
+  const XdmfSidecar& mesh_sidecar() const noexcept { return mesh_xmf_; }
+  std::size_t node_count() const noexcept { return nodes_; }
+  std::size_t zone_count() const noexcept { return zones_; }
+
+ private:
+  H5Frames h5_;
+  XdmfSidecar mesh_xmf_;
+  std::size_t nodes_ = 0;
+  std::size_t zones_ = 0;
+  bool has_time_ = false;
+  double last_time_ = 0.0;
+};
+
+}  // namespace demfdm::io

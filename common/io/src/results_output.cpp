@@ -1,0 +1,250 @@
+// ParticleOutput and MeshOutput: the recipe layout (output-recipe.md §3-§4) on top of
+// H5Frames and XdmfSidecar.
+#include "demfdm/io/results_output.hpp"
+
+#include <cmath>
+#include <set>
+#include <stdexcept>
+#include <system_error>
+
+#include "demfdm/io/error.hpp"
+
+namespace demfdm::io {
+
+namespace {
+
+constexpr const char* kVertexIndex = "/xdmf/vertex_index";
+
+void check_name(const std::string& what, const std::string& name) {
+  if (name.empty() || name.find('/') != std::string::npos || name == "." || name == "..")
+    throw std::invalid_argument(what + " name must be a plain non-empty name without '/', found '" + name + "'");
+}
+
+// Refuses to start when any target exists: an earlier run's results are never overwritten
+// (the HDF5 create is exclusive anyway; this also protects the sidecars and fails before
+// anything is written).
+void refuse_existing(const std::vector<std::filesystem::path>& files) {
+  for (const auto& f : files) {
+    std::error_code ec;
+    if (std::filesystem::exists(f, ec))
+      throw IoError("refusing to overwrite '" + f.string() +
+                    "' (exists): results are never overwritten, choose a new run folder or remove the old files");
+  }
+}
+
+H5Frames create_dem_file(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
+                         const std::vector<std::string>& link_sets, const std::string& h5_name) {
+  std::set<std::string> seen{"particles"};
+  std::vector<std::filesystem::path> targets{dir / h5_name, dir / "particles.xmf"};
+  for (const auto& l : link_sets) {
+    check_name("link set", l);
+    if (!seen.insert(l).second)
+      throw std::invalid_argument("ParticleOutput: link set '" + l + "' is given twice or clashes with 'particles'");
+    targets.push_back(dir / (l + ".xmf"));
+  }
+  refuse_existing(targets);
+  return H5Frames::create(dir / h5_name, info, storage);
+}
+
+FileInfo with_fdm_attrs(FileInfo info) {
+  // Recipe §3 fdm.h5 root attributes; sign convention of physics.md §0.2 (FLAC3D).
+  info.extra.emplace_back("stress_unit", "Pa");
+  info.extra.emplace_back("stress_components", "xx yy zz xy yz xz");
+  info.extra.emplace_back("stress_sign", "tension positive");
+  return info;
+}
+
+void check_rows(const std::string& what, const ArrayView& a, std::size_t rows) {
+  if (a.rows != rows)
+    throw std::invalid_argument(what + " has " + std::to_string(a.rows) + " rows, expected " + std::to_string(rows));
+  if (a.size() > 0 && a.data == nullptr) throw std::invalid_argument(what + " has a null data pointer");
+}
+
+void check_fields(const std::string& what, const std::vector<FieldArray>& fields, std::size_t rows,
+                  std::set<std::string> taken) {
+  for (const auto& f : fields) {
+    check_name(what, f.name);
+    if (!taken.insert(f.name).second)
+      throw std::invalid_argument(what + " '" + f.name + "' is given twice or clashes with a reserved name");
+    check_rows(what + " '" + f.name + "'", f.data, rows);
+  }
+}
+
+template <class I>
+void check_index_range(const std::string& what, const I* v, std::size_t n, std::size_t limit) {
+  for (std::size_t k = 0; k < n; ++k)
+    if (v[k] < 0 || static_cast<std::size_t>(v[k]) >= limit)
+      throw std::invalid_argument(what + ": entry " + std::to_string(k) + " (row " + std::to_string(k / 2) +
+                                  ") is " + std::to_string(v[k]) + ", outside [0, " + std::to_string(limit) + ")");
+}
+
+
+template <class I>
+void check_hex(const ArrayView& coords, const I* zn, std::size_t nz, std::size_t nn) {
+  check_index_range("MeshOutput zone_nodes", zn, nz * 8, nn);
+  const double* x = static_cast<const double*>(coords.data);
+  for (std::size_t z = 0; z < nz; ++z) {
+    const I* n = zn + 8 * z;
+    auto d = [&](int a, int c) { return x[3 * n[a] + c] - x[3 * n[0] + c]; };
+    // Corner Jacobian at node 0 in VTK order: edges 0->1, 0->3, 0->4 form a right-handed frame.
+    const double e1[3] = {d(1, 0), d(1, 1), d(1, 2)}, e3[3] = {d(3, 0), d(3, 1), d(3, 2)},
+                 e4[3] = {d(4, 0), d(4, 1), d(4, 2)};
+    const double jac = (e1[1] * e3[2] - e1[2] * e3[1]) * e4[0] + (e1[2] * e3[0] - e1[0] * e3[2]) * e4[1] +
+                       (e1[0] * e3[1] - e1[1] * e3[0]) * e4[2];
+    if (!(jac > 0.0))
+      throw std::invalid_argument("MeshOutput zone_nodes: zone " + std::to_string(z) +
+                                  " is not in VTK hexahedron order (corner Jacobian at node 0 is " +
+                                  std::to_string(jac) + ", must be > 0)");
+  }
+}
+
+
+// Validates the mesh, then creates the file: nothing is written for a bad mesh.
+H5Frames create_fdm_file(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
+                         const std::string& h5_name, const ArrayView& node_coords, const ArrayView& zone_nodes) {
+  if (node_coords.cols != 3 || node_coords.dtype != DType::kFloat64)
+    throw std::invalid_argument("MeshOutput node_coords must be [Nn,3] float64");
+  if (zone_nodes.cols != 8 || !(zone_nodes.dtype == DType::kInt64 || zone_nodes.dtype == DType::kInt32))
+    throw std::invalid_argument("MeshOutput zone_nodes must be [Nz,8] int64 (or int32)");
+  check_rows("MeshOutput node_coords", node_coords, node_coords.rows);
+  check_rows("MeshOutput zone_nodes", zone_nodes, zone_nodes.rows);
+  if (zone_nodes.dtype == DType::kInt64)
+    check_hex(node_coords, static_cast<const std::int64_t*>(zone_nodes.data), zone_nodes.rows, node_coords.rows);
+  else
+    check_hex(node_coords, static_cast<const std::int32_t*>(zone_nodes.data), zone_nodes.rows, node_coords.rows);
+  refuse_existing({dir / h5_name, dir / "mesh.xmf"});
+  return H5Frames::create(dir / h5_name, with_fdm_attrs(info), storage);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+
+ParticleOutput::ParticleOutput(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
+                               std::vector<std::string> link_sets, const std::string& h5_name)
+    : h5_(create_dem_file(dir, info, storage, link_sets, h5_name)),
+      particles_xmf_(dir / "particles.xmf", "particles"),
+      link_sets_(std::move(link_sets)) {
+  for (const auto& l : link_sets_) links_xmf_.emplace_back(dir / (l + ".xmf"), l);
+}
+
+std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const ParticleFrame& fr) {
+  // Validate everything before touching the file, so a bad frame leaves no partial group.
+  const std::string where = "ParticleOutput::write_frame (step " + std::to_string(step) + "): ";
+  if (!std::isfinite(time)) throw std::invalid_argument(where + "time must be finite");
+  if (has_time_ && !(time > last_time_))
+    throw std::invalid_argument(where + "frame times must increase strictly; last " + std::to_string(last_time_) +
+                                " s, now " + std::to_string(time) + " s");
+  const ArrayView& pos = fr.position;
+  if (pos.cols != 3 || !(pos.dtype == DType::kFloat64 || pos.dtype == DType::kFloat32))
+    throw std::invalid_argument(where + "position must be [Np,3] float64 (or float32), found " +
+                                std::to_string(pos.rows) + "x" + std::to_string(pos.cols) + " " +
+                                std::string(dtype_name(pos.dtype)));
+  const std::size_t np = pos.rows;
+  check_rows(where + "position", pos, np);
+  check_fields(where + "point array", fr.point_arrays, np, {"position"});
+  if (fr.links.size() != link_sets_.size())
+    throw std::invalid_argument(where + std::to_string(fr.links.size()) + " link sets given, " +
+                                std::to_string(link_sets_.size()) + " declared at construction");
+  for (std::size_t i = 0; i < fr.links.size(); ++i) {
+    const LinkFrame& l = fr.links[i];
+    if (l.name != link_sets_[i])
+      throw std::invalid_argument(where + "link set " + std::to_string(i) + " is '" + l.name + "', expected '" +
+                                  link_sets_[i] + "' (declaration order)");
+    if (l.nodes.cols != 2 || l.nodes.dtype != DType::kInt32)
+      throw std::invalid_argument(where + l.name + "/nodes must be [Nb,2] int32");
+    check_rows(where + l.name + "/nodes", l.nodes, l.nodes.rows);
+    // Recipe pitfall 6: link nodes are rows of this frame's particle arrays, not ids.
+    check_index_range(where + l.name + "/nodes", static_cast<const std::int32_t*>(l.nodes.data), l.nodes.size(), np);
+    check_fields(where + l.name + " cell array", l.cell_arrays, l.nodes.rows, {"nodes"});
+  }
+
+  const std::size_t index = h5_.begin_frame(step, time);
+  const DatasetRef vertex_index = h5_.ensure_index(kVertexIndex, np);
+  h5_.write("particles/position", pos);
+  for (const auto& f : fr.point_arrays) h5_.write("particles/" + f.name, f.data);
+  for (const auto& l : fr.links) {
+    h5_.write(l.name + "/nodes", l.nodes);
+    for (const auto& f : l.cell_arrays) h5_.write(l.name + "/" + f.name, f.data);
+  }
+  h5_.end_frame();
+
+  XdmfGrid g;
+  g.time = time;
+  g.topology = XdmfTopology::kPolyvertex;
+  g.elements = np;
+  g.connectivity = vertex_index;
+  g.geometry = h5_.ref("particles/position");
+  for (const auto& f : fr.point_arrays) g.attributes.push_back(XdmfAttribute::node(f.name, h5_.ref("particles/" + f.name)));
+  particles_xmf_.append(g);
+  for (std::size_t i = 0; i < fr.links.size(); ++i) {
+    const LinkFrame& l = fr.links[i];
+    XdmfGrid lg;
+    lg.time = time;
+    lg.topology = XdmfTopology::kPolyline;
+    lg.elements = l.nodes.rows;
+    lg.connectivity = h5_.ref(l.name + "/nodes");
+    lg.geometry = g.geometry;  // the same frame's particle positions
+    for (const auto& f : l.cell_arrays)
+      lg.attributes.push_back(XdmfAttribute::cell(f.name, h5_.ref(l.name + "/" + f.name)));
+    links_xmf_[i].append(std::move(lg));
+  }
+  particles_xmf_.write();
+  for (const auto& s : links_xmf_) s.write();
+  has_time_ = true;
+  last_time_ = time;
+  return index;
+}
+
+// ---------------------------------------------------------------------------------------
+
+
+MeshOutput::MeshOutput(const std::filesystem::path& dir, const FileInfo& info, const ArrayView& node_coords,
+                       const ArrayView& zone_nodes, const H5StorageParams& storage, const std::string& h5_name)
+    : h5_(create_fdm_file(dir, info, storage, h5_name, node_coords, zone_nodes)),
+      mesh_xmf_(dir / "mesh.xmf", "mesh"),
+      nodes_(node_coords.rows),
+      zones_(zone_nodes.rows) {
+  h5_.write_static("/mesh/node_coords", node_coords);
+  h5_.write_static("/mesh/zone_nodes", zone_nodes);
+  h5_.set_attribute("/mesh/zone_nodes", "zone_type", "hexahedron8-vtk-order");
+}
+
+std::size_t MeshOutput::write_frame(std::int64_t step, double time, const MeshFrame& fr) {
+  const std::string where = "MeshOutput::write_frame (step " + std::to_string(step) + "): ";
+  if (!std::isfinite(time)) throw std::invalid_argument(where + "time must be finite");
+  if (has_time_ && !(time > last_time_))
+    throw std::invalid_argument(where + "frame times must increase strictly; last " + std::to_string(last_time_) +
+                                " s, now " + std::to_string(time) + " s");
+  check_fields(where + "node array", fr.node_arrays, nodes_, {});
+  check_fields(where + "zone array", fr.zone_arrays, zones_, {});
+  bool moving = false;
+  for (const auto& f : fr.node_arrays)
+    if (f.name == "position") {
+      if (f.data.cols != 3 || f.data.dtype != DType::kFloat64)
+        throw std::invalid_argument(where + "node array 'position' must be [Nn,3] float64");
+      moving = true;
+    }
+
+  const std::size_t index = h5_.begin_frame(step, time);
+  for (const auto& f : fr.node_arrays) h5_.write("nodes/" + f.name, f.data);
+  for (const auto& f : fr.zone_arrays) h5_.write("zones/" + f.name, f.data);
+  h5_.end_frame();
+
+  XdmfGrid g;
+  g.time = time;
+  g.topology = XdmfTopology::kHexahedron;
+  g.elements = zones_;
+  g.connectivity = h5_.ref("/mesh/zone_nodes");
+  g.geometry = moving ? h5_.ref("nodes/position") : h5_.ref("/mesh/node_coords");
+  for (const auto& f : fr.node_arrays)
+    if (f.name != "position") g.attributes.push_back(XdmfAttribute::node(f.name, h5_.ref("nodes/" + f.name)));
+  for (const auto& f : fr.zone_arrays) g.attributes.push_back(XdmfAttribute::cell(f.name, h5_.ref("zones/" + f.name)));
+  mesh_xmf_.append(std::move(g));
+  mesh_xmf_.write();
+  has_time_ = true;
+  last_time_ = time;
+  return index;
+}
+
+}  // namespace demfdm::io

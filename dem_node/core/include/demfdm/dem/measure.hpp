@@ -1,0 +1,80 @@
+// Measurements and snapshot arrays (physics.md §4.3, §4.4, §3.6, §5.11, §8.18).
+// All functions read the state of the last force pass; none of them changes the world.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "demfdm/dem/world.hpp"
+
+namespace demfdm::dem {
+
+/// Row-major 3×3 tensor, tension positive (§0.2).
+using Mat3 = std::array<double, 9>;
+
+/// Love–Weber stress of the periodic cell: σ = −(1/V) Σ F ⊗ ℓ, symmetrised (§4.4).
+Mat3 cell_stress(const World& w);
+
+/// Measurement region: an axis-aligned box or a sphere.
+struct Region {
+  enum class Kind { kBox, kSphere } kind = Kind::kBox;
+  Vec3 lo{}, hi{};     // [m] box corners
+  Vec3 centre{};       // [m] sphere centre
+  double radius = 0;   // [m] sphere radius
+  bool contains(const Vec3& x) const;
+  double volume() const;
+};
+
+/// Particle-based stress of a region (§4.4 second form, balls whose centres lie inside,
+/// (1 − n_V)/Σ V_p = 1/V): σ = (1/V) Σ_p Σ_c (x_c − x_p) ⊗ F^{c→p}, symmetrised.
+/// Includes ball–wall contacts of those balls.
+Mat3 region_stress(const World& w, const Region& r);
+
+/// Porosity of a region: 1 − Σ V_p(centre inside)/V (the periodic cell: exact solid volume).
+double porosity(const World& w, const Region& r);
+double cell_porosity(const World& w);
+
+struct Coordination {
+  double z = 0.0;             // [-] 2 N_c / N_p over active ball–ball contacts (§4.3)
+  double z_no_rattlers = 0.0; // [-] same without balls having < 2 contacts
+  std::size_t active = 0;     // active ball–ball contacts (touching or bonded)
+  std::size_t rattlers = 0;   // balls with < 2 contacts
+};
+Coordination coordination(const World& w);
+
+struct BondCounts {
+  std::size_t never_bonded = 0, intact = 0, softening = 0, broken_tension = 0, broken_shear = 0;
+};
+/// Bond counts by state of the ball–ball family (§3.6).
+BondCounts bond_counts(const World& w);
+/// Same for ball–facet contacts (interface bonds).
+BondCounts facet_bond_counts(const World& w);
+
+/// Flat snapshot arrays for the HDF5 writer (row order = particle rows).
+struct Snapshot {
+  std::vector<double> position;     // [n,3] m
+  std::vector<double> velocity;     // [n,3] m/s
+  std::vector<double> radius;       // [n] m
+  std::vector<std::uint64_t> id;    // [n]
+  // ball–ball contacts that are active or bonded (or ever bonded)
+  std::vector<std::uint32_t> pair;  // [nc,2] particle rows
+  std::vector<double> force;        // [nc,3] N, force on the second ball
+  std::vector<std::uint8_t> state;  // [nc] BondState as uint8 (0 = never bonded)
+};
+Snapshot snapshot(const World& w);
+
+/// One line of measurements, for a history file every N steps (§3.6, §5.11, §8.18).
+struct Measurement {
+  double time = 0.0;
+  std::int64_t step = 0;
+  double ratio = 0.0;        // unbalanced-force ratio
+  Energy energy;
+  Coordination coord;
+  BondCounts bonds;
+  Mat3 stress{};             // cell stress (periodic) or zeros
+  double porosity = 0.0;     // cell porosity (periodic) or 0
+};
+Measurement measure(const World& w);
+
+}  // namespace demfdm::dem

@@ -1,0 +1,149 @@
+// Staged specimen generation (physics.md §0.4, §4.3–4.9): each operation is callable on
+// its own and returns a small report. Randomness comes only from the seeded generator
+// passed in the parameters (deterministic, habit 13).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+#include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/world.hpp"
+
+namespace demfdm::dem {
+
+/// Report of one staged operation.
+struct StageReport {
+  std::string what;          // sentence: what was done
+  std::int64_t steps = 0;    // cycles run
+  double ratio = 0.0;        // final unbalanced-force ratio
+  Mat3 stress{};             // final cell stress (periodic) [Pa], tension positive
+  double porosity = 0.0;     // final porosity (periodic cell) [-]
+  std::size_t count = 0;     // items created/changed (balls, bonds, contacts, ...)
+  bool converged = true;     // criterion met within the step budget
+};
+
+/// Particle size distribution: number density ∝ d⁻³ on [d_min, d_max] × scale (§0.4).
+struct PsdParams {
+  double d_min = 0.0655e-3;  // [m] smallest diameter (§0.3)
+  double d_max = 0.181e-3;   // [m] largest diameter (§0.3)
+  double scale = 1.0;        // [-] upscaling factor (1, 1.3, 1.5; §0.3)
+};
+/// Inverse CDF of density ∝ d⁻³: d = (d_min⁻² − u(d_min⁻² − d_max⁻²))^(−1/2), u ∈ [0,1) (§0.4).
+double psd_diameter(const PsdParams& p, double u);
+
+/// Deterministic uniform generator (splitmix64): identical on every platform.
+class Rng {
+ public:
+  explicit Rng(std::uint64_t seed) : s_(seed) {}
+  std::uint64_t next();
+  double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
+ private:
+  std::uint64_t s_;
+};
+
+/// REV generation in the world's periodic cell (§4.3).
+struct RevParams {
+  PsdParams psd;
+  std::uint64_t seed = 1;          // [-] random seed
+  std::size_t n_particles = 0;     // [-] number of balls; 0 → fill (1 − porosity_target) V
+  double porosity_target = 0.40;   // [-] n₁ reached by frictionless radius expansion (§4.3)
+  double initial_scale = 0.6;      // [-] s₀: initial radii d/2 · s₀
+  int increments = 5;              // [-] radius-expansion increments
+  double ratio_tol = 1e-3;         // [-] unbalanced ratio after each increment
+  std::int64_t max_steps_per_increment = 20000;  // [steps]
+  double fric = 0.0;               // [-] μ during generation (§4.3 step 2: μ = 0)
+};
+/// Generate balls in the periodic cell of `w` (which must be empty and periodic).
+StageReport generate_rev(World& w, const RevParams& p);
+
+/// Servo stiffness estimate (§4.5, U15).
+enum class ServoStiffness : std::uint8_t {
+  kAffine = 0,    ///< default: (1/V)Σ(ℓ·e)²[K_n(n̂·e)² + K_s(1−(n̂·e)²)]
+  kApparent = 1,  ///< (1/V)Σ K_n (ℓ·e)²
+};
+
+/// Strain-rate servo of the periodic cell (§4.5).
+struct ServoParams {
+  Vec3 target{6.25e3, 6.25e3, 12.5e3};  // [Pa] compressive targets (σ_h, σ_h, σ_v)
+  std::array<bool, 3> active{true, true, true};  // [-] servo-controlled axes
+  double gain = 0.3;          // [-] α_s, under-relaxation (0.3–0.5)
+  double max_face_step = 1e-4;  // [-] face displacement per step / d_min
+  ServoStiffness stiffness = ServoStiffness::kAffine;
+};
+
+/// Effect that sets the cell strain rate each step from the last stress (kPreStep).
+class PeriodicServo final : public Effect {
+ public:
+  explicit PeriodicServo(const ServoParams& p, double d_min) : p_(p), d_min_(d_min) {}
+  unsigned phases() const override { return kPreStep; }
+  void apply(World& w, Phase) override;
+  const char* name() const override { return "periodic_servo"; }
+  const Mat3& last_stress() const { return stress_; }
+ private:
+  ServoParams p_;
+  double d_min_;
+  Mat3 stress_{};
+};
+
+/// Servo until |s − s*| ≤ stress_tol·s* on active axes and ratio < ratio_tol for
+/// `hold_steps` consecutive checks (every 10 steps), or the budget is spent.
+/// `overshoot` (optional) receives max over the run of (s − s*)/s* over active axes.
+StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
+                        std::int64_t hold_steps, std::int64_t budget, double* overshoot = nullptr);
+
+/// Bond ball–ball contacts with gap in [gap_lo, gap_hi] (§4.6).
+StageReport install_bonds(World& w, double gap_lo, double gap_hi);
+
+/// Brick replication α×β×γ of a periodic cell (§4.7). With keep_periodic the result is a
+/// periodic cell of size (α L_x, β L_y, γ L_z); otherwise periodicity is switched off and
+/// contacts across the outer faces are dropped.
+struct ReplicateParams {
+  int nx = 1, ny = 1, nz = 5;   // [-] copies along x, y, z
+  bool keep_periodic = false;   // [-] result stays periodic
+};
+StageReport replicate(World& w, const ReplicateParams& p);
+
+/// Depth scaling of contact forces (§4.9, U7).
+enum class DepthScaling : std::uint8_t {
+  kDepthRatio = 0,    ///< default: f = (z_top − z_c)/H_D
+  kPaperLiteral = 1,  ///< f = (z_c − z_bottom)/H_D, with z_bottom = z_top − H_D
+};
+struct DepthScaleParams {
+  DepthScaling mode = DepthScaling::kDepthRatio;
+  double z_top = 0.0;     // [m] top of the DEM block
+  double height = 0.0;    // [m] H_D
+};
+/// Scale F_n, F_s, M of every ball–ball contact (and bond forces) by f(z_c) clamped to
+/// [0,1], switching them to incremental mode (§4.9).
+StageReport depth_scale(World& w, const DepthScaleParams& p);
+
+/// §2.6/§4.9: set the normal bond force of every bonded ball–facet contact to the mean
+/// normal force of active ball–ball contacts within ±band of its height whose normals are
+/// within 30° of the facet normal (global mean if none), in compression.
+StageReport assign_interface_bond_forces(World& w, double band);
+
+/// Gravity on or off (§4.9 step 5).
+StageReport set_gravity(World& w, bool on, double g_level);
+
+/// Cycle until the unbalanced ratio < ratio_tol or the budget is spent.
+StageReport cycle_to_equilibrium(World& w, double ratio_tol, std::int64_t budget);
+
+/// Unconfined compression between two rectangular platens (paper Fig. 1, §8.16).
+struct UcsParams {
+  double strain_rate = 0.5;     // [1/s] platen approach rate / specimen height (each platen half)
+  double max_strain = 0.01;     // [-] stop at this axial strain
+  double stop_fraction = 0.7;   // [-] stop once stress < stop_fraction · peak after the peak
+  int sample_every = 100;       // [steps]
+};
+struct UcsSample { double strain, stress; };
+struct UcsResult {
+  std::vector<UcsSample> curve;  // axial strain, axial compressive stress [Pa]
+  double peak = 0.0;             // [Pa] UCS
+  double e50 = 0.0;              // [Pa] secant modulus at 50 % of the peak
+  StageReport report;
+};
+/// The world must be non-periodic; platens are added at z_min and z_max of the balls.
+UcsResult unconfined_compression(World& w, const UcsParams& p);
+
+}  // namespace demfdm::dem

@@ -1,0 +1,319 @@
+// DEM world: particle store (SoA), contact families, walls, effects and the PFC cycle.
+//
+// Cycle (physics.md §1.2, PFC order): pre-step effects → timestep → law of motion with
+// local damping → wall motion → time advance → neighbour check/rebuild → force–displacement
+// for every contact family → fixed-order gather onto balls → force effects (gravity) →
+// end-of-step effects.
+//
+// Determinism (style.md habit 13): the ball–ball pass splits the sorted contact list into
+// one static block per thread; each thread adds into its own force buffer and the buffers
+// are summed in thread order. Results are bit-identical from run to run for a given thread
+// count (sums are associated differently for different thread counts).
+//
+// Contact history is keyed by the stable particle / wall ids and carried across rebuilds
+// (style.md habit 5). Bonded contacts are never dropped by a rebuild.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "demfdm/dem/contact_kernels.hpp"
+#include "demfdm/dem/params.hpp"
+#include "demfdm/dem/vec3.hpp"
+
+namespace demfdm::dem {
+
+/// Degree-of-freedom fixity bits (§1.2: a fixed component keeps its prescribed velocity).
+enum Fix : std::uint8_t {
+  kFixVx = 1, kFixVy = 2, kFixVz = 4, kFixWx = 8, kFixWy = 16, kFixWz = 32,
+  kFixVel = 7, kFixRot = 56, kFixAll = 63,
+};
+
+/// SoA particle store. Every array has one row per ball; Vec3 arrays are flat [n,3].
+struct Particles {
+  std::vector<Vec3> x;    // [m] position
+  std::vector<Vec3> v;    // [m/s] velocity (half step)
+  std::vector<Vec3> w;    // [rad/s] angular velocity (half step)
+  std::vector<Vec3> f;    // [N] contact + body force of the last force pass
+  std::vector<Vec3> t;    // [N m] contact torque of the last force pass
+  std::vector<Vec3> fa;   // [N] applied force (user)
+  std::vector<Vec3> ta;   // [N m] applied moment (user)
+  std::vector<Vec3> x_ref;  // [m] position at the last neighbour rebuild
+  std::vector<double> r;  // [m] radius
+  std::vector<double> m;  // [kg] mass
+  std::vector<double> inertia;  // [kg m^2] moment of inertia (2/5) m R²
+  std::vector<std::uint64_t> id;  // stable id
+  std::vector<std::uint8_t> fix;  // Fix bits
+  std::size_t size() const { return x.size(); }
+};
+
+/// Ball–ball contacts (half list, A = lower index). Hot arrays first.
+struct PairContacts {
+  std::vector<std::uint32_t> a, b;             // particle rows
+  std::vector<std::array<std::int8_t, 4>> shift;  // periodic image of B (cells), [3] unused
+  std::vector<ContactHist> h;
+  std::vector<BondHist> bond;                  // empty unless the family can bond
+  std::vector<Vec3> F;                         // per-contact force on B (last pass)
+  std::vector<Vec3> M;                         // per-contact moment on B (bond models only)
+  std::size_t size() const { return a.size(); }
+};
+
+/// Ball–wall contacts (A = ball, B = wall).
+struct WallContacts {
+  std::vector<std::uint32_t> ball, wall;       // particle row, wall index within its type
+  std::vector<ContactHist> h;
+  std::vector<BondHist> bond;
+  std::vector<std::int32_t> facet;             // facet walls: current facet
+  std::vector<std::uint32_t> cand_off, cand;   // facet walls: candidate facets (CSR)
+  std::vector<Vec3> F, M, TA, xc;              // force and moment on the wall, torque on ball,
+                                               // contact point
+  std::vector<Vec3> bary;                      // facet walls: barycentric weights of x_c
+  std::size_t size() const { return ball.size(); }
+};
+
+/// Planar wall: infinite plane, or a bounded rectangle (half1, half2 finite).
+struct PlaneWallParams {
+  Vec3 point{};          // [m] a point on the plane (rectangle centre)
+  Vec3 normal{0, 0, 1};  // [-] unit normal pointing towards the balls
+  Vec3 axis1{1, 0, 0};   // [-] first in-plane axis (orthogonalised against normal)
+  double half1 = 0.0;    // [m] rectangle half-extent along axis1; 0 = infinite
+  double half2 = 0.0;    // [m] rectangle half-extent along axis2 = normal × axis1; 0 = infinite
+  Vec3 velocity{};       // [m/s] prescribed velocity (ignored while servo is on)
+  bool servo = false;    // [-] stress servo along the normal (platen)
+  double servo_stress = 0.0;  // [Pa] target compressive stress
+  double servo_area = 0.0;    // [m^2] area used for the stress (0 → 4 half1 half2)
+  double servo_gain = 0.3;    // [-] under-relaxation α_s of the servo (cf. §4.5)
+  double servo_vmax = 1.0;    // [m/s] speed limit of the servo
+};
+
+struct PlaneWall {
+  PlaneWallParams p;
+  Vec3 axis2{};
+  Vec3 disp{};      // [m] displacement since the last rebuild
+  Vec3 reaction{};  // [N] total force of the balls on the wall (last pass)
+  double k_sum = 0.0;  // [N/m] Σ K_n of active contacts (servo gain)
+  std::uint64_t id = 0;
+};
+
+/// Interface wall made of triangles whose vertices are set from outside (§6.2).
+/// Winding: (p2−p1)×(p3−p1) points towards the balls (the DEM side).
+struct FacetWall {
+  std::vector<Vec3> pos, vel;                 // [m], [m/s] vertex positions / velocities
+  std::vector<std::array<std::int32_t, 3>> tri;
+  std::vector<Vec3> tri_normal, tri_spin;     // unit normal, facet angular velocity (§6.2)
+  std::vector<Vec3> pos_ref;                  // vertex positions at the last rebuild
+  std::vector<Vec3> vforce;                   // [N] equivalent vertex forces (§6.4) [nv,3]
+  std::vector<double> vstiff;                 // [N/m] stiffness contributions (§6.5) [nv]
+  Vec3 total_force{};                         // [N] Σ force on the facets
+  std::uint64_t id = 0;
+};
+
+/// Rigid flat-bottomed cylindrical footing, axis along z (§0.3, §6.3).
+struct FootingParams {
+  double diameter = 1.2e-3;  // [m] D_f
+  double height = 0.6e-3;    // [m] H_f
+  Vec3 bottom_centre{};      // [m] centre of the bottom disc
+  Vec3 velocity{};           // [m/s] prescribed velocity
+};
+
+struct Footing {
+  FootingParams p;
+  bool enabled = false;
+  Vec3 disp{};
+  Vec3 reaction{};  // [N] force of the balls on the footing (last pass)
+  std::uint64_t id = 0;
+};
+
+class World;
+
+/// Optional effect with declared phases (style.md §2b(1), habit 2). Lists per phase are
+/// built when effects are added; an absent effect costs nothing.
+class Effect {
+ public:
+  enum Phase : unsigned { kPreStep = 1, kForce = 2, kEndOfStep = 4 };
+  virtual ~Effect() = default;
+  virtual unsigned phases() const = 0;
+  virtual void apply(World& w, Phase ph) = 0;
+  virtual const char* name() const = 0;
+};
+
+/// Energy bookkeeping (§8.18).
+struct Energy {
+  double kinetic = 0.0;    // [J]
+  double strain = 0.0;     // [J] linear springs and bonds (current)
+  double damping = 0.0;    // [J] dissipated by local damping (cumulative)
+  double friction = 0.0;   // [J] dissipated by Coulomb slip (cumulative, live contacts)
+  double softening = 0.0;  // [J] dissipated by soft-bond softening (cumulative, live contacts)
+};
+
+class World {
+ public:
+  explicit World(const WorldParams& p);
+  ~World();
+  World(const World&) = delete;
+  World& operator=(const World&) = delete;
+
+  const WorldParams& params() const { return p_; }
+  /// Change contact-family parameters: existing contacts keep their constants until
+  /// refresh_contact_constants() (e.g. switching μ after compaction, §4.3 step 4).
+  WorldParams& mutable_params() { return p_; }
+
+  // ---- particles ----
+  /// Add a ball; density from params unless `density` > 0. Returns its row.
+  std::size_t add_ball(const Vec3& x, double radius, double density = 0.0);
+  Particles& balls() { return pt_; }
+  const Particles& balls() const { return pt_; }
+  std::size_t num_balls() const { return pt_.size(); }
+  /// Recompute mass and inertia from radius and density (after a radius change).
+  void set_radius(std::size_t i, double r);
+  /// Recompute the precomputed constants (K_n, K_s, μ, bond geometry) of all contacts.
+  void refresh_contact_constants();
+
+  // ---- walls ----
+  int add_plane(const PlaneWallParams& p);
+  PlaneWall& plane(int i) { return planes_[static_cast<std::size_t>(i)]; }
+  int num_planes() const { return static_cast<int>(planes_.size()); }
+  /// Interface wall from vertex positions [nv*3] and triangles [nt*3].
+  int add_facet_wall(std::span<const double> vertices, std::span<const std::int32_t> triangles);
+  /// Set the vertex positions and velocities [nv*3] of a facet wall (positions at t+Δt).
+  void set_vertex_kinematics(int wall, std::span<const double> pos, std::span<const double> vel);
+  /// Equivalent vertex forces [nv*3] of the last pass (force of the DEM on the wall, §6.4).
+  std::span<const double> vertex_forces(int wall) const;
+  /// Stiffness contributions [nv] (§6.5).
+  std::span<const double> vertex_stiffness(int wall) const;
+  /// Total force the DEM applied to the facets of one wall, and to all facet walls.
+  Vec3 facet_wall_force(int wall) const;
+  Vec3 facet_walls_total_force() const;
+  FacetWall& facet_wall(int i) { return fwalls_[static_cast<std::size_t>(i)]; }
+  int num_facet_walls() const { return static_cast<int>(fwalls_.size()); }
+
+  void set_footing(const FootingParams& p);
+  void remove_footing();
+  bool has_footing() const { return footing_.enabled; }
+  void set_footing_velocity(const Vec3& v) { footing_.p.velocity = v; }
+  void set_footing_position(const Vec3& bottom_centre);
+  const Footing& footing() const { return footing_; }
+  Vec3 footing_reaction() const { return footing_.reaction; }
+
+  // ---- effects ----
+  Effect* add_effect(std::unique_ptr<Effect> e);
+  void remove_effect(const Effect* e);
+  /// Turn the gravity effect on or off (g = (0,0,−N g0), §0.1).
+  void set_gravity(bool on, double g_level);
+  bool gravity_on() const { return gravity_ != nullptr; }
+  Vec3 gravity() const;
+
+  // ---- stepping ----
+  void step();
+  void step(std::int64_t n);
+  double time() const { return time_; }
+  std::int64_t step_count() const { return step_; }
+  double dt() const { return dt_; }
+  double skin() const { return skin_; }
+  /// Critical-step estimate of §1.8 (without the safety factor applied: returns f_s·min).
+  double critical_timestep();
+  /// Force a neighbour rebuild and a force pass with zero increments (after edits).
+  void prepare();
+  std::int64_t rebuild_count() const { return rebuilds_; }
+
+  // ---- periodic cell (§4.2, §4.5) ----
+  bool periodic() const { return p_.periodic.enabled; }
+  Vec3 cell_origin() const { return p_.periodic.origin; }
+  Vec3 cell_length() const { return p_.periodic.length; }
+  double cell_volume() const;
+  /// Strain rate of the cell axes [1/s]; positions are mapped affinely each step.
+  void set_strain_rate(const Vec3& edot) { edot_ = edot; }
+  Vec3 strain_rate() const { return edot_; }
+  /// Replace the cell (used by replication); positions are not touched.
+  void set_cell(const Vec3& origin, const Vec3& length);
+
+  // ---- bonds (§2.3, §3, §4.6) ----
+  /// Bond every ball–ball contact with gap in [gap_lo, gap_hi]. Returns the count.
+  std::size_t bond_ball_ball(double gap_lo, double gap_hi);
+  /// Bond ball–facet contacts of all facet walls with gap ≤ gap_hi (§2.6, §4.8).
+  std::size_t bond_ball_facet(double gap_hi);
+  /// Bond ball–footing / ball–plane contacts are not provided (no use in the paper).
+
+  // ---- contacts (expert access for specimen operations and measurements) ----
+  PairContacts& pair_contacts() { return pc_; }
+  const PairContacts& pair_contacts() const { return pc_; }
+  WallContacts& plane_contacts() { return plc_; }
+  WallContacts& facet_contacts() { return fcc_; }
+  WallContacts& footing_contacts() { return ftc_; }
+  const WallContacts& plane_contacts() const { return plc_; }
+  const WallContacts& facet_contacts() const { return fcc_; }
+  const WallContacts& footing_contacts() const { return ftc_; }
+  /// Branch vector x_B − x_A (minimum image) of ball–ball contact c.
+  Vec3 branch(std::size_t c) const;
+  /// Remove every contact and history (e.g. after moving balls by hand).
+  void clear_contacts();
+  /// Append a ball–ball contact with a given state (replication). Marks the list dirty.
+  void append_pair(std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& shift,
+                   const ContactHist& h, const BondHist* bond);
+
+  // ---- measurements ----
+  Energy energy() const;
+  /// PFC average ratio: mean ‖F_unb‖ over balls / mean ‖F_c‖ over active contacts (§5.11).
+  double unbalanced_ratio() const;
+  double max_unbalanced_force() const;
+  double mean_contact_force() const;
+  Vec3 cell_strain_since_reset() const { return cell_strain_; }
+
+ private:
+  friend class GravityEffect;
+  void init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondHist* bond,
+                    const ContactFamilyParams& fam, bool wall, double r_wall_dummy) const;
+  void rebuild();
+  void rebuild_walls(const std::vector<std::int32_t>& cell_of, const std::vector<std::uint32_t>& cell_start,
+                     const std::vector<std::uint32_t>& cell_items);
+  bool need_rebuild() const;
+  void force_pass(double dt);
+  template <ContactModel M, bool Periodic> void pair_pass(double dt);
+  template <ContactModel M> void plane_pass(double dt);
+  template <ContactModel M> void facet_pass(double dt);
+  template <ContactModel M> void footing_pass(double dt);
+  void gather();
+  void integrate(double dt);
+  void update_facet_spin(FacetWall& fw);
+  LawConst law_const(const ContactFamilyParams& f) const;
+
+  WorldParams p_;
+  Particles pt_;
+  PairContacts pc_;
+  WallContacts plc_, fcc_, ftc_;
+  std::vector<PlaneWall> planes_;
+  std::vector<FacetWall> fwalls_;
+  Footing footing_;
+  std::vector<std::unique_ptr<Effect>> effects_;
+  std::vector<Effect*> by_phase_[3];
+  Effect* gravity_ = nullptr;
+  double time_ = 0.0, dt_ = 0.0, skin_ = 0.0;
+  std::int64_t step_ = 0, rebuilds_ = 0, last_dt_step_ = -1;
+  bool prepared_ = false, dirty_ = true;
+  Vec3 edot_{}, cell_strain_{}, cell_len_ref_{};
+  std::uint64_t next_id_ = 0, next_wall_id_ = 1;
+  double e_damp_ = 0.0;
+  std::vector<double> chunk_e_;
+  double max_disp2_ = 0.0;
+  std::vector<std::vector<Vec3>> tbuf_;  // per-thread force/torque buffers [2n] (thread ≥ 1)
+  double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
+};
+
+/// Gravity as an optional force effect (§1.2).
+class GravityEffect final : public Effect {
+ public:
+  explicit GravityEffect(Vec3 g) : g_(g) {}
+  unsigned phases() const override { return kForce; }
+  void apply(World& w, Phase) override;
+  const char* name() const override { return "gravity"; }
+  Vec3 g() const { return g_; }
+
+ private:
+  Vec3 g_;
+};
+
+}  // namespace demfdm::dem

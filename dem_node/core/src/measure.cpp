@@ -1,0 +1,176 @@
+#include "demfdm/dem/measure.hpp"
+
+#include <cmath>
+
+namespace demfdm::dem {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
+bool pair_active(const World& w, std::size_t c) {
+  const auto& pc = w.pair_contacts();
+  if (pc.h[c].flags & ContactHist::kActive) return true;
+  return !pc.bond.empty() && bonded(pc.bond[c].state);
+}
+void symmetrise(Mat3& s) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = i + 1; j < 3; ++j) {
+      const double m = 0.5 * (s[3 * i + j] + s[3 * j + i]);
+      s[3 * i + j] = s[3 * j + i] = m;
+    }
+}
+}  // namespace
+
+Mat3 cell_stress(const World& w) {
+  Mat3 s{};
+  const auto& pc = w.pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const Vec3& F = pc.F[c];
+    if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
+    const Vec3 l = w.branch(c);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) s[3 * i + j] -= F[i] * l[j];
+  }
+  const double V = w.cell_volume();
+  for (double& x : s) x /= V;
+  symmetrise(s);
+  return s;
+}
+
+bool Region::contains(const Vec3& x) const {
+  if (kind == Kind::kSphere) return norm2(x - centre) <= radius * radius;
+  return x.x >= lo.x && x.x <= hi.x && x.y >= lo.y && x.y <= hi.y && x.z >= lo.z && x.z <= hi.z;
+}
+double Region::volume() const {
+  if (kind == Kind::kSphere) return 4.0 / 3.0 * kPi * radius * radius * radius;
+  return (hi.x - lo.x) * (hi.y - lo.y) * (hi.z - lo.z);
+}
+
+Mat3 region_stress(const World& w, const Region& r) {
+  Mat3 s{};
+  const auto& pt = w.balls();
+  const auto& pc = w.pair_contacts();
+  std::vector<char> in(pt.size());
+  for (std::size_t i = 0; i < pt.size(); ++i) in[i] = r.contains(pt.x[i]);
+  auto add = [&](const Vec3& arm, const Vec3& F) {
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) s[3 * i + j] += arm[i] * F[j];
+  };
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const Vec3& F = pc.F[c];
+    if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
+    const std::uint32_t a = pc.a[c], b = pc.b[c];
+    if (!in[a] && !in[b]) continue;
+    const Vec3 d = w.branch(c);
+    const double dist = norm(d);
+    const Vec3 n = d * (1.0 / dist);
+    const double gap = dist - pt.r[a] - pt.r[b];
+    if (in[a]) add((pt.r[a] + 0.5 * gap) * n, -F);   // force on A is −F
+    if (in[b]) add(-(pt.r[b] + 0.5 * gap) * n, F);
+  }
+  for (const WallContacts* wc : {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()})
+    for (std::size_t c = 0; c < wc->size(); ++c) {
+      const std::uint32_t i = wc->ball[c];
+      if (!in[i]) continue;
+      add(wc->xc[c] - pt.x[i], -wc->F[c]);
+    }
+  const double V = r.volume();
+  for (double& x : s) x /= V;
+  symmetrise(s);
+  return s;
+}
+
+double porosity(const World& w, const Region& r) {
+  const auto& pt = w.balls();
+  double vs = 0.0;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (r.contains(pt.x[i])) vs += 4.0 / 3.0 * kPi * pt.r[i] * pt.r[i] * pt.r[i];
+  return 1.0 - vs / r.volume();
+}
+
+double cell_porosity(const World& w) {
+  const auto& pt = w.balls();
+  double vs = 0.0;
+  for (std::size_t i = 0; i < pt.size(); ++i) vs += 4.0 / 3.0 * kPi * pt.r[i] * pt.r[i] * pt.r[i];
+  return 1.0 - vs / w.cell_volume();
+}
+
+Coordination coordination(const World& w) {
+  Coordination z;
+  const auto& pc = w.pair_contacts();
+  const std::size_t n = w.num_balls();
+  std::vector<std::uint32_t> cnt(n, 0);
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (pair_active(w, c)) {
+      ++cnt[pc.a[c]];
+      ++cnt[pc.b[c]];
+      ++z.active;
+    }
+  std::size_t nc_nr = 0;  // contact ends on non-rattlers
+  for (std::size_t i = 0; i < n; ++i) {
+    if (cnt[i] < 2) ++z.rattlers;
+    else nc_nr += cnt[i];
+  }
+  z.z = n ? 2.0 * double(z.active) / double(n) : 0.0;
+  z.z_no_rattlers = n > z.rattlers ? double(nc_nr) / double(n - z.rattlers) : 0.0;
+  return z;
+}
+
+namespace {
+BondCounts count(const std::vector<BondHist>& bs) {
+  BondCounts b;
+  for (const auto& x : bs) switch (x.state) {
+      case BondState::kNeverBonded: ++b.never_bonded; break;
+      case BondState::kIntact: ++b.intact; break;
+      case BondState::kSoftening: ++b.softening; break;
+      case BondState::kBrokenTension: ++b.broken_tension; break;
+      case BondState::kBrokenShear: ++b.broken_shear; break;
+    }
+  return b;
+}
+}  // namespace
+
+BondCounts bond_counts(const World& w) { return count(w.pair_contacts().bond); }
+BondCounts facet_bond_counts(const World& w) { return count(w.facet_contacts().bond); }
+
+Snapshot snapshot(const World& w) {
+  Snapshot s;
+  const auto& pt = w.balls();
+  const std::size_t n = pt.size();
+  s.position.resize(3 * n);
+  s.velocity.resize(3 * n);
+  s.radius = pt.r;
+  s.id = pt.id;
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) {
+      s.position[3 * i + k] = pt.x[i][k];
+      s.velocity[3 * i + k] = pt.v[i][k];
+    }
+  const auto& pc = w.pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const BondState st = pc.bond.empty() ? BondState::kNeverBonded : pc.bond[c].state;
+    if (!pair_active(w, c) && st == BondState::kNeverBonded) continue;
+    s.pair.push_back(pc.a[c]);
+    s.pair.push_back(pc.b[c]);
+    for (int k = 0; k < 3; ++k) s.force.push_back(pc.F[c][k]);
+    s.state.push_back(static_cast<std::uint8_t>(st));
+  }
+  return s;
+}
+
+Measurement measure(const World& w) {
+  Measurement m;
+  m.time = w.time();
+  m.step = w.step_count();
+  m.ratio = w.unbalanced_ratio();
+  m.energy = w.energy();
+  m.coord = coordination(w);
+  m.bonds = bond_counts(w);
+  if (w.periodic()) {
+    m.stress = cell_stress(w);
+    m.porosity = cell_porosity(w);
+  }
+  return m;
+}
+
+}  // namespace demfdm::dem

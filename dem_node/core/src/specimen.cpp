@@ -1,0 +1,428 @@
+// Staged specimen generation (physics.md §4). See specimen.hpp.
+#include "demfdm/dem/specimen.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace demfdm::dem {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
+
+void fill_report(World& w, StageReport& r) {
+  r.ratio = w.unbalanced_ratio();
+  if (w.periodic()) {
+    r.stress = cell_stress(w);
+    r.porosity = cell_porosity(w);
+  }
+}
+
+double min_diameter(const World& w) {
+  double d = std::numeric_limits<double>::infinity();
+  for (double r : w.balls().r) d = std::min(d, 2.0 * r);
+  return d;
+}
+
+// Cycle until ratio < tol (checked every `every` steps) or budget; returns steps run.
+std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, int every = 50) {
+  std::int64_t s = 0;
+  ok = false;
+  while (s < budget) {
+    const std::int64_t k = std::min<std::int64_t>(every, budget - s);
+    w.step(k);
+    s += k;
+    if (w.unbalanced_ratio() < tol) { ok = true; break; }
+  }
+  return s;
+}
+}  // namespace
+
+double psd_diameter(const PsdParams& p, double u) {
+  const double a = p.d_min * p.scale, b = p.d_max * p.scale;
+  const double ia = 1.0 / (a * a), ib = 1.0 / (b * b);
+  return 1.0 / std::sqrt(ia - u * (ia - ib));
+}
+
+std::uint64_t Rng::next() {  // splitmix64
+  std::uint64_t z = (s_ += 0x9e3779b97f4a7c15ULL);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+  return z ^ (z >> 31);
+}
+
+StageReport generate_rev(World& w, const RevParams& p) {
+  if (!w.periodic())
+    throw std::invalid_argument("generate_rev: the world must have a periodic cell (periodic.enabled = true).");
+  if (w.num_balls() != 0)
+    throw std::invalid_argument("generate_rev: the world must be empty, found balls in it.");
+  if (!(p.porosity_target > 0.0 && p.porosity_target < 1.0)) {
+    std::ostringstream s;
+    s << "generate_rev: 'porosity_target' must be in (0, 1), found " << p.porosity_target << ".";
+    throw std::invalid_argument(s.str());
+  }
+  if (!(p.initial_scale > 0.0 && p.initial_scale <= 1.0) || p.increments < 1) {
+    std::ostringstream s;
+    s << "generate_rev: 'initial_scale' must be in (0, 1] and 'increments' >= 1, found "
+      << p.initial_scale << " and " << p.increments << ".";
+    throw std::invalid_argument(s.str());
+  }
+  Rng rng(p.seed);
+  const Vec3 o = w.cell_origin(), L = w.cell_length();
+  const double V = w.cell_volume();
+  std::vector<double> d;
+  double vs = 0.0;
+  while (p.n_particles ? d.size() < p.n_particles : vs < (1.0 - p.porosity_target) * V) {
+    d.push_back(psd_diameter(p.psd, rng.uniform()));
+    vs += kPi / 6.0 * d.back() * d.back() * d.back();
+  }
+  for (double di : d) {
+    const Vec3 x{o.x + rng.uniform() * L.x, o.y + rng.uniform() * L.y, o.z + rng.uniform() * L.z};
+    w.add_ball(x, 0.5 * di * p.initial_scale);
+  }
+  // low friction during generation (§4.3 step 2); restored afterwards
+  const double mu_final = w.params().ball_ball.linear.fric;
+  w.mutable_params().ball_ball.linear.fric = p.fric;
+  w.prepare();
+  w.refresh_contact_constants();
+  const double n0 = cell_porosity(w);
+  const double mtot = std::cbrt((1.0 - p.porosity_target) / (1.0 - n0));
+  const double minc = std::pow(mtot, 1.0 / p.increments);
+  StageReport r;
+  bool ok_all = true;
+  for (int k = 0; k < p.increments; ++k) {
+    for (std::size_t i = 0; i < w.num_balls(); ++i) w.set_radius(i, w.balls().r[i] * minc);
+    w.prepare();
+    w.refresh_contact_constants();
+    bool ok;
+    r.steps += cycle(w, p.ratio_tol, p.max_steps_per_increment, ok);
+    ok_all &= ok;
+  }
+  w.mutable_params().ball_ball.linear.fric = mu_final;
+  w.refresh_contact_constants();
+  fill_report(w, r);
+  r.count = w.num_balls();
+  r.converged = ok_all;
+  std::ostringstream s;
+  s << "generated " << r.count << " balls (seed " << p.seed << ", PSD scale " << p.psd.scale
+    << ") and expanded radii from porosity " << n0 << " to " << r.porosity << " in "
+    << p.increments << " increments";
+  r.what = s.str();
+  return r;
+}
+
+// §4.5: ε̇_a = −α_s (s*_a − s_a)/(K_a Δt), |ε̇_a| ≤ max_face_step d_min/(L_a Δt).
+void PeriodicServo::apply(World& w, Phase) {
+  stress_ = cell_stress(w);
+  const double V = w.cell_volume();
+  const Vec3 L = w.cell_length();
+  const auto& pc = w.pair_contacts();
+  double K[3] = {0, 0, 0};
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const ContactHist& h = pc.h[c];
+    const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
+    if (!(h.flags & ContactHist::kActive) && !bd) continue;
+    double kn = h.kn, ks = h.ks;
+    if (bd && w.params().ball_ball.model == ContactModel::kLinearPBond) {
+      kn += pc.bond[c].kn * pc.bond[c].area;
+      ks += pc.bond[c].ks * pc.bond[c].area;
+    }
+    const Vec3 l = w.branch(c);
+    const double ll = norm(l);
+    for (int a = 0; a < 3; ++a) {
+      const double na = l[a] / ll;
+      K[a] += (p_.stiffness == ServoStiffness::kAffine)
+                  ? l[a] * l[a] * (kn * na * na + ks * (1.0 - na * na))
+                  : kn * l[a] * l[a];
+    }
+  }
+  const double dt = w.dt() > 0.0 ? w.dt() : 1.0;
+  Vec3 ed{};
+  for (int a = 0; a < 3; ++a) {
+    if (!p_.active[a]) continue;
+    const double s = -stress_[4 * a];
+    const double err = p_.target[a] - s;
+    const double emax = p_.max_face_step * d_min_ / (L[a] * dt);
+    const double Ka = K[a] / V;
+    double e = Ka > 0.0 ? -p_.gain * err / (Ka * dt) : (err > 0.0 ? -emax : emax);
+    ed[a] = std::clamp(e, -emax, emax);
+  }
+  w.set_strain_rate(ed);
+}
+
+StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
+                        std::int64_t hold_steps, std::int64_t budget, double* overshoot) {
+  if (!w.periodic()) throw std::invalid_argument("servo_until: the world must have a periodic cell.");
+  for (int a = 0; a < 3; ++a)
+    if (p.active[a] && !(p.target[a] > 0.0)) {
+      std::ostringstream s;
+      s << "servo_until: 'target[" << a << "]' must be > 0 Pa (compressive), found " << p.target[a] << ".";
+      throw std::invalid_argument(s.str());
+    }
+  auto* servo = static_cast<PeriodicServo*>(w.add_effect(std::make_unique<PeriodicServo>(p, min_diameter(w))));
+  StageReport r;
+  std::int64_t held = 0;
+  double over = -std::numeric_limits<double>::infinity();
+  r.converged = false;
+  while (r.steps < budget) {
+    w.step();
+    ++r.steps;
+    const Mat3& s = servo->last_stress();
+    bool in = true;
+    for (int a = 0; a < 3; ++a) {
+      if (!p.active[a]) continue;
+      const double rel = (-s[4 * a] - p.target[a]) / p.target[a];
+      over = std::max(over, rel);
+      in &= std::abs(rel) <= stress_tol;
+    }
+    if (r.steps % 10 == 0) {
+      if (in && w.unbalanced_ratio() < ratio_tol) held += 10;
+      else held = 0;
+      if (held >= hold_steps) { r.converged = true; break; }
+    }
+  }
+  w.remove_effect(servo);
+  w.set_strain_rate({});
+  fill_report(w, r);
+  if (overshoot) *overshoot = over;
+  std::ostringstream o;
+  o << "servo to (" << p.target.x << ", " << p.target.y << ", " << p.target.z << ") Pa "
+    << (r.converged ? "converged" : "did not converge") << " in " << r.steps << " steps";
+  r.what = o.str();
+  return r;
+}
+
+StageReport install_bonds(World& w, double lo, double hi) {
+  StageReport r;
+  r.count = w.bond_ball_ball(lo, hi);
+  fill_report(w, r);
+  std::ostringstream s;
+  s << "installed " << r.count << " " << to_string(w.params().ball_ball.model) << " bonds ("
+    << (w.num_balls() ? 2.0 * double(r.count) / double(w.num_balls()) : 0.0) << " per ball) on gaps in ["
+    << lo << ", " << hi << "] m";
+  r.what = s.str();
+  return r;
+}
+
+StageReport replicate(World& w, const ReplicateParams& p) {
+  if (!w.periodic()) throw std::invalid_argument("replicate: the world must have a periodic cell.");
+  if (p.nx < 1 || p.ny < 1 || p.nz < 1) {
+    std::ostringstream s;
+    s << "replicate: copies 'nx', 'ny', 'nz' must be >= 1, found " << p.nx << ", " << p.ny << ", " << p.nz << ".";
+    throw std::invalid_argument(s.str());
+  }
+  w.prepare();  // wrap positions into the cell and refresh the image shifts
+  const std::size_t n = w.num_balls();
+  const Vec3 L = w.cell_length(), o = w.cell_origin();
+  const int nc[3] = {p.nx, p.ny, p.nz};
+  const int ncopy = p.nx * p.ny * p.nz;
+  // snapshot of the original contacts
+  const PairContacts old = w.pair_contacts();
+  auto& pt = w.balls();
+  for (int c = 1; c < ncopy; ++c) {
+    const int i = c % p.nx, j = (c / p.nx) % p.ny, k = c / (p.nx * p.ny);
+    const Vec3 off{i * L.x, j * L.y, k * L.z};
+    for (std::size_t b = 0; b < n; ++b) {
+      const double rho = pt.m[b] / (4.0 / 3.0 * kPi * pt.r[b] * pt.r[b] * pt.r[b]);
+      const std::size_t row = w.add_ball(pt.x[b] + off, pt.r[b], rho);
+      pt.v[row] = pt.v[b];
+      pt.w[row] = pt.w[b];
+      pt.fix[row] = pt.fix[b];
+    }
+  }
+  w.clear_contacts();
+  std::size_t kept = 0, dropped = 0;
+  for (int c = 0; c < ncopy; ++c) {
+    const int ci[3] = {c % p.nx, (c / p.nx) % p.ny, c / (p.nx * p.ny)};
+    for (std::size_t q = 0; q < old.size(); ++q) {
+      int cj[3];
+      std::array<std::int8_t, 4> s{0, 0, 0, 0};
+      bool drop = false;
+      for (int a = 0; a < 3; ++a) {
+        cj[a] = ci[a] + old.shift[q][a];
+        if (cj[a] < 0 || cj[a] >= nc[a]) {
+          if (!p.keep_periodic) { drop = true; break; }
+          const int wrap = cj[a] < 0 ? -1 : 1;
+          cj[a] -= wrap * nc[a];
+          s[a] = static_cast<std::int8_t>(wrap);
+        }
+      }
+      if (drop) { ++dropped; continue; }
+      const int c2 = (cj[2] * p.ny + cj[1]) * p.nx + cj[0];
+      const auto a = static_cast<std::uint32_t>(c * n + old.a[q]);
+      const auto b = static_cast<std::uint32_t>(c2 * n + old.b[q]);
+      w.append_pair(a, b, s, old.h[q], old.bond.empty() ? nullptr : &old.bond[q]);
+      ++kept;
+    }
+  }
+  if (p.keep_periodic) {
+    w.set_cell(o, {p.nx * L.x, p.ny * L.y, p.nz * L.z});
+  } else {
+    w.mutable_params().periodic.enabled = false;
+  }
+  w.prepare();
+  StageReport r;
+  r.count = w.num_balls();
+  fill_report(w, r);
+  std::ostringstream s;
+  s << "replicated " << n << " balls " << p.nx << "x" << p.ny << "x" << p.nz << " into " << r.count
+    << " balls; " << kept << " contacts copied, " << dropped << " dropped on new boundaries";
+  r.what = s.str();
+  return r;
+}
+
+StageReport depth_scale(World& w, const DepthScaleParams& p) {
+  if (!(p.height > 0.0)) {
+    std::ostringstream s;
+    s << "depth_scale: 'height' (H_D) must be > 0 m, found " << p.height << ".";
+    throw std::invalid_argument(s.str());
+  }
+  auto& pc = w.pair_contacts();
+  const auto& pt = w.balls();
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const Vec3 d = w.branch(c);
+    const double dist = norm(d);
+    const double gap = dist - pt.r[pc.a[c]] - pt.r[pc.b[c]];
+    const double zc = pt.x[pc.a[c]].z + (pt.r[pc.a[c]] + 0.5 * gap) * d.z / dist;
+    double f = p.mode == DepthScaling::kDepthRatio ? (p.z_top - zc) / p.height
+                                                   : (zc - (p.z_top - p.height)) / p.height;
+    f = std::clamp(f, 0.0, 1.0);
+    ContactHist& h = pc.h[c];
+    h.fn *= f;
+    h.fs *= f;
+    h.flags |= ContactHist::kIncremental;  // otherwise K_n·overlap comes back (§4.9)
+    if (!pc.bond.empty()) {
+      BondHist& b = pc.bond[c];
+      b.nb *= f;
+      b.fsb *= f;
+      b.mt *= f;
+      b.mb *= f;
+    }
+    pc.F[c] *= f;
+    ++cnt;
+  }
+  StageReport r;
+  r.count = cnt;
+  fill_report(w, r);
+  r.what = std::string("scaled ") + std::to_string(cnt) + " ball-ball contact forces by the " +
+           (p.mode == DepthScaling::kDepthRatio ? "depth ratio (z_top - z)/H_D" : "paper-literal ratio z/H_D");
+  return r;
+}
+
+StageReport assign_interface_bond_forces(World& w, double band) {
+  auto& fc = w.facet_contacts();
+  if (fc.bond.empty())
+    throw std::invalid_argument("assign_interface_bond_forces: family 'ball_facet' has no bonds (model 'linear').");
+  const auto& pc = w.pair_contacts();
+  struct Cf { double z; Vec3 n; double fn; };
+  std::vector<Cf> cs;
+  double gsum = 0.0;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const double fn = pc.h[c].fn + (pc.bond.empty() ? 0.0 : -pc.bond[c].nb);
+    if (!(fn > 0.0)) continue;
+    const Vec3 d = w.branch(c);
+    const Vec3 n = d * (1.0 / norm(d));
+    cs.push_back({w.balls().x[pc.a[c]].z + 0.5 * d.z, n, fn});
+    gsum += fn;
+  }
+  const double gmean = cs.empty() ? 0.0 : gsum / double(cs.size());
+  const double cos30 = std::cos(kPi / 6.0);
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < fc.size(); ++c) {
+    if (!bonded(fc.bond[c].state)) continue;
+    const Vec3 nf = w.facet_wall(static_cast<int>(fc.wall[c])).tri_normal[static_cast<std::size_t>(fc.facet[c])];
+    const double z = fc.xc[c].z;
+    double s1 = 0, s2 = 0;
+    std::size_t n1 = 0, n2 = 0;
+    for (const auto& e : cs) {
+      if (std::abs(e.z - z) > band) continue;
+      s2 += e.fn; ++n2;
+      if (std::abs(dot(e.n, nf)) >= cos30) { s1 += e.fn; ++n1; }
+    }
+    const double mean = n1 ? s1 / double(n1) : (n2 ? s2 / double(n2) : gmean);
+    fc.bond[c].nb = -mean;  // compression (tension positive in the bond routine)
+    ++cnt;
+  }
+  StageReport r;
+  r.count = cnt;
+  fill_report(w, r);
+  r.what = "assigned the depth-wise mean ball-ball normal force to " + std::to_string(cnt) + " interface bonds";
+  return r;
+}
+
+StageReport set_gravity(World& w, bool on, double g_level) {
+  w.set_gravity(on, g_level);
+  StageReport r;
+  fill_report(w, r);
+  std::ostringstream s;
+  s << "gravity " << (on ? "on" : "off") << " at " << g_level << " g";
+  r.what = s.str();
+  return r;
+}
+
+StageReport cycle_to_equilibrium(World& w, double ratio_tol, std::int64_t budget) {
+  StageReport r;
+  bool ok;
+  r.steps = cycle(w, ratio_tol, budget, ok);
+  r.converged = ok;
+  fill_report(w, r);
+  std::ostringstream s;
+  s << "cycled " << r.steps << " steps to ratio " << r.ratio << (ok ? " (converged)" : " (budget spent)");
+  r.what = s.str();
+  return r;
+}
+
+UcsResult unconfined_compression(World& w, const UcsParams& p) {
+  if (w.periodic())
+    throw std::invalid_argument("unconfined_compression: the world must not be periodic (replicate with keep_periodic = false first).");
+  const auto& pt = w.balls();
+  Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], pt.x[i][k] - pt.r[i]);
+      hi[k] = std::max(hi[k], pt.x[i][k] + pt.r[i]);
+    }
+  const double H0 = hi.z - lo.z;
+  const double area = (hi.x - lo.x) * (hi.y - lo.y);
+  const double v = 0.5 * p.strain_rate * H0;
+  PlaneWallParams bot, top;
+  bot.point = {0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), lo.z};
+  bot.normal = {0, 0, 1};
+  bot.velocity = {0, 0, v};
+  top.point = {bot.point.x, bot.point.y, hi.z};
+  top.normal = {0, 0, -1};
+  top.velocity = {0, 0, -v};
+  const int ib = w.add_plane(bot), it = w.add_plane(top);
+  UcsResult res;
+  std::int64_t steps = 0;
+  bool past_peak = false;
+  while (true) {
+    w.step(p.sample_every);
+    steps += p.sample_every;
+    const double H = w.plane(it).p.point.z - w.plane(ib).p.point.z;
+    const double strain = (H0 - H) / H0;
+    const double stress = 0.5 * (-w.plane(ib).reaction.z + w.plane(it).reaction.z) / area;
+    res.curve.push_back({strain, stress});
+    if (stress > res.peak) res.peak = stress;
+    else if (stress < p.stop_fraction * res.peak && res.peak > 0.0) past_peak = true;
+    if (past_peak || strain >= p.max_strain) break;
+  }
+  for (std::size_t k = 0; k < res.curve.size(); ++k)
+    if (res.curve[k].stress >= 0.5 * res.peak) {
+      res.e50 = res.curve[k].stress / res.curve[k].strain;
+      break;
+    }
+  res.report.steps = steps;
+  res.report.converged = past_peak;
+  res.report.ratio = w.unbalanced_ratio();
+  std::ostringstream s;
+  s << "unconfined compression: peak " << res.peak << " Pa, E50 " << res.e50 << " Pa in " << steps << " steps";
+  res.report.what = s.str();
+  return res;
+}
+
+}  // namespace demfdm::dem

@@ -1,0 +1,1383 @@
+// DEM world: cycle, neighbour search, contact passes, gather, law of motion.
+// See world.hpp for the design notes (determinism, history keyed by ids).
+#include "demfdm/dem/world.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+#include <sstream>
+#include <stdexcept>
+#include <tuple>
+
+#include "demfdm/dem/geometry.hpp"
+
+namespace demfdm::dem {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+constexpr std::size_t kChunk = 2048;  // fixed chunking: reductions independent of threads
+
+inline bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
+
+struct Key {
+  std::uint64_t lo, hi;
+  std::uint32_t idx;
+  bool operator<(const Key& o) const { return std::tie(lo, hi) < std::tie(o.lo, o.hi); }
+};
+
+// Flip the orientation of a contact's stored vectors (A and B swapped).
+void flip(ContactHist& h, BondHist* b) {
+  h.fs = -h.fs;
+  h.n_old = -h.n_old;
+  if (b) {
+    b->fsb = -b->fsb;
+    b->mb = -b->mb;
+    b->mt = -b->mt;
+  }
+}
+}  // namespace
+
+World::World(const WorldParams& p) : p_(p) {
+  validate(p_);
+  if (p_.periodic.enabled) cell_len_ref_ = p_.periodic.length;
+  if (p_.gravity) set_gravity(true, p_.g_level);
+}
+
+World::~World() = default;
+
+// ------------------------------------------------------------------------------------------
+// particles and constants
+
+std::size_t World::add_ball(const Vec3& x, double radius, double density) {
+  if (!(radius > 0.0)) {
+    std::ostringstream s;
+    s << "add_ball: 'radius' must be > 0 m, found " << radius << ".";
+    throw std::invalid_argument(s.str());
+  }
+  const double rho = density > 0.0 ? density : p_.density;
+  const double m = rho * 4.0 / 3.0 * kPi * radius * radius * radius;
+  pt_.x.push_back(x);
+  pt_.v.push_back({});
+  pt_.w.push_back({});
+  pt_.f.push_back({});
+  pt_.t.push_back({});
+  pt_.fa.push_back({});
+  pt_.ta.push_back({});
+  pt_.x_ref.push_back(x);
+  pt_.r.push_back(radius);
+  pt_.m.push_back(m);
+  pt_.inertia.push_back(0.4 * m * radius * radius);
+  pt_.id.push_back(next_id_++);
+  pt_.fix.push_back(0);
+  dirty_ = true;
+  return pt_.size() - 1;
+}
+
+void World::set_radius(std::size_t i, double r) {
+  const double rho = pt_.m[i] / (4.0 / 3.0 * kPi * pt_.r[i] * pt_.r[i] * pt_.r[i]);
+  pt_.r[i] = r;
+  pt_.m[i] = rho * 4.0 / 3.0 * kPi * r * r * r;
+  pt_.inertia[i] = 0.4 * pt_.m[i] * r * r;
+}
+
+LawConst World::law_const(const ContactFamilyParams& f) const {
+  LawConst c;
+  c.rgap = f.linear.rgap;
+  c.rescale = p_.rescale_shear;
+  if (f.model == ContactModel::kLinearPBond) c.beta = f.pbond.mcf;
+  if (f.model == ContactModel::kSoftBond) {
+    const auto& s = f.softbond;
+    c.beta = s.mcf;
+    c.bmul = s.bmul;
+    c.twist = s.twist_factor;
+    c.zeta = s.soft;
+    c.gamma = s.cut;
+    c.ret = s.ret;
+    c.unload = s.unload;
+    c.cohesion = s.cohesion;
+    c.bend_soft = s.bending_in_softening;
+    c.moments = s.moments;
+  }
+  return c;
+}
+
+// Precomputed per-contact constants from the deformability method (§1.7, §2.2, §3.3).
+// r_wall < 0 marks a ball–ball contact (a, b rows); otherwise a ball–wall contact of ball a.
+void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondHist* bond,
+                         const ContactFamilyParams& fam, bool wall, double) const {
+  const double ra = pt_.r[a];
+  double rbar, L;
+  if (!wall) {
+    const double rb = pt_.r[b];
+    rbar = std::min(ra, rb);
+    L = ra + rb;
+  } else {
+    rbar = ra;
+    L = fam.linear.wall_length == WallLength::kRadius ? ra : 2.0 * ra;
+  }
+  const bool zero_lin = bond && fam.model == ContactModel::kLinearPBond && fam.pbond.zero_linear &&
+                        bonded(bond->state);
+  if (fam.model == ContactModel::kSoftBond) {
+    // One stiffness set (§3.1): per-area k_n = E*/L, contact K_n = k_n A with A = π R̄².
+    const double rb = fam.softbond.rmul * rbar;
+    const double area = kPi * rb * rb;
+    const double kna = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed / area : fam.linear.emod / L;
+    bond->rb = rb;
+    bond->area = area;
+    bond->inertia = 0.25 * area * rb * rb;
+    bond->polar = 2.0 * bond->inertia;
+    bond->kn = kna;
+    bond->ks = kna / fam.linear.kratio;
+    bond->sigc = fam.softbond.ten;
+    bond->coh = fam.softbond.coh;
+    bond->tanphi = std::tan(fam.softbond.fa_deg * kPi / 180.0);
+    h.kn = kna * area;
+    h.ks = bond->ks * area;
+  } else {
+    const double kn = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed
+                                                : kPi * rbar * rbar * fam.linear.emod / L;
+    h.kn = zero_lin ? 0.0 : kn;
+    h.ks = zero_lin ? 0.0 : kn / fam.linear.kratio;
+    if (fam.model == ContactModel::kLinearPBond) {
+      const auto& pb = fam.pbond;
+      const double rb = pb.rmul * rbar;
+      bond->rb = rb;
+      bond->area = kPi * rb * rb;
+      bond->inertia = 0.25 * bond->area * rb * rb;
+      bond->polar = 2.0 * bond->inertia;
+      bond->kn = pb.emod / L;
+      bond->ks = bond->kn / pb.kratio;
+      bond->sigc = pb.ten;
+      bond->coh = pb.coh;
+      bond->tanphi = std::tan(pb.fa_deg * kPi / 180.0);
+    }
+  }
+  h.mu = fam.linear.fric;
+  if (fam.linear.mode == NormalMode::kIncremental) h.flags |= ContactHist::kIncremental;
+}
+
+void World::refresh_contact_constants() {
+  const bool bb = p_.ball_ball.model != ContactModel::kLinear;
+  for (std::size_t c = 0; c < pc_.size(); ++c)
+    init_contact(pc_.a[c], pc_.b[c], pc_.h[c], bb ? &pc_.bond[c] : nullptr, p_.ball_ball, false, 0);
+  auto wall = [&](WallContacts& wc, const ContactFamilyParams& fam) {
+    const bool bd = fam.model != ContactModel::kLinear;
+    for (std::size_t c = 0; c < wc.size(); ++c)
+      init_contact(wc.ball[c], 0, wc.h[c], bd ? &wc.bond[c] : nullptr, fam, true, 0);
+  };
+  wall(plc_, p_.ball_wall);
+  wall(fcc_, p_.ball_facet);
+  wall(ftc_, p_.ball_footing);
+  last_dt_step_ = -1;
+}
+
+// ------------------------------------------------------------------------------------------
+// walls
+
+int World::add_plane(const PlaneWallParams& p) {
+  PlaneWall w;
+  w.p = p;
+  const double nn = norm(p.normal);
+  if (!(nn > 0.0)) throw std::invalid_argument("add_plane: 'normal' must be a non-zero vector.");
+  w.p.normal = p.normal * (1.0 / nn);
+  Vec3 a1 = p.axis1 - dot(p.axis1, w.p.normal) * w.p.normal;
+  if (norm(a1) < 1e-12) a1 = std::abs(w.p.normal.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+  a1 = a1 - dot(a1, w.p.normal) * w.p.normal;
+  w.p.axis1 = a1 * (1.0 / norm(a1));
+  w.axis2 = cross(w.p.normal, w.p.axis1);
+  if (p.half1 < 0.0 || p.half2 < 0.0)
+    throw std::invalid_argument("add_plane: 'half1' and 'half2' must be >= 0 m (0 = infinite).");
+  w.id = next_wall_id_++;
+  planes_.push_back(w);
+  dirty_ = true;
+  return static_cast<int>(planes_.size()) - 1;
+}
+
+int World::add_facet_wall(std::span<const double> vertices, std::span<const std::int32_t> triangles) {
+  if (vertices.size() % 3 != 0 || triangles.size() % 3 != 0 || triangles.empty()) {
+    std::ostringstream s;
+    s << "add_facet_wall: 'vertices' and 'triangles' must be non-empty flat [n,3] arrays, found "
+      << vertices.size() << " and " << triangles.size() << " values.";
+    throw std::invalid_argument(s.str());
+  }
+  FacetWall fw;
+  const std::size_t nv = vertices.size() / 3;
+  for (std::size_t i = 0; i < nv; ++i)
+    fw.pos.push_back({vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]});
+  fw.vel.assign(nv, Vec3{});
+  for (std::size_t t = 0; t < triangles.size() / 3; ++t) {
+    std::array<std::int32_t, 3> tr{triangles[3 * t], triangles[3 * t + 1], triangles[3 * t + 2]};
+    for (auto v : tr)
+      if (v < 0 || static_cast<std::size_t>(v) >= nv) {
+        std::ostringstream s;
+        s << "add_facet_wall: triangle " << t << " has vertex index " << v << ", expected [0, "
+          << nv << ").";
+        throw std::invalid_argument(s.str());
+      }
+    fw.tri.push_back(tr);
+  }
+  fw.pos_ref = fw.pos;
+  fw.vforce.assign(nv, Vec3{});
+  fw.vstiff.assign(nv, 0.0);
+  fw.tri_normal.resize(fw.tri.size());
+  fw.tri_spin.assign(fw.tri.size(), Vec3{});
+  fw.id = next_wall_id_++;
+  fwalls_.push_back(std::move(fw));
+  update_facet_spin(fwalls_.back());
+  dirty_ = true;
+  return static_cast<int>(fwalls_.size()) - 1;
+}
+
+// §6.2 facet normal and kinematic spin ω_f = ω_⊥ + ω_n n̂ from the vertex velocities.
+void World::update_facet_spin(FacetWall& fw) {
+  for (std::size_t t = 0; t < fw.tri.size(); ++t) {
+    const auto& tr = fw.tri[t];
+    const Vec3 e1 = fw.pos[tr[1]] - fw.pos[tr[0]], e2 = fw.pos[tr[2]] - fw.pos[tr[0]];
+    Vec3 n = cross(e1, e2);
+    const double nn = norm(n);
+    if (!(nn > 0.0)) throw std::invalid_argument("facet wall: degenerate triangle (zero area).");
+    n *= 1.0 / nn;
+    fw.tri_normal[t] = n;
+    if (!p_.facet_spin) { fw.tri_spin[t] = Vec3{}; continue; }
+    const Vec3 d1 = fw.vel[tr[1]] - fw.vel[tr[0]], d2 = fw.vel[tr[2]] - fw.vel[tr[0]];
+    // L_s = Ė (EᵀE)⁻¹ Eᵀ
+    const double g11 = dot(e1, e1), g12 = dot(e1, e2), g22 = dot(e2, e2);
+    const double det = g11 * g22 - g12 * g12;
+    const double i11 = g22 / det, i12 = -g12 / det, i22 = g11 / det;
+    auto Ls = [&](const Vec3& x) {  // L_s x
+      const double a1 = dot(e1, x), a2 = dot(e2, x);
+      const double c1 = i11 * a1 + i12 * a2, c2 = i12 * a1 + i22 * a2;
+      return c1 * d1 + c2 * d2;
+    };
+    auto LsT = [&](const Vec3& y) {  // L_sᵀ y = E (EᵀE)⁻¹ Ėᵀ y
+      const double b1 = dot(d1, y), b2 = dot(d2, y);
+      const double c1 = i11 * b1 + i12 * b2, c2 = i12 * b1 + i22 * b2;
+      return c1 * e1 + c2 * e2;
+    };
+    Vec3 nd = -LsT(n);
+    nd -= dot(nd, n) * n;
+    const Vec3 t1 = e1 * (1.0 / norm(e1));
+    const Vec3 t2 = cross(n, t1);
+    const double wn = 0.5 * (dot(t2, Ls(t1)) - dot(t1, Ls(t2)));
+    fw.tri_spin[t] = cross(n, nd) + wn * n;
+  }
+}
+
+void World::set_vertex_kinematics(int wall, std::span<const double> pos, std::span<const double> vel) {
+  if (wall < 0 || wall >= num_facet_walls())
+    throw std::invalid_argument("set_vertex_kinematics: 'wall' index out of range.");
+  FacetWall& fw = fwalls_[static_cast<std::size_t>(wall)];
+  if (pos.size() != 3 * fw.pos.size() || vel.size() != 3 * fw.pos.size()) {
+    std::ostringstream s;
+    s << "set_vertex_kinematics: 'pos' and 'vel' must hold " << 3 * fw.pos.size()
+      << " values (nv*3), found " << pos.size() << " and " << vel.size() << ".";
+    throw std::invalid_argument(s.str());
+  }
+  for (std::size_t i = 0; i < fw.pos.size(); ++i) {
+    fw.pos[i] = {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
+    fw.vel[i] = {vel[3 * i], vel[3 * i + 1], vel[3 * i + 2]};
+  }
+  update_facet_spin(fw);
+}
+
+std::span<const double> World::vertex_forces(int wall) const {
+  const auto& fw = fwalls_.at(static_cast<std::size_t>(wall));
+  return {reinterpret_cast<const double*>(fw.vforce.data()), 3 * fw.vforce.size()};
+}
+std::span<const double> World::vertex_stiffness(int wall) const {
+  const auto& fw = fwalls_.at(static_cast<std::size_t>(wall));
+  return {fw.vstiff.data(), fw.vstiff.size()};
+}
+Vec3 World::facet_wall_force(int wall) const { return fwalls_.at(static_cast<std::size_t>(wall)).total_force; }
+Vec3 World::facet_walls_total_force() const {
+  Vec3 s{};
+  for (const auto& fw : fwalls_) s += fw.total_force;
+  return s;
+}
+
+void World::set_footing(const FootingParams& p) {
+  if (!(p.diameter > 0.0) || !(p.height > 0.0)) {
+    std::ostringstream s;
+    s << "set_footing: 'diameter' and 'height' must be > 0 m, found " << p.diameter << " and "
+      << p.height << ".";
+    throw std::invalid_argument(s.str());
+  }
+  footing_.p = p;
+  if (!footing_.enabled) footing_.id = next_wall_id_++;
+  footing_.enabled = true;
+  dirty_ = true;
+}
+void World::remove_footing() {
+  footing_.enabled = false;
+  dirty_ = true;
+}
+void World::set_footing_position(const Vec3& c) {
+  footing_.disp += c - footing_.p.bottom_centre;
+  footing_.p.bottom_centre = c;
+}
+
+// ------------------------------------------------------------------------------------------
+// effects
+
+Effect* World::add_effect(std::unique_ptr<Effect> e) {
+  Effect* raw = e.get();
+  effects_.push_back(std::move(e));
+  const unsigned ph = raw->phases();
+  if (ph & Effect::kPreStep) by_phase_[0].push_back(raw);
+  if (ph & Effect::kForce) by_phase_[1].push_back(raw);
+  if (ph & Effect::kEndOfStep) by_phase_[2].push_back(raw);
+  return raw;
+}
+
+void World::remove_effect(const Effect* e) {
+  for (auto& l : by_phase_) l.erase(std::remove(l.begin(), l.end(), e), l.end());
+  effects_.erase(std::remove_if(effects_.begin(), effects_.end(),
+                                [&](const auto& p) { return p.get() == e; }),
+                 effects_.end());
+  if (e == gravity_) gravity_ = nullptr;
+}
+
+void World::set_gravity(bool on, double g_level) {
+  if (gravity_) remove_effect(gravity_);
+  p_.gravity = on;
+  p_.g_level = g_level;
+  if (on) gravity_ = add_effect(std::make_unique<GravityEffect>(Vec3{0, 0, -g_level * p_.g0}));
+}
+
+Vec3 World::gravity() const {
+  return gravity_ ? static_cast<const GravityEffect*>(gravity_)->g() : Vec3{};
+}
+
+void GravityEffect::apply(World& w, Phase) {
+  auto& pt = w.pt_;
+  const std::size_t n = pt.size();
+  for (std::size_t i = 0; i < n; ++i) pt.f[i] += pt.m[i] * g_;
+}
+
+// ------------------------------------------------------------------------------------------
+// periodic cell
+
+double World::cell_volume() const {
+  const Vec3 L = p_.periodic.length;
+  return L.x * L.y * L.z;
+}
+
+void World::set_cell(const Vec3& origin, const Vec3& length) {
+  p_.periodic.origin = origin;
+  p_.periodic.length = length;
+  cell_len_ref_ = length;
+  dirty_ = true;
+}
+
+Vec3 World::branch(std::size_t c) const {
+  Vec3 d = pt_.x[pc_.b[c]] - pt_.x[pc_.a[c]];
+  if (p_.periodic.enabled) {
+    const auto& s = pc_.shift[c];
+    d += cmul(Vec3{double(s[0]), double(s[1]), double(s[2])}, p_.periodic.length);
+  }
+  return d;
+}
+
+// ------------------------------------------------------------------------------------------
+// neighbour search and history
+
+void World::clear_contacts() {
+  pc_ = PairContacts{};
+  plc_ = WallContacts{};
+  fcc_ = WallContacts{};
+  ftc_ = WallContacts{};
+  dirty_ = true;
+}
+
+void World::append_pair(std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s,
+                        const ContactHist& h, const BondHist* bond) {
+  pc_.a.push_back(a);
+  pc_.b.push_back(b);
+  pc_.shift.push_back(s);
+  pc_.h.push_back(h);
+  if (p_.ball_ball.model != ContactModel::kLinear) pc_.bond.push_back(bond ? *bond : BondHist{});
+  pc_.F.push_back({});
+  if (p_.ball_ball.model != ContactModel::kLinear) pc_.M.push_back({});
+  dirty_ = true;
+}
+
+bool World::need_rebuild() const {
+  if (dirty_) return true;
+  const double dmax = std::sqrt(max_disp2_);
+  double dcell = 0.0;
+  if (p_.periodic.enabled)
+    for (int k = 0; k < 3; ++k)
+      dcell = std::max(dcell, std::abs(p_.periodic.length[k] - cell_len_ref_[k]));
+  if (2.0 * dmax + dcell > skin_) return true;
+  double dw = 0.0;
+  for (const auto& pw : planes_) dw = std::max(dw, norm(pw.disp));
+  if (footing_.enabled) dw = std::max(dw, norm(footing_.disp));
+  for (const auto& fw : fwalls_)
+    for (std::size_t i = 0; i < fw.pos.size(); ++i) dw = std::max(dw, norm(fw.pos[i] - fw.pos_ref[i]));
+  return dmax + dw > skin_;
+}
+
+void World::rebuild() {
+  ++rebuilds_;
+  const std::size_t n = pt_.size();
+  const bool per = p_.periodic.enabled;
+  const Vec3 o = p_.periodic.origin, L = p_.periodic.length;
+  if (per) {  // wrap into [o, o+L) (§4.2)
+    for (std::size_t i = 0; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        const double s = std::floor((pt_.x[i][k] - o[k]) / L[k]);
+        if (s != 0.0) pt_.x[i][k] -= s * L[k];
+      }
+  }
+  double rmax = 0.0;
+  for (double r : pt_.r) rmax = std::max(rmax, r);
+  const double cut = 2.0 * rmax + skin_;
+  // cell grid
+  Vec3 lo{}, hi{};
+  if (per) {
+    lo = o;
+    hi = o + L;
+    for (int k = 0; k < 3; ++k)
+      if (L[k] < 2.0 * cut) {
+        std::ostringstream s;
+        s << "periodic.length[" << k << "] = " << L[k] << " m must be at least twice the "
+          << "neighbour cut-off 2(2 R_max + skin) = " << 2.0 * cut << " m (minimum image, §4.2).";
+        throw std::invalid_argument(s.str());
+      }
+  } else if (n > 0) {
+    lo = hi = pt_.x[0];
+    for (std::size_t i = 1; i < n; ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], pt_.x[i][k]);
+        hi[k] = std::max(hi[k], pt_.x[i][k]);
+      }
+  }
+  int nc[3];
+  double cs[3];
+  for (int k = 0; k < 3; ++k) {
+    const double ext = hi[k] - lo[k];
+    if (per) nc[k] = std::max(1, static_cast<int>(std::floor(ext / cut)));
+    else nc[k] = std::max(1, std::min(1024, static_cast<int>(std::ceil(ext / cut))));
+    cs[k] = per ? ext / nc[k] : std::max(cut, ext / nc[k]);
+  }
+  const std::size_t ncell = static_cast<std::size_t>(nc[0]) * nc[1] * nc[2];
+  std::vector<std::int32_t> cell_of(n);
+  std::vector<std::uint32_t> cell_start(ncell + 1, 0), cell_items(n);
+  auto cidx = [&](const Vec3& x, int k) {
+    int c = static_cast<int>(std::floor((x[k] - lo[k]) / cs[k]));
+    return std::clamp(c, 0, nc[k] - 1);
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    const int c = (cidx(pt_.x[i], 2) * nc[1] + cidx(pt_.x[i], 1)) * nc[0] + cidx(pt_.x[i], 0);
+    cell_of[i] = c;
+    ++cell_start[static_cast<std::size_t>(c) + 1];
+  }
+  for (std::size_t c = 0; c < ncell; ++c) cell_start[c + 1] += cell_start[c];
+  {
+    std::vector<std::uint32_t> fill(cell_start.begin(), cell_start.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) cell_items[fill[cell_of[i]]++] = static_cast<std::uint32_t>(i);
+  }
+  // candidate pairs (i < j), then one sort by (i, j). Positions are wrapped, so the
+  // minimum image needs at most one cell shift per axis.
+  struct NewPair { std::uint32_t a, b; std::array<std::int8_t, 4> s; };
+  std::vector<NewPair> np;
+  np.reserve(pc_.size() + n * 4);
+  for (std::size_t i = 0; i < n; ++i) {
+    const int c = cell_of[i];
+    const int ci[3] = {c % nc[0], (c / nc[0]) % nc[1], c / (nc[0] * nc[1])};
+    int lists[3][3] = {}, cnt[3] = {};
+    for (int k = 0; k < 3; ++k) {
+      for (int d = -1; d <= 1; ++d) {
+        int q = ci[k] + d;
+        if (per) q = (q % nc[k] + nc[k]) % nc[k];
+        else if (q < 0 || q >= nc[k]) continue;
+        bool dup = false;
+        for (int m = 0; m < cnt[k]; ++m) dup |= lists[k][m] == q;
+        if (!dup) lists[k][cnt[k]++] = q;
+      }
+    }
+    const Vec3 xi = pt_.x[i];
+    const double ri = pt_.r[i] + skin_;
+    for (int z = 0; z < cnt[2]; ++z)
+      for (int y = 0; y < cnt[1]; ++y)
+        for (int x = 0; x < cnt[0]; ++x) {
+          const std::size_t cc = (static_cast<std::size_t>(lists[2][z]) * nc[1] + lists[1][y]) * nc[0] + lists[0][x];
+          for (std::uint32_t k = cell_start[cc]; k < cell_start[cc + 1]; ++k) {
+            const std::uint32_t j = cell_items[k];
+            if (j <= i) continue;
+            Vec3 d = pt_.x[j] - xi;
+            std::array<std::int8_t, 4> s{0, 0, 0, 0};
+            if (per)
+              for (int a = 0; a < 3; ++a) {
+                if (d[a] > 0.5 * L[a]) { s[a] = -1; d[a] -= L[a]; }
+                else if (d[a] < -0.5 * L[a]) { s[a] = 1; d[a] += L[a]; }
+              }
+            const double rc = ri + pt_.r[j];
+            if (norm2(d) < rc * rc) np.push_back({static_cast<std::uint32_t>(i), j, s});
+          }
+        }
+  }
+  std::sort(np.begin(), np.end(), [](const NewPair& x, const NewPair& y) {
+    return (std::uint64_t(x.a) << 32 | x.b) < (std::uint64_t(y.a) << 32 | y.b);
+  });
+  // merge the history keyed by (id_A, id_B) (style.md habit 5)
+  const bool has_bond = p_.ball_ball.model != ContactModel::kLinear;
+  std::vector<Key> keys(pc_.size());
+  for (std::size_t c = 0; c < pc_.size(); ++c) {
+    const std::uint64_t ia = pt_.id[pc_.a[c]], ib = pt_.id[pc_.b[c]];
+    keys[c] = {std::min(ia, ib), std::max(ia, ib), static_cast<std::uint32_t>(c)};
+  }
+  std::sort(keys.begin(), keys.end());
+  std::vector<char> used(pc_.size(), 0);
+  PairContacts q;
+  auto push = [&](std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s) {
+    q.a.push_back(a);
+    q.b.push_back(b);
+    q.shift.push_back(s);
+    const std::uint64_t ia = pt_.id[a], ib = pt_.id[b];
+    Key k{std::min(ia, ib), std::max(ia, ib), 0};
+    auto it = std::lower_bound(keys.begin(), keys.end(), k);
+    if (it != keys.end() && it->lo == k.lo && it->hi == k.hi && !used[it->idx]) {
+      const std::uint32_t oc = it->idx;
+      used[oc] = 1;
+      q.h.push_back(pc_.h[oc]);
+      if (has_bond) q.bond.push_back(pc_.bond[oc]);
+      if (pt_.id[pc_.a[oc]] != ia) flip(q.h.back(), has_bond ? &q.bond.back() : nullptr);
+    } else {
+      q.h.push_back({});
+      if (has_bond) q.bond.push_back({});
+      init_contact(a, b, q.h.back(), has_bond ? &q.bond.back() : nullptr, p_.ball_ball, false, 0);
+    }
+  };
+  for (const auto& e : np) push(e.a, e.b, e.s);
+  // bonded contacts beyond the cut-off are kept (a bond never disappears in a rebuild)
+  bool appended = false;
+  for (std::size_t c = 0; c < pc_.size(); ++c) {
+    if (used[c]) continue;
+    if (has_bond && bonded(pc_.bond[c].state)) {
+      std::uint32_t a = pc_.a[c], b = pc_.b[c];
+      Vec3 d = pt_.x[b] - pt_.x[a];
+      std::array<std::int8_t, 4> s{0, 0, 0, 0};
+      if (per)
+        for (int k = 0; k < 3; ++k) {
+          const double sh = -std::round(d[k] / L[k]);
+          s[k] = static_cast<std::int8_t>(sh);
+        }
+      q.a.push_back(a);
+      q.b.push_back(b);
+      q.shift.push_back(s);
+      q.h.push_back(pc_.h[c]);
+      q.bond.push_back(pc_.bond[c]);
+      appended = true;
+    } else {
+      e_slip_dead_ += pc_.h[c].e_slip;
+      if (has_bond) e_soft_dead_ += pc_.bond[c].e_soft;
+    }
+  }
+  if (appended) {  // restore the (a, b) order
+    std::vector<std::uint32_t> perm(q.a.size());
+    std::iota(perm.begin(), perm.end(), 0u);
+    std::sort(perm.begin(), perm.end(), [&](std::uint32_t x, std::uint32_t y) {
+      return std::tie(q.a[x], q.b[x]) < std::tie(q.a[y], q.b[y]);
+    });
+    PairContacts r;
+    for (auto k : perm) {
+      r.a.push_back(q.a[k]);
+      r.b.push_back(q.b[k]);
+      r.shift.push_back(q.shift[k]);
+      r.h.push_back(q.h[k]);
+      if (has_bond) r.bond.push_back(q.bond[k]);
+    }
+    q = std::move(r);
+  }
+  const std::size_t m = q.a.size();
+  q.F.assign(m, {});
+  if (has_bond) q.M.assign(m, {});
+  pc_ = std::move(q);
+  rebuild_walls(cell_of, cell_start, cell_items);
+  pt_.x_ref = pt_.x;
+  max_disp2_ = 0.0;
+  if (per) cell_len_ref_ = p_.periodic.length;
+  dirty_ = false;
+}
+
+namespace {
+// One ball–wall candidate found by the search.
+struct WallCand {
+  std::uint32_t ball, wall;
+  std::int32_t facet;
+};
+
+// Signed distance ball centre → facet with a one-sided normal in the face region (§1.4).
+inline double facet_distance(const Vec3& x, const FacetWall& fw, std::size_t t, Vec3& n, Vec3& w) {
+  const auto& tr = fw.tri[t];
+  Vec3 q;
+  const int reg = closest_point_triangle(x, fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]], q, w);
+  const Vec3& nf = fw.tri_normal[t];
+  if (reg == 0) {
+    n = -nf;
+    return dot(x - q, nf);
+  }
+  const Vec3 d = q - x;
+  const double dist = norm(d);
+  n = dist > 0.0 ? d * (1.0 / dist) : -nf;
+  return dist;
+}
+
+// Geometry of a ball and a planar wall (§1.4); one-sided inside the rectangle.
+inline double plane_distance(const Vec3& x, const PlaneWall& pw, Vec3& n) {
+  const Vec3 rel = x - pw.p.point;
+  const double s = dot(rel, pw.p.normal);
+  const double u1 = dot(rel, pw.p.axis1), u2 = dot(rel, pw.axis2);
+  const bool in1 = pw.p.half1 == 0.0 || std::abs(u1) <= pw.p.half1;
+  const bool in2 = pw.p.half2 == 0.0 || std::abs(u2) <= pw.p.half2;
+  if (in1 && in2) {
+    n = -pw.p.normal;
+    return s;
+  }
+  const double c1 = pw.p.half1 == 0.0 ? u1 : std::clamp(u1, -pw.p.half1, pw.p.half1);
+  const double c2 = pw.p.half2 == 0.0 ? u2 : std::clamp(u2, -pw.p.half2, pw.p.half2);
+  const Vec3 q = pw.p.point + c1 * pw.p.axis1 + c2 * pw.axis2;
+  const Vec3 d = q - x;
+  const double dist = norm(d);
+  n = dist > 0.0 ? d * (1.0 / dist) : -pw.p.normal;
+  return dist;
+}
+}  // namespace
+
+void World::rebuild_walls(const std::vector<std::int32_t>&, const std::vector<std::uint32_t>&,
+                          const std::vector<std::uint32_t>&) {
+  const std::size_t n = pt_.size();
+  auto merge = [&](WallContacts& old, std::vector<WallCand>& cands, const ContactFamilyParams& fam,
+                   auto wall_id) {
+    const bool has_bond = fam.model != ContactModel::kLinear;
+    std::vector<Key> keys(old.size());
+    for (std::size_t c = 0; c < old.size(); ++c)
+      keys[c] = {pt_.id[old.ball[c]], wall_id(old.wall[c]), static_cast<std::uint32_t>(c)};
+    std::sort(keys.begin(), keys.end());
+    std::vector<char> used(old.size(), 0);
+    std::sort(cands.begin(), cands.end(), [](const WallCand& x, const WallCand& y) {
+      return std::tie(x.ball, x.wall, x.facet) < std::tie(y.ball, y.wall, y.facet);
+    });
+    WallContacts q;
+    q.cand_off.push_back(0);
+    for (std::size_t k = 0; k < cands.size();) {
+      const auto& e = cands[k];
+      q.ball.push_back(e.ball);
+      q.wall.push_back(e.wall);
+      std::int32_t keep_facet = e.facet;
+      std::size_t k2 = k;
+      for (; k2 < cands.size() && cands[k2].ball == e.ball && cands[k2].wall == e.wall; ++k2)
+        q.cand.push_back(static_cast<std::uint32_t>(cands[k2].facet));
+      q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
+      Key key{pt_.id[e.ball], wall_id(e.wall), 0};
+      auto it = std::lower_bound(keys.begin(), keys.end(), key);
+      if (it != keys.end() && it->lo == key.lo && it->hi == key.hi) {
+        used[it->idx] = 1;
+        q.h.push_back(old.h[it->idx]);
+        if (has_bond) q.bond.push_back(old.bond[it->idx]);
+        if (!old.facet.empty()) keep_facet = old.facet[it->idx];
+      } else {
+        q.h.push_back({});
+        if (has_bond) q.bond.push_back({});
+        init_contact(e.ball, 0, q.h.back(), has_bond ? &q.bond.back() : nullptr, fam, true, 0);
+      }
+      q.facet.push_back(keep_facet);
+      k = k2;
+    }
+    // bonded wall contacts never disappear: keep them with their last facet as candidate
+    for (std::size_t c = 0; c < old.size(); ++c) {
+      if (used[c]) continue;
+      if (has_bond && bonded(old.bond[c].state)) {
+        q.ball.push_back(old.ball[c]);
+        q.wall.push_back(old.wall[c]);
+        q.cand.push_back(static_cast<std::uint32_t>(old.facet.empty() ? 0 : old.facet[c]));
+        q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
+        q.facet.push_back(old.facet.empty() ? 0 : old.facet[c]);
+        q.h.push_back(old.h[c]);
+        q.bond.push_back(old.bond[c]);
+      } else {
+        e_slip_dead_ += old.h[c].e_slip;
+        if (has_bond) e_soft_dead_ += old.bond[c].e_soft;
+      }
+    }
+    const std::size_t m = q.ball.size();
+    q.F.assign(m, {});
+    q.M.assign(m, {});
+    q.TA.assign(m, {});
+    q.xc.assign(m, {});
+    q.bary.assign(m, {});
+    old = std::move(q);
+  };
+  // planes: linear search per plane (few planes)
+  {
+    std::vector<WallCand> cands;
+    for (std::size_t w = 0; w < planes_.size(); ++w) {
+      for (std::size_t i = 0; i < n; ++i) {
+        Vec3 nn;
+        const double d = plane_distance(pt_.x[i], planes_[w], nn);
+        if (d - pt_.r[i] < skin_ + p_.ball_wall.linear.rgap)
+          cands.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(w), 0});
+      }
+      planes_[w].disp = Vec3{};
+    }
+    merge(plc_, cands, p_.ball_wall, [&](std::uint32_t w) { return planes_[w].id; });
+  }
+  // facet walls: every facet against every ball near its bounding box (sorted by x for a
+  // cheap sweep); candidates within R + skin.
+  {
+    std::vector<WallCand> cands;
+    if (!fwalls_.empty()) {
+      std::vector<std::uint32_t> order(n);
+      std::iota(order.begin(), order.end(), 0u);
+      std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return pt_.x[a].x < pt_.x[b].x;
+      });
+      std::vector<double> xs(n);
+      for (std::size_t k = 0; k < n; ++k) xs[k] = pt_.x[order[k]].x;
+      double rmax = 0.0;
+      for (double r : pt_.r) rmax = std::max(rmax, r);
+      const double reach = rmax + skin_ + p_.ball_facet.linear.rgap;
+      for (std::size_t w = 0; w < fwalls_.size(); ++w) {
+        const auto& fw = fwalls_[w];
+        for (std::size_t t = 0; t < fw.tri.size(); ++t) {
+          Vec3 lo = fw.pos[fw.tri[t][0]], hi = lo;
+          for (int v = 1; v < 3; ++v)
+            for (int k = 0; k < 3; ++k) {
+              lo[k] = std::min(lo[k], fw.pos[fw.tri[t][v]][k]);
+              hi[k] = std::max(hi[k], fw.pos[fw.tri[t][v]][k]);
+            }
+          auto it0 = std::lower_bound(xs.begin(), xs.end(), lo.x - reach);
+          auto it1 = std::upper_bound(xs.begin(), xs.end(), hi.x + reach);
+          for (auto it = it0; it != it1; ++it) {
+            const std::uint32_t i = order[static_cast<std::size_t>(it - xs.begin())];
+            const Vec3& x = pt_.x[i];
+            if (x.y < lo.y - reach || x.y > hi.y + reach || x.z < lo.z - reach || x.z > hi.z + reach) continue;
+            Vec3 nn, ww;
+            const double d = facet_distance(x, fw, t, nn, ww);
+            if (d - pt_.r[i] < skin_ + p_.ball_facet.linear.rgap)
+              cands.push_back({i, static_cast<std::uint32_t>(w), static_cast<std::int32_t>(t)});
+          }
+        }
+      }
+      for (auto& fw : fwalls_) fw.pos_ref = fw.pos;
+    }
+    merge(fcc_, cands, p_.ball_facet, [&](std::uint32_t w) { return fwalls_[w].id; });
+  }
+  // footing
+  {
+    std::vector<WallCand> cands;
+    if (footing_.enabled) {
+      const double R = 0.5 * footing_.p.diameter;
+      for (std::size_t i = 0; i < n; ++i) {
+        Vec3 q, nn;
+        const double d = closest_point_cylinder(pt_.x[i], footing_.p.bottom_centre, R, footing_.p.height, q, nn);
+        if (d - pt_.r[i] < skin_ + p_.ball_footing.linear.rgap)
+          cands.push_back({static_cast<std::uint32_t>(i), 0, 0});
+      }
+      footing_.disp = Vec3{};
+    }
+    merge(ftc_, cands, p_.ball_footing, [&](std::uint32_t) { return footing_.id; });
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// contact passes (one template instantiation per pass; no model branch in the loops)
+
+// Ball–ball pass. Each contact stores its force (and moment) in its own slot for the
+// measurements, and adds −F/+F and the torques into a force buffer: the particle arrays for
+// thread 0 and a private buffer for every other thread; the buffers are then summed in
+// thread order. The static partition makes the result bit-identical from run to run for a
+// given thread count (style.md habit 13).
+template <ContactModel M, bool Periodic>
+void World::pair_pass(double dt) {
+  const std::int64_t m = static_cast<std::int64_t>(pc_.size());
+  const std::size_t n = pt_.size();
+  const LawConst lc = law_const(p_.ball_ball);
+  const Vec3* X = pt_.x.data();
+  const Vec3* V = pt_.v.data();
+  const Vec3* W = pt_.w.data();
+  const double* R = pt_.r.data();
+  const std::uint32_t* A = pc_.a.data();
+  const std::uint32_t* B = pc_.b.data();
+  const auto* S = pc_.shift.data();
+  ContactHist* H = pc_.h.data();
+  BondHist* BD = pc_.bond.empty() ? nullptr : pc_.bond.data();
+  Vec3* OF = pc_.F.data();
+  Vec3* OM = pc_.M.data();
+  const Vec3 L = p_.periodic.length;
+  const Vec3 ed = edot_;
+  const double rgap = lc.rgap;
+  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+  const bool par = nt > 1 && m > 4096;
+  auto body = [&](std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t) {
+    for (std::int64_t c = c0; c < c1; ++c) {
+      const std::uint32_t a = A[c], b = B[c];
+      Vec3 d = X[b] - X[a];
+      if constexpr (Periodic) d += cmul(Vec3{double(S[c][0]), double(S[c][1]), double(S[c][2])}, L);
+      ContactHist& h = H[c];
+      const double d2 = norm2(d);
+      if constexpr (M == ContactModel::kLinear) {
+        const double reach = R[a] + R[b] + rgap;
+        if (d2 > reach * reach && h.fn == 0.0) {  // separated and force-free: nothing to do
+          h.n_old = d * (1.0 / std::sqrt(d2));
+          h.flags = static_cast<std::uint8_t>((h.flags | ContactHist::kHasNormal) &
+                                              ~(ContactHist::kActive | ContactHist::kSlip));
+          h.fs = Vec3{};
+          OF[c] = Vec3{};
+          continue;
+        }
+      }
+      const double dist = std::sqrt(d2);
+      const double gap = dist - R[a] - R[b];
+      const Vec3 nn = d * (1.0 / dist);
+      Kin k;
+      k.n = nn;
+      k.gap = gap;
+      const Vec3 la = (R[a] + 0.5 * gap) * nn;
+      const Vec3 lb = -(R[b] + 0.5 * gap) * nn;
+      Vec3 vr = (V[b] + cross(W[b], lb)) - (V[a] + cross(W[a], la));
+      if constexpr (Periodic) vr += cmul(ed, d);  // affine cell motion (§4.5)
+      k.du = vr * dt;
+      k.dtheta = (W[b] - W[a]) * dt;
+      k.wmean = 0.5 * (W[a] + W[b]);
+      k.dt = dt;
+      Vec3 Mo;
+      const Vec3 F = contact_law<M>(k, h, BD ? BD + c : nullptr, lc, Mo);
+      OF[c] = F;
+      f[a] -= F;
+      f[b] += F;
+      if constexpr (M != ContactModel::kLinear) {
+        OM[c] = Mo;
+        t[a] += cross(F, la) - Mo;  // ℓ_A × (−F) − M
+        t[b] += cross(lb, F) + Mo;
+      } else {
+        t[a] += cross(F, la);
+        t[b] += cross(lb, F);
+      }
+    }
+  };
+  if (!par) {
+    std::fill(pt_.f.begin(), pt_.f.end(), Vec3{});
+    std::fill(pt_.t.begin(), pt_.t.end(), Vec3{});
+    body(0, m, pt_.f.data(), pt_.t.data());
+    return;
+  }
+  if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
+  for (int k = 1; k < nt; ++k) tbuf_[static_cast<std::size_t>(k)].resize(2 * n);
+  int used = 1;
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = omp_get_thread_num(), T = omp_get_num_threads();
+#pragma omp single
+    used = T;
+    Vec3* f = tid == 0 ? pt_.f.data() : tbuf_[static_cast<std::size_t>(tid)].data();
+    Vec3* t = tid == 0 ? pt_.t.data() : f + n;
+    std::fill(f, f + n, Vec3{});
+    std::fill(t, t + n, Vec3{});
+    const std::int64_t c0 = m * tid / T, c1 = m * (tid + 1) / T;
+    body(c0, c1, f, t);
+  }
+  // fixed-order reduction of the thread buffers
+  const std::int64_t ni = static_cast<std::int64_t>(n);
+#pragma omp parallel for schedule(static) num_threads(nt)
+  for (std::int64_t i = 0; i < ni; ++i)
+    for (int k = 1; k < used; ++k) {
+      pt_.f[i] += tbuf_[static_cast<std::size_t>(k)][i];
+      pt_.t[i] += tbuf_[static_cast<std::size_t>(k)][n + i];
+    }
+}
+
+template <ContactModel M>
+void World::plane_pass(double dt) {
+  const LawConst lc = law_const(p_.ball_wall);
+  WallContacts& wc = plc_;
+  const std::int64_t m = static_cast<std::int64_t>(wc.size());
+  for (auto& pw : planes_) { pw.reaction = Vec3{}; pw.k_sum = 0.0; }
+  for (std::int64_t c = 0; c < m; ++c) {
+    const std::uint32_t i = wc.ball[c];
+    PlaneWall& pw = planes_[wc.wall[c]];
+    Vec3 n;
+    const double dist = plane_distance(pt_.x[i], pw, n);
+    Kin k;
+    k.n = n;
+    k.gap = dist - pt_.r[i];
+    const Vec3 la = (pt_.r[i] + 0.5 * k.gap) * n;
+    const Vec3 vr = pw.p.velocity - (pt_.v[i] + cross(pt_.w[i], la));
+    k.du = vr * dt;
+    k.dtheta = -pt_.w[i] * dt;
+    k.wmean = 0.5 * pt_.w[i];
+    k.dt = dt;
+    Vec3 Mo;
+    const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
+    wc.F[c] = F;
+    wc.M[c] = Mo;
+    wc.TA[c] = cross(F, la) - Mo;
+    wc.xc[c] = pt_.x[i] + la;
+    pw.reaction += F;
+    if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
+  }
+}
+
+template <ContactModel M>
+void World::facet_pass(double dt) {
+  const LawConst lc = law_const(p_.ball_facet);
+  WallContacts& wc = fcc_;
+  const std::int64_t m = static_cast<std::int64_t>(wc.size());
+  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
+  for (std::int64_t c = 0; c < m; ++c) {
+    const std::uint32_t i = wc.ball[c];
+    const FacetWall& fw = fwalls_[wc.wall[c]];
+    // nearest candidate facet; history stays with the (ball, wall) contact (§1.4)
+    double best = std::numeric_limits<double>::infinity();
+    Vec3 n{}, w{};
+    std::int32_t ft = wc.facet[c];
+    for (std::uint32_t k = wc.cand_off[c]; k < wc.cand_off[c + 1]; ++k) {
+      Vec3 nn, ww;
+      const double d = facet_distance(pt_.x[i], fw, wc.cand[k], nn, ww);
+      if (d < best) { best = d; n = nn; w = ww; ft = static_cast<std::int32_t>(wc.cand[k]); }
+    }
+    wc.facet[c] = ft;
+    wc.bary[c] = w;
+    const auto& tr = fw.tri[static_cast<std::size_t>(ft)];
+    Kin k;
+    k.n = n;
+    k.gap = best - pt_.r[i];
+    const Vec3 la = (pt_.r[i] + 0.5 * k.gap) * n;
+    const Vec3 vf = w.x * fw.vel[tr[0]] + w.y * fw.vel[tr[1]] + w.z * fw.vel[tr[2]];
+    const Vec3 wf = fw.tri_spin[static_cast<std::size_t>(ft)];
+    const Vec3 vr = vf - (pt_.v[i] + cross(pt_.w[i], la));
+    k.du = vr * dt;
+    k.dtheta = (wf - pt_.w[i]) * dt;
+    k.wmean = 0.5 * (pt_.w[i] + wf);
+    k.dt = dt;
+    Vec3 Mo;
+    const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
+    wc.F[c] = F;
+    wc.M[c] = Mo;
+    wc.TA[c] = cross(F, la) - Mo;
+    wc.xc[c] = pt_.x[i] + la;
+  }
+  // §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order
+  for (auto& fw : fwalls_) {
+    std::fill(fw.vforce.begin(), fw.vforce.end(), Vec3{});
+    std::fill(fw.vstiff.begin(), fw.vstiff.end(), 0.0);
+    fw.total_force = Vec3{};
+  }
+  for (std::int64_t c = 0; c < m; ++c) {
+    FacetWall& fw = fwalls_[wc.wall[c]];
+    const auto& tr = fw.tri[static_cast<std::size_t>(wc.facet[c])];
+    const bool bd = !wc.bond.empty() && bonded(wc.bond[c].state);
+    const bool act = (wc.h[c].flags & ContactHist::kActive) || bd;
+    if (!act) continue;
+    if (norm2(wc.F[c]) > 0.0 || norm2(wc.M[c]) > 0.0) {
+      std::array<Vec3, 3> f;
+      facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, wc.xc[c], wc.F[c], wc.M[c], f);
+      for (int v = 0; v < 3; ++v) fw.vforce[tr[v]] += f[v];
+      fw.total_force += wc.F[c];
+    }
+    double K = wc.h[c].kn + wc.h[c].ks;
+    if (bd && p_.ball_facet.model == ContactModel::kLinearPBond)
+      K += (wc.bond[c].kn + wc.bond[c].ks) * wc.bond[c].area;
+    const Vec3& w = wc.bary[c];
+    for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += w[v] * K;
+  }
+}
+
+template <ContactModel M>
+void World::footing_pass(double dt) {
+  const LawConst lc = law_const(p_.ball_footing);
+  WallContacts& wc = ftc_;
+  const std::int64_t m = static_cast<std::int64_t>(wc.size());
+  const double R = 0.5 * footing_.p.diameter;
+  footing_.reaction = Vec3{};
+  for (std::int64_t c = 0; c < m; ++c) {
+    const std::uint32_t i = wc.ball[c];
+    Vec3 q, n;
+    const double dist = closest_point_cylinder(pt_.x[i], footing_.p.bottom_centre, R, footing_.p.height, q, n);
+    Kin k;
+    k.n = n;
+    k.gap = dist - pt_.r[i];
+    const Vec3 la = (pt_.r[i] + 0.5 * k.gap) * n;
+    const Vec3 vr = footing_.p.velocity - (pt_.v[i] + cross(pt_.w[i], la));
+    k.du = vr * dt;
+    k.dtheta = -pt_.w[i] * dt;
+    k.wmean = 0.5 * pt_.w[i];
+    k.dt = dt;
+    Vec3 Mo;
+    const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
+    wc.F[c] = F;
+    wc.M[c] = Mo;
+    wc.TA[c] = cross(F, la) - Mo;
+    wc.xc[c] = pt_.x[i] + la;
+    footing_.reaction += F;
+  }
+}
+
+void World::force_pass(double dt) {
+  // One switch per pass selects the template instantiation (style.md §2b(2)).
+  const bool per = p_.periodic.enabled;
+  switch (p_.ball_ball.model) {
+    case ContactModel::kLinear:
+      per ? pair_pass<ContactModel::kLinear, true>(dt) : pair_pass<ContactModel::kLinear, false>(dt);
+      break;
+    case ContactModel::kLinearPBond:
+      per ? pair_pass<ContactModel::kLinearPBond, true>(dt) : pair_pass<ContactModel::kLinearPBond, false>(dt);
+      break;
+    case ContactModel::kSoftBond:
+      per ? pair_pass<ContactModel::kSoftBond, true>(dt) : pair_pass<ContactModel::kSoftBond, false>(dt);
+      break;
+  }
+  auto wall_pass = [&](const ContactFamilyParams& f, auto lin, auto pb, auto sb) {
+    switch (f.model) {
+      case ContactModel::kLinear: lin(); break;
+      case ContactModel::kLinearPBond: pb(); break;
+      case ContactModel::kSoftBond: sb(); break;
+    }
+  };
+  if (!planes_.empty())
+    wall_pass(p_.ball_wall, [&] { plane_pass<ContactModel::kLinear>(dt); },
+              [&] { plane_pass<ContactModel::kLinearPBond>(dt); },
+              [&] { plane_pass<ContactModel::kSoftBond>(dt); });
+  if (!fwalls_.empty())
+    wall_pass(p_.ball_facet, [&] { facet_pass<ContactModel::kLinear>(dt); },
+              [&] { facet_pass<ContactModel::kLinearPBond>(dt); },
+              [&] { facet_pass<ContactModel::kSoftBond>(dt); });
+  if (footing_.enabled)
+    wall_pass(p_.ball_footing, [&] { footing_pass<ContactModel::kLinear>(dt); },
+              [&] { footing_pass<ContactModel::kLinearPBond>(dt); },
+              [&] { footing_pass<ContactModel::kSoftBond>(dt); });
+  else
+    footing_.reaction = Vec3{};
+  gather();
+  for (Effect* e : by_phase_[1]) e->apply(*this, Effect::kForce);
+}
+
+// Wall contacts act on balls after the ball–ball pass, serially in contact order.
+void World::gather() {
+  Vec3* f = pt_.f.data();
+  Vec3* t = pt_.t.data();
+  for (const WallContacts* wc : {&plc_, &fcc_, &ftc_})
+    for (std::size_t c = 0; c < wc->size(); ++c) {
+      f[wc->ball[c]] -= wc->F[c];
+      t[wc->ball[c]] += wc->TA[c];
+    }
+}
+
+// §1.2–1.3: centred differences with local damping; fixed components keep their velocity.
+void World::integrate(double dt) {
+  const std::size_t n = pt_.size();
+  const double alpha = p_.local_damping;
+  const bool per = p_.periodic.enabled;
+  const Vec3 o = p_.periodic.origin;
+  Vec3 sc{1.0 + edot_.x * dt, 1.0 + edot_.y * dt, 1.0 + edot_.z * dt};
+  const bool energy = p_.track_energy;
+  const std::size_t nch = (n + kChunk - 1) / kChunk;
+  chunk_e_.assign(2 * nch, 0.0);
+  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+  auto damp = [alpha](double F, double v) {
+    return v > 0.0 ? -alpha * std::abs(F) : (v < 0.0 ? alpha * std::abs(F) : 0.0);
+  };
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && nch > 1)
+  for (std::int64_t ch = 0; ch < static_cast<std::int64_t>(nch); ++ch) {
+    double ed = 0.0, dmax = 0.0;
+    const std::size_t i0 = static_cast<std::size_t>(ch) * kChunk, i1 = std::min(n, i0 + kChunk);
+    for (std::size_t i = i0; i < i1; ++i) {
+      const Vec3 F = pt_.f[i] + pt_.fa[i];
+      const Vec3 T = pt_.t[i] + pt_.ta[i];
+      const std::uint8_t fx = pt_.fix[i];
+      const double im = 1.0 / pt_.m[i], ii = 1.0 / pt_.inertia[i];
+      Vec3& v = pt_.v[i];
+      Vec3& w = pt_.w[i];
+      for (int k = 0; k < 3; ++k) {
+        if (!(fx & (1u << k))) {
+          const double fd = damp(F[k], v[k]);
+          const double v0 = v[k];
+          v[k] = v0 + dt * (F[k] + fd) * im;
+          if (energy) ed -= fd * 0.5 * (v0 + v[k]) * dt;
+        }
+        if (!(fx & (8u << k))) {
+          const double md = damp(T[k], w[k]);
+          const double w0 = w[k];
+          w[k] = w0 + dt * (T[k] + md) * ii;
+          if (energy) ed -= md * 0.5 * (w0 + w[k]) * dt;
+        }
+      }
+      Vec3& x = pt_.x[i];
+      x += dt * v;
+      if (per) x = o + cmul(x - o, sc);
+      dmax = std::max(dmax, norm2(x - pt_.x_ref[i]));
+    }
+    chunk_e_[2 * static_cast<std::size_t>(ch)] = ed;
+    chunk_e_[2 * static_cast<std::size_t>(ch) + 1] = dmax;
+  }
+  for (std::size_t ch = 0; ch < nch; ++ch) {  // fixed-order reduction
+    e_damp_ += chunk_e_[2 * ch];
+    max_disp2_ = std::max(max_disp2_, chunk_e_[2 * ch + 1]);
+  }
+  if (per) {
+    for (int k = 0; k < 3; ++k) {
+      p_.periodic.length[k] *= sc[k];
+      cell_strain_[k] += edot_[k] * dt;
+    }
+  }
+}
+
+// ------------------------------------------------------------------------------------------
+// timestep (§1.8)
+
+double World::critical_timestep() {
+  const std::size_t n = pt_.size();
+  std::vector<double> kt(n, 0.0), kr(n, 0.0);
+  const bool bb_bond = !pc_.bond.empty();
+  for (std::size_t c = 0; c < pc_.size(); ++c) {
+    const ContactHist& h = pc_.h[c];
+    const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
+    const bool bd = b && bonded(b->state);
+    if (!(h.flags & ContactHist::kActive) && !bd) continue;
+    double k = h.kn, krot = 0.0;
+    if (b) {
+      if (p_.ball_ball.model == ContactModel::kLinearPBond) {
+        if (bd) { k += b->kn * b->area; krot += b->kn * b->inertia; }
+      } else {
+        krot += b->kn * b->inertia;
+      }
+    }
+    const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
+    kt[a] += k;
+    kt[bb] += k;
+    const double ks = h.ks + ((bd && p_.ball_ball.model == ContactModel::kLinearPBond) ? b->ks * b->area : 0.0);
+    kr[a] += krot + ks * pt_.r[a] * pt_.r[a];
+    kr[bb] += krot + ks * pt_.r[bb] * pt_.r[bb];
+  }
+  auto wall = [&](const WallContacts& wc, const ContactFamilyParams& fam) {
+    for (std::size_t c = 0; c < wc.size(); ++c) {
+      const ContactHist& h = wc.h[c];
+      const BondHist* b = wc.bond.empty() ? nullptr : &wc.bond[c];
+      const bool bd = b && bonded(b->state);
+      if (!(h.flags & ContactHist::kActive) && !bd) continue;
+      double k = h.kn, ks = h.ks, krot = 0.0;
+      if (b && fam.model == ContactModel::kLinearPBond && bd) {
+        k += b->kn * b->area;
+        ks += b->ks * b->area;
+        krot += b->kn * b->inertia;
+      } else if (b && fam.model == ContactModel::kSoftBond) {
+        krot += b->kn * b->inertia;
+      }
+      const std::uint32_t i = wc.ball[c];
+      kt[i] += k;
+      kr[i] += krot + ks * pt_.r[i] * pt_.r[i];
+    }
+  };
+  wall(plc_, p_.ball_wall);
+  wall(fcc_, p_.ball_facet);
+  wall(ftc_, p_.ball_footing);
+  double dt = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < n; ++i) {
+    if (kt[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / kt[i]));
+    if (kr[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.inertia[i] / kr[i]));
+  }
+  if (!std::isfinite(dt)) {
+    // No active contact: use one contact with an equal ball (k_n = π R E*/2, §7.2).
+    for (std::size_t i = 0; i < n; ++i) {
+      const auto& lp = p_.ball_ball.linear;
+      const double k = lp.kn_fixed > 0.0 ? lp.kn_fixed : kPi * pt_.r[i] * lp.emod * 0.5;
+      if (k > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / k));
+    }
+    if (!std::isfinite(dt)) dt = 1e-6;
+  }
+  return p_.dt_safety * dt;
+}
+
+// ------------------------------------------------------------------------------------------
+// stepping
+
+void World::prepare() {
+  if (skin_ <= 0.0) {
+    if (p_.skin > 0.0) {
+      skin_ = p_.skin;
+    } else {
+      double rmin = std::numeric_limits<double>::infinity();
+      for (double r : pt_.r) rmin = std::min(rmin, r);
+      skin_ = std::isfinite(rmin) ? p_.skin_factor * 2.0 * rmin : 1e-3;
+    }
+  }
+  rebuild();
+  force_pass(0.0);
+  dt_ = p_.dt_fixed > 0.0 ? p_.dt_fixed : critical_timestep();
+  last_dt_step_ = step_;
+  prepared_ = true;
+}
+
+void World::step() {
+  if (!prepared_) prepare();
+  for (Effect* e : by_phase_[0]) e->apply(*this, Effect::kPreStep);
+  if (p_.dt_fixed > 0.0) {
+    dt_ = p_.dt_fixed;
+  } else if (last_dt_step_ < 0 || step_ - last_dt_step_ >= p_.dt_interval) {
+    dt_ = critical_timestep();
+    last_dt_step_ = step_;
+  }
+  integrate(dt_);
+  for (auto& pw : planes_) {
+    pw.p.point += dt_ * pw.p.velocity;
+    pw.disp += dt_ * pw.p.velocity;
+  }
+  if (footing_.enabled) {
+    footing_.p.bottom_centre += dt_ * footing_.p.velocity;
+    footing_.disp += dt_ * footing_.p.velocity;
+  }
+  time_ += dt_;
+  ++step_;
+  if (need_rebuild()) rebuild();
+  force_pass(dt_);
+  for (Effect* e : by_phase_[2]) e->apply(*this, Effect::kEndOfStep);
+}
+
+void World::step(std::int64_t n) {
+  for (std::int64_t k = 0; k < n; ++k) step();
+}
+
+// ------------------------------------------------------------------------------------------
+// bonds
+
+std::size_t World::bond_ball_ball(double lo, double hi) {
+  if (p_.ball_ball.model == ContactModel::kLinear)
+    throw std::invalid_argument(
+        "bond_ball_ball: family 'ball_ball' uses model 'linear', which cannot bond; set "
+        "ball_ball.model to 'linearpbond' or 'softbond'.");
+  if (!prepared_) prepare();
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < pc_.size(); ++c) {
+    BondHist& b = pc_.bond[c];
+    if (b.state != BondState::kNeverBonded) continue;
+    const Vec3 d = branch(c);
+    const double gap = norm(d) - pt_.r[pc_.a[c]] - pt_.r[pc_.b[c]];
+    if (gap < lo || gap > hi) continue;
+    b.state = BondState::kIntact;
+    b.sigma_t = b.sigc;
+    ContactHist& h = pc_.h[c];
+    h.flags |= ContactHist::kIncremental;  // §3.1: bonding switches to incremental mode
+    if (!(h.flags & ContactHist::kHasNormal)) { h.n_old = d * (1.0 / norm(d)); h.flags |= ContactHist::kHasNormal; }
+    if (p_.ball_ball.model == ContactModel::kLinearPBond) {
+      b.nb = 0.0; b.fsb = Vec3{}; b.mt = 0.0; b.mb = Vec3{};  // §2.3: bond force starts at 0
+      if (p_.ball_ball.pbond.zero_linear) { h.kn = h.ks = 0.0; h.fn = 0.0; h.fs = Vec3{}; }
+    }
+    ++cnt;
+  }
+  last_dt_step_ = -1;
+  return cnt;
+}
+
+std::size_t World::bond_ball_facet(double hi) {
+  if (p_.ball_facet.model == ContactModel::kLinear)
+    throw std::invalid_argument(
+        "bond_ball_facet: family 'ball_facet' uses model 'linear', which cannot bond; set "
+        "ball_facet.model to 'linearpbond' (the paper's interface, §2.6).");
+  if (!prepared_) prepare();
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < fcc_.size(); ++c) {
+    BondHist& b = fcc_.bond[c];
+    if (b.state != BondState::kNeverBonded) continue;
+    const FacetWall& fw = fwalls_[fcc_.wall[c]];
+    double best = std::numeric_limits<double>::infinity();
+    Vec3 n{};
+    for (std::uint32_t k = fcc_.cand_off[c]; k < fcc_.cand_off[c + 1]; ++k) {
+      Vec3 nn, ww;
+      const double d = facet_distance(pt_.x[fcc_.ball[c]], fw, fcc_.cand[k], nn, ww);
+      if (d < best) { best = d; n = nn; }
+    }
+    if (best - pt_.r[fcc_.ball[c]] > hi) continue;
+    b.state = BondState::kIntact;
+    b.sigma_t = b.sigc;
+    ContactHist& h = fcc_.h[c];
+    h.flags |= ContactHist::kIncremental | ContactHist::kHasNormal;
+    h.n_old = n;
+    if (p_.ball_facet.model == ContactModel::kLinearPBond) {
+      b.nb = 0.0; b.fsb = Vec3{}; b.mt = 0.0; b.mb = Vec3{};
+      if (p_.ball_facet.pbond.zero_linear) { h.kn = h.ks = 0.0; h.fn = 0.0; h.fs = Vec3{}; }
+    }
+    ++cnt;
+  }
+  last_dt_step_ = -1;
+  return cnt;
+}
+
+// ------------------------------------------------------------------------------------------
+// measurements
+
+Energy World::energy() const {
+  Energy e;
+  for (std::size_t i = 0; i < pt_.size(); ++i)
+    e.kinetic += 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]);
+  e.damping = e_damp_;
+  e.friction = e_slip_dead_;
+  e.softening = e_soft_dead_;
+  auto add = [&](const std::vector<ContactHist>& hs, const std::vector<BondHist>& bs, ContactModel m) {
+    for (std::size_t c = 0; c < hs.size(); ++c) {
+      const ContactHist& h = hs[c];
+      if (h.kn > 0.0) e.strain += 0.5 * h.fn * h.fn / h.kn;
+      if (h.ks > 0.0) e.strain += 0.5 * norm2(h.fs) / h.ks;
+      e.friction += h.e_slip;
+      if (bs.empty()) continue;
+      const BondHist& b = bs[c];
+      e.softening += b.e_soft;
+      if (b.kn <= 0.0) continue;
+      if (m == ContactModel::kLinearPBond) {
+        e.strain += 0.5 * b.nb * b.nb / (b.kn * b.area) + 0.5 * norm2(b.fsb) / (b.ks * b.area);
+      }
+      e.strain += 0.5 * b.mt * b.mt / (b.ks * b.polar) + 0.5 * norm2(b.mb) / (b.kn * b.inertia);
+    }
+  };
+  add(pc_.h, pc_.bond, p_.ball_ball.model);
+  add(plc_.h, plc_.bond, p_.ball_wall.model);
+  add(fcc_.h, fcc_.bond, p_.ball_facet.model);
+  add(ftc_.h, ftc_.bond, p_.ball_footing.model);
+  return e;
+}
+
+namespace {
+double unbalanced(const Particles& pt, std::size_t i) {
+  const Vec3 F = pt.f[i] + pt.fa[i];
+  double s = 0.0;
+  for (int k = 0; k < 3; ++k)
+    if (!(pt.fix[i] & (1u << k))) s += F[k] * F[k];
+  return std::sqrt(s);
+}
+}  // namespace
+
+double World::mean_contact_force() const {
+  double s = 0.0;
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < pc_.size(); ++c) {
+    const double f = norm(pc_.F[c]);
+    if (f > 0.0) { s += f; ++cnt; }
+  }
+  for (const WallContacts* wc : {&plc_, &fcc_, &ftc_})
+    for (std::size_t c = 0; c < wc->size(); ++c) {
+      const double f = norm(wc->F[c]);
+      if (f > 0.0) { s += f; ++cnt; }
+    }
+  return cnt ? s / double(cnt) : 0.0;
+}
+
+double World::unbalanced_ratio() const {
+  if (pt_.size() == 0) return 0.0;
+  double s = 0.0;
+  for (std::size_t i = 0; i < pt_.size(); ++i) s += unbalanced(pt_, i);
+  const double fc = mean_contact_force();
+  if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
+  return (s / double(pt_.size())) / fc;
+}
+
+double World::max_unbalanced_force() const {
+  double s = 0.0;
+  for (std::size_t i = 0; i < pt_.size(); ++i) s = std::max(s, unbalanced(pt_, i));
+  return s;
+}
+
+}  // namespace demfdm::dem

@@ -1,0 +1,83 @@
+// Structured hexahedral mesh with an optional open pocket for the DEM block
+// (physics.md 5.1, 6.2).
+//
+// Numbering (stable and deterministic):
+//  * gridpoints: lexicographic in (k, j, i) of the structured grid, skipping grid nodes that no
+//    zone uses (those strictly inside the pocket);
+//  * zones: lexicographic in (k, j, i) over the kept cells; corners in unit-cube order
+//    0:(0,0,0) 1:(1,0,0) 2:(1,1,0) 3:(0,1,0) 4:(0,0,1) 5:(1,0,1) 6:(1,1,1) 7:(0,1,1)
+//    (physics.md 5.2), which is also the VTK_HEXAHEDRON order;
+//  * interface: the zone faces shared with the pocket. Interface gridpoints are listed in
+//    ascending gridpoint id; each quad face gives two triangles (q0,q1,q2), (q0,q2,q3) with the
+//    fixed diagonal q0-q2, wound so that the normal points out of the zone, i.e. into the
+//    pocket (towards the DEM). Faces are ordered by the Side of the zone face, i.e. by the
+//    direction of the normal (-z, -x, +x, -y, +y, +z; the pocket bottom is +z), then by zone id.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "demfdm/fdm/params.hpp"
+
+namespace demfdm::fdm {
+
+// Pocket / box side identifiers, in interface order.
+enum class Side : std::int8_t { kMinusZ = 0, kMinusX = 1, kPlusX = 2, kMinusY = 3, kPlusY = 4, kPlusZ = 5 };
+
+// Local corners of each hexahedron face, counter-clockwise seen from outside the zone,
+// indexed by Side.
+inline constexpr std::array<std::array<int, 4>, 6> kHexFaces{{
+    {0, 3, 2, 1},  // -z
+    {0, 4, 7, 3},  // -x
+    {1, 2, 6, 5},  // +x
+    {0, 1, 5, 4},  // -y
+    {3, 7, 6, 2},  // +y
+    {4, 5, 6, 7},  // +z
+}};
+
+struct Mesh {
+  std::vector<double> grid_x, grid_y, grid_z;  // [m] structured grid-line coordinates
+  std::vector<double> points;                  // [m] [n,3] gridpoint reference positions
+  std::vector<std::int32_t> point_ijk;         // [-] [n,3] structured indices of each gridpoint
+  std::vector<std::int32_t> zones;             // [-] [nz,8] corner gridpoint ids (unit-cube order)
+  std::vector<std::int32_t> zone_ijk;          // [-] [nz,3] structured indices of each zone cell
+  bool has_pocket = false;                     // [-] pocket left open
+  Box pocket{};                                // [m] pocket box (inner box) when has_pocket
+  std::vector<std::int32_t> interface_points;     // [-] gridpoint ids, ascending
+  std::vector<std::int32_t> interface_triangles;  // [-] [nt,3] indices into interface_points
+  std::vector<std::int8_t> interface_triangle_side;  // [-] [nt] Side of the zone face (normal direction)
+
+  [[nodiscard]] std::size_t num_points() const { return points.size() / 3; }
+  [[nodiscard]] std::size_t num_zones() const { return zones.size() / 8; }
+  [[nodiscard]] std::size_t num_interface_triangles() const { return interface_triangles.size() / 3; }
+};
+
+// Grid-line coordinates of [0, length] with grid lines at a and b (0 <= a <= b <= length):
+// uniform spacing <= size_near in [a, b]; outside, sizes grow geometrically away from the
+// inner interval, starting at size_near, by `growth` per zone, capped at size_far, then
+// scaled down uniformly so that they fill the segment exactly (ratio and cap are kept).
+// a == b: uniform spacing <= size_near over the whole length.
+std::vector<double> graded_axis(double length, double a, double b, double size_near,
+                                double size_far, double growth);
+
+// Builds the mesh (validates the parameters first).
+Mesh generate_mesh(const MeshParams& p);
+
+// Builds a mesh from explicit grid-line coordinates (strictly increasing). If `pocket_cells`
+// is given as {i0,i1,j0,j1,k0,k1} (half-open cell ranges), those cells are left open.
+Mesh mesh_from_grid(std::vector<double> xs, std::vector<double> ys, std::vector<double> zs,
+                    const std::array<int, 6>* pocket_cells = nullptr);
+
+// A zone face on the outer or pocket boundary: 4 gridpoint ids, counter-clockwise seen from
+// outside the material (so (q1-q0)x(q3-q0) points outward), with the zone and its Side.
+struct BoundaryFace {
+  std::array<std::int32_t, 4> points{};
+  std::int32_t zone = -1;
+  Side side = Side::kMinusZ;
+};
+
+// Every zone face not shared with another zone, in zone order then Side order.
+std::vector<BoundaryFace> boundary_faces(const Mesh& mesh);
+
+}  // namespace demfdm::fdm

@@ -1,0 +1,132 @@
+// Parameters of the FDM engine (physics.md section 5). Plain structs with documented
+// defaults and units; the scene reader maps its keys onto these fields. Validation lives in
+// validate() (throws std::invalid_argument naming the field, the range and the value found).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <optional>
+#include <vector>
+
+namespace demfdm::fdm {
+
+inline constexpr double kStandardGravity = 9.81;  // [m/s^2] g0 (physics.md 0.1)
+inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+
+// Axis-aligned box [lo, hi] used for the inner (pocket / refinement) region and for
+// material-group regions.
+struct Box {
+  std::array<double, 3> lo{0.0, 0.0, 0.0};  // [m] minimum corner
+  std::array<double, 3> hi{0.0, 0.0, 0.0};  // [m] maximum corner
+  [[nodiscard]] bool contains(const std::array<double, 3>& p) const {
+    return p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] &&
+           p[2] <= hi[2];
+  }
+};
+
+// Structured hexahedral mesh of the box [0,L]x[0,W]x[0,H] (physics.md 5.1).
+// Grid lines pass through the faces of an inner box; zones have size `size_near` inside and
+// next to it and grow by `growth` per zone up to `size_far` towards the outer boundary.
+// With `pocket` the inner box is left open (the DEM block) and its faces shared with zones
+// form the coupling interface (physics.md 6.2).
+struct MeshParams {
+  double length = 16e-3;  // [m] L, extent in x (physics.md 0.3)
+  double width = 16e-3;   // [m] W, extent in y (physics.md 0.3)
+  double height = 16e-3;  // [m] H, extent in z (physics.md 0.3)
+  // [m] L_D, W_D, H_D of the inner box (physics.md 0.3: 4 x 4 x 10 mm). All three zero: no
+  // inner box, the grid is uniform with spacing <= size_near on every axis.
+  std::array<double, 3> inner_size{4e-3, 4e-3, 10e-3};
+  // [m] minimum corner of the inner box; NaN components take the default position: centred
+  // in x and y, top face flush with z = H (physics.md 5.1 [RECON]).
+  std::array<double, 3> inner_origin{kNaN, kNaN, kNaN};
+  bool pocket = true;        // [-] true: inner box left open for the DEM block; false: meshed
+  double size_near = 0.5e-3; // [m] zone size inside and next to the inner box (physics.md 5.1)
+  double size_far = 2e-3;    // [m] largest zone size towards the outer boundary
+  double growth = 1.2;       // [-] zone-to-zone size ratio outside the inner box, in [1, 2]
+
+  // A plain box with uniform zones of size <= `size` and no inner box (verification runs).
+  static MeshParams plain_box(double length, double width, double height, double size) {
+    MeshParams p;
+    p.length = length;
+    p.width = width;
+    p.height = height;
+    p.inner_size = {0.0, 0.0, 0.0};
+    p.pocket = false;
+    p.size_near = size;
+    p.size_far = size;
+    p.growth = 1.0;
+    return p;
+  }
+};
+
+// Constitutive model of a zone group (physics.md 5.4).
+enum class Constitutive : std::uint8_t { kElastic = 0, kMohrCoulomb = 1 };
+
+struct Material {
+  Constitutive model = Constitutive::kElastic;  // [-] elastic or Mohr-Coulomb with tension cut-off
+  double density = 1272.0;    // [kg/m^3] rho_b = (1-n) rho_s (physics.md 0.3, 7.4)
+  double young = 2.0e9;       // [Pa] E (physics.md 5.7 example; calibrate from the DEM, U9)
+  double poisson = 0.25;      // [-] nu, in (-1, 0.5)
+  double cohesion = 0.0;      // [Pa] c (Mohr-Coulomb only)
+  double friction_deg = 30.0; // [deg] phi, in [0, 90) (Mohr-Coulomb only)
+  double dilation_deg = 0.0;  // [deg] psi, in [0, phi] (Mohr-Coulomb only)
+  // [Pa] tension cut-off sigma^t (tension positive); NaN: the apex value c/tan(phi); values
+  // above the apex are limited to it (physics.md 5.4).
+  double tension = kNaN;
+};
+
+// A material applied to the zones whose centroid lies in `region` (all zones if empty).
+// Groups are applied in order, so a later group overrides an earlier one.
+struct MaterialGroup {
+  Material material{};
+  std::optional<Box> region{};  // [m] nullopt: every zone
+};
+
+// Integration mode (physics.md 5.6, 6.6).
+enum class Mode : std::uint8_t {
+  kDynamic = 0,  // real (gravitational) masses, physical timestep (option A)
+  kStatic = 1,   // mass-scaled, dt = 1, velocities are displacement per step (option B)
+};
+
+// Where the mixed-discretisation volumetric strain rate is averaged (physics.md 5.3, U15).
+enum class VolumetricAveraging : std::uint8_t {
+  kPerOverlay = 0,  // over the 5 tetrahedra of each overlay (physics.md 5.3, default)
+  kPerZone = 1,     // over all 10 tetrahedra of the zone
+};
+
+struct ModelParams {
+  MeshParams mesh{};                                 // mesh, used by Model(ModelParams)
+  // At least one group; the first should cover all zones. Default: one elastic group with the
+  // Material defaults everywhere (built in place: avoids a GCC 12 -Wmaybe-uninitialized false
+  // positive on copying an initializer_list that holds a std::optional).
+  std::vector<MaterialGroup> materials = std::vector<MaterialGroup>(1);
+  Mode mode = Mode::kDynamic;                        // [-] physics.md 5.6
+  double damping = 0.8;         // [-] local damping alpha_F in [0, 1) (physics.md 5.6)
+  double gravity_level = 1.0;   // [-] N, gravity (0, 0, -N g0); 0 switches gravity off (0.1)
+  bool large_strain = false;    // [-] recompute geometry each step + Jaumann rate (physics.md 5.8)
+  VolumetricAveraging averaging = VolumetricAveraging::kPerOverlay;  // physics.md 5.3, U15
+  double timestep_safety = 0.5; // [-] dt = safety * min_t h_t / C_p, in (0, 1] (physics.md 5.7)
+  // [-] multiplier on the static-mode inertial mass rule (physics.md 5.6, U10), >= 1 is safe
+  double static_mass_factor = 1.0;
+  bool strongbox_boundary = true;  // [-] fixed base, rollers on the 4 sides (physics.md 5.10)
+  int history_every = 0;        // [steps] append a HistoryRecord every n steps; 0: never
+  // [-] loops over fewer zones / gridpoints than this run on one thread (a parallel region
+  // costs a barrier, more than a small model's step on a busy machine). Results do not depend
+  // on it: every zone writes its own force slot, gathered in a fixed order.
+  int parallel_threshold = 4096;
+};
+
+// Geostatic initial stress (physics.md 4.10, 5.9): sigma_zz = -rho N g0 (z_top - z_c),
+// sigma_xx = sigma_yy = K0 sigma_zz, no shear (tension positive).
+struct GeostaticStress {
+  double z_top = kNaN;  // [m] ground surface; NaN: top of the mesh
+  double k0 = kNaN;     // [-] K0; NaN: nu/(1-nu) of each zone's material
+};
+
+// Throws std::invalid_argument naming the first bad field.
+void validate(const MeshParams& p);
+void validate(const Material& m);
+void validate(const ModelParams& p);
+
+}  // namespace demfdm::fdm

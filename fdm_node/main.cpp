@@ -1,0 +1,260 @@
+// fdm_node: the FLAC3D-style continuum (fdm_core) as the bus's continuum role.
+//
+// A thin adapter: scene keys -> fdm::ModelParams, stage actions -> model calls, coupling hooks
+// -> interface arrays, results -> fdm.h5 + mesh.xmf + fdm_history.csv in the run folder.
+#include <omp.h>
+
+#include <cmath>
+#include <filesystem>
+#include <optional>
+
+#include <spdlog/spdlog.h>
+
+#include "demfdm/fdm/model.hpp"
+#include "demfdm/io/csv_series.hpp"
+#include "demfdm/io/results_output.hpp"
+#include "messages/node_runtime.hpp"
+
+using namespace demfdm;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::array<double, 3> vec3(const std::vector<double>& v) { return {v[0], v[1], v[2]}; }
+
+fdm::ModelParams model_params(const config::Scene& s) {
+  fdm::ModelParams p;
+  auto& m = p.mesh;
+  auto size = s.reals("continuum.mesh.size");
+  m.length = size[0];
+  m.width = size[1];
+  m.height = size[2];
+  m.pocket = s.boolean("continuum.mesh.pocket");
+  m.inner_size = vec3(s.reals("continuum.mesh.inner_size"));
+  auto origin = s.reals("continuum.mesh.inner_origin");
+  if (origin.size() == 3)
+    m.inner_origin = vec3(origin);
+  else if (!origin.empty())
+    s.fail("continuum.mesh.inner_origin", "an empty list or 3 numbers [x, y, z] in m",
+           std::to_string(origin.size()) + " numbers");
+  m.size_near = s.real("continuum.mesh.size_near");
+  m.size_far = s.real("continuum.mesh.size_far");
+  m.growth = s.real("continuum.mesh.growth");
+
+  p.materials.clear();
+  std::size_t n = s.count("continuum.material");
+  if (n == 0) p.materials.push_back(fdm::MaterialGroup{});
+  for (std::size_t i = 0; i < n; ++i) {
+    auto e = s.at("continuum.material", i);
+    fdm::MaterialGroup g;
+    auto& mat = g.material;
+    mat.model = e.string("model") == "mohr_coulomb" ? fdm::Constitutive::kMohrCoulomb : fdm::Constitutive::kElastic;
+    mat.density = e.real("density");
+    mat.young = e.real("young");
+    mat.poisson = e.real("poisson");
+    mat.cohesion = e.real("cohesion");
+    mat.friction_deg = e.real("friction_deg");
+    mat.dilation_deg = e.real("dilation_deg");
+    mat.tension = e.real("tension") < 0 ? fdm::kNaN : e.real("tension");
+    auto lo = e.reals("region_lo"), hi = e.reals("region_hi");
+    if (lo.size() != hi.size() || (lo.size() != 0 && lo.size() != 3))
+      e.fail("region_lo", "region_lo and region_hi both empty or both [x, y, z]",
+             std::to_string(lo.size()) + " and " + std::to_string(hi.size()) + " numbers");
+    if (lo.size() == 3) g.region = fdm::Box{vec3(lo), vec3(hi)};
+    p.materials.push_back(g);
+  }
+  p.mode = s.string("continuum.mode") == "static" ? fdm::Mode::kStatic : fdm::Mode::kDynamic;
+  p.damping = s.real("continuum.damping");
+  p.gravity_level = s.has("gravity") ? s.real("gravity.level") * s.real("gravity.g0") / fdm::kStandardGravity : 0.0;
+  p.large_strain = s.boolean("continuum.large_strain");
+  p.averaging = s.string("continuum.averaging") == "zone" ? fdm::VolumetricAveraging::kPerZone
+                                                          : fdm::VolumetricAveraging::kPerOverlay;
+  p.timestep_safety = s.real("continuum.timestep_safety");
+  p.static_mass_factor = s.real("continuum.static_mass_factor");
+  p.strongbox_boundary = s.string("continuum.boundary") == "strongbox";
+  try {
+    fdm::validate(p);
+  } catch (const std::invalid_argument& e) {
+    s.fail("continuum", "a valid FDM model", e.what());
+  }
+  return p;
+}
+
+class FdmParticipant : public node::Participant {
+ public:
+  explicit FdmParticipant(const node::Context& ctx) : ctx_(ctx), model_(model_params(ctx.scene)) {
+    const auto& s = ctx.scene;
+    omp_set_num_threads(static_cast<int>(s.integer("run.threads")));
+    frame_every_ = s.integer("continuum.output.frame_every");
+    history_every_ = s.integer("continuum.output.history_every");
+    if (s.has("continuum.punch")) setup_punch(s);
+    spdlog::info("fdm: {} gridpoints, {} zones, {} interface points, {} interface triangles; critical dt {:.3e} s",
+                 model_.num_gridpoints(), model_.num_zones(), model_.interface_gridpoints().size(),
+                 model_.interface_triangles().size() / 3, model_.critical_timestep());
+    if (!ctx.options.run_dir.empty()) {
+      fs::path dir = ctx.options.run_dir;
+      io::FileInfo info{"fdm_node", std::to_string(ctx.options.run_id), std::to_string(s.hash()), {}};
+      std::vector<std::int64_t> conn(model_.connectivity().begin(), model_.connectivity().end());
+      out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8));
+      if (history_every_ > 0)
+        history_.emplace(io::CsvSeries::create(
+            dir / "fdm_history.csv",
+            {"step_unit", "time_s", "ratio_avg_unit", "ratio_max_unit", "kinetic_J", "base_fx_N", "base_fy_N",
+             "base_fz_N", "punch_fz_N", "punch_disp_m"}));
+    }
+  }
+
+  double dt_stable() const override {
+    return model_.params().mode == fdm::Mode::kStatic ? 0.0 : model_.critical_timestep();
+  }
+  double time() const override { return model_.time(); }
+
+  proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
+    const auto& a = st.action;
+    if (a != "cycle" && a != "equilibrium" && a != "geostatic")
+      throw std::invalid_argument("fdm_node does not support stage action '" + a + "'");
+    if (a == "geostatic") {
+      fdm::GeostaticStress g;
+      double k0 = st.view.real("k0");
+      g.k0 = k0 < 0 ? fdm::kNaN : k0;
+      model_.set_geostatic_stress(g);
+      spdlog::info("fdm: geostatic stresses assigned (K0 {})", k0 < 0 ? std::string("nu/(1-nu)") : std::to_string(k0));
+    }
+    if (st.view.boolean("reset_displacements")) {
+      model_.reset_displacements();
+      punch_disp_ = 0;
+    }
+    return {{"zones", static_cast<double>(model_.num_zones())},
+            {"gridpoints", static_cast<double>(model_.num_gridpoints())}};
+  }
+
+  void advance(const schema::Stage&, std::int64_t step, double dt, const std::vector<double>&) override {
+    if (model_.params().mode == fdm::Mode::kDynamic) {
+      // Sub-cycle when the coupling step is longer than this model's stable step.
+      double crit = model_.critical_timestep();
+      int n = dt > 0 ? static_cast<int>(std::ceil(dt / crit * (1 - 1e-12))) : 1;
+      double h = dt > 0 ? dt / n : crit;
+      if (h != model_.timestep()) model_.set_timestep(h);
+      for (int i = 0; i < n; ++i) model_.step();
+      if (!punch_.empty()) punch_disp_ += punch_velocity_ * (dt > 0 ? dt : crit);
+    } else {
+      model_.step();
+      if (!punch_.empty()) punch_disp_ += punch_velocity_;
+    }
+    last_ratios_ = model_.ratios();
+    if (history_ && history_every_ > 0 && step % history_every_ == 0) {
+      auto b = model_.base_reaction();
+      history_->append({static_cast<double>(step), model_.time(), last_ratios_.average, last_ratios_.max,
+                        model_.kinetic_energy(), b[0], b[1], b[2], punch_force(), punch_disp_});
+    }
+    if (out_ && frame_every_ > 0 && step % frame_every_ == 0) write_frame(step);
+    last_step_ = step;
+  }
+
+  proto::Values step_values() override {
+    auto b = model_.base_reaction();
+    proto::Values v{{"ratio", last_ratios_.average}, {"base_fz_N", b[2]}, {"kinetic_J", model_.kinetic_energy()}};
+    if (!punch_.empty()) {
+      v.push_back({"punch_fz_N", punch_force()});
+      v.push_back({"punch_disp_m", punch_disp_});
+    }
+    return v;
+  }
+  bool criterion_met(const schema::Stage& st) override {
+    return (st.action == "equilibrium" || st.action == "geostatic") && last_ratios_.average < st.view.real("ratio");
+  }
+  proto::Values stage_end(const schema::Stage&, std::int64_t last) override {
+    if (out_ && last != last_frame_) write_frame(last);
+    return step_values();
+  }
+  void finish() override {
+    if (history_) history_->close();
+  }
+
+  // Coupling (continuum role).
+  proto::InterfaceMesh interface_mesh() override {
+    proto::InterfaceMesh m;
+    auto ids = model_.interface_gridpoints();
+    m.point_ids.assign(ids.begin(), ids.end());
+    m.positions = model_.interface_positions();
+    auto tri = model_.interface_triangles();
+    m.triangles.assign(tri.begin(), tri.end());
+    const auto& side = model_.mesh().interface_triangle_side;
+    m.wall_of_triangle.assign(side.begin(), side.end());
+    m.n_walls = 6;
+    return m;
+  }
+  proto::Kinematics interface_kinematics() override {
+    proto::Kinematics k;
+    k.positions = model_.interface_positions();
+    k.velocities = model_.interface_velocities();
+    return k;
+  }
+  void apply_interface_forces(const proto::Forces& f) override {
+    if (f.forces.size() != 3 * model_.interface_gridpoints().size())
+      throw std::runtime_error("interface forces for " + std::to_string(f.forces.size() / 3) + " points, the mesh has " +
+                               std::to_string(model_.interface_gridpoints().size()));
+    // Action-reaction: the sum we apply must equal the DEM's total to round-off.
+    std::array<double, 3> sum{0, 0, 0};
+    for (std::size_t i = 0; i < f.forces.size(); ++i) sum[i % 3] += f.forces[i];
+    double scale = std::max({std::abs(f.total[0]), std::abs(f.total[1]), std::abs(f.total[2]), 1e-300});
+    double imbalance = std::max({std::abs(sum[0] - f.total[0]), std::abs(sum[1] - f.total[1]), std::abs(sum[2] - f.total[2])});
+    max_imbalance_ = std::max(max_imbalance_, imbalance / scale);
+    model_.set_interface_forces(f.forces);
+    model_.set_interface_stiffness(f.stiffness);
+  }
+
+ private:
+  void setup_punch(const config::Scene& s) {
+    double a = s.real("continuum.punch.radius");
+    punch_velocity_ = s.real("continuum.punch.velocity");
+    auto c = s.reals("continuum.punch.centre");
+    auto size = s.reals("continuum.mesh.size");
+    double cx = c.size() == 2 ? c[0] : size[0] / 2, cy = c.size() == 2 ? c[1] : size[1] / 2;
+    auto top = model_.gridpoints_on_plane(2, size[2]);
+    auto pos = model_.positions();
+    for (auto g : top) {
+      double dx = pos[3 * g] - cx, dy = pos[3 * g + 1] - cy;
+      if (dx * dx + dy * dy <= a * a * (1 + 1e-9)) punch_.push_back(g);
+    }
+    if (punch_.empty()) s.fail("continuum.punch.radius", "a radius that covers at least one top gridpoint", std::to_string(a));
+    for (auto g : punch_) model_.fix_velocity(g, fdm::kFixAll, {0.0, 0.0, -punch_velocity_});
+    spdlog::info("fdm: rigid punch radius {} m on {} top gridpoints, speed {} m/s", a, punch_.size(), punch_velocity_);
+  }
+  // Upward force the punch exerts on... the soil pushes back: reaction on the punch gridpoints.
+  double punch_force() const { return punch_.empty() ? 0.0 : model_.reaction_sum(punch_)[2]; }
+
+  void write_frame(std::int64_t step) {
+    auto stress = model_.zone_stress();
+    io::MeshFrame f;
+    f.node_arrays.push_back({"displacement", io::ArrayView(model_.displacements(), 3)});
+    f.node_arrays.push_back({"velocity", io::ArrayView(model_.velocities(), 3)});
+    f.zone_arrays.push_back({"stress", io::ArrayView(stress, 6)});
+    f.zone_arrays.push_back({"plastic", io::ArrayView(model_.plastic_state())});
+    // Frame times must increase strictly: a repeated time (two frames of one step) is skipped.
+    if (has_frame_ && model_.time() <= last_frame_time_) return;
+    out_->write_frame(step, model_.time(), f);
+    has_frame_ = true;
+    last_frame_time_ = model_.time();
+    last_frame_ = step;
+  }
+
+  node::Context ctx_;
+  fdm::Model model_;
+  std::optional<io::MeshOutput> out_;
+  std::optional<io::CsvSeries> history_;
+  std::int64_t frame_every_ = 0, history_every_ = 1, last_step_ = -1, last_frame_ = -2;
+  bool has_frame_ = false;
+  double last_frame_time_ = 0;
+  fdm::Ratios last_ratios_{};
+  std::vector<std::int32_t> punch_;
+  double punch_velocity_ = 0, punch_disp_ = 0;
+  double max_imbalance_ = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return node::run_node(argc, argv, "continuum", "fdm_node",
+                        [](const node::Context& ctx) { return std::make_unique<FdmParticipant>(ctx); });
+}

@@ -1,0 +1,156 @@
+// Physics checks of the law of motion and the linear contact (physics.md §8.1–8.3).
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "demfdm/dem/world.hpp"
+
+using namespace demfdm::dem;
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+
+struct Collision {
+  double tc, dmax, e, p_err, min_fn;
+};
+
+// Two equal balls approaching head-on at relative speed v0, no friction, no gravity.
+Collision collide(double alpha) {
+  WorldParams p;
+  p.local_damping = alpha;
+  p.ball_ball.linear.fric = 0.0;
+  const double R = 1e-4, v0 = 0.1;
+  const double m = p.density * 4.0 / 3.0 * kPi * R * R * R;
+  const double kn = kPi * R * R * p.ball_ball.linear.emod / (2 * R);
+  const double tc = kPi * std::sqrt(0.5 * m / kn);
+  p.dt_fixed = tc / 400.0;
+  World w(p);
+  w.add_ball({0, 0, 0}, R);
+  w.add_ball({2 * R + 0.5 * v0 * 20 * p.dt_fixed, 0, 0}, R);
+  w.balls().v[0] = {0.5 * v0, 0, 0};
+  w.balls().v[1] = {-0.5 * v0, 0, 0};
+  Collision c{0, 0, 0, 0, 1e30};
+  double g_prev = w.balls().x[1].x - w.balls().x[0].x - 2 * R, t_prev = 0, t_in = -1, t_out = -1;
+  for (int k = 0; k < 2000 && t_out < 0; ++k) {
+    w.step();
+    const double g = w.balls().x[1].x - w.balls().x[0].x - 2 * R;
+    if (g_prev > 0 && g <= 0) t_in = t_prev + (w.time() - t_prev) * g_prev / (g_prev - g);
+    if (g_prev <= 0 && g > 0) t_out = t_prev + (w.time() - t_prev) * g_prev / (g_prev - g);
+    c.dmax = std::max(c.dmax, -g);
+    if (w.pair_contacts().size() > 0) c.min_fn = std::min(c.min_fn, w.pair_contacts().h[0].fn);
+    g_prev = g;
+    t_prev = w.time();
+  }
+  w.step(5);
+  c.tc = t_out - t_in;
+  c.e = (w.balls().v[1].x - w.balls().v[0].x) / v0;
+  c.p_err = std::abs(w.balls().m[0] * w.balls().v[0].x + w.balls().m[1] * w.balls().v[1].x);
+  c.dmax /= v0 * std::sqrt(0.5 * m / kn);
+  c.tc /= tc;
+  return c;
+}
+}  // namespace
+
+// §8.1: t_c = π√(m*/k_n), δ_max = v0√(m*/k_n), e = 1, momentum conserved, no tension.
+TEST(Motion, TwoBallCollisionUndamped) {
+  const Collision c = collide(0.0);
+  EXPECT_NEAR(c.tc, 1.0, 5e-3);
+  EXPECT_NEAR(c.dmax, 1.0, 5e-3);
+  EXPECT_NEAR(c.e, 1.0, 1e-2);
+  EXPECT_LT(c.p_err, 1e-20);
+  EXPECT_GE(c.min_fn, 0.0);
+  std::printf("undamped: tc/tc_ref-1 = %.2e, dmax/ref-1 = %.2e, e-1 = %.2e\n", c.tc - 1, c.dmax - 1, c.e - 1);
+}
+
+// §1.3/§8.1: local damping α gives e = √((1−α)/(1+α)).
+TEST(Motion, TwoBallCollisionLocalDamping) {
+  const double alpha = 0.3;
+  const Collision c = collide(alpha);
+  const double e_ref = std::sqrt((1 - alpha) / (1 + alpha));
+  EXPECT_NEAR(c.e / e_ref, 1.0, 1e-2);
+  EXPECT_GE(c.min_fn, 0.0);
+  std::printf("damped: e/e_ref-1 = %.2e\n", c.e / e_ref - 1);
+}
+
+// §8.2: a ball resting on a wall under N·g has overlap δ = m N g0/k_n (k_n = π R E*, L = R).
+TEST(Motion, BallRestingOnWall) {
+  WorldParams p;
+  p.local_damping = 0.7;
+  p.ball_wall.linear.fric = 0.5;
+  const double R = 1e-4, N = 100;
+  World w(p);
+  PlaneWallParams pw;
+  pw.point = {0, 0, 0};
+  pw.normal = {0, 0, 1};
+  w.add_plane(pw);
+  w.add_ball({0, 0, R}, R);
+  w.set_gravity(true, N);
+  w.step(20000);
+  const double m = w.balls().m[0];
+  const double kn = kPi * R * R * p.ball_wall.linear.emod / R;
+  const double delta = R - w.balls().x[0].z;
+  const double ref = m * N * p.g0 / kn;
+  EXPECT_NEAR(delta / ref, 1.0, 1e-6);
+  std::printf("resting: delta/ref-1 = %.2e\n", delta / ref - 1);
+}
+
+namespace {
+// Sphere released on an incline of angle θ with friction μ, no damping; returns the mean
+// acceleration along the slope measured from s(T) = ½ a T².
+double incline_accel(double theta, double mu, double& spin_rate) {
+  WorldParams p;
+  p.local_damping = 0.0;
+  p.ball_wall.linear.fric = mu;
+  const double R = 1e-3;
+  World w(p);
+  PlaneWallParams pw;
+  pw.normal = {-std::sin(theta), 0, std::cos(theta)};  // slope descends along +x
+  w.add_plane(pw);
+  const double m = p.density * 4.0 / 3.0 * kPi * R * R * R;
+  const double kn = kPi * R * p.ball_wall.linear.emod;
+  const double d0 = m * p.g0 * std::cos(theta) / kn;  // start at the static overlap
+  w.add_ball((R - d0) * pw.normal, R);
+  w.set_gravity(true, 1.0);
+  const Vec3 s_dir{std::cos(theta), 0, std::sin(theta)};
+  const Vec3 x0 = w.balls().x[0];
+  w.step(4000);
+  const double T = w.time();
+  const double s = -dot(w.balls().x[0] - x0, s_dir);  // downhill distance
+  spin_rate = w.balls().w[0].y / T;
+  return 2 * s / (T * T);
+}
+}  // namespace
+
+// §8.3: rolling without slip when tanθ ≤ 7/2 μ: a = 5/7 g sinθ.
+TEST(Motion, InclineRolling) {
+  const double th = 20 * kPi / 180, mu = 0.5;
+  double spin;
+  const double a = incline_accel(th, mu, spin);
+  const double ref = 5.0 / 7.0 * 9.81 * std::sin(th);
+  EXPECT_NEAR(a / ref, 1.0, 1e-2);
+  std::printf("rolling: a/ref-1 = %.2e\n", a / ref - 1);
+}
+
+// §8.3: sliding when tanθ > 7/2 μ: a = g(sinθ − μ cosθ), spin grows at 5μg cosθ/(2R).
+TEST(Motion, InclineSliding) {
+  const double th = 30 * kPi / 180, mu = 0.1;
+  double spin;
+  const double a = incline_accel(th, mu, spin);
+  const double ref = 9.81 * (std::sin(th) - mu * std::cos(th));
+  EXPECT_NEAR(a / ref, 1.0, 1e-2);
+  const double spin_ref = 5 * mu * 9.81 * std::cos(th) / (2 * 1e-3);
+  EXPECT_NEAR(std::abs(spin) / spin_ref, 1.0, 2e-2);
+  std::printf("sliding: a/ref-1 = %.2e spin/ref-1 = %.2e\n", a / ref - 1, std::abs(spin) / spin_ref - 1);
+}
+
+// Bad parameters are rejected with a sentence naming the field.
+TEST(Params, RejectsBadDamping) {
+  WorldParams p;
+  p.local_damping = 1.5;
+  try {
+    World w(p);
+    FAIL() << "expected std::invalid_argument";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("local_damping"), std::string::npos);
+  }
+}

@@ -1,0 +1,148 @@
+// Interface facets (physics.md §1.4, §6.2–6.5) and the rigid cylindrical footing.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <set>
+
+#include "demfdm/dem/geometry.hpp"
+#include "demfdm/dem/world.hpp"
+
+using namespace demfdm::dem;
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+
+// A horizontal square [−h, h]² at z = 0 made of two triangles, normal +z.
+int add_square(World& w, double h, double z = 0.0) {
+  const std::vector<double> v = {-h, -h, z, h, -h, z, h, h, z, -h, h, z};
+  const std::vector<std::int32_t> t = {0, 1, 2, 0, 2, 3};
+  return w.add_facet_wall(v, t);
+}
+}  // namespace
+
+// §6.4: the equivalent vertex forces have the exact resultant and moment (1e-12 relative).
+TEST(Facet, EquivalentForceSystemIdentity) {
+  std::mt19937_64 rng(12345);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  double err_f = 0, err_m = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    std::array<Vec3, 3> p;
+    for (auto& q : p) q = {U(rng), U(rng), U(rng)};
+    if (norm(cross(p[1] - p[0], p[2] - p[0])) < 1e-3) continue;
+    const Vec3 xc{U(rng), U(rng), U(rng)}, F{U(rng), U(rng), U(rng)}, M{U(rng), U(rng), U(rng)};
+    std::array<Vec3, 3> f;
+    facet_equivalent_forces(p, xc, F, M, f);
+    const Vec3 sf = f[0] + f[1] + f[2];
+    const Vec3 sm = cross(p[0], f[0]) + cross(p[1], f[1]) + cross(p[2], f[2]);
+    const Vec3 mref = cross(xc, F) + M;
+    err_f = std::max(err_f, norm(sf - F) / norm(F));
+    err_m = std::max(err_m, norm(sm - mref) / (norm(M) + norm(xc) * norm(F)));
+  }
+  EXPECT_LT(err_f, 1e-12);
+  EXPECT_LT(err_m, 1e-12);
+  std::printf("equivalent forces: max rel err F %.1e M %.1e\n", err_f, err_m);
+}
+
+// §8.2 on a facet wall: δ = m N g0/k_n; vertex forces sum to the facet load, which balances
+// the ball weight; stiffness contributions sum to K_n + K_s (Σw = 1).
+TEST(Facet, BallRestingOnFacetsForceBalance) {
+  WorldParams p;
+  p.ball_facet.linear.fric = 0.5;
+  const double R = 1e-4, N = 50;
+  World w(p);
+  const int wall = add_square(w, 1e-3);
+  w.add_ball({2e-4, 1e-4, R}, R);
+  w.set_gravity(true, N);
+  w.step(20000);
+  const double m = w.balls().m[0];
+  const double kn = kPi * R * p.ball_facet.linear.emod;
+  EXPECT_NEAR((R - w.balls().x[0].z) / (m * N * p.g0 / kn), 1.0, 1e-6);
+  auto vf = w.vertex_forces(wall);
+  Vec3 s{};
+  for (std::size_t i = 0; i < vf.size() / 3; ++i) s += Vec3{vf[3 * i], vf[3 * i + 1], vf[3 * i + 2]};
+  const Vec3 tot = w.facet_wall_force(wall);
+  EXPECT_LT(norm(s - tot), 1e-12 * norm(tot));
+  // force on the facets + force of the facets on the ball = 0 (Newton's third law, §6.9)
+  Vec3 on_ball{};
+  const auto& fc = w.facet_contacts();
+  for (std::size_t c = 0; c < fc.size(); ++c) on_ball -= fc.F[c];
+  EXPECT_LT(norm(tot + on_ball), 1e-15 * norm(tot));
+  EXPECT_NEAR(tot.z / (-m * N * p.g0), 1.0, 1e-6);
+  double ks = 0;
+  for (double k : w.vertex_stiffness(wall)) ks += k;
+  EXPECT_NEAR(ks / (kn + kn / p.ball_facet.linear.kratio), 1.0, 1e-12);
+}
+
+// §1.4: one contact per (ball, wall); the history follows the ball across a shared edge.
+TEST(Facet, HistoryMovesAcrossFacets) {
+  WorldParams p;
+  p.local_damping = 0.0;
+  p.ball_facet.linear.fric = 0.3;
+  const double R = 1e-4;
+  World w(p);
+  add_square(w, 1e-3);
+  const double m = p.density * 4.0 / 3.0 * kPi * R * R * R;
+  const double kn = kPi * R * p.ball_facet.linear.emod;
+  w.add_ball({3e-4, -3e-4, R - m * p.g0 / kn}, R);  // below the diagonal x = y
+  w.set_gravity(true, 1.0);
+  w.balls().fix[0] = kFixVx | kFixVy | kFixRot;
+  w.balls().v[0] = {-0.5, 0.5, 0};  // crosses the diagonal
+  std::set<int> facets;
+  double err = 0;
+  for (int k = 0; w.balls().x[0].x > -3e-4; ++k) {
+    w.step();
+    const auto& fc = w.facet_contacts();
+    ASSERT_EQ(fc.size(), 1u);
+    facets.insert(fc.facet[0]);
+    if (k > 20) err = std::max(err, std::abs(norm(fc.h[0].fs) - 0.3 * fc.h[0].fn) / (0.3 * fc.h[0].fn));
+  }
+  EXPECT_EQ(facets.size(), 2u);
+  EXPECT_LT(err, 1e-9);
+  std::printf("facet change: sliding |Fs|/(mu Fn) max rel err %.1e\n", err);
+}
+
+// §6.2: the kinematic facet spin of a rigidly rotating triangle is its angular velocity.
+TEST(Facet, KinematicSpinOfRigidRotation) {
+  World w(WorldParams{});
+  const std::vector<double> v = {0.1, 0.2, 0.3, 1.0, 0.1, 0.4, 0.2, 0.9, 0.7};
+  const int wall = w.add_facet_wall(v, std::vector<std::int32_t>{0, 1, 2});
+  const Vec3 om{0.3, -1.2, 0.7};
+  std::vector<double> vel(9);
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 vi = cross(om, Vec3{v[3 * i], v[3 * i + 1], v[3 * i + 2]});
+    vel[3 * i] = vi.x; vel[3 * i + 1] = vi.y; vel[3 * i + 2] = vi.z;
+  }
+  w.set_vertex_kinematics(wall, v, vel);
+  EXPECT_LT(norm(w.facet_wall(wall).tri_spin[0] - om), 1e-12 * norm(om));
+}
+
+// Footing: reaction = K_n × overlap for the bottom disc and the side (L = R, §1.7).
+TEST(Footing, ReactionBottomAndSide) {
+  WorldParams p;
+  const double R = 1e-4;
+  World w(p);
+  w.add_ball({0, 0, 0}, R);          // under the bottom disc
+  w.add_ball({1.0e-3, 0, 4e-4}, R);  // beside the side wall
+  w.balls().fix[0] = w.balls().fix[1] = kFixAll;
+  FootingParams fp;
+  fp.diameter = 1.2e-3;
+  fp.height = 0.6e-3;
+  fp.bottom_centre = {0, 0, R + 1e-6};
+  fp.velocity = {0, 0, -0.1};
+  w.set_footing(fp);
+  const double kn = kPi * R * p.ball_footing.linear.emod;
+  while (w.footing().p.bottom_centre.z > R - 2e-6) w.step();
+  const double pen = R - w.footing().p.bottom_centre.z;
+  EXPECT_GT(pen, 0.0);
+  // ball 1: surface of the side at x = 0.6 mm, ball centre at 1.0 mm: gap 0.3 mm, inactive
+  EXPECT_NEAR(w.footing_reaction().z / (kn * pen), 1.0, 1e-9);
+  EXPECT_NEAR(w.footing_reaction().x, 0.0, 1e-15);
+  // move the footing sideways into ball 1
+  w.set_footing_position({1.0e-3 - 0.6e-3 - R + 2e-6, 0, 2e-4});
+  w.set_footing_velocity({0, 0, 0});
+  w.step();
+  EXPECT_NEAR(w.footing_reaction().x / (-kn * 2e-6), 1.0, 1e-6);
+  EXPECT_NEAR(w.footing_reaction().z, 0.0, 1e-12);
+}

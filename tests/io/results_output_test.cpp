@@ -1,0 +1,261 @@
+// ParticleOutput / MeshOutput: a 3-frame particle + bond run and a 2-frame mesh run, read
+// back with the HDF5 C API; every HDF DataItem of the sidecars is resolved against the
+// HDF5 files (path, rank, sizes and element width must agree).
+#include "demfdm/io/results_output.hpp"
+
+#include <fstream>
+#include <regex>
+
+#include <gtest/gtest.h>
+
+#include "demfdm/io/error.hpp"
+#include "io_test_util.hpp"
+
+namespace demfdm::io {
+namespace {
+
+using test::H5Reader;
+using test::ScratchDir;
+
+// Checks every <DataItem Dimensions=.. NumberType=.. Precision=.. Format="HDF">file:path</DataItem>
+// of `xmf` against the HDF5 file it names (relative to the xmf folder). Returns the count.
+std::size_t check_data_items(const std::filesystem::path& xmf) {
+  const std::string x = test::slurp(xmf);
+  EXPECT_EQ(test::xml_problem(x), "") << xmf;
+  static const std::regex item(
+      R"re(<DataItem Dimensions="([0-9 ]+)" NumberType="(\w+)" Precision="(\d)" Format="HDF">([^:<]+):([^<]+)</DataItem>)re");
+  std::size_t n = 0;
+  for (auto it = std::sregex_iterator(x.begin(), x.end(), item); it != std::sregex_iterator(); ++it, ++n) {
+    const auto& m = *it;
+    H5Reader r(xmf.parent_path() / m[4].str());
+    const std::string path = m[5].str();
+    EXPECT_TRUE(r.exists(path)) << path;
+    if (!r.exists(path)) continue;
+    std::string dims;
+    for (hsize_t d : r.dims(path)) {
+      if (!dims.empty()) dims += ' ';
+      dims += std::to_string(d);
+    }
+    EXPECT_EQ(dims, m[1].str()) << path << " in " << xmf;
+    H5T_class_t cls;
+    std::size_t size;
+    bool little;
+    r.file_type(path, cls, size, little);
+    EXPECT_EQ(std::to_string(size), m[3].str()) << path;
+    const std::string want_type = cls == H5T_FLOAT ? "Float" : (size == 1 ? "UChar" : "Int");
+    EXPECT_EQ(want_type, m[2].str()) << path;
+  }
+  return n;
+}
+
+struct DemFrame {
+  std::vector<double> x, r;
+  std::vector<double> v;
+  std::vector<std::int64_t> id;
+  std::vector<std::int32_t> bonds;
+  std::vector<std::uint8_t> state;
+  std::vector<double> bond_force;
+};
+
+// Frame k: 6 - k particles in a row, bonds between neighbours, the last one broken from k = 1.
+DemFrame dem_frame(int k) {
+  DemFrame f;
+  const int np = 6 - k;
+  for (int i = 0; i < np; ++i) {
+    f.x.insert(f.x.end(), {0.02 * i, 0.0, 0.01 * k});
+    f.r.push_back(0.01);
+    f.v.insert(f.v.end(), {0.0, 0.0, -0.1 * k});
+    f.id.push_back(i + 1);
+  }
+  for (int b = 0; b + 1 < np; ++b) {
+    f.bonds.insert(f.bonds.end(), {b, b + 1});
+    f.state.push_back(static_cast<std::uint8_t>(k > 0 && b + 2 == np ? 1 : 0));
+    f.bond_force.insert(f.bond_force.end(), {1.0 * b, -1.0 * k, 0.5});
+  }
+  return f;
+}
+
+void write_dem_run(const std::filesystem::path& dir) {
+  ParticleOutput out(dir, FileInfo{"dem_node", "test-run", "0f0f", {}});
+  for (int k = 0; k < 3; ++k) {
+    const DemFrame f = dem_frame(k);
+    ParticleFrame pf;
+    pf.position = ArrayView(f.x, 3);
+    pf.point_arrays = {{"radius", ArrayView(f.r)}, {"velocity", ArrayView(f.v, 3)}, {"id", ArrayView(f.id)}};
+    pf.links = {LinkFrame{"bonds", ArrayView(f.bonds, 2), {{"state", ArrayView(f.state)}, {"force", ArrayView(f.bond_force, 3)}}}};
+    EXPECT_EQ(out.write_frame(100 * k, 1e-3 * k, pf), static_cast<std::size_t>(k));
+  }
+}
+
+TEST(ParticleOutput, ThreeFramesWithBondsReadBackAndSidecarsResolve) {
+  ScratchDir dir;
+  write_dem_run(dir.path());
+  H5Reader r(dir / "dem.h5");
+  EXPECT_EQ(r.attr_str("/", "producer"), "dem_node");
+  for (int k = 0; k < 3; ++k) {
+    const DemFrame f = dem_frame(k);
+    const std::string g = "/frames/00000" + std::to_string(k);
+    EXPECT_EQ(r.attr_f64(g, "time"), 1e-3 * k);
+    EXPECT_EQ(r.read_f64(g + "/particles/position"), f.x);
+    EXPECT_EQ(r.read_f64(g + "/particles/velocity"), f.v);
+    EXPECT_EQ(r.read_i64(g + "/particles/id"), f.id);
+    EXPECT_EQ(r.read_i32(g + "/bonds/nodes"), f.bonds);
+    EXPECT_EQ(r.read_u8(g + "/bonds/state"), f.state);
+    EXPECT_EQ(r.read_f64(g + "/bonds/force"), f.bond_force);
+  }
+  EXPECT_EQ(r.dims("/xdmf/vertex_index"), (std::vector<hsize_t>{6}));
+
+  const std::string px = test::slurp(dir / "particles.xmf");
+  const std::string bx = test::slurp(dir / "bonds.xmf");
+  EXPECT_EQ(test::count_substr(px, R"(GridType="Uniform")"), 3u);
+  EXPECT_EQ(test::count_substr(bx, R"(GridType="Uniform")"), 3u);
+  for (int k = 0; k < 3; ++k) {
+    const std::string np = std::to_string(6 - k), nb = std::to_string(5 - k);
+    EXPECT_NE(px.find("NumberOfElements=\"" + np + "\" NodesPerElement=\"1\""), std::string::npos) << k;
+    EXPECT_NE(bx.find("NumberOfElements=\"" + nb + "\" NodesPerElement=\"2\""), std::string::npos) << k;
+  }
+  EXPECT_NE(bx.find(R"(<Attribute Name="force" AttributeType="Vector" Center="Cell">)"), std::string::npos);
+  // Frame 2's data items: 1 hyperslab index + position + radius + velocity + id = 5 per frame.
+  EXPECT_EQ(check_data_items(dir / "particles.xmf"), 15u);
+  // Bonds: nodes + position + state + force = 4 per frame.
+  EXPECT_EQ(check_data_items(dir / "bonds.xmf"), 12u);
+}
+
+TEST(ParticleOutput, IdenticalRunsGiveIdenticalFiles) {
+  ScratchDir dir;
+  std::filesystem::create_directories(dir / "a");
+  std::filesystem::create_directories(dir / "b");
+  write_dem_run(dir / "a");
+  write_dem_run(dir / "b");
+  for (const char* f : {"dem.h5", "particles.xmf", "bonds.xmf"})
+    EXPECT_TRUE(test::slurp(dir / "a" / f) == test::slurp(dir / "b" / f)) << f << " differs between identical runs";
+}
+
+TEST(ParticleOutput, BadFramesAreRejectedBeforeAnythingIsWritten) {
+  ScratchDir dir;
+  ParticleOutput out(dir.path(), FileInfo{"dem_node", "", "", {}});
+  DemFrame f = dem_frame(0);
+  ParticleFrame pf;
+  pf.position = ArrayView(f.x, 3);
+  pf.point_arrays = {{"radius", ArrayView(f.r)}};
+  std::vector<std::int32_t> bad_bonds = f.bonds;
+  bad_bonds.back() = 6;  // row 6 of 6 particles: out of range
+  pf.links = {LinkFrame{"bonds", ArrayView(bad_bonds, 2), {}}};
+  try {
+    out.write_frame(0, 0.0, pf);
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("outside [0, 6)"), std::string::npos) << e.what();
+  }
+  pf.links = {LinkFrame{"bonds", ArrayView(f.bonds, 2), {}}};
+  std::vector<double> short_r(5, 0.01);
+  pf.point_arrays = {{"radius", ArrayView(short_r)}};
+  EXPECT_THROW(out.write_frame(0, 0.0, pf), std::invalid_argument);
+  pf.point_arrays = {{"radius", ArrayView(f.r)}};
+  pf.links = {};
+  EXPECT_THROW(out.write_frame(0, 0.0, pf), std::invalid_argument) << "declared link set missing";
+  EXPECT_EQ(out.h5().frame_count(), 0u);
+  EXPECT_FALSE(std::filesystem::exists(dir / "particles.xmf"));
+  pf.links = {LinkFrame{"bonds", ArrayView(f.bonds, 2), {}}};
+  out.write_frame(0, 0.0, pf);
+  EXPECT_THROW(out.write_frame(1, 0.0, pf), std::invalid_argument) << "time must increase";
+  EXPECT_EQ(out.h5().frame_count(), 1u);
+}
+
+TEST(ParticleOutput, RefusesToOverwriteAnEarlierRun) {
+  ScratchDir dir;
+  { std::ofstream(dir / "bonds.xmf") << "old"; }
+  try {
+    ParticleOutput out(dir.path(), FileInfo{"dem_node", "", "", {}});
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("bonds.xmf"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "dem.h5")) << "nothing is created when a target exists";
+  EXPECT_EQ(test::slurp(dir / "bonds.xmf"), "old");
+}
+
+// A 2 x 1 x 1 brick of unit hexahedra: nodes on a 3 x 2 x 2 lattice, VTK order per zone.
+struct Brick {
+  std::vector<double> coords;
+  std::vector<std::int64_t> zones;
+};
+Brick brick_vtk() {
+  Brick b;
+  auto node = [](int i, int j, int k) { return static_cast<std::int64_t>(i + 3 * (j + 2 * k)); };
+  for (int k = 0; k < 2; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 3; ++i) b.coords.insert(b.coords.end(), {1.0 * i, 1.0 * j, 1.0 * k});
+  for (int i = 0; i < 2; ++i)
+    b.zones.insert(b.zones.end(), {node(i, 0, 0), node(i + 1, 0, 0), node(i + 1, 1, 0), node(i, 1, 0),
+                                   node(i, 0, 1), node(i + 1, 0, 1), node(i + 1, 1, 1), node(i, 1, 1)});
+  return b;
+}
+
+TEST(MeshOutput, HexMeshFramesReadBackAndSidecarResolves) {
+  ScratchDir dir;
+  const Brick b = brick_vtk();
+  MeshOutput out(dir.path(), FileInfo{"fdm_node", "test-run", "0f0f", {}}, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+  EXPECT_EQ(out.node_count(), 12u);
+  EXPECT_EQ(out.zone_count(), 2u);
+  std::vector<std::vector<double>> stresses;
+  for (int k = 0; k < 2; ++k) {
+    std::vector<double> disp(12 * 3), vel(12 * 3), stress(2 * 6);
+    for (std::size_t i = 0; i < disp.size(); ++i) disp[i] = -1e-4 * k * static_cast<double>(i % 3 == 2);
+    for (std::size_t i = 0; i < vel.size(); ++i) vel[i] = 0.01 * k;
+    for (std::size_t i = 0; i < stress.size(); ++i) stress[i] = -1e5 * (k + 1) * static_cast<double>(i + 1);
+    std::vector<std::uint8_t> plastic{static_cast<std::uint8_t>(k), 0};
+    MeshFrame mf;
+    mf.node_arrays = {{"displacement", ArrayView(disp, 3)}, {"velocity", ArrayView(vel, 3)}};
+    mf.zone_arrays = {{"stress", ArrayView(stress, 6)}, {"plastic_state", ArrayView(plastic)}};
+    out.write_frame(10 * k, 0.01 * (k + 1), mf);
+    stresses.push_back(stress);
+  }
+  H5Reader r(dir / "fdm.h5");
+  EXPECT_EQ(r.attr_str("/", "stress_components"), "xx yy zz xy yz xz");
+  EXPECT_EQ(r.attr_str("/", "stress_unit"), "Pa");
+  EXPECT_EQ(r.attr_str("/mesh/zone_nodes", "zone_type"), "hexahedron8-vtk-order");
+  EXPECT_EQ(r.read_f64("/mesh/node_coords"), b.coords);
+  EXPECT_EQ(r.read_i64("/mesh/zone_nodes"), b.zones);
+  EXPECT_EQ(r.read_f64("/frames/000001/zones/stress"), stresses[1]);
+  EXPECT_EQ(r.dims("/frames/000001/zones/stress"), (std::vector<hsize_t>{2, 6}));
+  const std::string mx = test::slurp(dir / "mesh.xmf");
+  EXPECT_EQ(test::count_substr(mx, R"(<Attribute Name="stress" AttributeType="Matrix" Center="Cell">)"), 2u);
+  EXPECT_EQ(test::count_substr(mx, R"(<Attribute Name="plastic_state" AttributeType="Scalar" Center="Cell">)"), 2u);
+  EXPECT_EQ(test::count_substr(mx, R"(<Topology TopologyType="Hexahedron" NumberOfElements="2">)"), 2u);
+  // Per frame: zone_nodes + node_coords + displacement + velocity + stress + plastic_state.
+  EXPECT_EQ(check_data_items(dir / "mesh.xmf"), 12u);
+}
+
+TEST(MeshOutput, MirroredZonesAndBadIndicesAreRejected) {
+  ScratchDir dir;
+  Brick b = brick_vtk();
+  std::swap(b.zones[1], b.zones[3]);  // zone 0 bottom face clockwise: mirrored
+  try {
+    MeshOutput out(dir.path(), FileInfo{"fdm_node", "", "", {}}, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+    FAIL();
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("zone 0 is not in VTK hexahedron order"), std::string::npos) << e.what();
+  }
+  b = brick_vtk();
+  b.zones[15] = 12;
+  EXPECT_THROW(MeshOutput(dir.path(), FileInfo{"fdm_node", "", "", {}}, ArrayView(b.coords, 3), ArrayView(b.zones, 8)),
+               std::invalid_argument);
+  EXPECT_FALSE(std::filesystem::exists(dir / "fdm.h5"));
+}
+
+TEST(MeshOutput, CurrentPositionsBecomeTheGeometry) {
+  ScratchDir dir;
+  const Brick b = brick_vtk();
+  MeshOutput out(dir.path(), FileInfo{"fdm_node", "", "", {}}, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+  MeshFrame mf;
+  mf.node_arrays = {{"position", ArrayView(b.coords, 3)}};
+  out.write_frame(0, 0.0, mf);
+  const std::string mx = test::slurp(dir / "mesh.xmf");
+  EXPECT_NE(mx.find(">fdm.h5:/frames/000000/nodes/position</DataItem>\n        </Geometry>"), std::string::npos) << mx;
+  EXPECT_EQ(mx.find("<Attribute Name=\"position\""), std::string::npos);
+  EXPECT_EQ(check_data_items(dir / "mesh.xmf"), 2u);
+}
+
+}  // namespace
+}  // namespace demfdm::io
