@@ -9,6 +9,7 @@
 // (named in the message), 130 interrupted.
 #include <unistd.h>
 
+#include <cmath>
 #include <csignal>
 #include <fstream>
 #include <iomanip>
@@ -202,6 +203,16 @@ int main(int argc, char** argv) {
     BusDriver driver(*ep);
     coord::Runner runner(schema::stages(scene), driver, dt,
                          scene.has("coupling") ? scene.integer("coupling.window") : 1);
+    // Footing kinematics (physics.md 7.1): v = I L_p / (d50 sqrt(rho_s / P)), L_p = ratio D_f,
+    // with d50 of the upscaled PSD (d50 times the upscaling factor).
+    runner.set_kinematics([&scene](const schema::Stage& st, std::int64_t, double) -> std::vector<double> {
+      if (st.action != "penetrate") return {};
+      const auto& v = st.view;
+      double d50 = scene.real("dem.specimen.d50") * scene.real("dem.specimen.scale");
+      double lp = v.real("plastic_zone_ratio") * scene.real("dem.footing.diameter");
+      double speed = v.real("inertial_number") * lp / (d50 * std::sqrt(scene.real("dem.density") / v.real("mean_stress")));
+      return {speed * v.real("speed_factor")};
+    });
     History hist(opt.run_dir);
     runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
     auto sum = runner.run();

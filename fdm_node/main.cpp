@@ -111,9 +111,10 @@ class FdmParticipant : public node::Participant {
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     const auto& a = st.action;
-    if (a != "cycle" && a != "equilibrium" && a != "geostatic")
+    if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
       throw std::invalid_argument("fdm_node does not support stage action '" + a + "'");
-    if (a == "geostatic") {
+    // couple: the interface is being set up; the continuum starts from its geostatic state.
+    if (a == "geostatic" || a == "couple") {
       fdm::GeostaticStress g;
       double k0 = st.view.real("k0");
       g.k0 = k0 < 0 ? fdm::kNaN : k0;
@@ -154,14 +155,24 @@ class FdmParticipant : public node::Participant {
   proto::Values step_values() override {
     auto b = model_.base_reaction();
     proto::Values v{{"ratio", last_ratios_.average}, {"base_fz_N", b[2]}, {"kinetic_J", model_.kinetic_energy()}};
+    if (coupled_) {
+      // Largest relative difference so far between the force sum the continuum applied and the
+      // DEM's own total of the same step (action = reaction, physics.md 6.9).
+      v.push_back({"iface_imbalance", max_imbalance_});
+      v.push_back({"iface_fz_N", iface_fz_});
+    }
     if (!punch_.empty()) {
       v.push_back({"punch_fz_N", punch_force()});
       v.push_back({"punch_disp_m", punch_disp_});
     }
     return v;
   }
+  // Equilibrium actions: the FLAC3D ratio-average below the stage's 'ratio'. Actions whose
+  // end the continuum does not decide (penetrate: the footing depth) have its consent.
   bool criterion_met(const schema::Stage& st) override {
-    return (st.action == "equilibrium" || st.action == "geostatic") && last_ratios_.average < st.view.real("ratio");
+    const auto& a = st.action;
+    if (a == "equilibrium" || a == "geostatic" || a == "couple") return last_ratios_.average < st.view.real("ratio");
+    return a == "penetrate";
   }
   proto::Values stage_end(const schema::Stage&, std::int64_t last) override {
     if (out_ && last != last_frame_) write_frame(last);
@@ -200,6 +211,8 @@ class FdmParticipant : public node::Participant {
     double scale = std::max({std::abs(f.total[0]), std::abs(f.total[1]), std::abs(f.total[2]), 1e-300});
     double imbalance = std::max({std::abs(sum[0] - f.total[0]), std::abs(sum[1] - f.total[1]), std::abs(sum[2] - f.total[2])});
     max_imbalance_ = std::max(max_imbalance_, imbalance / scale);
+    coupled_ = true;
+    iface_fz_ = sum[2];
     model_.set_interface_forces(f.forces);
     model_.set_interface_stiffness(f.stiffness);
   }
@@ -249,7 +262,8 @@ class FdmParticipant : public node::Participant {
   fdm::Ratios last_ratios_{};
   std::vector<std::int32_t> punch_;
   double punch_velocity_ = 0, punch_disp_ = 0;
-  double max_imbalance_ = 0;
+  double max_imbalance_ = 0, iface_fz_ = 0;
+  bool coupled_ = false;
 };
 
 }  // namespace

@@ -85,6 +85,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
   std::unique_ptr<proto::NodeEndpoint> ep;
   std::unique_ptr<Participant> part;
   std::int64_t step = -1;
+  std::int64_t cmd_step = -1;  // header.step of the command being worked on (for a FAILED report)
   std::int32_t stage_index = -1;
   try {
     bus = std::make_unique<bus::Bus>(bus::resolve_url(opt.url), opt.run_id, role);
@@ -97,6 +98,9 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
       ctx.scene = config::Scene::parse(text, ep->scene_origin(), schema::scene_schema());
     } catch (const config::Error& e) {
       log->error("scene rejected: {}", e.what());
+      ep->report(-1, demfdm::report_t::FAILED, -1, 0.0, 0.0, 0.0, 0.0, {},
+                 role + " (" + solver + ") rejected the scene: " + e.what());
+      bus->pump(0.05);
       return 2;
     }
     log->info("scene {} (hash {:016x}) received", ep->scene_origin(), ctx.scene.hash());
@@ -112,6 +116,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
       auto c = ep->next_command();
       // Waiting for the command counts as bus wait, not compute.
       double cmd_wait = ep->take_wait_s();
+      cmd_step = c.header.step;
       auto t0 = std::chrono::steady_clock::now();
       auto compute = [&] {
         return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -194,7 +199,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
     log->error("{} failed at step {}: {}", role, step + 1, e.what());
     if (ep) {
       try {
-        ep->report(step + 1, demfdm::report_t::FAILED, stage_index, part ? part->time() : 0.0, 0.0, 0.0, 0.0, {},
+        ep->report(cmd_step, demfdm::report_t::FAILED, stage_index, part ? part->time() : 0.0, 0.0, 0.0, 0.0, {},
                    role + " at step " + std::to_string(step + 1) + ": " + e.what());
         bus->pump(0.05);
       } catch (...) {

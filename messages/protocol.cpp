@@ -530,6 +530,8 @@ void CoordinatorEndpoint::start(const std::string& text, const std::string& orig
   auto start = clock::now();
   auto last = start - std::chrono::seconds(1);
   while (!all_in()) {
+    for (auto& [k, r] : reports_)
+      if (r.status == demfdm::report_t::FAILED) throw ProtocolError("node '" + r.header.sender + "' failed at start-up: " + r.text);
     if (since(last) > 0.25) {
       for (auto& m : msgs) bus_.publish(bus::channel::kScene, m);
       last = clock::now();
@@ -633,11 +635,10 @@ std::map<std::string, demfdm::report_t> CoordinatorEndpoint::collect(std::int32_
   double interval = t_.resend_after_s;
   while (!done()) {
     bus_.pump(std::min(0.01, interval));
-    for (auto& r : targets) {
-      auto it = reports_.find(key(r, cmd, step));
-      if (it != reports_.end() && it->second.status == demfdm::report_t::FAILED)
-        throw ProtocolError("node '" + r + "' failed at step " + std::to_string(step) + ": " + it->second.text);
-    }
+    // A failure report from any node ends the run, whatever command it answers.
+    for (auto& [k, rep] : reports_)
+      if (rep.status == demfdm::report_t::FAILED)
+        throw ProtocolError("node '" + rep.header.sender + "' failed: " + rep.text);
     if (done()) break;
     throw_if_interrupted();
     check_alive(all);

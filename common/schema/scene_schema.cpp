@@ -1,6 +1,7 @@
 #include "common/schema/scene_schema.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 namespace demfdm::schema {
 namespace {
@@ -113,6 +114,111 @@ void declare_continuum(config::Section& root) {
   out.integer("history_every", "steps", 1, "fdm_history.csv row every n coupling steps; 0: none.").min(0);
 }
 
+struct FamilyDefaults {
+  const char* model;
+  double fric;
+  bool zero_linear;
+  const char* doc;
+};
+
+void declare_family(config::Section& dem, const char* name, const FamilyDefaults& d) {
+  auto& f = dem.section(name, d.doc, config::Presence::Optional);
+  f.choice("model", {"linear", "pbond", "softbond"}, std::string(d.model),
+           "Contact model: linear (1.7), linear parallel bond (2), soft bond (3).");
+  f.real("emod", "Pa", 2.8e9, "Deformability modulus E* of the linear part (soft bond: its only stiffness).").min(0.0);
+  f.real("kratio", "-", 2.4, "Normal-to-shear stiffness ratio kappa*.").min(0.0, true);
+  f.real("fric", "-", d.fric, "Friction coefficient mu of unbonded contacts.").min(0.0);
+  f.choice("wall_length", {"radius", "diameter"}, std::string("radius"),
+           "Deformability length L of ball-wall contacts: R_ball (default) or 2 R_ball (U6).");
+  f.real("pb_emod", "Pa", 2.8e9, "Parallel bond modulus E-bar*.").min(0.0);
+  f.real("pb_kratio", "-", 2.4, "Parallel bond stiffness ratio.").min(0.0, true);
+  f.real("pb_rmul", "-", 1.0, "Parallel bond radius multiplier lambda-bar.").min(0.0, true);
+  f.real("pb_mcf", "-", 1.0, "Parallel bond moment contribution factor beta-bar.").min(0.0).max(1.0);
+  f.real("pb_ten", "Pa", 0.45e6, "Parallel bond tensile strength; negative: unbreakable.");
+  f.real("pb_coh", "Pa", 0.45e6, "Parallel bond cohesion; negative: unbreakable.");
+  f.real("pb_fa", "deg", 32.0, "Parallel bond friction angle.").min(0.0).max(90.0, true);
+  f.boolean("pb_zero_linear", d.zero_linear,
+            "Give the linear part zero stiffness when bonding (interface bonds: no repulsion from initial "
+            "overlaps, physics.md 2.6).");
+  f.real("sb_rmul", "-", 1.0, "Soft bond radius multiplier lambda.").min(0.0, true);
+  f.real("sb_mcf", "-", 1.0, "Soft bond moment contribution factor beta.").min(0.0).max(1.0);
+  f.real("sb_bmul", "-", 1.0, "Soft bond bending-friction multiplier lambda_b.").min(0.0);
+  f.real("sb_ten", "Pa", 0.45e6, "Soft bond tensile strength sigma_c.").min(0.0);
+  f.real("sb_coh", "Pa", 0.45e6, "Soft bond cohesion c.").min(0.0);
+  f.real("sb_fa", "deg", 32.0, "Soft bond friction angle phi.").min(0.0).max(90.0, true);
+  f.real("sb_soft", "-", 100.0, "Softening factor zeta: softening slope -k_n/zeta (0: brittle).").min(0.0);
+  f.real("sb_cut", "-", 0.05, "Softening tensile-strength factor gamma: break at gamma sigma_c.").min(0.0);
+  f.real("sb_twist", "-", 2.0 / 3.0, "Unbonded twisting limit factor: |M_t| <= f mu F_n R (3.5, U3).").min(0.0);
+  f.choice("sb_return", {"associated", "radial"}, std::string("associated"),
+           "Soft bond return while softening (3.3; reconstruction, default associated).");
+  f.choice("sb_unload", {"elastic", "secant"}, std::string("elastic"),
+           "Unloading from the softening branch (3.3, U1; default elastic with plastic offset).");
+  f.choice("sb_cohesion_softening", {"none", "proportional"}, std::string("none"),
+           "Cohesion while softening in tension (3.4; default untouched).");
+  f.boolean("sb_bending_in_softening", true,
+            "Bending drives softening with the normal opening (PFC); false: normal only (Ma & Huang).");
+  f.choice("sb_unbonded_moments", {"jiang", "none"}, std::string("jiang"),
+           "Moment limits of unbonded soft-bond contacts (3.5, U3).");
+}
+
+void declare_dem(config::Section& root) {
+  auto& d = *root.find("dem")->section;
+  d.real("density", "kg/m^3", 2650.0, "Grain density rho_s.").min(0.0, true);
+  d.real("damping", "-", 0.7, "Local (non-viscous) damping alpha (physics.md 1.3).").min(0.0).max(1.0, true);
+  d.real("dt_safety", "-", 0.8, "Time step = safety * critical step (1.8).").min(0.0, true).max(1.0);
+  d.integer("dt_interval", "steps", 100, "Recompute the critical step every n steps.").min(1);
+  d.real("dt_fixed", "s", 0.0, "Fixed time step instead of the automatic one (0: automatic).").min(0.0);
+  d.real("skin_factor", "-", 0.15, "Verlet skin as a fraction of d_min (1.4).").min(0.0, true);
+  d.boolean("facet_spin", true, "Kinematic facet spin for ball-facet contacts (6.2).");
+  d.boolean("track_energy", true, "Accumulate dissipated energies (damping, friction, softening).");
+  declare_family(d, "ball_ball", {"softbond", 0.6248693519093275, false, "Ball-ball contacts."});
+  declare_family(d, "ball_wall", {"linear", 0.0, false, "Ball-platen contacts (UCS test, boxes)."});
+  declare_family(d, "ball_facet", {"pbond", 0.6248693519093275, true,
+                                   "Ball-interface facet contacts (DEM-continuum coupling, physics.md 6.3)."});
+  declare_family(d, "ball_footing", {"linear", 0.5, false, "Ball-footing contacts (physics.md 0.3: mu = 0.5)."});
+  auto& sp = d.section("specimen", "Specimen generation (physics.md 0.4, 4).", config::Presence::Optional);
+  sp.real("d_min", "m", 0.0655e-3, "Smallest particle diameter (before upscaling).").min(0.0, true);
+  sp.real("d_max", "m", 0.181e-3, "Largest particle diameter (before upscaling).").min(0.0, true);
+  sp.real("d50", "m", 0.116e-3, "d50 quoted by the paper (inertial-number rate rule).").min(0.0, true);
+  sp.real("scale", "-", 1.5, "Particle upscaling factor (1, 1.3, 1.5 in the paper).").min(0.1).max(10.0);
+  sp.reals("cell", "m", std::vector<double>{4e-3, 4e-3, 2e-3}, "REV periodic cell L_c x W_c x H_c.").length(3).min(0.0, true);
+  sp.reals("origin", "m", std::vector<double>{},
+           "Minimum corner of the REV (and of the replicated block); empty: the continuum's pocket if there is "
+           "a [continuum], else [0, 0, 0].");
+  sp.integer("n_particles", "-", 0, "Number of balls; 0: fill the cell at porosity_target.").min(0);
+  sp.real("porosity_target", "-", 0.40, "Porosity reached by frictionless radius expansion (4.3).").min(0.0).max(1.0, true);
+  sp.real("initial_scale", "-", 0.6, "Initial radii = d/2 * this (4.3).").min(0.0, true).max(1.0);
+  sp.integer("increments", "-", 5, "Radius-expansion increments.").min(1);
+  sp.real("expansion_ratio", "-", 1e-3, "Unbalanced ratio to reach after each expansion increment.").min(0.0, true);
+  sp.integer("max_steps_per_increment", "steps", 20000, "Step budget of each expansion increment.").min(1);
+  sp.real("k0", "-", 0.5, "sigma_h / sigma_v of the REV servo (U7).").min(0.0);
+  sp.real("sigma_v", "Pa", -1.0,
+          "REV vertical stress; negative: rho_b N g0 H_D, the self-weight stress at the DEM block's bottom "
+          "(physics.md 4.5), with rho_b = (1 - 0.52) rho_s unless bulk_density is set.");
+  sp.real("bulk_density", "kg/m^3", -1.0, "Bulk density for sigma_v; negative: 0.48 rho_s.");
+  sp.real("servo_tol", "-", 0.005, "Servo stress tolerance |s - s*| / s*.").min(0.0, true);
+  sp.real("servo_ratio", "-", 1e-4, "Servo unbalanced-ratio criterion.").min(0.0, true);
+  sp.real("servo_gain", "-", 0.3, "Servo under-relaxation alpha_s.").min(0.0, true).max(1.0);
+  sp.integer("servo_steps", "steps", 400000, "Step budget of the servo at low friction (then half of it at the final friction).")
+      .min(1);
+  sp.real("servo_fric", "-", 0.1, "Friction during servo compaction (4.3 step 4: 0 to 0.1).").min(0.0);
+  sp.real("bond_gap", "m", -1.0, "Bond contacts with gap <= this; negative: 1e-3 d_min (4.6).");
+  sp.integers("replicate", "-", std::vector<std::int64_t>{1, 1, 5}, "Copies alpha x beta x gamma (4.7).")
+      .length(3).min(1);
+  sp.choice("depth_scaling", {"depth_ratio", "paper_literal", "none"}, std::string("depth_ratio"),
+            "Scaling of contact and bond forces with depth (4.9, U7): depth_ratio (default) f = depth/H_D; "
+            "paper_literal f = height above the block bottom / H_D; none.");
+  auto& ft = d.section("footing", "Rigid cylindrical footing (paper: D_f 1.2 mm, H_f 0.6 mm). Absent: none.",
+                       config::Presence::Optional);
+  ft.real("diameter", "m", 1.2e-3, "Footing diameter D_f.").min(0.0, true);
+  ft.real("height", "m", 0.6e-3, "Footing height H_f.").min(0.0, true);
+  ft.reals("centre", "m", std::vector<double>{}, "Axis position [x, y]; empty: the centre of the DEM block.");
+  auto& o = d.section("output", "DEM results (dem.h5 + particles.xmf + bonds.xmf, dem_history.csv).",
+                      config::Presence::Optional);
+  o.integer("frame_every", "steps", 0, "HDF5 frame every n coupling steps; 0: only at the end of each stage.").min(0);
+  o.integer("history_every", "steps", 1, "dem_history.csv row every n coupling steps; 0: none.").min(0);
+}
+
 void declare_output(config::Section& root) {
   auto& out = root.section("output", "What a run writes to its run folder.", config::Presence::Optional);
   out.boolean("traffic_log", true, "Record the bus traffic with lcm-logger (traffic.lcmlog).");
@@ -139,14 +245,30 @@ void declare_stages(config::Section& root) {
   auto& st = root.array("stage", "The run's stages, in order (staged initialisation, loading).",
                         config::Presence::Required);
   st.string("name", std::nullopt, "Stage name (logs, summary).");
-  st.choice("action", {"cycle", "equilibrium", "geostatic"}, std::string("cycle"),
-            "What the nodes do in this stage. cycle: step the models as they are; equilibrium: step until the "
-            "unbalanced-force ratio is below 'ratio' (use until = \"done\"); geostatic: assign the initial "
-            "stresses sigma_v = rho N g depth, sigma_h = K0 sigma_v (continuum), then as equilibrium.");
+  st.choice("action",
+            {"cycle", "equilibrium", "geostatic", "generate", "servo", "bond", "replicate", "couple", "penetrate", "ucs"},
+            std::string("cycle"),
+            "What the nodes do in this stage (docs/stages.md). cycle: step the models as they are; equilibrium: "
+            "step until the unbalanced-force ratio is below 'ratio' (use until = \"done\"); geostatic: "
+            "(continuum) assign sigma_v = rho N g depth, sigma_h = K0 sigma_v, then as equilibrium. DEM "
+            "generation: generate (REV in a periodic cell), servo (compress the REV to sigma_v, sigma_h), bond "
+            "(install bonds), replicate (stack copies, open the boundaries). couple: interface set-up (facets from "
+            "the continuum's mesh, ball-facet bonds, depth scaling, facet bond forces; continuum: geostatic "
+            "stresses), gravity on, then as equilibrium. penetrate: the footing moves down at the rate of the "
+            "inertial number; the stage ends at 'depth'. ucs: unconfined compression between platens.");
   st.real("ratio", "-", 1e-5, "Equilibrium criterion: unbalanced-force ratio (FLAC3D ratio-average, physics.md 5.11).")
       .min(0.0, true);
   st.real("k0", "-", -1.0, "K0 for 'geostatic'; negative: nu/(1-nu) of each zone's material.");
   st.boolean("reset_displacements", false, "Set continuum displacements to zero at the stage's start.");
+  st.real("inertial_number", "-", 1e-3, "penetrate: inertial number I of the footing rate (physics.md 7.1).")
+      .min(0.0, true);
+  st.real("plastic_zone_ratio", "-", 3.0, "penetrate: L_p / D_f in v = I L_p / (d50 sqrt(rho_s / P)).").min(0.0, true);
+  st.real("mean_stress", "Pa", 1e6, "penetrate: mean stress P at the footing tip in the rate rule (U12).").min(0.0, true);
+  st.real("depth_ratio", "-", 0.2, "penetrate: stop when the footing has moved this many D_f (paper: 0.2).")
+      .min(0.0, true);
+  st.real("speed_factor", "-", 1.0, "penetrate: multiply the rate-rule speed (stability studies).").min(0.0, true);
+  st.real("strain_rate", "1/s", 0.5, "ucs: platen approach rate / specimen height.").min(0.0, true);
+  st.real("max_strain", "-", 0.01, "ucs: stop at this axial strain.").min(0.0, true);
   st.strings("nodes", std::vector<std::string>{}, "Roles taking part ('dem', 'continuum'); empty: all of the scene's.");
   st.integer("steps", "-", std::nullopt, "Step budget in coupling steps.").min(1);
   st.choice("until", {"steps", "done"}, std::string("steps"),
@@ -165,6 +287,7 @@ config::Schema build() {
   declare_bus(root);
   declare_nodes(root);
   declare_gravity(root);
+  declare_dem(root);
   declare_continuum(root);
   declare_output(root);
   declare_chain(root);
@@ -182,6 +305,20 @@ config::Schema build() {
         ctx.fail("chain.split", "an integer in [1, n_masses-1] = [1, " + std::to_string(n - 1) + "]",
                  std::to_string(sp));
     }
+    if (sc.has("dem") && sc.has("continuum") && sc.boolean("continuum.mesh.pocket")) {
+      auto cell = sc.reals("dem.specimen.cell");
+      auto rep = sc.integers("dem.specimen.replicate");
+      auto inner = sc.reals("continuum.mesh.inner_size");
+      for (int a = 0; a < 3; ++a) {
+        double block = cell[a] * static_cast<double>(rep[a]);
+        if (std::abs(block - inner[a]) > 1e-9 * std::max(block, inner[a]))
+          ctx.fail("continuum.mesh.inner_size",
+                   "the DEM block size dem.specimen.cell x dem.specimen.replicate = [" +
+                       std::to_string(cell[0] * rep[0]) + ", " + std::to_string(cell[1] * rep[1]) + ", " +
+                       std::to_string(cell[2] * rep[2]) + "] m (the pocket holds the block)",
+                   "[" + std::to_string(inner[0]) + ", " + std::to_string(inner[1]) + ", " + std::to_string(inner[2]) + "]");
+      }
+    }
     auto present = roles(sc);
     for (std::size_t i = 0; i < sc.count("stage"); ++i) {
       auto e = sc.at("stage", i);
@@ -193,6 +330,11 @@ config::Schema build() {
           for (auto& r : present) have += (have.empty() ? "'" : ", '") + r + "'";
           ctx.fail(p + ".nodes", "roles present in the scene (" + have + ")", "'" + nodes[j] + "'");
         }
+      auto action = e.string("action");
+      if (action == "penetrate" && !sc.has("dem.footing"))
+        ctx.fail(p + ".action", "a [dem.footing] section for a penetrate stage", "none");
+      if (action == "couple" && !e.boolean("coupled"))
+        ctx.fail(p + ".coupled", "true for a couple stage (it sets up the interface)", "false");
       if (e.boolean("coupled")) {
         if (!sc.has("coupling")) ctx.fail(p + ".coupled", "a [coupling] section for a coupled stage", "none");
         if (!nodes.empty() && nodes.size() != 2)

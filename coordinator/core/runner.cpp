@@ -37,8 +37,11 @@ RunSummary Runner::run() {
     ss.first_step = step;
     auto t0 = std::chrono::steady_clock::now();
     ss.begin = driver_.command(Cmd::StageBegin, st.nodes, step - 1, idx, st.name, stage_dt(st), {});
-    for (auto& [r, rep] : ss.begin)
+    for (auto& [r, rep] : ss.begin) {
       if (rep.dt_stable > 0) dt_stable_[r] = rep.dt_stable;
+      ss.compute_s[r] += rep.compute_s;  // set-up procedures (generation, servo) run here
+      ss.wait_s[r] += rep.wait_s;
+    }
     std::int64_t end = step + st.steps;  // exclusive
     const std::int64_t window = st.coupled ? window_ : 1;
     std::deque<std::int64_t> outstanding;  // last step of each posted, uncollected grant
@@ -74,6 +77,10 @@ RunSummary Runner::run() {
     ss.criterion_met = done || !st.until_done;
     ss.ended_by = st.until_done ? (done ? "done" : "budget") : "steps";
     ss.end = driver_.command(Cmd::StageEnd, st.nodes, step - 1, idx, st.name, stage_dt(st), {});
+    for (auto& [r, rep] : ss.end) {
+      ss.compute_s[r] += rep.compute_s;
+      ss.wait_s[r] += rep.wait_s;
+    }
     ss.wall_s = seconds_since(t0);
     sum.stages.push_back(ss);
     if (st.until_done && !done && st.fail_on_budget)

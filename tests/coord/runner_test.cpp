@@ -71,7 +71,7 @@ TEST(Runner, GrantsBlocksAndCountsStepsGloballyOverStages) {
   ASSERT_EQ(sum.stages.size(), 2u);
   EXPECT_EQ(sum.stages[0].last_step, 9);
   EXPECT_EQ(sum.stages[1].first_step, 10);
-  EXPECT_DOUBLE_EQ(sum.stages[0].compute_s.at("dem"), 1.5);  // 3 grants x 0.5 s
+  EXPECT_DOUBLE_EQ(sum.stages[0].compute_s.at("dem"), 2.5);  // begin + 3 grants + end, 0.5 s each
   EXPECT_EQ(sum.stages[0].ended_by, "steps");
 }
 

@@ -83,17 +83,21 @@ TEST(ParallelBond, TensileBreakAtStrength) {
 // Strictly-greater break test (U15): a bond loaded exactly to σ̄_c survives.
 TEST(ParallelBond, KernelStrictBreak) {
   BondHist b;
-  b.rb = 1e-4; b.area = kPi * 1e-8; b.inertia = 0.25 * b.area * 1e-8; b.polar = 2 * b.inertia;
-  b.kn = 1e13; b.ks = b.kn / 2.4; b.sigc = 1e6; b.coh = 1e6; b.tanphi = 0.5;
+  b.rb = 1e-4;
+  b.kn = 1.0 / b.area();  // k̄_n Ā = 1 N/m: the force equals the displacement exactly
   b.state = BondState::kIntact;
+  LawConst c;
+  c.ks_kn = 1 / 2.4;
+  c.sigc = 1.0 / b.area();  // σ̄_c Ā = 1 N
+  c.coh = 1e30;
+  c.tanphi = 0.5;
   const Vec3 n{1, 0, 0};
   Vec3 F{}, M{};
-  const double du = b.sigc / b.kn;  // exactly to strength: N̄ = k̄_n Ā du = σ̄_c Ā
   b.nb = 0;
-  pbond_update(b, 1.0, du, {}, 0, {}, n, F, M);
+  pbond_update(b, c, 1.0, {}, 0, {}, n, F, M);  // N̄ = 1 N = σ̄_c Ā
   EXPECT_EQ(b.state, BondState::kIntact);
-  EXPECT_LE(b.nb / b.area, b.sigc);
-  pbond_update(b, 1.0, 1e-6 * du, {}, 0, {}, n, F, M);
+  EXPECT_EQ(b.nb, 1.0);
+  pbond_update(b, c, 1e-6, {}, 0, {}, n, F, M);
   EXPECT_EQ(b.state, BondState::kBrokenTension);
 }
 
@@ -156,25 +160,32 @@ TEST(ParallelBond, ChainTorsion) {
 // Soft bond (§3.3–3.5)
 
 namespace {
-BondHist soft_geometry(double R, double E, double kratio) {
+// Soft-bond geometry and constants for a pair of equal balls (§3.3), written out here
+// independently of World::init_contact.
+struct Soft {
   BondHist b;
-  b.rb = R;
-  b.area = kPi * R * R;
-  b.inertia = 0.25 * b.area * R * R;
-  b.polar = 2 * b.inertia;
-  b.kn = E / (2 * R);
-  b.ks = b.kn / kratio;
-  b.sigc = 0.45e6;
-  b.coh = 0.45e6;
-  b.tanphi = std::tan(32 * kPi / 180);
-  b.sigma_t = b.sigc;
-  b.state = BondState::kIntact;
-  return b;
+  double area, inertia, polar, ks, sigc = 0.45e6;
+};
+Soft soft_geometry(double R, double E, double kratio) {
+  Soft s;
+  s.b.rb = R;
+  s.b.kn = E / (2 * R);
+  s.b.sigma_t = s.sigc;
+  s.b.state = BondState::kIntact;
+  s.area = kPi * R * R;
+  s.inertia = 0.25 * s.area * R * R;
+  s.polar = 2 * s.inertia;
+  s.ks = s.b.kn / kratio;
+  return s;
 }
 LawConst soft_const(double zeta, double gamma) {
   LawConst c;
   c.zeta = zeta;
   c.gamma = gamma;
+  c.ks_kn = 1 / 2.4;
+  c.sigc = 0.45e6;
+  c.coh = 0.45e6;
+  c.tanphi = std::tan(32 * kPi / 180);
   return c;
 }
 }  // namespace
@@ -248,16 +259,17 @@ TEST(SoftBond, LoadUnloadPath) {
 // held by letting the contact open or close freely: each step the normal increment is the
 // one that brings the predicted N back to zero (a free ball would translate that way).
 TEST(SoftBond, PureBendingPeak) {
-  BondHist b = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  BondHist& b = g.b;
   LawConst c = soft_const(100, 0.05);
   ContactHist h;
-  h.kn = b.kn * b.area;
-  h.ks = b.ks * b.area;
+  h.kn = b.kn * g.area;
+  h.ks = g.ks * g.area;
   h.mu = 0.5;
   h.flags = ContactHist::kIncremental | ContactHist::kHasNormal;
   const Vec3 n{1, 0, 0};
   h.n_old = n;
-  const double th_pk = b.sigc / (b.kn * b.rb);  // rotation at the peak (β = 1)
+  const double th_pk = g.sigc / (b.kn * b.rb);  // rotation at the peak (β = 1)
   Kin k;
   k.n = n;
   k.dt = 1.0;
@@ -265,29 +277,30 @@ TEST(SoftBond, PureBendingPeak) {
   k.dtheta = {0, th_pk / nsteps, 0};
   double mmax = 0, m_end = 0;
   for (int s = 0; s < 3 * nsteps; ++s) {
-    k.du = {h.fn / (b.kn * b.area), 0, 0};
+    k.du = {h.fn / (b.kn * g.area), 0, 0};
     Vec3 M;
     contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
     mmax = std::max(mmax, norm(M));
     m_end = norm(M);
   }
-  const double ref = b.sigc * b.inertia / b.rb;
+  const double ref = g.sigc * g.inertia / b.rb;
   EXPECT_NEAR(mmax / ref, 1.0, 1.0 / nsteps);
   EXPECT_EQ(b.state, BondState::kSoftening);
   EXPECT_LT(m_end, mmax);  // softening after the peak
   // associated return keeps σ on the current strength
-  const double sigma = -h.fn / b.area + norm(b.mb) * b.rb / b.inertia;
+  const double sigma = -h.fn / g.area + norm(b.mb) * b.rb / g.inertia;
   EXPECT_NEAR(sigma / b.sigma_t, 1.0, 1e-12);
   std::printf("bending: Mmax/ref-1 = %.2e\n", mmax / ref - 1);
 }
 
 // §3.8 test 3: shear under confinement breaks at τ = c − (N/A) tanφ → BROKEN_SHEAR.
 TEST(SoftBond, ShearBreakUnderCompression) {
-  BondHist b = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  BondHist& b = g.b;
   LawConst c = soft_const(100, 0.05);
   ContactHist h;
-  h.kn = b.kn * b.area;
-  h.ks = b.ks * b.area;
+  h.kn = b.kn * g.area;
+  h.ks = g.ks * g.area;
   h.mu = 0.5;
   h.flags = ContactHist::kIncremental | ContactHist::kHasNormal;
   const Vec3 n{1, 0, 0};
@@ -299,13 +312,13 @@ TEST(SoftBond, ShearBreakUnderCompression) {
   k.du = {sig_n / b.kn, 0, 0};
   Vec3 M;
   contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
-  const double tau_c = b.coh - sig_n * b.tanphi;
-  const double dus = tau_c / b.ks / 2000.0;
+  const double tau_c = c.coh - sig_n * c.tanphi;
+  const double dus = tau_c / g.ks / 2000.0;
   k.du = {0, dus, 0};
   double tau_last = 0;
   int steps = 0;
   while (b.state == BondState::kIntact && steps < 5000) {
-    tau_last = norm(h.fs) / b.area;
+    tau_last = norm(h.fs) / g.area;
     contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
     ++steps;
   }
@@ -319,17 +332,18 @@ TEST(SoftBond, ShearBreakUnderCompression) {
 
 // §3.8 test 4: ζ = 0 reproduces the PBM tensile break (same geometry, Ē* = E*).
 TEST(SoftBond, ZetaZeroEqualsParallelBond) {
-  BondHist s = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  BondHist& s = g.b;
   BondHist pbh = s;
   LawConst c = soft_const(0.0, 0.05);
   ContactHist h;
-  h.kn = s.kn * s.area;
-  h.ks = s.ks * s.area;
+  h.kn = s.kn * g.area;
+  h.ks = g.ks * g.area;
   h.mu = 0.5;
   h.flags = ContactHist::kIncremental | ContactHist::kHasNormal;
   const Vec3 n{1, 0, 0};
   h.n_old = n;
-  const double du = s.sigc / s.kn / 777.0;
+  const double du = g.sigc / s.kn / 777.0;
   int step_soft = -1, step_pb = -1;
   double Nmax_soft = 0, Nmax_pb = 0;
   for (int k = 0; k < 2000; ++k) {
@@ -346,7 +360,7 @@ TEST(SoftBond, ZetaZeroEqualsParallelBond) {
     if (step_pb < 0) {
       Vec3 F{}, Mp{};
       const double dtt = 0;
-      pbond_update(pbh, 1.0, du, {}, dtt, kin.dtheta, n, F, Mp);
+      pbond_update(pbh, c, du, {}, dtt, kin.dtheta, n, F, Mp);
       if (pbh.state == BondState::kBrokenTension) step_pb = k;
       else Nmax_pb = std::max(Nmax_pb, pbh.nb);
     }
@@ -359,12 +373,13 @@ TEST(SoftBond, ZetaZeroEqualsParallelBond) {
 
 // §3.5: unbonded soft-bond moment limits λ_b F_n R̄/4 and (2/3) μ F_n R̄.
 TEST(SoftBond, UnbondedMomentLimits) {
-  BondHist b = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  BondHist& b = g.b;
   b.state = BondState::kNeverBonded;
   LawConst c = soft_const(100, 0.05);
   ContactHist h;
-  h.kn = b.kn * b.area;
-  h.ks = b.ks * b.area;
+  h.kn = b.kn * g.area;
+  h.ks = g.ks * g.area;
   h.mu = 0.5;
   h.flags = ContactHist::kHasNormal;
   const Vec3 n{1, 0, 0};

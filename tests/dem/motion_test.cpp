@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <random>
 
 #include "demfdm/dem/world.hpp"
 
@@ -153,4 +154,64 @@ TEST(Params, RejectsBadDamping) {
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("local_damping"), std::string::npos);
   }
+}
+
+// §1.7 incremental mode: the same collision as in absolute mode (linear spring from 0).
+TEST(Motion, IncrementalModeCollision) {
+  WorldParams p;
+  p.local_damping = 0.0;
+  p.ball_ball.linear.fric = 0.0;
+  p.ball_ball.linear.mode = NormalMode::kIncremental;
+  const double R = 1e-4, v0 = 0.1;
+  const double m = p.density * 4.0 / 3.0 * kPi * R * R * R;
+  const double kn = kPi * R * p.ball_ball.linear.emod / 2;
+  p.dt_fixed = kPi * std::sqrt(0.5 * m / kn) / 400.0;
+  World w(p);
+  w.add_ball({0, 0, 0}, R);
+  w.add_ball({2 * R, 0, 0}, R);  // touching: the incremental force starts at 0
+  w.balls().v[0] = {0.5 * v0, 0, 0};
+  w.balls().v[1] = {-0.5 * v0, 0, 0};
+  double dmax = 0;
+  for (int k = 0; k < 1000; ++k) {
+    w.step();
+    dmax = std::max(dmax, 2 * R - (w.balls().x[1].x - w.balls().x[0].x));
+  }
+  EXPECT_NEAR(dmax / (v0 * std::sqrt(0.5 * m / kn)), 1.0, 5e-3);
+  EXPECT_NEAR((w.balls().v[1].x - w.balls().v[0].x) / v0, 1.0, 1e-2);
+  EXPECT_EQ(w.pair_contacts().h[0].fn, 0.0);  // reset to 0 once inactive
+}
+
+// §1.8: critical step of two touching equal balls: f_s·min(√(m/Σk_n), √(I/Σk_s R²)).
+TEST(Motion, CriticalTimestep) {
+  WorldParams p;
+  World w(p);
+  const double R = 1e-4;
+  w.add_ball({0, 0, 0}, R);
+  w.add_ball({2 * R - 1e-8, 0, 0}, R);
+  w.prepare();
+  const double m = w.balls().m[0], I = w.balls().inertia[0];
+  const double kn = kPi * R * p.ball_ball.linear.emod / 2, ks = kn / p.ball_ball.linear.kratio;
+  const double ref = p.dt_safety * std::min(std::sqrt(m / kn), std::sqrt(I / (ks * R * R)));
+  EXPECT_NEAR(w.dt() / ref, 1.0, 1e-12);
+}
+
+// §1.6: the plane rotation keeps a shear vector in the new plane with its magnitude.
+TEST(Kernels, ShearRotationKeepsPlaneAndMagnitude) {
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> U(-1, 1);
+  double err_plane = 0, err_mag = 0;
+  for (int t = 0; t < 1000; ++t) {
+    Vec3 n0{U(rng), U(rng), U(rng)};
+    n0 *= 1 / norm(n0);
+    Vec3 n1 = n0 + 0.01 * Vec3{U(rng), U(rng), U(rng)};
+    n1 *= 1 / norm(n1);
+    Vec3 v{U(rng), U(rng), U(rng)};
+    v -= dot(v, n0) * n0;
+    const double m0 = norm(v);
+    rotate_into_plane(v, n0, n1, {U(rng), U(rng), U(rng)}, 1e-3, true);
+    err_plane = std::max(err_plane, std::abs(dot(v, n1)) / m0);
+    err_mag = std::max(err_mag, std::abs(norm(v) / m0 - 1));
+  }
+  EXPECT_LT(err_plane, 1e-14);
+  EXPECT_LT(err_mag, 1e-14);
 }

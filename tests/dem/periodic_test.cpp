@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <map>
 
 #include "demfdm/dem/measure.hpp"
@@ -27,6 +28,7 @@ WorldParams rev_params(double Lx, double Ly, double Lz) {
   p.periodic.enabled = true;
   p.periodic.length = {Lx, Ly, Lz};
   p.local_damping = 0.7;
+  p.threads = 1;  // thread counts are exercised by the determinism tests
   return p;
 }
 
@@ -47,7 +49,7 @@ Rev& shared_rev() {
     Rev r;
     r.w = std::make_unique<World>(rev_params(0.8e-3, 0.8e-3, 0.8e-3));
     RevParams g;
-    g.seed = 7;
+    g.seed = 8;  // seeds 7, 8, 9 give overshoots 0.155, 0.101, 0.040 (all converge)
     g.porosity_target = 0.38;  // frictionless expansion close to jamming (§4.3)
     g.ratio_tol = 1e-2;
     g.max_steps_per_increment = 3000;
@@ -179,7 +181,7 @@ TEST(Specimen, ReplicationPreservesStress) {
   std::size_t cross_xy = 0, cross_z = 0, total = 0;
   const auto& pc = w0.pair_contacts();
   for (std::size_t c = 0; c < pc.size(); ++c) {
-    if (norm(pc.F[c]) == 0.0) continue;
+    if (norm(w0.pair_force(c)) == 0.0) continue;
     ++total;
     if (pc.shift[c][0] != 0 || pc.shift[c][1] != 0) ++cross_xy;
     else if (pc.shift[c][2] != 0) ++cross_z;
@@ -190,7 +192,7 @@ TEST(Specimen, ReplicationPreservesStress) {
   open.nz = 3;
   replicate(*w2, open);
   std::size_t active = 0;
-  for (std::size_t c = 0; c < w2->pair_contacts().size(); ++c) active += norm(w2->pair_contacts().F[c]) > 0.0;
+  for (std::size_t c = 0; c < w2->pair_contacts().size(); ++c) active += norm(w2->pair_force(c)) > 0.0;
   // every copy keeps its inner contacts; z-crossing contacts survive between copies (2 of 3)
   EXPECT_EQ(active, 3 * (total - cross_xy - cross_z) + 2 * cross_z);
   std::printf("replication: stress max rel diff %.1e; open stack %zu active contacts\n", err, active);
@@ -239,4 +241,44 @@ TEST(Specimen, DepthScaling) {
   EXPECT_GT(n, 100u);
   EXPECT_LT(err, 1e-12);
   std::printf("depth scaling: %zu contacts, max rel deviation %.2e\n", n, err);
+}
+
+// Habit 13: a bonded random packing (soft bonds, replicated 2×2×1 so that the threaded
+// paths run) gives bit-identical positions from run to run, with 1 and with 2 threads.
+TEST(Determinism, SameThreadCountSameHash) {
+  Rev& r = shared_rev();
+  auto run = [&](int threads) {
+    WorldParams p = r.w->params();
+    p.threads = threads;
+    p.ball_ball.model = ContactModel::kSoftBond;
+    World w(p);
+    const auto& pt = r.w->balls();
+    for (std::size_t i = 0; i < pt.size(); ++i) w.add_ball(pt.x[i], pt.r[i]);
+    const auto& pc = r.w->pair_contacts();
+    for (std::size_t c = 0; c < pc.size(); ++c) w.append_pair(pc.a[c], pc.b[c], pc.shift[c], pc.h[c], nullptr);
+    ReplicateParams rp;
+    rp.nx = rp.ny = 2;
+    rp.nz = 1;
+    rp.keep_periodic = true;
+    replicate(w, rp);
+    w.refresh_contact_constants();
+    w.bond_ball_ball(-1.0, 1e-3 * 0.0655e-3);
+    w.set_strain_rate({0, 0, -2.0});  // load the bonds so that some soften and break
+    w.step(60);
+    std::uint64_t h = 1469598103934665603ULL;  // FNV-1a over the bits of x, v, ω
+    auto mix = [&](double d) {
+      std::uint64_t u;
+      std::memcpy(&u, &d, 8);
+      for (int k = 0; k < 8; ++k) { h ^= (u >> (8 * k)) & 0xff; h *= 1099511628211ULL; }
+    };
+    for (std::size_t i = 0; i < w.num_balls(); ++i)
+      for (int k = 0; k < 3; ++k) { mix(w.balls().x[i][k]); mix(w.balls().v[i][k]); mix(w.balls().w[i][k]); }
+    EXPECT_GT(w.pair_contacts().size(), 4096u);  // the threaded branch is taken
+    return h;
+  };
+  const auto h1a = run(1), h1b = run(1), h2a = run(2), h2b = run(2);
+  EXPECT_EQ(h1a, h1b);
+  EXPECT_EQ(h2a, h2b);
+  std::printf("hash 1 thread %016llx / %016llx, 2 threads %016llx / %016llx\n", (unsigned long long)h1a,
+              (unsigned long long)h1b, (unsigned long long)h2a, (unsigned long long)h2b);
 }

@@ -22,8 +22,10 @@ struct FootingResult {
 
 // zones_per_radius: zone size a / zones_per_radius under the footing; extent: half-width and
 // depth of the model in footing radii.
-inline FootingResult run_footing(int zones_per_radius, double extent, double tolerance = 1e-4) {
-  const double a = 1.0, E = 1e8, nu = 0.3, delta = 1e-4;
+// Quarter-model parameters: radius a = 1 m, zones a/zones_per_radius in [0,a]^2 x [H-a, H],
+// graded (1.2, at most 4a) to the extent; E = 1e8 Pa, nu = 0.3, static mode, no gravity.
+inline ModelParams quarter_model_params(int zones_per_radius, double extent) {
+  const double a = 1.0, E = 1e8, nu = 0.3;
   ModelParams p;
   p.mesh.length = extent * a;
   p.mesh.width = extent * a;
@@ -41,7 +43,12 @@ inline FootingResult run_footing(int zones_per_radius, double extent, double tol
   p.mode = Mode::kStatic;
   p.gravity_level = 0.0;
   p.strongbox_boundary = true;  // fixed base, rollers on all four sides (incl. symmetry planes)
-  Model model(p);
+  return p;
+}
+
+inline FootingResult run_footing(int zones_per_radius, double extent, double tolerance = 1e-4) {
+  const double a = 1.0, E = 1e8, nu = 0.3, delta = 1e-4;
+  Model model(quarter_model_params(zones_per_radius, extent));
   std::vector<std::int32_t> footing;
   for (std::int32_t g : model.gridpoints_on_plane(2, extent * a)) {
     const double x = model.positions()[3 * g], y = model.positions()[3 * g + 1];

@@ -211,8 +211,8 @@ TEST(Timestep, MatchesPhysicsExampleAndRefusesLargerImposedStep) {
 }
 
 // Large strain, dynamic: compressing a block by 30 % shrinks the zones; an automatic step follows
-// the critical timestep (re-checked every 100 steps), an imposed one that became too large is
-// refused with std::runtime_error (physics.md 5.7, 5.8).
+// the critical timestep (re-checked every 100 steps), with an imposed one that became too large
+// step() refuses with std::runtime_error (physics.md 5.7, 5.8).
 TEST(Timestep, LargeStrainFollowsShrinkingZones) {
   auto make = [] {
     ModelParams p;
@@ -231,6 +231,41 @@ TEST(Timestep, LargeStrainFollowsShrinkingZones) {
   imposed.set_timestep(dt0);
   for (std::int32_t g : imposed.gridpoints_on_plane(2, 1.0)) imposed.fix_velocity(g, kFixZ, {0.0, 0.0, -0.3 / (200 * dt0)});
   EXPECT_THROW(imposed.step(200), std::runtime_error);
+}
+
+// Coupling stiffness in dynamic mode (physics.md 6.5, option A): a stiff interface lowers the
+// critical timestep to 0.5 sqrt(m_g / (k + k_zone)) at the interface gridpoints; with an imposed
+// step above that, step() refuses. Static mode: the stiffness joins the inertial mass instead.
+TEST(Timestep, InterfaceStiffnessLimitsDynamicStep) {
+  ModelParams p;
+  p.mesh = test::small_pocket_params();
+  p.materials = {MaterialGroup{elastic(1e8, 0.3, 2000.0), std::nullopt}};
+  Model model(p);
+  const double dt0 = model.timestep();
+  const std::size_t nif = model.interface_gridpoints().size();
+  model.set_interface_stiffness(std::vector<double>(nif, 0.0));
+  EXPECT_EQ(model.timestep(), dt0);
+  const double k = 1e12;  // far stiffer than the zones
+  model.set_interface_stiffness(std::vector<double>(nif, k));
+  double expect = dt0;
+  for (std::int32_t g : model.interface_gridpoints())
+    expect = std::min(expect, 0.5 * std::sqrt(model.gravitational_masses()[g] / k));
+  EXPECT_LT(model.timestep(), 0.5 * dt0);
+  EXPECT_NEAR(model.timestep(), expect, 0.01 * expect);  // k_zone << k
+  // Imposed step: the stiffness is accepted, the next step() refuses until dt is lowered.
+  Model imposed(p);
+  imposed.set_timestep(dt0);
+  imposed.set_interface_stiffness(std::vector<double>(nif, k));
+  EXPECT_EQ(imposed.timestep(), dt0);
+  EXPECT_THROW(imposed.step(), std::runtime_error);
+  imposed.set_timestep(imposed.critical_timestep());
+  EXPECT_NO_THROW(imposed.step());
+  ModelParams s = p;
+  s.mode = Mode::kStatic;
+  Model stat(s);
+  const double m0 = stat.inertial_masses()[stat.interface_gridpoints()[0]];
+  stat.set_interface_stiffness(std::vector<double>(nif, 5.0));
+  EXPECT_DOUBLE_EQ(stat.inertial_masses()[stat.interface_gridpoints()[0]], m0 + 5.0);
 }
 
 // Gravitational masses add up to rho * V; output arrays have the documented shapes.
@@ -280,9 +315,10 @@ TEST(ModelApi, MaterialGroupsByRegion) {
   EXPECT_NEAR(model.total_gravitational_mass(), 4 * 0.125 * 2000 + 4 * 0.125 * 1000, 1e-9);
 }
 
-std::uint64_t run_hash(int threads) {
+std::uint64_t run_hash(int threads, bool large_strain = false) {
   omp_set_num_threads(threads);
   ModelParams p;
+  p.large_strain = large_strain;
   p.mesh = test::small_pocket_params();
   Material mc = elastic(5e7, 0.3, 1800.0);
   mc.model = Constitutive::kMohrCoulomb;
@@ -308,9 +344,13 @@ TEST(Determinism, SameHashAcrossRunsAndThreadCounts) {
   const auto a = run_hash(2);
   const auto b = run_hash(2);
   const auto c = run_hash(1);
+  const auto d = run_hash(2, true);
+  const auto e = run_hash(1, true);
   omp_set_num_threads(saved);
   EXPECT_EQ(a, b);
   EXPECT_EQ(a, c);
+  EXPECT_EQ(d, e);  // large strain
+  EXPECT_NE(a, d);
 }
 
 }  // namespace

@@ -32,7 +32,6 @@ ColumnResult run_column(double N) {
   const auto mc = make_constants(elastic(E, nu, rho));
   const double g = N * kStandardGravity;
   const auto s = model.zone_stress();
-  const auto x = model.positions();
   const auto conn = model.connectivity();
   for (std::size_t z = 0; z < model.num_zones(); ++z) {
     double zc = 0.0;
@@ -46,7 +45,6 @@ ColumnResult run_column(double N) {
   for (std::int32_t gp : top) r.utop_error = std::max(r.utop_error, std::abs(model.displacements()[3 * gp + 2] - utop) / std::abs(utop));
   const double weight = rho * 0.5 * 0.5 * H * g;
   r.weight_error = std::abs(model.base_reaction()[2] - weight) / weight;
-  (void)x;
   return r;
 }
 
@@ -71,6 +69,37 @@ TEST(ElasticColumn, FiftyG) {
   EXPECT_LT(r.weight_error, 1e-3);
   std::printf("column 50g: steps %lld  szz %.2e  sxx %.2e  utop %.2e  weight %.2e\n",
               static_cast<long long>(r.steps), r.worst_szz, r.worst_sxx, r.utop_error, r.weight_error);
+}
+
+// Surface loads: a pressure p on the top of a rollered column (4 zones high) equals point loads
+// of p A / 4 on the top gridpoints, and both give the uniaxial-strain settlement
+// u_top = -p H / (K + 4G/3) within 1e-6 (static mode).
+TEST(SurfaceLoads, PressureAndPointLoadsOnColumn) {
+  const double E = 1e8, nu = 0.3, p = 2e5, H = 2.0;
+  double settle[2];
+  for (int variant = 0; variant < 2; ++variant) {
+    ModelParams mp;
+    mp.materials = {MaterialGroup{elastic(E, nu, 2000.0), std::nullopt}};
+    mp.mode = Mode::kStatic;
+    mp.gravity_level = 0.0;
+    Model model(generate_mesh(MeshParams::plain_box(0.5, 0.5, H, 0.5)), mp);
+    const auto top = model.gridpoints_on_plane(2, H);
+    ASSERT_EQ(top.size(), 4u);
+    if (variant == 0) {
+      std::vector<BoundaryFace> faces;
+      for (const auto& f : boundary_faces(model.mesh()))
+        if (f.side == Side::kPlusZ) faces.push_back(f);
+      model.add_face_pressure(faces, p);
+    } else {
+      for (std::int32_t g : top) model.add_point_load(g, {0.0, 0.0, -p * 0.25 / 4.0});
+    }
+    while (model.ratios().average > 1e-10 && model.step_count() < 20000) model.step(100);
+    settle[variant] = model.displacements()[3 * top[0] + 2];
+    EXPECT_NEAR(model.base_reaction()[2], p * 0.25, 1e-6 * p * 0.25);
+  }
+  const double M = make_constants(elastic(E, nu, 2000.0)).alpha1;
+  EXPECT_NEAR(settle[0], -p * H / M, 1e-6 * p * H / M);
+  EXPECT_NEAR(settle[1], settle[0], 1e-9 * p * H / M);
 }
 
 // 1-D compression wave in a rollered column, dynamic mode, no damping (physics.md 8.12): the
@@ -145,6 +174,68 @@ TEST(StaticEquilibrium, PocketMeshUnderGravity) {
               static_cast<long long>(model.step_count()), model.ratios().local);
   model.reset_displacements();
   for (double u : model.displacements()) EXPECT_EQ(u, 0.0);
+}
+
+// Global balance with coupling forces on fixed gridpoints: the pocket touches the x = 0 wall,
+// so some interface gridpoints are roller-fixed in x. With uniform interface forces, at
+// equilibrium the reactions of all supports cancel the total applied force within 0.1 %.
+TEST(InterfaceForces, ReactionsBalanceWhenInterfaceTouchesSupports) {
+  ModelParams p;
+  p.mesh = test::small_pocket_params();
+  p.mesh.inner_origin = {0.0, 1.5, kNaN};
+  p.materials = {MaterialGroup{elastic(1e8, 0.3, 2000.0), std::nullopt}};
+  p.mode = Mode::kStatic;
+  p.gravity_level = 0.0;
+  Model model(p);
+  const std::size_t nif = model.interface_gridpoints().size();
+  bool touches = false;
+  for (std::int32_t g : model.interface_gridpoints()) touches = touches || model.positions()[3 * g] == 0.0;
+  ASSERT_TRUE(touches);
+  std::vector<double> f(3 * nif);
+  for (std::size_t l = 0; l < nif; ++l) {
+    f[3 * l] = 1e3;
+    f[3 * l + 1] = -2e3;
+    f[3 * l + 2] = -5e3;
+  }
+  model.set_interface_forces(f);
+  while (model.ratios().average > 1e-7 && model.step_count() < 20000) model.step(100);
+  std::vector<std::int32_t> all(model.num_gridpoints());
+  for (std::size_t g = 0; g < all.size(); ++g) all[g] = static_cast<std::int32_t>(g);
+  const Vec3 r = model.reaction_sum(all);
+  const double n = static_cast<double>(nif);
+  EXPECT_NEAR(r[0], -1e3 * n, 1e-3 * 5e3 * n);
+  EXPECT_NEAR(r[1], 2e3 * n, 1e-3 * 5e3 * n);
+  EXPECT_NEAR(r[2], 5e3 * n, 1e-3 * 5e3 * n);
+}
+
+// Option A vs option B (physics.md 6.6): the same interface load solved in dynamic mode (real
+// masses, physical dt, local damping 0.8) and in static mode (mass-scaled, dt = 1) reaches the
+// same equilibrium: interface displacements agree within 1e-4 of the largest one.
+TEST(ModeCrossCheck, DynamicAndStaticReachSameEquilibrium) {
+  std::vector<double> u[2];
+  for (int mode = 0; mode < 2; ++mode) {
+    ModelParams p;
+    p.mesh = test::small_pocket_params();
+    p.materials = {MaterialGroup{elastic(1e8, 0.3, 2000.0), std::nullopt}};
+    p.mode = mode == 0 ? Mode::kDynamic : Mode::kStatic;
+    p.gravity_level = 0.0;
+    Model model(p);
+    std::vector<double> f(3 * model.interface_gridpoints().size(), 0.0);
+    for (std::size_t l = 0; l < f.size() / 3; ++l) f[3 * l + 2] = -1e3;  // downward on every interface point
+    model.set_interface_forces(f);
+    while (model.ratios().average > 1e-7 && model.step_count() < 200000) model.step(100);
+    EXPECT_LT(model.ratios().average, 1e-7) << (mode == 0 ? "dynamic" : "static");
+    u[mode] = model.interface_displacements();
+    std::printf("%s: %lld steps\n", mode == 0 ? "dynamic" : "static", static_cast<long long>(model.step_count()));
+  }
+  double umax = 0.0, diff = 0.0;
+  for (std::size_t i = 0; i < u[0].size(); ++i) {
+    umax = std::max(umax, std::abs(u[1][i]));
+    diff = std::max(diff, std::abs(u[0][i] - u[1][i]));
+  }
+  EXPECT_GT(umax, 0.0);
+  EXPECT_LT(diff, 1e-4 * umax);
+  std::printf("max |u_dyn - u_static| / max |u| = %.2e\n", diff / umax);
 }
 
 // Dead-load check on the paper's geometry (physics.md 6.9, 4.10), FDM side only, 100 g: the

@@ -1,6 +1,8 @@
 #include "demfdm/dem/measure.hpp"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace demfdm::dem {
 
@@ -25,7 +27,7 @@ Mat3 cell_stress(const World& w) {
   Mat3 s{};
   const auto& pc = w.pair_contacts();
   for (std::size_t c = 0; c < pc.size(); ++c) {
-    const Vec3& F = pc.F[c];
+    const Vec3 F = w.pair_force(c);
     if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
     const Vec3 l = w.branch(c);
     for (int i = 0; i < 3; ++i)
@@ -57,7 +59,7 @@ Mat3 region_stress(const World& w, const Region& r) {
       for (int j = 0; j < 3; ++j) s[3 * i + j] += arm[i] * F[j];
   };
   for (std::size_t c = 0; c < pc.size(); ++c) {
-    const Vec3& F = pc.F[c];
+    const Vec3 F = w.pair_force(c);
     if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
     const std::uint32_t a = pc.a[c], b = pc.b[c];
     if (!in[a] && !in[b]) continue;
@@ -152,7 +154,8 @@ Snapshot snapshot(const World& w) {
     if (!pair_active(w, c) && st == BondState::kNeverBonded) continue;
     s.pair.push_back(pc.a[c]);
     s.pair.push_back(pc.b[c]);
-    for (int k = 0; k < 3; ++k) s.force.push_back(pc.F[c][k]);
+    const Vec3 F = w.pair_force(c);
+    for (int k = 0; k < 3; ++k) s.force.push_back(F[k]);
     s.state.push_back(static_cast<std::uint8_t>(st));
   }
   return s;
@@ -171,6 +174,17 @@ Measurement measure(const World& w) {
     m.porosity = cell_porosity(w);
   }
   return m;
+}
+
+MeasurementRecorder::MeasurementRecorder(std::int64_t interval) : interval_(interval) {
+  if (interval < 1) {
+    throw std::invalid_argument("MeasurementRecorder: 'interval' must be >= 1 step, found " +
+                                std::to_string(interval) + ".");
+  }
+}
+
+void MeasurementRecorder::apply(World& w, Phase) {
+  if (w.step_count() % interval_ == 0) samples_.push_back(measure(w));
 }
 
 }  // namespace demfdm::dem

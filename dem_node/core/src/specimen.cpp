@@ -114,43 +114,77 @@ StageReport generate_rev(World& w, const RevParams& p) {
   return r;
 }
 
-// §4.5: ε̇_a = −α_s (s*_a − s_a)/(K_a Δt), |ε̇_a| ≤ max_face_step d_min/(L_a Δt).
+// §4.5: ε̇ = −α_s K⁻¹(s* − s)/Δt, |ε̇_a| ≤ max_face_step d_min/(L_a Δt).
+// K is the affine stiffness (U15). For an affine strain increment Δε (diagonal), contact c
+// sees Δu = Δε ∘ ℓ, so Δσ_aa = Σ_b K_ab Δε_b with
+//   K_ab = (1/V) Σ_c [ (K_n − K_s) ℓ_a n_a n_b ℓ_b + K_s ℓ_a² δ_ab ],
+// whose diagonal is U15's (1/V)Σ(ℓ·e_a)²[K_n(n̂·e_a)² + K_s(1−(n̂·e_a)²)]. With `coupled` the
+// 3×3 system is solved (the lateral servo anticipates the Poisson effect of the vertical
+// one); otherwise only the diagonal is used. A rate above the limit scales the whole vector.
 void PeriodicServo::apply(World& w, Phase) {
   stress_ = cell_stress(w);
   const double V = w.cell_volume();
   const Vec3 L = w.cell_length();
   const auto& pc = w.pair_contacts();
-  double K[3] = {0, 0, 0};
+  double K[3][3] = {};
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const ContactHist& h = pc.h[c];
     const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
     if (!(h.flags & ContactHist::kActive) && !bd) continue;
     double kn = h.kn, ks = h.ks;
     if (bd && w.params().ball_ball.model == ContactModel::kLinearPBond) {
-      kn += pc.bond[c].kn * pc.bond[c].area;
-      ks += pc.bond[c].ks * pc.bond[c].area;
+      kn += pc.bond[c].kn * pc.bond[c].area();
+      ks += pc.bond[c].kn / w.params().ball_ball.pbond.kratio * pc.bond[c].area();
     }
     const Vec3 l = w.branch(c);
-    const double ll = norm(l);
+    const Vec3 n = l * (1.0 / norm(l));
     for (int a = 0; a < 3; ++a) {
-      const double na = l[a] / ll;
-      K[a] += (p_.stiffness == ServoStiffness::kAffine)
-                  ? l[a] * l[a] * (kn * na * na + ks * (1.0 - na * na))
-                  : kn * l[a] * l[a];
+      if (p_.stiffness == ServoStiffness::kApparent) {
+        K[a][a] += kn * l[a] * l[a];
+        continue;
+      }
+      for (int b = 0; b < 3; ++b) K[a][b] += (kn - ks) * l[a] * n[a] * n[b] * l[b];
+      K[a][a] += ks * l[a] * l[a];
     }
   }
   const double dt = w.dt() > 0.0 ? w.dt() : 1.0;
+  double err[3] = {0, 0, 0};
+  int idx[3], na = 0;
+  for (int a = 0; a < 3; ++a)
+    if (p_.active[a]) {
+      err[a] = p_.target[a] - (-stress_[4 * a]);
+      idx[na++] = a;
+    }
   Vec3 ed{};
-  for (int a = 0; a < 3; ++a) {
-    if (!p_.active[a]) continue;
-    const double s = -stress_[4 * a];
-    const double err = p_.target[a] - s;
-    const double emax = p_.max_face_step * d_min_ / (L[a] * dt);
-    const double Ka = K[a] / V;
-    double e = Ka > 0.0 ? -p_.gain * err / (Ka * dt) : (err > 0.0 ? -emax : emax);
-    ed[a] = std::clamp(e, -emax, emax);
+  // Solve the active sub-system K_sub x = −α err/Δt (Gaussian elimination, ≤ 3×3).
+  double M[3][4] = {};
+  bool ok = true;
+  for (int i = 0; i < na; ++i) {
+    for (int j = 0; j < na; ++j)
+      M[i][j] = (p_.coupled || i == j) ? K[idx[i]][idx[j]] / V : 0.0;
+    M[i][3] = -p_.gain * err[idx[i]] / dt;
   }
-  w.set_strain_rate(ed);
+  for (int i = 0; i < na && ok; ++i) {
+    int piv = i;
+    for (int r = i + 1; r < na; ++r)
+      if (std::abs(M[r][i]) > std::abs(M[piv][i])) piv = r;
+    if (!(std::abs(M[piv][i]) > 0.0)) { ok = false; break; }
+    for (int k = 0; k < 4; ++k) std::swap(M[i][k], M[piv][k]);
+    for (int r = 0; r < na; ++r) {
+      if (r == i) continue;
+      const double f = M[r][i] / M[i][i];
+      for (int k = i; k < 4; ++k) M[r][k] -= f * M[i][k];
+    }
+  }
+  double scale = 1.0;
+  for (int i = 0; i < na; ++i) {
+    const int a = idx[i];
+    const double emax = p_.max_face_step * d_min_ / (L[a] * dt);
+    // no contacts yet: compress (or expand) at the limit rate
+    ed[a] = ok ? M[i][3] / M[i][i] : (err[a] > 0.0 ? -emax : emax);
+    if (std::abs(ed[a]) > emax) scale = std::min(scale, emax / std::abs(ed[a]));
+  }
+  w.set_strain_rate(ed * scale);
 }
 
 StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
@@ -165,7 +199,13 @@ StageReport servo_until(World& w, const ServoParams& p, double stress_tol, doubl
   auto* servo = static_cast<PeriodicServo*>(w.add_effect(std::make_unique<PeriodicServo>(p, min_diameter(w))));
   StageReport r;
   std::int64_t held = 0;
-  double over = -std::numeric_limits<double>::infinity();
+  double over = 0.0;
+  // Overshoot: excursion past the target on the side opposite to the starting stress.
+  double side[3] = {0, 0, 0};
+  {
+    const Mat3 s0 = cell_stress(w);
+    for (int a = 0; a < 3; ++a) side[a] = (-s0[4 * a] <= p.target[a]) ? 1.0 : -1.0;
+  }
   r.converged = false;
   while (r.steps < budget) {
     w.step();
@@ -175,7 +215,7 @@ StageReport servo_until(World& w, const ServoParams& p, double stress_tol, doubl
     for (int a = 0; a < 3; ++a) {
       if (!p.active[a]) continue;
       const double rel = (-s[4 * a] - p.target[a]) / p.target[a];
-      over = std::max(over, rel);
+      over = std::max(over, side[a] * rel);
       in &= std::abs(rel) <= stress_tol;
     }
     if (r.steps % 10 == 0) {
@@ -302,7 +342,6 @@ StageReport depth_scale(World& w, const DepthScaleParams& p) {
       b.mt *= f;
       b.mb *= f;
     }
-    pc.F[c] *= f;
     ++cnt;
   }
   StageReport r;

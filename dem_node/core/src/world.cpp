@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <sstream>
@@ -81,13 +82,74 @@ void World::set_radius(std::size_t i, double r) {
   pt_.r[i] = r;
   pt_.m[i] = rho * 4.0 / 3.0 * kPi * r * r * r;
   pt_.inertia[i] = 0.4 * pt_.m[i] * r * r;
+  dirty_ = true;  // the Verlet list depends on the radii
+  last_dt_step_ = -1;
+}
+
+std::vector<std::uint32_t> World::reorder_spatially() {
+  const std::size_t n = pt_.size();
+  std::vector<std::uint32_t> newrow(n);
+  if (n == 0) return newrow;
+  Vec3 lo = pt_.x[0], hi = lo;
+  double rmax = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    rmax = std::max(rmax, pt_.r[i]);
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], pt_.x[i][k]);
+      hi[k] = std::max(hi[k], pt_.x[i][k]);
+    }
+  }
+  // Morton (z-order) key of cells of size 2 R_max: neighbours end up close in memory.
+  const double cs = 2.0 * rmax;
+  auto spread = [](std::uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+  };
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> key(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    std::uint64_t c[3];
+    for (int k = 0; k < 3; ++k) c[k] = static_cast<std::uint64_t>((pt_.x[i][k] - lo[k]) / cs);
+    key[i] = {spread(c[0]) | spread(c[1]) << 1 | spread(c[2]) << 2, static_cast<std::uint32_t>(i)};
+  }
+  std::sort(key.begin(), key.end());
+  for (std::size_t k = 0; k < n; ++k) newrow[key[k].second] = static_cast<std::uint32_t>(k);
+  auto perm = [&](auto& v) {
+    auto old = v;
+    for (std::size_t i = 0; i < n; ++i) v[newrow[i]] = old[i];
+  };
+  perm(pt_.x); perm(pt_.v); perm(pt_.w); perm(pt_.f); perm(pt_.t); perm(pt_.fa); perm(pt_.ta);
+  perm(pt_.x_ref); perm(pt_.r); perm(pt_.m); perm(pt_.inertia); perm(pt_.id); perm(pt_.fix);
+  for (std::size_t c = 0; c < pc_.size(); ++c) {
+    pc_.a[c] = newrow[pc_.a[c]];
+    pc_.b[c] = newrow[pc_.b[c]];
+    if (pc_.a[c] > pc_.b[c]) {  // keep A = lower row: swap sides
+      std::swap(pc_.a[c], pc_.b[c]);
+      for (int k = 0; k < 3; ++k) pc_.shift[c][k] = static_cast<std::int8_t>(-pc_.shift[c][k]);
+      flip(pc_.h[c], pc_.bond.empty() ? nullptr : &pc_.bond[c]);
+    }
+  }
+  for (WallContacts* wc : {&plc_, &fcc_, &ftc_})
+    for (auto& b : wc->ball) b = newrow[b];
+  dirty_ = true;
+  return newrow;
 }
 
 LawConst World::law_const(const ContactFamilyParams& f) const {
   LawConst c;
   c.rgap = f.linear.rgap;
   c.rescale = p_.rescale_shear;
-  if (f.model == ContactModel::kLinearPBond) c.beta = f.pbond.mcf;
+  if (f.model == ContactModel::kLinearPBond) {
+    c.beta = f.pbond.mcf;
+    c.ks_kn = 1.0 / f.pbond.kratio;
+    c.sigc = f.pbond.ten;
+    c.coh = f.pbond.coh;
+    c.tanphi = std::tan(f.pbond.fa_deg * kPi / 180.0);
+  }
   if (f.model == ContactModel::kSoftBond) {
     const auto& s = f.softbond;
     c.beta = s.mcf;
@@ -100,14 +162,18 @@ LawConst World::law_const(const ContactFamilyParams& f) const {
     c.cohesion = s.cohesion;
     c.bend_soft = s.bending_in_softening;
     c.moments = s.moments;
+    c.ks_kn = 1.0 / f.linear.kratio;
+    c.sigc = s.ten;
+    c.coh = s.coh;
+    c.tanphi = std::tan(s.fa_deg * kPi / 180.0);
   }
   return c;
 }
 
 // Precomputed per-contact constants from the deformability method (§1.7, §2.2, §3.3).
-// r_wall < 0 marks a ball–ball contact (a, b rows); otherwise a ball–wall contact of ball a.
+// `wall` marks a ball–wall contact of ball a (b unused); otherwise a ball–ball contact.
 void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondHist* bond,
-                         const ContactFamilyParams& fam, bool wall, double) const {
+                         const ContactFamilyParams& fam, bool wall) const {
   const double ra = pt_.r[a];
   double rbar, L;
   if (!wall) {
@@ -126,16 +192,9 @@ void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondH
     const double area = kPi * rb * rb;
     const double kna = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed / area : fam.linear.emod / L;
     bond->rb = rb;
-    bond->area = area;
-    bond->inertia = 0.25 * area * rb * rb;
-    bond->polar = 2.0 * bond->inertia;
     bond->kn = kna;
-    bond->ks = kna / fam.linear.kratio;
-    bond->sigc = fam.softbond.ten;
-    bond->coh = fam.softbond.coh;
-    bond->tanphi = std::tan(fam.softbond.fa_deg * kPi / 180.0);
     h.kn = kna * area;
-    h.ks = bond->ks * area;
+    h.ks = kna / fam.linear.kratio * area;
   } else {
     const double kn = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed
                                                 : kPi * rbar * rbar * fam.linear.emod / L;
@@ -145,14 +204,7 @@ void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondH
       const auto& pb = fam.pbond;
       const double rb = pb.rmul * rbar;
       bond->rb = rb;
-      bond->area = kPi * rb * rb;
-      bond->inertia = 0.25 * bond->area * rb * rb;
-      bond->polar = 2.0 * bond->inertia;
       bond->kn = pb.emod / L;
-      bond->ks = bond->kn / pb.kratio;
-      bond->sigc = pb.ten;
-      bond->coh = pb.coh;
-      bond->tanphi = std::tan(pb.fa_deg * kPi / 180.0);
     }
   }
   h.mu = fam.linear.fric;
@@ -162,11 +214,11 @@ void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondH
 void World::refresh_contact_constants() {
   const bool bb = p_.ball_ball.model != ContactModel::kLinear;
   for (std::size_t c = 0; c < pc_.size(); ++c)
-    init_contact(pc_.a[c], pc_.b[c], pc_.h[c], bb ? &pc_.bond[c] : nullptr, p_.ball_ball, false, 0);
+    init_contact(pc_.a[c], pc_.b[c], pc_.h[c], bb ? &pc_.bond[c] : nullptr, p_.ball_ball, false);
   auto wall = [&](WallContacts& wc, const ContactFamilyParams& fam) {
     const bool bd = fam.model != ContactModel::kLinear;
     for (std::size_t c = 0; c < wc.size(); ++c)
-      init_contact(wc.ball[c], 0, wc.h[c], bd ? &wc.bond[c] : nullptr, fam, true, 0);
+      init_contact(wc.ball[c], 0, wc.h[c], bd ? &wc.bond[c] : nullptr, fam, true);
   };
   wall(plc_, p_.ball_wall);
   wall(fcc_, p_.ball_facet);
@@ -372,6 +424,22 @@ void World::set_cell(const Vec3& origin, const Vec3& length) {
   dirty_ = true;
 }
 
+Vec3 World::pair_force(std::size_t c) const {
+  const ContactHist& h = pc_.h[c];
+  Vec3 F = h.fn * h.n_old + h.fs;
+  if (p_.ball_ball.model == ContactModel::kLinearPBond) {
+    const BondHist& b = pc_.bond[c];
+    if (b.state == BondState::kIntact) F += (-b.nb) * h.n_old + b.fsb;
+  }
+  return F;
+}
+
+Vec3 World::pair_moment(std::size_t c) const {
+  if (p_.ball_ball.model == ContactModel::kLinear) return Vec3{};
+  const BondHist& b = pc_.bond[c];
+  return b.mt * pc_.h[c].n_old + b.mb;
+}
+
 Vec3 World::branch(std::size_t c) const {
   Vec3 d = pt_.x[pc_.b[c]] - pt_.x[pc_.a[c]];
   if (p_.periodic.enabled) {
@@ -399,8 +467,6 @@ void World::append_pair(std::uint32_t a, std::uint32_t b, const std::array<std::
   pc_.shift.push_back(s);
   pc_.h.push_back(h);
   if (p_.ball_ball.model != ContactModel::kLinear) pc_.bond.push_back(bond ? *bond : BondHist{});
-  pc_.F.push_back({});
-  if (p_.ball_ball.model != ContactModel::kLinear) pc_.M.push_back({});
   dirty_ = true;
 }
 
@@ -549,7 +615,7 @@ void World::rebuild() {
     } else {
       q.h.push_back({});
       if (has_bond) q.bond.push_back({});
-      init_contact(a, b, q.h.back(), has_bond ? &q.bond.back() : nullptr, p_.ball_ball, false, 0);
+      init_contact(a, b, q.h.back(), has_bond ? &q.bond.back() : nullptr, p_.ball_ball, false);
     }
   };
   for (const auto& e : np) push(e.a, e.b, e.s);
@@ -593,11 +659,8 @@ void World::rebuild() {
     }
     q = std::move(r);
   }
-  const std::size_t m = q.a.size();
-  q.F.assign(m, {});
-  if (has_bond) q.M.assign(m, {});
   pc_ = std::move(q);
-  rebuild_walls(cell_of, cell_start, cell_items);
+  rebuild_walls();
   pt_.x_ref = pt_.x;
   max_disp2_ = 0.0;
   if (per) cell_len_ref_ = p_.periodic.length;
@@ -648,8 +711,7 @@ inline double plane_distance(const Vec3& x, const PlaneWall& pw, Vec3& n) {
 }
 }  // namespace
 
-void World::rebuild_walls(const std::vector<std::int32_t>&, const std::vector<std::uint32_t>&,
-                          const std::vector<std::uint32_t>&) {
+void World::rebuild_walls() {
   const std::size_t n = pt_.size();
   auto merge = [&](WallContacts& old, std::vector<WallCand>& cands, const ContactFamilyParams& fam,
                    auto wall_id) {
@@ -683,7 +745,7 @@ void World::rebuild_walls(const std::vector<std::int32_t>&, const std::vector<st
       } else {
         q.h.push_back({});
         if (has_bond) q.bond.push_back({});
-        init_contact(e.ball, 0, q.h.back(), has_bond ? &q.bond.back() : nullptr, fam, true, 0);
+        init_contact(e.ball, 0, q.h.back(), has_bond ? &q.bond.back() : nullptr, fam, true);
       }
       q.facet.push_back(keep_facet);
       k = k2;
@@ -797,37 +859,51 @@ void World::pair_pass(double dt) {
   const std::int64_t m = static_cast<std::int64_t>(pc_.size());
   const std::size_t n = pt_.size();
   const LawConst lc = law_const(p_.ball_ball);
-  const Vec3* X = pt_.x.data();
-  const Vec3* V = pt_.v.data();
-  const Vec3* W = pt_.w.data();
-  const double* R = pt_.r.data();
-  const std::uint32_t* A = pc_.a.data();
-  const std::uint32_t* B = pc_.b.data();
-  const auto* S = pc_.shift.data();
-  ContactHist* H = pc_.h.data();
-  BondHist* BD = pc_.bond.empty() ? nullptr : pc_.bond.data();
-  Vec3* OF = pc_.F.data();
-  Vec3* OM = pc_.M.data();
+  // No array aliases another (restrict lets loads be kept across the force stores).
+  const Vec3* __restrict__ X = pt_.x.data();
+  const Vec3* __restrict__ V = pt_.v.data();
+  const Vec3* __restrict__ W = pt_.w.data();
+  const double* __restrict__ R = pt_.r.data();
+  const std::uint32_t* __restrict__ A = pc_.a.data();
+  const std::uint32_t* __restrict__ B = pc_.b.data();
+  const auto* __restrict__ S = pc_.shift.data();
+  ContactHist* __restrict__ H = pc_.h.data();
+  BondHist* __restrict__ BD = pc_.bond.empty() ? nullptr : pc_.bond.data();
   const Vec3 L = p_.periodic.length;
   const Vec3 ed = edot_;
   const double rgap = lc.rgap;
   const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
   const bool par = nt > 1 && m > 4096;
-  auto body = [&](std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t) {
+  const bool strained = ed.x != 0.0 || ed.y != 0.0 || ed.z != 0.0;
+  auto body = [&](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
+    // The list is sorted by A: the sums on A are kept in registers for the run of contacts
+    // that share it and flushed when A changes (fixed order, hence deterministic).
+    std::uint32_t cur = c0 < c1 ? A[c0] : 0u;
+    Vec3 fa_acc{}, ta_acc{};
     for (std::int64_t c = c0; c < c1; ++c) {
       const std::uint32_t a = A[c], b = B[c];
+      if (a != cur) {
+        f[cur] += fa_acc;
+        t[cur] += ta_acc;
+        fa_acc = Vec3{};
+        ta_acc = Vec3{};
+        cur = a;
+      }
       Vec3 d = X[b] - X[a];
-      if constexpr (Periodic) d += cmul(Vec3{double(S[c][0]), double(S[c][1]), double(S[c][2])}, L);
+      if constexpr (Periodic) {
+        std::uint32_t any;  // most contacts lie inside the cell: skip the conversion
+        std::memcpy(&any, S[c].data(), 4);
+        if (any) d += cmul(Vec3{double(S[c][0]), double(S[c][1]), double(S[c][2])}, L);
+      }
       ContactHist& h = H[c];
       const double d2 = norm2(d);
       if constexpr (M == ContactModel::kLinear) {
         const double reach = R[a] + R[b] + rgap;
-        if (d2 > reach * reach && h.fn == 0.0) {  // separated and force-free: nothing to do
-          h.n_old = d * (1.0 / std::sqrt(d2));
-          h.flags = static_cast<std::uint8_t>((h.flags | ContactHist::kHasNormal) &
-                                              ~(ContactHist::kActive | ContactHist::kSlip));
-          h.fs = Vec3{};
-          OF[c] = Vec3{};
+        // Separated and force-free: nothing to do. F_n = 0 implies F_s = 0 (Coulomb limit
+        // μF_n = 0), so the stale n_old is never used to rotate a non-zero vector.
+        if (d2 > reach * reach && h.fn == 0.0) {
+          if (h.flags & ContactHist::kActive)
+            h.flags &= static_cast<std::uint8_t>(~(ContactHist::kActive | ContactHist::kSlip));
           continue;
         }
       }
@@ -840,24 +916,28 @@ void World::pair_pass(double dt) {
       const Vec3 la = (R[a] + 0.5 * gap) * nn;
       const Vec3 lb = -(R[b] + 0.5 * gap) * nn;
       Vec3 vr = (V[b] + cross(W[b], lb)) - (V[a] + cross(W[a], la));
-      if constexpr (Periodic) vr += cmul(ed, d);  // affine cell motion (§4.5)
+      if constexpr (Periodic) {
+        if (strained) vr += cmul(ed, d);  // affine cell motion (§4.5)
+      }
       k.du = vr * dt;
       k.dtheta = (W[b] - W[a]) * dt;
       k.wmean = 0.5 * (W[a] + W[b]);
       k.dt = dt;
       Vec3 Mo;
       const Vec3 F = contact_law<M>(k, h, BD ? BD + c : nullptr, lc, Mo);
-      OF[c] = F;
-      f[a] -= F;
+      fa_acc -= F;
       f[b] += F;
       if constexpr (M != ContactModel::kLinear) {
-        OM[c] = Mo;
-        t[a] += cross(F, la) - Mo;  // ℓ_A × (−F) − M
+        ta_acc += cross(F, la) - Mo;  // ℓ_A × (−F) − M
         t[b] += cross(lb, F) + Mo;
       } else {
-        t[a] += cross(F, la);
+        ta_acc += cross(F, la);
         t[b] += cross(lb, F);
       }
+    }
+    if (c0 < c1) {
+      f[cur] += fa_acc;
+      t[cur] += ta_acc;
     }
   };
   if (!par) {
@@ -982,7 +1062,7 @@ void World::facet_pass(double dt) {
     }
     double K = wc.h[c].kn + wc.h[c].ks;
     if (bd && p_.ball_facet.model == ContactModel::kLinearPBond)
-      K += (wc.bond[c].kn + wc.bond[c].ks) * wc.bond[c].area;
+      K += wc.bond[c].kn * (1.0 + 1.0 / p_.ball_facet.pbond.kratio) * wc.bond[c].area();
     const Vec3& w = wc.bary[c];
     for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += w[v] * K;
   }
@@ -1079,8 +1159,8 @@ void World::integrate(double dt) {
   const std::size_t nch = (n + kChunk - 1) / kChunk;
   chunk_e_.assign(2 * nch, 0.0);
   const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
-  auto damp = [alpha](double F, double v) {
-    return v > 0.0 ? -alpha * std::abs(F) : (v < 0.0 ? alpha * std::abs(F) : 0.0);
+  auto damp = [alpha](double F, double v) {  // −α|F| sign(v), branch-free (§1.3)
+    return -alpha * std::abs(F) * static_cast<double>((v > 0.0) - (v < 0.0));
   };
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && nch > 1)
   for (std::int64_t ch = 0; ch < static_cast<std::int64_t>(nch); ++ch) {
@@ -1142,15 +1222,16 @@ double World::critical_timestep() {
     double k = h.kn, krot = 0.0;
     if (b) {
       if (p_.ball_ball.model == ContactModel::kLinearPBond) {
-        if (bd) { k += b->kn * b->area; krot += b->kn * b->inertia; }
+        if (bd) { k += b->kn * b->area(); krot += b->kn * b->inertia(); }
       } else {
-        krot += b->kn * b->inertia;
+        krot += b->kn * b->inertia();
       }
     }
     const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
     kt[a] += k;
     kt[bb] += k;
-    const double ks = h.ks + ((bd && p_.ball_ball.model == ContactModel::kLinearPBond) ? b->ks * b->area : 0.0);
+    const double ks = h.ks + ((bd && p_.ball_ball.model == ContactModel::kLinearPBond)
+                                  ? b->kn / p_.ball_ball.pbond.kratio * b->area() : 0.0);
     kr[a] += krot + ks * pt_.r[a] * pt_.r[a];
     kr[bb] += krot + ks * pt_.r[bb] * pt_.r[bb];
   }
@@ -1162,11 +1243,11 @@ double World::critical_timestep() {
       if (!(h.flags & ContactHist::kActive) && !bd) continue;
       double k = h.kn, ks = h.ks, krot = 0.0;
       if (b && fam.model == ContactModel::kLinearPBond && bd) {
-        k += b->kn * b->area;
-        ks += b->ks * b->area;
-        krot += b->kn * b->inertia;
+        k += b->kn * b->area();
+        ks += b->kn / fam.pbond.kratio * b->area();
+        krot += b->kn * b->inertia();
       } else if (b && fam.model == ContactModel::kSoftBond) {
-        krot += b->kn * b->inertia;
+        krot += b->kn * b->inertia();
       }
       const std::uint32_t i = wc.ball[c];
       kt[i] += k;
@@ -1224,6 +1305,16 @@ void World::step() {
   }
   integrate(dt_);
   for (auto& pw : planes_) {
+    if (pw.p.servo) {
+      // Platen stress servo along the normal: close a fraction α_s of the force error per
+      // step with the wall's contact stiffness (same form as §4.5), speed-limited.
+      const double area = pw.p.servo_area > 0.0 ? pw.p.servo_area : 4.0 * pw.p.half1 * pw.p.half2;
+      const double err = pw.p.servo_stress * area - (-dot(pw.reaction, pw.p.normal));
+      double vn = pw.k_sum > 0.0 ? pw.p.servo_gain * err / (pw.k_sum * dt_)
+                                 : (err > 0.0 ? pw.p.servo_vmax : -pw.p.servo_vmax);
+      vn = std::clamp(vn, -pw.p.servo_vmax, pw.p.servo_vmax);
+      pw.p.velocity = vn * pw.p.normal;
+    }
     pw.p.point += dt_ * pw.p.velocity;
     pw.disp += dt_ * pw.p.velocity;
   }
@@ -1259,7 +1350,7 @@ std::size_t World::bond_ball_ball(double lo, double hi) {
     const double gap = norm(d) - pt_.r[pc_.a[c]] - pt_.r[pc_.b[c]];
     if (gap < lo || gap > hi) continue;
     b.state = BondState::kIntact;
-    b.sigma_t = b.sigc;
+    b.sigma_t = p_.ball_ball.model == ContactModel::kSoftBond ? p_.ball_ball.softbond.ten : p_.ball_ball.pbond.ten;
     ContactHist& h = pc_.h[c];
     h.flags |= ContactHist::kIncremental;  // §3.1: bonding switches to incremental mode
     if (!(h.flags & ContactHist::kHasNormal)) { h.n_old = d * (1.0 / norm(d)); h.flags |= ContactHist::kHasNormal; }
@@ -1293,7 +1384,7 @@ std::size_t World::bond_ball_facet(double hi) {
     }
     if (best - pt_.r[fcc_.ball[c]] > hi) continue;
     b.state = BondState::kIntact;
-    b.sigma_t = b.sigc;
+    b.sigma_t = p_.ball_facet.model == ContactModel::kSoftBond ? p_.ball_facet.softbond.ten : p_.ball_facet.pbond.ten;
     ContactHist& h = fcc_.h[c];
     h.flags |= ContactHist::kIncremental | ContactHist::kHasNormal;
     h.n_old = n;
@@ -1317,7 +1408,10 @@ Energy World::energy() const {
   e.damping = e_damp_;
   e.friction = e_slip_dead_;
   e.softening = e_soft_dead_;
-  auto add = [&](const std::vector<ContactHist>& hs, const std::vector<BondHist>& bs, ContactModel m) {
+  auto add = [&](const std::vector<ContactHist>& hs, const std::vector<BondHist>& bs,
+                 const ContactFamilyParams& fam) {
+    const ContactModel m = fam.model;
+    const double ks_kn = 1.0 / (m == ContactModel::kSoftBond ? fam.linear.kratio : fam.pbond.kratio);
     for (std::size_t c = 0; c < hs.size(); ++c) {
       const ContactHist& h = hs[c];
       if (h.kn > 0.0) e.strain += 0.5 * h.fn * h.fn / h.kn;
@@ -1328,15 +1422,15 @@ Energy World::energy() const {
       e.softening += b.e_soft;
       if (b.kn <= 0.0) continue;
       if (m == ContactModel::kLinearPBond) {
-        e.strain += 0.5 * b.nb * b.nb / (b.kn * b.area) + 0.5 * norm2(b.fsb) / (b.ks * b.area);
+        e.strain += 0.5 * b.nb * b.nb / (b.kn * b.area()) + 0.5 * norm2(b.fsb) / (b.kn * ks_kn * b.area());
       }
-      e.strain += 0.5 * b.mt * b.mt / (b.ks * b.polar) + 0.5 * norm2(b.mb) / (b.kn * b.inertia);
+      e.strain += 0.5 * b.mt * b.mt / (b.kn * ks_kn * b.polar()) + 0.5 * norm2(b.mb) / (b.kn * b.inertia());
     }
   };
-  add(pc_.h, pc_.bond, p_.ball_ball.model);
-  add(plc_.h, plc_.bond, p_.ball_wall.model);
-  add(fcc_.h, fcc_.bond, p_.ball_facet.model);
-  add(ftc_.h, ftc_.bond, p_.ball_footing.model);
+  add(pc_.h, pc_.bond, p_.ball_ball);
+  add(plc_.h, plc_.bond, p_.ball_wall);
+  add(fcc_.h, fcc_.bond, p_.ball_facet);
+  add(ftc_.h, ftc_.bond, p_.ball_footing);
   return e;
 }
 
@@ -1354,7 +1448,7 @@ double World::mean_contact_force() const {
   double s = 0.0;
   std::size_t cnt = 0;
   for (std::size_t c = 0; c < pc_.size(); ++c) {
-    const double f = norm(pc_.F[c]);
+    const double f = norm(pair_force(c));
     if (f > 0.0) { s += f; ++cnt; }
   }
   for (const WallContacts* wc : {&plc_, &fcc_, &ftc_})

@@ -55,7 +55,8 @@ void symmetric_eigen(const double* s, std::array<double, 3>& val, std::array<std
   for (int sweep = 0; sweep < 50; ++sweep) {
     const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
     const double diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
-    if (off <= 1e-36 * diag || off == 0.0) break;
+    // off-diagonal below 1e-15 of the diagonal: converged to round-off.
+    if (off <= 1e-30 * diag || off == 0.0) break;
     for (int p = 0; p < 2; ++p)
       for (int q = p + 1; q < 3; ++q) {
         if (a[p][q] == 0.0) continue;
@@ -89,6 +90,92 @@ void symmetric_eigen(const double* s, std::array<double, 3>& val, std::array<std
   }
 }
 
+void symmetric_eigen_fast(const double* s, std::array<double, 3>& val, std::array<std::array<double, 3>, 3>& vec) {
+  const auto lam = principal_values(s);
+  const double spread = lam[2] - lam[0];
+  if (!(spread > 1e-9 * (std::abs(lam[0]) + std::abs(lam[2])))) {
+    symmetric_eigen(s, val, vec);  // (nearly) isotropic: any basis would do, Jacobi is exact
+    return;
+  }
+  // The eigenvalue farthest from the other two is accurate in closed form (the acos error
+  // falls on the close pair), and so is its eigenvector from cross products of the rows of
+  // A - lambda I (the gap is at least half the spread).
+  const int k = (lam[1] - lam[0]) > (lam[2] - lam[1]) ? 0 : 2;
+  const double a[3][3] = {{s[0], s[3], s[5]}, {s[3], s[1], s[4]}, {s[5], s[4], s[2]}};
+  double r[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r[i][j] = a[i][j] - (i == j ? lam[k] : 0.0);
+  auto crs = [](const double* u, const double* w, double* o) {
+    o[0] = u[1] * w[2] - u[2] * w[1];
+    o[1] = u[2] * w[0] - u[0] * w[2];
+    o[2] = u[0] * w[1] - u[1] * w[0];
+  };
+  double c[3][3];
+  crs(r[0], r[1], c[0]);
+  crs(r[0], r[2], c[1]);
+  crs(r[1], r[2], c[2]);
+  int best = 0;
+  double bn = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const double n = c[i][0] * c[i][0] + c[i][1] * c[i][1] + c[i][2] * c[i][2];
+    if (n > bn) {
+      bn = n;
+      best = i;
+    }
+  }
+  if (!(bn > 0.0)) {
+    symmetric_eigen(s, val, vec);
+    return;
+  }
+  const double inv = 1.0 / std::sqrt(bn);
+  const double v[3] = {c[best][0] * inv, c[best][1] * inv, c[best][2] * inv};
+  // Orthonormal basis (t1, t2) of the plane normal to v.
+  double t1[3];
+  if (std::abs(v[0]) <= std::abs(v[1]) && std::abs(v[0]) <= std::abs(v[2])) {
+    const double e[3] = {1.0, 0.0, 0.0};
+    crs(v, e, t1);
+  } else if (std::abs(v[1]) <= std::abs(v[2])) {
+    const double e[3] = {0.0, 1.0, 0.0};
+    crs(v, e, t1);
+  } else {
+    const double e[3] = {0.0, 0.0, 1.0};
+    crs(v, e, t1);
+  }
+  const double n1 = 1.0 / std::sqrt(t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2]);
+  for (double& x : t1) x *= n1;
+  double t2[3];
+  crs(v, t1, t2);
+  auto quad = [&](const double* x, const double* y) {
+    double q = 0.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) q += x[i] * a[i][j] * y[j];
+    return q;
+  };
+  const double lv = quad(v, v);  // Rayleigh quotient: accurate to round-off
+  const double b11 = quad(t1, t1), b22 = quad(t2, t2), b12 = quad(t1, t2);
+  // Exact 2x2 diagonalisation in the plane: rotation angle theta with tan(2 theta) =
+  // 2 b12 / (b11 - b22).
+  const double theta = 0.5 * std::atan2(2.0 * b12, b11 - b22);
+  const double cs = std::cos(theta), sn = std::sin(theta);
+  double u1[3], u2[3];
+  for (int i = 0; i < 3; ++i) {
+    u1[i] = cs * t1[i] + sn * t2[i];
+    u2[i] = -sn * t1[i] + cs * t2[i];
+  }
+  const double m1 = b11 * cs * cs + 2.0 * b12 * cs * sn + b22 * sn * sn;
+  const double m2 = b11 * sn * sn - 2.0 * b12 * cs * sn + b22 * cs * cs;
+  struct Pair {
+    double value;
+    const double* dir;
+  };
+  Pair p[3] = {{lv, v}, {m1, u1}, {m2, u2}};
+  std::sort(p, p + 3, [](const Pair& x, const Pair& y) { return x.value < y.value; });
+  for (int i = 0; i < 3; ++i) {
+    val[i] = p[i].value;
+    for (int d = 0; d < 3; ++d) vec[i][d] = p[i].dir[d];
+  }
+}
+
 std::uint8_t mohr_coulomb_return(const MaterialConstants& m, double* s) {
   // Cheapest check first, with a square root only: every principal value lies within
   // r = sqrt(2/3) |dev sigma| of the mean stress, so sigma1 >= p - r and sigma3 <= p + r.
@@ -109,7 +196,7 @@ std::uint8_t mohr_coulomb_return(const MaterialConstants& m, double* s) {
 
   std::array<double, 3> sig{};
   std::array<std::array<double, 3>, 3> e{};
-  symmetric_eigen(s, sig, e);
+  symmetric_eigen_fast(s, sig, e);
   const double a1 = m.alpha1, a2 = m.alpha2;
   const double fs = sig[0] - sig[2] * m.n_phi + 2.0 * m.cohesion * m.sqrt_n_phi;
   const double ft = m.tension - sig[2];

@@ -13,6 +13,11 @@
 namespace demfdm::fdm {
 namespace {
 
+// An imposed dt may exceed the critical one by this relative round-off (a caller dividing a
+// coupling step into n sub-steps lands within a few ulps of it); the safety factor of
+// physics.md 5.7 covers it.
+constexpr double kDtTolerance = 1.0 + 1e-9;
+
 struct ElasticLaw {
   static std::uint8_t update(const MaterialConstants& m, const double* de, double* s) {
     elastic_update(m, de, s);
@@ -109,12 +114,17 @@ void Model::build() {
   for (std::size_t g = 0; g < n_; ++g)
     if (mesh_.point_ijk[3 * g + 2] == 0) base_points_.push_back(static_cast<std::int32_t>(g));
 
+  gp_interface_.assign(n_, -1);
+  for (std::size_t l = 0; l < mesh_.interface_points.size(); ++l)
+    gp_interface_[mesh_.interface_points[l]] = static_cast<std::int32_t>(l);
   fcouple_.assign(3 * mesh_.interface_points.size(), 0.0);
   kcouple_.assign(mesh_.interface_points.size(), 0.0);
 
   compute_geometry(x0_);
   compute_masses();
   rebuild_external_forces();
+  zone_critical_dt_ = zone_critical_timestep();
+  update_interface_critical_timestep();
   dt_ = params_.mode == Mode::kStatic ? 1.0 : critical_timestep();
   if (params_.strongbox_boundary) apply_strongbox_boundary();
   zone_pass(false);
@@ -162,6 +172,7 @@ void Model::compute_masses() {
       }
     }
   }
+  zone_stiffness_ = smass;  // diagonal zone stiffness per gridpoint [N/m] (physics.md 6.5)
   if (params_.mode == Mode::kStatic) {
     mass_base_.resize(n_);
     for (std::size_t g = 0; g < n_; ++g) mass_base_[g] = params_.static_mass_factor * smass[g];
@@ -176,7 +187,22 @@ void Model::rebuild_external_forces() {
     for (int d = 0; d < 3; ++d) fext_[3 * g + d] = gmass_[g] * gravity_[d] + fapplied_[3 * g + d];
 }
 
-double Model::critical_timestep() const {
+double Model::critical_timestep() const { return std::min(zone_critical_dt_, interface_critical_dt_); }
+
+void Model::update_interface_critical_timestep() {
+  // Coupling stiffness (dynamic mode, physics.md 6.5 option A): dt <= 0.5 sqrt(m_g / (k_gp +
+  // k_zone)) at the interface gridpoints that carry contact stiffness. O(n_if).
+  interface_critical_dt_ = std::numeric_limits<double>::infinity();
+  if (params_.mode != Mode::kDynamic) return;
+  for (std::size_t l = 0; l < kcouple_.size(); ++l) {
+    if (kcouple_[l] <= 0.0) continue;
+    const std::int32_t g = mesh_.interface_points[l];
+    interface_critical_dt_ =
+        std::min(interface_critical_dt_, 0.5 * std::sqrt(gmass_[g] / (kcouple_[l] + zone_stiffness_[g])));
+  }
+}
+
+double Model::zone_critical_timestep() const {
   // dt = safety * min_t h_t / C_p, h_t = 3V / max|a| = 1 / max_l |g_l| (physics.md 5.7).
   double best = std::numeric_limits<double>::infinity();
   std::vector<double> local;
@@ -211,7 +237,7 @@ void Model::set_timestep(double dt) {
   if (params_.mode == Mode::kStatic)
     throw std::logic_error("set_timestep: the static (mass-scaled) mode runs with dt = 1");
   const double crit = critical_timestep();
-  if (!(dt > 0.0) || dt > crit) {
+  if (!(dt > 0.0) || dt > crit * kDtTolerance) {
     std::ostringstream os;
     os << "timestep: expected a value in (0, " << crit << "] s (critical timestep with safety factor "
        << params_.timestep_safety << "), found " << dt;
@@ -378,6 +404,13 @@ void Model::gather_zone_forces() {
 // ---- stepping ------------------------------------------------------------------------------
 
 void Model::step() {
+  if (dt_imposed_ && dt_ > critical_timestep() * kDtTolerance) {
+    std::ostringstream os;
+    os << "step: the imposed dt = " << dt_ << " s exceeds the critical timestep " << critical_timestep()
+       << " s (coupling stiffness or large-strain deformation lowered it, physics.md 5.7, 6.5); "
+       << "call set_timestep() with a smaller value";
+    throw std::runtime_error(os.str());
+  }
   // Coupling forces join the zone-force sum for this law of motion only; the zone pass
   // below overwrites fzone_ with the new zone forces.
   if (has_coupling_)
@@ -412,16 +445,10 @@ void Model::step() {
   ++step_;
   time_ += dt_;
   if (params_.large_strain && params_.mode == Mode::kDynamic && step_ % kTimestepCheckInterval == 0) {
-    // Zones deform in large strain: keep the step below the critical one (physics.md 5.7).
-    const double crit = critical_timestep();
-    if (!dt_imposed_) {
-      dt_ = crit;
-    } else if (dt_ > crit) {
-      std::ostringstream os;
-      os << "timestep: the imposed dt = " << dt_ << " s now exceeds the critical timestep " << crit
-         << " s of the deformed mesh (large strain, step " << step_ << "); impose a smaller one";
-      throw std::runtime_error(os.str());
-    }
+    // Zones deform in large strain: refresh the critical step (physics.md 5.7). An automatic
+    // step follows it; an imposed one that became too large stops the next step().
+    zone_critical_dt_ = zone_critical_timestep();
+    if (!dt_imposed_) dt_ = critical_timestep();
   }
   if (params_.history_every > 0 && step_ % params_.history_every == 0) history_.push_back(sample());
 }
@@ -529,7 +556,12 @@ void Model::set_interface_stiffness(std::span<const double> stiffness) {
     // m_I += k dt^2 with dt = 1 (physics.md 6.5, option B).
     mass_ = mass_base_;
     for (std::size_t l = 0; l < kcouple_.size(); ++l) mass_[mesh_.interface_points[l]] += kcouple_[l];
+    return;
   }
+  // Dynamic mode: the stiffer interface may lower the stable step (physics.md 6.5, U15). An
+  // automatic step follows; an imposed one is checked by step().
+  update_interface_critical_timestep();
+  if (!dt_imposed_) dt_ = critical_timestep();
 }
 
 namespace {
@@ -601,14 +633,11 @@ void Model::set_velocity(std::int32_t gp, const Vec3& v) {
 
 void Model::net_force(std::size_t g, double* f) const {
   for (int d = 0; d < 3; ++d) f[d] = fzone_[3 * g + d] + fext_[3 * g + d];
+  if (has_coupling_ && gp_interface_[g] >= 0)
+    for (int d = 0; d < 3; ++d) f[d] += fcouple_[3 * static_cast<std::size_t>(gp_interface_[g]) + d];
 }
 
 Ratios Model::ratios() const {
-  // Coupling forces by gridpoint (interface gridpoints only).
-  std::vector<double> fc(3 * n_, 0.0);
-  if (has_coupling_)
-    for (std::size_t l = 0; l < mesh_.interface_points.size(); ++l)
-      for (int d = 0; d < 3; ++d) fc[3 * mesh_.interface_points[l] + d] = fcouple_[3 * l + d];
   double sum_unb = 0.0, sum_app = 0.0, max_unb = 0.0, local = 0.0;
   std::size_t counted = 0;
   auto norm = [](const double* a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); };
@@ -616,15 +645,18 @@ Ratios Model::ratios() const {
     if (fix_[g] == kFixAll) continue;  // only reactions act there
     double f[3];
     net_force(g, f);
+    double fc[3] = {0.0, 0.0, 0.0};  // coupling force on this gridpoint (for F_app)
+    if (has_coupling_ && gp_interface_[g] >= 0)
+      for (int d = 0; d < 3; ++d) fc[d] = fcouple_[3 * static_cast<std::size_t>(gp_interface_[g]) + d];
     double unb2 = 0.0;
     for (int d = 0; d < 3; ++d)
-      if (!(fix_[g] & (1u << d))) unb2 += (f[d] + fc[3 * g + d]) * (f[d] + fc[3 * g + d]);
+      if (!(fix_[g] & (1u << d))) unb2 += f[d] * f[d];
     const double unb = std::sqrt(unb2);
     double app = 0.0;
     for (std::int32_t e = gp_zone_offset_[g]; e < gp_zone_offset_[g + 1]; ++e)
       app += norm(&zone_slot_[3 * static_cast<std::size_t>(gp_zone_entry_[e])]);
     const double grav[3] = {gmass_[g] * gravity_[0], gmass_[g] * gravity_[1], gmass_[g] * gravity_[2]};
-    app += norm(grav) + norm(&fapplied_[3 * g]) + norm(&fc[3 * g]);
+    app += norm(grav) + norm(&fapplied_[3 * g]) + norm(fc);
     sum_unb += unb;
     sum_app += app;
     max_unb = std::max(max_unb, unb);
@@ -716,9 +748,19 @@ std::uint64_t Model::state_hash() const {
 std::vector<double> Model::zone_stress() const {
   std::vector<double> out(6 * nz_, 0.0);
   for (std::size_t z = 0; z < nz_; ++z) {
+    // Weights: tetrahedron volumes of the geometry the stresses live on (current in large strain).
+    double local[100];
+    const double* G = &geom_[z * 100];
+    if (params_.large_strain) {
+      double p[8][3];
+      for (int k = 0; k < 8; ++k)
+        for (int d = 0; d < 3; ++d) p[k][d] = x_[3 * mesh_.zones[8 * z + k] + d];
+      zone_geometry(p, local);
+      G = local;
+    }
     double vs = 0.0;
     for (int t = 0; t < kTetsPerZone; ++t) {
-      const double V = geom_[z * 100 + 10 * t + 9];
+      const double V = G[10 * t + 9];
       vs += V;
       for (int i = 0; i < 6; ++i) out[6 * z + i] += V * stress_[60 * z + 6 * t + i];
     }

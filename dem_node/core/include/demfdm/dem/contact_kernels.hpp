@@ -39,18 +39,16 @@ struct BondHist {
   Vec3 mb{};          // [N m] bending moment on B (PBM bond or soft-bond contact)
   double mt = 0.0;    // [N m] twisting moment about n̂ on B
   double rb = 0.0;    // [m] bond radius R̄ = λ min(R_A, R_B) (§2.2, §3.3)
-  double area = 0.0;  // [m^2] A = π R̄²
-  double inertia = 0.0;  // [m^4] I = π R̄⁴/4
-  double polar = 0.0;    // [m^4] J = 2I
-  double kn = 0.0;    // [Pa/m] bond normal stiffness per area k_n = E/L (§1.7, §2.2)
-  double ks = 0.0;    // [Pa/m] bond shear stiffness per area
-  double sigc = 0.0;  // [Pa] tensile strength
-  double coh = 0.0;   // [Pa] cohesion
-  double tanphi = 0.0;  // [-] tan of the bond friction angle
+  double kn = 0.0;    // [Pa/m] bond normal stiffness per area k_n = E/L (§1.7, §2.2);
+                      // k_s = k_n/κ and the strengths are family constants (LawConst)
   double sigma_t = 0.0; // [Pa] current tensile strength (soft bond, §3.3)
   double e_soft = 0.0;  // [J] softening dissipation (§8.18)
   BondState state = BondState::kNeverBonded;
   std::uint8_t slip_b = 0, slip_t = 0;  // soft-bond unbonded moment slip flags (§3.5)
+  // Disc geometry derived from R̄ (cheaper than storing it: the loop is memory bound).
+  double area() const { return 3.14159265358979323846 * rb * rb; }  // A = π R̄²
+  double inertia() const { return 0.25 * area() * rb * rb; }        // I = π R̄⁴/4
+  double polar() const { return 0.5 * area() * rb * rb; }           // J = 2I
 };
 
 /// Kinematics of one contact over one step (§1.4, §1.5).
@@ -67,6 +65,10 @@ struct Kin {
 /// Family-level constants of a law (per-contact constants live in the histories).
 struct LawConst {
   double rgap = 0.0;       // [m] reference gap
+  double ks_kn = 1.0;      // [-] bond k_s/k_n = 1/κ (§2.2, §3.3)
+  double sigc = 0.0;       // [Pa] bond tensile strength
+  double coh = 0.0;        // [Pa] bond cohesion
+  double tanphi = 0.0;     // [-] tan of the bond friction angle
   double beta = 1.0;       // [-] moment contribution factor
   double bmul = 1.0;       // [-] soft-bond bending friction multiplier
   double twist = 2.0 / 3.0;  // [-] soft-bond twist limit factor
@@ -149,18 +151,20 @@ inline void softbond_clamp_unbonded(ContactHist& h, BondHist& b, const LawConst&
 
 /// §2.4–2.5 parallel bond, bonded state. Returns false if the bond broke this step.
 /// Adds the bond force/moment on B into (F, M).
-inline void pbond_update(BondHist& b, double beta, double dun, const Vec3& dus, double dtt,
+[[gnu::always_inline]] inline void pbond_update(BondHist& b, const LawConst& c, double dun, const Vec3& dus, double dtt,
                          const Vec3& dtb, const Vec3& n, Vec3& F, Vec3& M) {
-  b.nb += b.kn * b.area * dun;
-  b.fsb -= (b.ks * b.area) * dus;
-  b.mt -= b.ks * b.polar * dtt;
-  b.mb -= (b.kn * b.inertia) * dtb;
-  const double sigma = b.nb / b.area + beta * norm(b.mb) * b.rb / b.inertia;
-  const double tau = norm(b.fsb) / b.area + beta * std::abs(b.mt) * b.rb / b.polar;
+  const double A = b.area(), iA = 1.0 / A;
+  const double rb_I = 4.0 * 3.14159265358979323846 * b.rb * iA * iA;  // R̄/I = 4πR̄/A²
+  b.nb += b.kn * A * dun;
+  b.fsb -= ((b.kn * c.ks_kn) * A) * dus;
+  b.mt -= (b.kn * c.ks_kn) * b.polar() * dtt;
+  b.mb -= (b.kn * b.inertia()) * dtb;
+  const double sigma = b.nb * iA + c.beta * norm(b.mb) * rb_I;
+  const double tau = norm(b.fsb) * iA + c.beta * std::abs(b.mt) * (0.5 * rb_I);
   // Strictly greater: a bond loaded exactly to its strength survives (U15).
-  if (sigma > b.sigc) {
+  if (sigma > c.sigc) {
     b.state = BondState::kBrokenTension;
-  } else if (tau > b.coh - (b.nb / b.area) * b.tanphi) {
+  } else if (tau > c.coh - (b.nb * iA) * c.tanphi) {
     b.state = BondState::kBrokenShear;
   }
   if (b.state != BondState::kIntact) {  // §2.5: force, moment and stiffness removed
@@ -178,32 +182,35 @@ inline void pbond_update(BondHist& b, double beta, double dun, const Vec3& dus, 
 /// Elastic unloading: σ_t = σ_c + H u_p with H = −k_n/(ζ+1). Secant: u_max on the envelope.
 inline double softbond_plastic_elongation(const BondHist& b, const LawConst& c) {
   if (b.state != BondState::kSoftening && b.state != BondState::kIntact) return 0.0;
-  const double ds = b.sigc - b.sigma_t;
+  const double ds = c.sigc - b.sigma_t;
   if (c.unload == SoftUnload::kElastic) return ds * (c.zeta + 1.0) / b.kn;
-  const double umax = b.sigc / b.kn + c.zeta * ds / b.kn;
+  const double umax = c.sigc / b.kn + c.zeta * ds / b.kn;
   return umax - b.sigma_t / b.kn;
 }
 
 /// §3.3–3.5 soft bond: complete update for any state. Returns the force on B; the moment on
 /// B is written to M. `gs` is g − g_r, the rest as in linear_update.
-inline Vec3 softbond_update(ContactHist& h, BondHist& b, const LawConst& c, double gs, double dun,
+[[gnu::always_inline]] inline Vec3 softbond_update(ContactHist& h, BondHist& b, const LawConst& c, double gs, double dun,
                             const Vec3& dus, double dtt, const Vec3& dtb, const Vec3& n,
                             Vec3& M) {
   if (b.state == BondState::kIntact || b.state == BondState::kSoftening) {
     // Effective normal stiffness: k_n, or the secant stiffness while softening (U1).
     double kne = b.kn;
     if (c.unload == SoftUnload::kSecant && b.state == BondState::kSoftening) {
-      const double umax = b.sigc / b.kn + c.zeta * (b.sigc - b.sigma_t) / b.kn;
+      const double umax = c.sigc / b.kn + c.zeta * (c.sigc - b.sigma_t) / b.kn;
       kne = b.sigma_t / umax;
     }
+    // One division for the disc: 1/A; R̄/I = 4π R̄/A² and R̄/J = 2π R̄/A² (A = π R̄²).
+    const double A = b.area(), iA = 1.0 / A;
+    const double rb_I = 4.0 * 3.14159265358979323846 * b.rb * iA * iA;
     // 1. elastic predictor
-    double N = -h.fn + kne * b.area * dun;
+    double N = -h.fn + kne * A * dun;
     h.fs -= h.ks * dus;
-    b.mt -= b.ks * b.polar * dtt;
-    b.mb -= (kne * b.inertia) * dtb;
+    b.mt -= (b.kn * c.ks_kn) * b.polar() * dtt;
+    b.mb -= (kne * b.inertia()) * dtb;
     const double mbn = norm(b.mb);
-    const double cm = c.bend_soft ? c.beta * b.rb / b.inertia : 0.0;
-    const double sig = N / b.area + cm * mbn;
+    const double cm = c.bend_soft ? c.beta * rb_I : 0.0;
+    const double sig = N * iA + cm * mbn;
     if (sig > b.sigma_t) {
       if (c.zeta == 0.0) {
         b.state = BondState::kBrokenTension;
@@ -211,18 +218,18 @@ inline Vec3 softbond_update(ContactHist& h, BondHist& b, const LawConst& c, doub
         // 3. envelope step: σ_t drops by (k_n/ζ)·(excess elongation), §3.3.
         const double st_new = b.sigma_t - (b.kn / c.zeta) * (sig - b.sigma_t) / kne;
         const double x = (sig - st_new) / kne;  // plastic peripheral elongation this step
-        b.e_soft += 0.5 * (b.sigma_t + std::max(st_new, 0.0)) * b.area * x;
+        b.e_soft += 0.5 * (b.sigma_t + std::max(st_new, 0.0)) * b.area() * x;
         b.sigma_t = st_new;
         b.state = BondState::kSoftening;
         // 4. return to σ = σ_t
         if (c.ret == SoftReturn::kAssociated || !(N > 0.0)) {
           if (c.ret == SoftReturn::kAssociated) {
-            const double cmm = (mbn > 0.0 && c.bend_soft) ? c.beta * c.beta * b.rb * b.rb / b.inertia : 0.0;
-            const double lam = x / (1.0 / b.area + cmm);
+            const double cmm = (mbn > 0.0 && c.bend_soft) ? c.beta * c.beta * b.rb * b.rb / b.inertia() : 0.0;
+            const double lam = x / (1.0 / b.area() + cmm);
             N -= kne * lam;
             if (cmm > 0.0) b.mb -= (kne * c.beta * b.rb * lam / mbn) * b.mb;
           } else {  // radial with N ≤ 0: reduce only the moment
-            const double mnew = std::max(st_new - N / b.area, 0.0) * b.inertia / (c.beta * b.rb);
+            const double mnew = std::max(st_new - N / b.area(), 0.0) * b.inertia() / (c.beta * b.rb);
             if (mbn > 0.0) b.mb *= mnew / mbn;
           }
         } else {  // radial, N > 0
@@ -231,16 +238,16 @@ inline Vec3 softbond_update(ContactHist& h, BondHist& b, const LawConst& c, doub
           b.mb *= s;
         }
         // 5. break when the strength has fallen to γσ_c
-        if (b.sigma_t <= c.gamma * b.sigc) b.state = BondState::kBrokenTension;
+        if (b.sigma_t <= c.gamma * c.sigc) b.state = BondState::kBrokenTension;
       }
     }
     h.fn = -N;
     if (b.state == BondState::kIntact || b.state == BondState::kSoftening) {
       // 6. brittle shear break, mean normal stress (§3.4)
-      const double tau = norm(h.fs) / b.area + c.beta * std::abs(b.mt) * b.rb / b.polar;
+      const double tau = norm(h.fs) * iA + c.beta * std::abs(b.mt) * (0.5 * rb_I);
       const double ceff =
-          c.cohesion == CohesionSoftening::kNone ? b.coh : b.coh * b.sigma_t / b.sigc;
-      if (tau > ceff - (N / b.area) * b.tanphi) b.state = BondState::kBrokenShear;
+          c.cohesion == CohesionSoftening::kNone ? c.coh : c.coh * b.sigma_t / c.sigc;
+      if (tau > ceff - (N * iA) * c.tanphi) b.state = BondState::kBrokenShear;
     }
     if (b.state == BondState::kBrokenShear || b.state == BondState::kBrokenTension) {
       softbond_clamp_unbonded(h, b, c, n);  // §3.5: keep the state, clamp to limits
@@ -264,8 +271,8 @@ inline Vec3 softbond_update(ContactHist& h, BondHist& b, const LawConst& c, doub
     M = Vec3{};
     return F;
   }
-  b.mb -= (b.kn * b.inertia) * dtb;
-  b.mt -= b.ks * b.polar * dtt;
+  b.mb -= (b.kn * b.inertia()) * dtb;
+  b.mt -= (b.kn * c.ks_kn) * b.polar() * dtt;
   const double mbl = c.bmul * h.fn * b.rb * 0.25;
   const double mbn = norm(b.mb);
   b.slip_b = mbn > mbl;
@@ -317,7 +324,7 @@ template <ContactModel M>
     if (b->state == BondState::kIntact) {
       const double dtt = dot(k.dtheta, n);
       const Vec3 dtb = k.dtheta - dtt * n;
-      pbond_update(*b, c.beta, dun, dus, dtt, dtb, n, F, Mo);
+      pbond_update(*b, c, dun, dus, dtt, dtb, n, F, Mo);
     }
     return F;
   } else {

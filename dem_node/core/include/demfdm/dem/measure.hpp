@@ -77,4 +77,19 @@ struct Measurement {
 };
 Measurement measure(const World& w);
 
+/// End-of-step effect that records a Measurement every `interval` steps (§3.6 counters,
+/// §5.11 ratio, §8.18 energies). Add it with World::add_effect; read samples() any time.
+class MeasurementRecorder final : public Effect {
+ public:
+  explicit MeasurementRecorder(std::int64_t interval);
+  unsigned phases() const override { return kEndOfStep; }
+  void apply(World& w, Phase) override;
+  const char* name() const override { return "measurement_recorder"; }
+  const std::vector<Measurement>& samples() const { return samples_; }
+
+ private:
+  std::int64_t interval_;
+  std::vector<Measurement> samples_;
+};
+
 }  // namespace demfdm::dem

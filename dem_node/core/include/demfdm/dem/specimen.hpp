@@ -70,6 +70,7 @@ struct ServoParams {
   double gain = 0.3;          // [-] α_s, under-relaxation (0.3–0.5)
   double max_face_step = 1e-4;  // [-] face displacement per step / d_min
   ServoStiffness stiffness = ServoStiffness::kAffine;
+  bool coupled = true;        // [-] use the full 3×3 affine stiffness (axes coupled)
 };
 
 /// Effect that sets the cell strain rate each step from the last stress (kPreStep).
@@ -88,7 +89,8 @@ class PeriodicServo final : public Effect {
 
 /// Servo until |s − s*| ≤ stress_tol·s* on active axes and ratio < ratio_tol for
 /// `hold_steps` consecutive checks (every 10 steps), or the budget is spent.
-/// `overshoot` (optional) receives max over the run of (s − s*)/s* over active axes.
+/// `overshoot` (optional) receives the largest excursion past the target, relative to the
+/// target, on the side opposite to the starting stress (0 if the target is never crossed).
 StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
                         std::int64_t hold_steps, std::int64_t budget, double* overshoot = nullptr);
 

@@ -2,7 +2,7 @@
 //
 // Cycle (physics.md §1.2, PFC order): pre-step effects → timestep → law of motion with
 // local damping → wall motion → time advance → neighbour check/rebuild → force–displacement
-// for every contact family → fixed-order gather onto balls → force effects (gravity) →
+// for every contact family → fixed-order sums onto balls (thread buffers, then wall contacts) → force effects (gravity) →
 // end-of-step effects.
 //
 // Determinism (style.md habit 13): the ball–ball pass splits the sorted contact list into
@@ -57,8 +57,6 @@ struct PairContacts {
   std::vector<std::array<std::int8_t, 4>> shift;  // periodic image of B (cells), [3] unused
   std::vector<ContactHist> h;
   std::vector<BondHist> bond;                  // empty unless the family can bond
-  std::vector<Vec3> F;                         // per-contact force on B (last pass)
-  std::vector<Vec3> M;                         // per-contact moment on B (bond models only)
   std::size_t size() const { return a.size(); }
 };
 
@@ -170,6 +168,10 @@ class World {
   std::size_t num_balls() const { return pt_.size(); }
   /// Recompute mass and inertia from radius and density (after a radius change).
   void set_radius(std::size_t i, double r);
+  /// Reorder the particle rows along a space-filling order of cells (cache locality of the
+  /// contact loop). Ids and all histories are kept; returns new_row[old_row]. Rows held by
+  /// the caller must be remapped with the returned table.
+  std::vector<std::uint32_t> reorder_spatially();
   /// Recompute the precomputed constants (K_n, K_s, μ, bond geometry) of all contacts.
   void refresh_contact_constants();
 
@@ -247,6 +249,11 @@ class World {
   const WallContacts& plane_contacts() const { return plc_; }
   const WallContacts& facet_contacts() const { return fcc_; }
   const WallContacts& footing_contacts() const { return ftc_; }
+  /// Force on B of ball–ball contact c after the last pass, rebuilt from the history
+  /// (F = F_n n̂ + F_s, plus −N̄ n̂ + F̄_s for a parallel bond): nothing is stored per step.
+  Vec3 pair_force(std::size_t c) const;
+  /// Moment on B of ball–ball contact c (bond models; zero for the linear model).
+  Vec3 pair_moment(std::size_t c) const;
   /// Branch vector x_B − x_A (minimum image) of ball–ball contact c.
   Vec3 branch(std::size_t c) const;
   /// Remove every contact and history (e.g. after moving balls by hand).
@@ -266,17 +273,16 @@ class World {
  private:
   friend class GravityEffect;
   void init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondHist* bond,
-                    const ContactFamilyParams& fam, bool wall, double r_wall_dummy) const;
+                    const ContactFamilyParams& fam, bool wall) const;
   void rebuild();
-  void rebuild_walls(const std::vector<std::int32_t>& cell_of, const std::vector<std::uint32_t>& cell_start,
-                     const std::vector<std::uint32_t>& cell_items);
+  void rebuild_walls();
   bool need_rebuild() const;
   void force_pass(double dt);
   template <ContactModel M, bool Periodic> void pair_pass(double dt);
   template <ContactModel M> void plane_pass(double dt);
   template <ContactModel M> void facet_pass(double dt);
   template <ContactModel M> void footing_pass(double dt);
-  void gather();
+  void gather();  // add the wall-contact forces to the balls (serial, contact order)
   void integrate(double dt);
   void update_facet_spin(FacetWall& fw);
   LawConst law_const(const ContactFamilyParams& f) const;

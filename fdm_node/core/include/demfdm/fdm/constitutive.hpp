@@ -60,6 +60,12 @@ inline void elastic_update(const MaterialConstants& m, const double* de, double*
 // eigenvector of val[k].
 void symmetric_eigen(const double* s, std::array<double, 3>& val, std::array<std::array<double, 3>, 3>& vec);
 
+// Same result, faster: the closed-form eigenvalue farthest from the other two gives an accurate
+// eigenvector (cross products of the rows of A - lambda I); the other two come from an exact
+// 2x2 diagonalisation in the orthogonal plane; all eigenvalues are Rayleigh quotients. Near-
+// isotropic tensors fall back to Jacobi. Used by the Mohr-Coulomb return.
+void symmetric_eigen_fast(const double* s, std::array<double, 3>& val, std::array<std::array<double, 3>, 3>& vec);
+
 // Principal values only, ascending (closed form, for the cheap elastic check).
 std::array<double, 3> principal_values(const double* s);
 

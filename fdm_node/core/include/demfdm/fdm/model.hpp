@@ -63,14 +63,16 @@ class Model {
   [[nodiscard]] std::int64_t step_count() const { return step_; }
   [[nodiscard]] double time() const { return time_; }  // [s]; static mode: steps
   [[nodiscard]] double timestep() const { return dt_; }  // [s] in use (1 in static mode)
-  // [s] stable timestep: safety * min_t h_t / C_p over all tetrahedra (physics.md 5.7),
-  // from the current geometry.
+  // [s] stable timestep (cached, O(1)): the smaller of safety * min_t h_t / C_p over all
+  // tetrahedra (physics.md 5.7) and the coupling-stiffness limit (see set_interface_stiffness).
+  // The zone part is computed at construction and, in large-strain dynamic runs, refreshed
+  // every 100 steps from the deformed geometry.
   [[nodiscard]] double critical_timestep() const;
   // Impose dt (dynamic mode). Throws std::invalid_argument if dt <= 0 or dt exceeds
-  // critical_timestep(), and std::logic_error in static mode. In large-strain dynamic runs the
-  // critical timestep is re-checked every 100 steps: a step that was not imposed follows it;
-  // an imposed one that has become too large makes step() throw std::runtime_error.
-  // Otherwise dt is the critical timestep computed at construction.
+  // critical_timestep(), and std::logic_error in static mode. If the critical timestep later
+  // drops below an imposed dt (stiffer coupling, deformed zones), step() throws
+  // std::runtime_error until a smaller dt is imposed. Without set_timestep(), dt follows
+  // critical_timestep().
   void set_timestep(double dt);
 
   // ---- boundary conditions ----------------------------------------------------------------
@@ -100,11 +102,13 @@ class Model {
   // External forces [N] on the interface gridpoints, [n_if,3]; added to the force sum of every
   // later step until replaced.
   void set_interface_forces(std::span<const double> forces);
-  // Stiffness [N/m] per interface gridpoint [n_if] (physics.md 6.5); in static mode it is
-  // added to the inertial mass (m_I += k dt^2, dt = 1). Ignored in dynamic mode.
+  // Stiffness [N/m] per interface gridpoint [n_if] (physics.md 6.5), O(n_if), may be called
+  // every step. Static mode: added to the inertial mass (m_I += k dt^2, dt = 1). Dynamic mode:
+  // critical_timestep() also obeys dt <= 0.5 sqrt(m_g / (k + k_zone)) at those gridpoints; an
+  // automatic dt follows it, an imposed dt is checked by step().
   void set_interface_stiffness(std::span<const double> stiffness);
   [[nodiscard]] std::vector<double> interface_positions() const;      // [m] [n_if,3]
-  [[nodiscard]] std::vector<double> interface_velocities() const;     // [m/s] [n_if,3]
+  [[nodiscard]] std::vector<double> interface_velocities() const;     // [m/s] [n_if,3] (static mode: m/step)
   [[nodiscard]] std::vector<double> interface_displacements() const;  // [m] [n_if,3]
 
   // ---- stresses and state -------------------------------------------------------------------
@@ -118,8 +122,8 @@ class Model {
   // ---- diagnostics ------------------------------------------------------------------------
   [[nodiscard]] Ratios ratios() const;
   [[nodiscard]] double kinetic_energy() const;
-  // Reaction [N] = force the supports exert = -(net force) on the fixed components, summed over
-  // the given gridpoints.
+  // Reaction [N] = force the supports exert = -(zone + gravity + applied + coupling forces) on
+  // the fixed components, summed over the given gridpoints.
   [[nodiscard]] Vec3 reaction_sum(std::span<const std::int32_t> gps) const;
   [[nodiscard]] Vec3 base_reaction() const { return reaction_sum(base_points_); }
   [[nodiscard]] HistoryRecord sample() const;
@@ -157,12 +161,15 @@ class Model {
   template <class Law, bool Large, bool ZoneAvg>
   void zone_kernel(std::span<const std::int32_t> zones, bool update_stress);
   void net_force(std::size_t g, double* f) const;  // zone + external + coupling
+  [[nodiscard]] double zone_critical_timestep() const;  // full pass over the tetrahedra
+  void update_interface_critical_timestep();
 
   ModelParams params_;
   Mesh mesh_;
   std::size_t n_ = 0, nz_ = 0;
   std::vector<double> x0_, x_, u_, v_;           // [n,3]
   std::vector<double> mass_, gmass_, mass_base_; // [n] inertial, gravitational, static base
+  std::vector<double> zone_stiffness_;           // [n] N/m, alpha1 V max|g|^2 summed (6.5)
   std::vector<double> fzone_;                    // [n,3] gathered zone forces
   std::vector<double> fext_;                     // [n,3] gravity + applied loads
   std::vector<double> fapplied_;                 // [n,3] applied loads only
@@ -178,6 +185,7 @@ class Model {
   std::vector<std::int32_t> gp_zone_offset_;     // [n+1] CSR of (zone*8 + corner) around each gp
   std::vector<std::int32_t> gp_zone_entry_;
   std::vector<std::int32_t> base_points_;
+  std::vector<std::int32_t> gp_interface_;       // [n] interface index of each gridpoint, -1: none
   std::vector<double> fcouple_;                  // [n_if,3]
   std::vector<double> kcouple_;                  // [n_if]
   bool has_coupling_ = false;
@@ -186,6 +194,8 @@ class Model {
   double time_ = 0.0;
   double dt_ = 1.0;
   bool dt_imposed_ = false;  // set_timestep() was called (dynamic mode)
+  double zone_critical_dt_ = 0.0;       // [s] cached zone part of critical_timestep()
+  double interface_critical_dt_ = 0.0;  // [s] cached coupling-stiffness part
   // Large-strain dynamic runs re-check the critical timestep every this many steps.
   static constexpr std::int64_t kTimestepCheckInterval = 100;
   Vec3 gravity_{0.0, 0.0, 0.0};

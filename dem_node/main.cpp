@@ -1,0 +1,432 @@
+// dem_node: the DEM engine (dem_core) as the bus's DEM role.
+//
+// A thin adapter: scene keys -> dem::WorldParams, stage actions -> the staged operations of
+// dem_core (physics.md 4), coupling hooks -> facet walls driven by the continuum's interface
+// gridpoints (6.2-6.5), footing kinematics from the coordinator's grants (7.1), results ->
+// dem.h5 + particles.xmf + bonds.xmf + dem_history.csv in the run folder.
+//
+// Procedures that converge by themselves (REV generation, servo, UCS test) run inside the
+// stage's STAGE_BEGIN with their own budgets from the scene; the stage's grants then only
+// cycle. Gravity (if the scene has [gravity]) is switched on by the first stage that is not a
+// specimen-generation stage (generate, servo, bond, replicate): a periodic REV has no weight.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iomanip>
+#include <limits>
+#include <optional>
+
+#include <spdlog/spdlog.h>
+
+#include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/specimen.hpp"
+#include "demfdm/dem/world.hpp"
+#include "demfdm/io/csv_series.hpp"
+#include "demfdm/io/results_output.hpp"
+#include "messages/node_runtime.hpp"
+
+using namespace demfdm;
+namespace fs = std::filesystem;
+
+namespace {
+
+dem::ContactFamilyParams family(const config::Scene& s, const std::string& name) {
+  auto k = [&](const char* key) { return "dem." + name + "." + key; };
+  dem::ContactFamilyParams f;
+  auto m = s.string(k("model"));
+  f.model = m == "pbond" ? dem::ContactModel::kLinearPBond
+                         : m == "softbond" ? dem::ContactModel::kSoftBond : dem::ContactModel::kLinear;
+  f.linear.emod = s.real(k("emod"));
+  f.linear.kratio = s.real(k("kratio"));
+  f.linear.fric = s.real(k("fric"));
+  f.linear.wall_length = s.string(k("wall_length")) == "diameter" ? dem::WallLength::kDiameter : dem::WallLength::kRadius;
+  const double inf = std::numeric_limits<double>::infinity();
+  auto strength = [&](const char* key) { return s.real(k(key)) < 0 ? inf : s.real(k(key)); };
+  f.pbond.emod = s.real(k("pb_emod"));
+  f.pbond.kratio = s.real(k("pb_kratio"));
+  f.pbond.rmul = s.real(k("pb_rmul"));
+  f.pbond.mcf = s.real(k("pb_mcf"));
+  f.pbond.ten = strength("pb_ten");
+  f.pbond.coh = strength("pb_coh");
+  f.pbond.fa_deg = s.real(k("pb_fa"));
+  f.pbond.zero_linear = s.boolean(k("pb_zero_linear"));
+  auto& b = f.softbond;
+  b.rmul = s.real(k("sb_rmul"));
+  b.mcf = s.real(k("sb_mcf"));
+  b.bmul = s.real(k("sb_bmul"));
+  b.ten = s.real(k("sb_ten"));
+  b.coh = s.real(k("sb_coh"));
+  b.fa_deg = s.real(k("sb_fa"));
+  b.soft = s.real(k("sb_soft"));
+  b.cut = s.real(k("sb_cut"));
+  b.twist_factor = s.real(k("sb_twist"));
+  b.ret = s.string(k("sb_return")) == "radial" ? dem::SoftReturn::kRadial : dem::SoftReturn::kAssociated;
+  b.unload = s.string(k("sb_unload")) == "secant" ? dem::SoftUnload::kSecant : dem::SoftUnload::kElastic;
+  b.cohesion = s.string(k("sb_cohesion_softening")) == "proportional" ? dem::CohesionSoftening::kProportional
+                                                                       : dem::CohesionSoftening::kNone;
+  b.bending_in_softening = s.boolean(k("sb_bending_in_softening"));
+  b.moments = s.string(k("sb_unbonded_moments")) == "none" ? dem::UnbondedMoments::kNone : dem::UnbondedMoments::kJiang;
+  return f;
+}
+
+// Geometry of the DEM block: REV cell, replication, placement.
+struct Block {
+  dem::Vec3 origin{}, cell{};
+  int nx = 1, ny = 1, nz = 1;
+  double height() const { return cell.z * nz; }
+  double z_top() const { return origin.z + height(); }
+  dem::Vec3 centre() const { return {origin.x + cell.x * nx / 2, origin.y + cell.y * ny / 2, origin.z + height() / 2}; }
+};
+
+Block block_of(const config::Scene& s) {
+  Block b;
+  auto c = s.reals("dem.specimen.cell");
+  b.cell = {c[0], c[1], c[2]};
+  auto r = s.integers("dem.specimen.replicate");
+  b.nx = static_cast<int>(r[0]);
+  b.ny = static_cast<int>(r[1]);
+  b.nz = static_cast<int>(r[2]);
+  auto o = s.reals("dem.specimen.origin");
+  if (o.size() == 3) {
+    b.origin = {o[0], o[1], o[2]};
+  } else if (!o.empty()) {
+    s.fail("dem.specimen.origin", "an empty list or [x, y, z] in m", std::to_string(o.size()) + " numbers");
+  } else if (s.has("continuum")) {
+    auto box = s.reals("continuum.mesh.size");
+    b.origin = {(box[0] - b.cell.x * b.nx) / 2, (box[1] - b.cell.y * b.ny) / 2, box[2] - b.height()};
+  }
+  return b;
+}
+
+bool is_generation(const std::string& a) { return a == "generate" || a == "servo" || a == "bond" || a == "replicate"; }
+
+class DemParticipant : public node::Participant {
+ public:
+  explicit DemParticipant(const node::Context& ctx)
+      : ctx_(ctx), s_(ctx_.scene), block_(block_of(ctx.scene)), world_(world_params()) {
+    interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
+    frame_every_ = s_.integer("dem.output.frame_every");
+    history_every_ = s_.integer("dem.output.history_every");
+    gravity_level_ = s_.has("gravity") ? s_.real("gravity.level") : 0.0;
+    if (!ctx.options.run_dir.empty()) {
+      dir_ = ctx.options.run_dir;
+      io::FileInfo info{"dem_node", std::to_string(ctx.options.run_id), std::to_string(s_.hash()), {}};
+      out_.emplace(dir_, info, io::H5StorageParams{}, std::vector<std::string>{"bonds"});
+      if (history_every_ > 0)
+        history_.emplace(io::CsvSeries::create(
+            dir_ / "dem_history.csv",
+            {"step_unit", "time_s", "ratio_unit", "kinetic_J", "footing_fz_N", "footing_disp_m", "facet_fz_N"}));
+    }
+  }
+
+  double dt_stable() const override {
+    if (world_.num_balls() == 0) return 0.0;
+    return interval_ * const_cast<dem::World&>(world_).critical_timestep();
+  }
+  double time() const override { return world_.time(); }
+
+  proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
+    const auto& a = st.action;
+    stage_ratio_ = st.view.real("ratio");
+    if (!is_generation(a) && gravity_level_ > 0 && !world_.gravity_on()) {
+      auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
+      spdlog::info("dem: {}", r.what);
+    }
+    proto::Values v;
+    if (a == "generate") {
+      v = report(generate());
+    } else if (a == "servo") {
+      v = report(servo());
+    } else if (a == "bond") {
+      double gap = s_.real("dem.specimen.bond_gap");
+      if (gap < 0) gap = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
+      v = report(dem::install_bonds(world_, -std::numeric_limits<double>::infinity(), gap));
+    } else if (a == "replicate") {
+      dem::ReplicateParams p;
+      p.nx = block_.nx;
+      p.ny = block_.ny;
+      p.nz = block_.nz;
+      p.keep_periodic = false;
+      v = report(dem::replicate(world_, p));
+    } else if (a == "couple") {
+      if (!st.coupled) throw std::invalid_argument("stage '" + st.name + "': action 'couple' needs coupled = true");
+      coupling_setup_pending_ = true;  // done when the interface mesh arrives (set_interface_mesh)
+    } else if (a == "penetrate") {
+      v = place_footing();
+    } else if (a == "ucs") {
+      v = ucs(st);
+    } else if (a != "cycle" && a != "equilibrium") {
+      throw std::invalid_argument("dem_node does not support stage action '" + a + "'");
+    }
+    penetrating_ = a == "penetrate";
+    if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
+    world_.prepare();
+    return v;
+  }
+
+  void advance(const schema::Stage&, std::int64_t step, double dt, const std::vector<double>& values) override {
+    if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
+    if (penetrating_) {
+      if (values.empty()) throw std::runtime_error("penetrate: the coordinator sent no footing speed");
+      world_.set_footing_velocity({0.0, 0.0, -values[0]});
+    }
+    // Exactly 'interval' DEM steps per coupling step of length dt.
+    if (dt > 0) world_.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
+    world_.step(interval_);
+    if (history_ && history_every_ > 0 && step % history_every_ == 0) {
+      auto fz = world_.has_footing() ? world_.footing_reaction().z : 0.0;
+      auto facet = world_.num_facet_walls() > 0 ? world_.facet_walls_total_force().z : 0.0;
+      history_->append({static_cast<double>(step), world_.time(), world_.unbalanced_ratio(), world_.energy().kinetic, fz,
+                        footing_disp(), facet});
+    }
+    if (out_ && frame_every_ > 0 && step % frame_every_ == 0) write_frame(step);
+  }
+
+  proto::Values step_values() override {
+    proto::Values v{{"ratio", world_.unbalanced_ratio()}};
+    if (world_.has_footing()) {
+      v.push_back({"footing_fz_N", world_.footing_reaction().z});
+      v.push_back({"footing_disp_m", footing_disp()});
+    }
+    return v;
+  }
+  bool criterion_met(const schema::Stage& st) override {
+    if (penetrating_) return footing_disp() >= target_disp_ * (1 - 1e-12);
+    return st.action != "cycle" && world_.unbalanced_ratio() < stage_ratio_;
+  }
+  proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
+    if (out_) write_frame(last);
+    auto m = dem::measure(world_);
+    proto::Values v{{"balls", static_cast<double>(world_.num_balls())},
+                    {"ratio", m.ratio},
+                    {"coordination", m.coord.z},
+                    {"bonds_intact", static_cast<double>(m.bonds.intact)},
+                    {"bonds_softening", static_cast<double>(m.bonds.softening)},
+                    {"bonds_broken_tension", static_cast<double>(m.bonds.broken_tension)},
+                    {"bonds_broken_shear", static_cast<double>(m.bonds.broken_shear)}};
+    if (world_.num_facet_walls() > 0) v.push_back({"facet_fz_N", world_.facet_walls_total_force().z});
+    spdlog::info("dem: stage '{}' ends: {} balls, ratio {:.3e}, Z {:.3f}, bonds intact {} softening {} broken T {} S {}",
+                 st.name, world_.num_balls(), m.ratio, m.coord.z, m.bonds.intact, m.bonds.softening,
+                 m.bonds.broken_tension, m.bonds.broken_shear);
+    return v;
+  }
+  void finish() override {
+    if (history_) history_->close();
+  }
+
+  // Coupling (DEM role).
+  void set_interface_mesh(const proto::InterfaceMesh& m) override {
+    wall_ = world_.add_facet_wall(m.positions, m.triangles);
+    n_iface_ = m.n_points();
+    spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
+    if (coupling_setup_pending_) {
+      coupling_setup_pending_ = false;
+      double d_min = s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
+      world_.prepare();  // detect the ball-facet contacts before bonding them
+      std::size_t nb = world_.bond_ball_facet(1e-3 * d_min);
+      spdlog::info("dem: {} ball-facet bonds installed", nb);
+      auto mode = s_.string("dem.specimen.depth_scaling");
+      if (mode != "none") {
+        dem::DepthScaleParams p;
+        p.mode = mode == "paper_literal" ? dem::DepthScaling::kPaperLiteral : dem::DepthScaling::kDepthRatio;
+        p.z_top = block_.z_top();
+        p.height = block_.height();
+        spdlog::info("dem: {}", dem::depth_scale(world_, p).what);
+      }
+      spdlog::info("dem: {}", dem::assign_interface_bond_forces(world_, s_.real("dem.specimen.d50") * s_.real("dem.specimen.scale")).what);
+      world_.prepare();
+    }
+  }
+  void set_interface_kinematics(const proto::Kinematics& k) override {
+    if (wall_ < 0) throw std::runtime_error("interface kinematics before the interface mesh");
+    world_.set_vertex_kinematics(wall_, k.positions, k.velocities);
+  }
+  proto::Forces interface_forces() override {
+    proto::Forces f;
+    auto vf = world_.vertex_forces(wall_);
+    auto vk = world_.vertex_stiffness(wall_);
+    f.forces.assign(vf.begin(), vf.end());
+    f.stiffness.assign(vk.begin(), vk.end());
+    auto t = world_.facet_wall_force(wall_);
+    f.total = {t.x, t.y, t.z};
+    return f;
+  }
+
+ private:
+  dem::WorldParams world_params() {
+    dem::WorldParams p;
+    p.density = s_.real("dem.density");
+    p.local_damping = s_.real("dem.damping");
+    p.dt_safety = s_.real("dem.dt_safety");
+    p.dt_interval = static_cast<int>(s_.integer("dem.dt_interval"));
+    p.dt_fixed = s_.real("dem.dt_fixed");
+    p.skin_factor = s_.real("dem.skin_factor");
+    p.facet_spin = s_.boolean("dem.facet_spin");
+    p.track_energy = s_.boolean("dem.track_energy");
+    p.threads = static_cast<int>(s_.integer("run.threads"));
+    p.gravity = false;
+    p.ball_ball = family(s_, "ball_ball");
+    p.ball_wall = family(s_, "ball_wall");
+    p.ball_facet = family(s_, "ball_facet");
+    p.ball_footing = family(s_, "ball_footing");
+    // A scene that generates its specimen starts with the REV's periodic cell.
+    for (auto& st : schema::stages(s_))
+      if (st.action == "generate") {
+        p.periodic.enabled = true;
+        p.periodic.origin = block_.origin;
+        p.periodic.length = block_.cell;
+      }
+    omp_set_num_threads(p.threads);
+    try {
+      dem::validate(p);
+    } catch (const std::invalid_argument& e) {
+      s_.fail("dem", "valid DEM parameters", e.what());
+    }
+    return p;
+  }
+
+  dem::StageReport generate() {
+    dem::RevParams p;
+    p.psd.d_min = s_.real("dem.specimen.d_min");
+    p.psd.d_max = s_.real("dem.specimen.d_max");
+    p.psd.scale = s_.real("dem.specimen.scale");
+    p.seed = static_cast<std::uint64_t>(s_.integer("run.seed"));
+    p.n_particles = static_cast<std::size_t>(s_.integer("dem.specimen.n_particles"));
+    p.porosity_target = s_.real("dem.specimen.porosity_target");
+    p.initial_scale = s_.real("dem.specimen.initial_scale");
+    p.increments = static_cast<int>(s_.integer("dem.specimen.increments"));
+    p.ratio_tol = s_.real("dem.specimen.expansion_ratio");
+    p.max_steps_per_increment = s_.integer("dem.specimen.max_steps_per_increment");
+    return dem::generate_rev(world_, p);
+  }
+
+  // sigma_v at the bottom of the DEM block for the scene's g-level (physics.md 4.5, 7.4).
+  double sigma_v() const {
+    double sv = s_.real("dem.specimen.sigma_v");
+    if (sv >= 0) return sv;
+    double rho_b = s_.real("dem.specimen.bulk_density");
+    if (rho_b < 0) rho_b = 0.48 * s_.real("dem.density");
+    double g = s_.has("gravity") ? s_.real("gravity.level") * s_.real("gravity.g0") : 9.81;
+    return rho_b * g * block_.height();
+  }
+
+  dem::StageReport servo() {
+    dem::ServoParams p;
+    double sv = sigma_v(), sh = s_.real("dem.specimen.k0") * sv;
+    p.target = {sh, sh, sv};
+    p.gain = s_.real("dem.specimen.servo_gain");
+    // Compaction with low friction, then the final friction at constant stress (4.3 step 4).
+    double mu = world_.params().ball_ball.linear.fric;
+    world_.mutable_params().ball_ball.linear.fric = std::min(mu, s_.real("dem.specimen.servo_fric"));
+    world_.refresh_contact_constants();
+    auto tol = s_.real("dem.specimen.servo_tol"), ratio = s_.real("dem.specimen.servo_ratio");
+    auto budget = s_.integer("dem.specimen.servo_steps");
+    auto r1 = dem::servo_until(world_, p, tol, ratio, 200, budget);
+    world_.mutable_params().ball_ball.linear.fric = mu;
+    world_.refresh_contact_constants();
+    auto r2 = dem::servo_until(world_, p, tol, ratio, 200, budget / 2);
+    r2.steps += r1.steps;
+    r2.what = "servo to sigma_v " + std::to_string(sv) + " Pa, sigma_h " + std::to_string(sh) + " Pa: " + r1.what +
+              "; at final friction: " + r2.what;
+    return r2;
+  }
+
+  proto::Values report(const dem::StageReport& r) {
+    spdlog::info("dem: {} ({} steps, ratio {:.3e}, porosity {:.4f}, count {}, converged {})", r.what, r.steps, r.ratio,
+                 r.porosity, r.count, r.converged);
+    if (!r.converged) spdlog::warn("dem: '{}' did not converge within its budget", r.what);
+    return {{"steps", static_cast<double>(r.steps)}, {"ratio", r.ratio}, {"porosity", r.porosity},
+            {"count", static_cast<double>(r.count)}, {"converged", r.converged ? 1.0 : 0.0},
+            {"sxx_Pa", r.stress[0]}, {"syy_Pa", r.stress[4]}, {"szz_Pa", r.stress[8]}};
+  }
+
+  proto::Values place_footing() {
+    dem::FootingParams f;
+    f.diameter = s_.real("dem.footing.diameter");
+    f.height = s_.real("dem.footing.height");
+    auto c = s_.reals("dem.footing.centre");
+    dem::Vec3 axis = block_.centre();
+    if (c.size() == 2) axis = {c[0], c[1], 0};
+    // Bottom at the highest ball top under the footprint: penetration counts from first contact.
+    double ztop = block_.z_top();
+    const auto& b = world_.balls();
+    double r_f = f.diameter / 2;
+    double best = -std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < b.size(); ++i) {
+      double dx = b.x[i].x - axis.x, dy = b.x[i].y - axis.y;
+      if (dx * dx + dy * dy <= (r_f + b.r[i]) * (r_f + b.r[i])) best = std::max(best, b.x[i].z + b.r[i]);
+    }
+    if (!std::isfinite(best)) best = ztop;
+    f.bottom_centre = {axis.x, axis.y, best};
+    f.velocity = {0, 0, 0};
+    world_.set_footing(f);
+    footing_z0_ = best;
+    spdlog::info("dem: footing D {} m at ({}, {}), bottom z {} m", f.diameter, axis.x, axis.y, best);
+    return {{"footing_z0_m", best}};
+  }
+  double footing_disp() const {
+    return world_.has_footing() ? footing_z0_ - world_.footing().p.bottom_centre.z : 0.0;
+  }
+
+  proto::Values ucs(const schema::Stage& st) {
+    dem::UcsParams p;
+    p.strain_rate = st.view.real("strain_rate");
+    p.max_strain = st.view.real("max_strain");
+    auto r = dem::unconfined_compression(world_, p);
+    if (!dir_.empty()) {
+      auto csv = io::CsvSeries::create(dir_ / "ucs_curve.csv", {"strain_unit", "stress_Pa"});
+      for (auto& s : r.curve) csv.append({s.strain, s.stress});
+      csv.close();
+    }
+    spdlog::info("dem: UCS {:.4e} Pa, E50 {:.4e} Pa ({} samples)", r.peak, r.e50, r.curve.size());
+    return {{"ucs_Pa", r.peak}, {"e50_Pa", r.e50}, {"samples", static_cast<double>(r.curve.size())}};
+  }
+
+  void write_frame(std::int64_t step) {
+    if (world_.num_balls() == 0) return;
+    if (has_frame_ && world_.time() <= last_frame_time_) return;  // frame times must increase
+    auto snap = dem::snapshot(world_);
+    std::vector<std::int64_t> ids(snap.id.begin(), snap.id.end());
+    std::vector<std::int32_t> pairs(snap.pair.begin(), snap.pair.end());
+    io::ParticleFrame f;
+    f.position = io::ArrayView(snap.position, 3);
+    f.point_arrays.push_back({"radius", io::ArrayView(snap.radius)});
+    f.point_arrays.push_back({"velocity", io::ArrayView(snap.velocity, 3)});
+    f.point_arrays.push_back({"id", io::ArrayView(ids)});
+    io::LinkFrame bonds;
+    bonds.name = "bonds";
+    bonds.nodes = io::ArrayView(pairs, 2);
+    bonds.cell_arrays.push_back({"state", io::ArrayView(snap.state)});
+    bonds.cell_arrays.push_back({"force", io::ArrayView(snap.force, 3)});
+    f.links.push_back(bonds);
+    out_->write_frame(step, world_.time(), f);
+    has_frame_ = true;
+    last_frame_time_ = world_.time();
+  }
+
+  node::Context ctx_;
+  const config::Scene& s_;
+  Block block_;
+  dem::World world_;
+  std::int64_t interval_ = 1, frame_every_ = 0, history_every_ = 1;
+  double gravity_level_ = 0, stage_ratio_ = 1e-5;
+  fs::path dir_;
+  std::optional<io::ParticleOutput> out_;
+  std::optional<io::CsvSeries> history_;
+  bool has_frame_ = false;
+  double last_frame_time_ = 0;
+  int wall_ = -1;
+  std::size_t n_iface_ = 0;
+  bool coupling_setup_pending_ = false, penetrating_ = false;
+  double footing_z0_ = 0, target_disp_ = 0;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return node::run_node(argc, argv, "dem", "dem_node",
+                        [](const node::Context& ctx) { return std::make_unique<DemParticipant>(ctx); });
+}
