@@ -104,6 +104,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
       return 2;
     }
     log->info("scene {} (hash {:016x}) received", ep->scene_origin(), ctx.scene.hash());
+    ep->set_timeouts(ctx.scene.real("bus.peer_timeout_s"), ctx.scene.real("bus.resend_after_s"));
     part = make(ctx);
     auto stages = schema::stages(ctx.scene);
     std::string scheme = ctx.scene.has("coupling") ? ctx.scene.string("coupling.scheme") : "serial";

@@ -106,6 +106,12 @@ class NodeEndpoint {
   std::int64_t scene_hash() const { return scene_hash_; }
   const std::string& scene_origin() const { return scene_origin_; }
 
+  // Deadlines from the scene (known only after the scene has arrived).
+  void set_timeouts(double peer_timeout_s, double resend_after_s) {
+    t_.peer_timeout_s = peer_timeout_s;
+    t_.resend_after_s = resend_after_s;
+  }
+
   // Says hello (repeated until the first command for this node arrives) and sets the
   // node's stable time step for the coordinator's dt choice.
   void hello(double dt_stable);
