@@ -244,3 +244,66 @@ TEST(Protocol, SilentCoordinatorIsDetected) {
   double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_LT(s, 1.0);
 }
+
+namespace {
+// A node's hello as a fake: lets a test tamper with what the coordinator checks.
+demfdm::hello_t fake_hello(std::uint64_t hash) {
+  demfdm::hello_t h{};
+  h.role = "dem";
+  h.solver = "fake";
+  h.protocol_version = proto::kProtocolVersion;
+  h.scene_hash = static_cast<std::int64_t>(hash);
+  for (auto& f : bus::compiled_fingerprints()) {
+    h.type_names.push_back(f.name);
+    h.fingerprints.push_back(f.hash);
+  }
+  h.n_types = static_cast<std::int32_t>(h.type_names.size());
+  h.pid = 1;
+  h.host = "here";
+  return h;
+}
+
+std::string start_with(std::function<void(demfdm::hello_t&)> tamper) {
+  auto l = memq();
+  bus::Bus cb(l, 5, "coordinator"), nb(l, 5, "dem");
+  proto::Timeouts t;
+  t.startup_s = 2.0;
+  proto::CoordinatorEndpoint coord(cb, t);
+  const std::string text = "[dem]\n";
+  // FNV-1a 64 of the text, as config::Scene::hash() computes it.
+  std::uint64_t h = 14695981039346656037ull;
+  for (unsigned char c : text) h = (h ^ c) * 1099511628211ull;
+  // The node answers every scene broadcast with its (tampered) hello.
+  nb.subscribe<demfdm::scene_t>(bus::channel::kScene, [&](const demfdm::scene_t&) {
+    auto hello = fake_hello(h);
+    tamper(hello);
+    nb.publish(bus::channel::kHello, hello);
+  });
+  try {
+    coord.start(text, "test.toml", h, {"dem"});
+  } catch (const proto::ProtocolError& e) {
+    return e.what();
+  }
+  return "";
+}
+}  // namespace
+
+TEST(Handshake, MatchingHelloIsAccepted) {
+  EXPECT_EQ(start_with([](demfdm::hello_t&) {}), "");
+}
+
+TEST(Handshake, MismatchesAreRefusedNamingWhatDiffers) {
+  auto version = start_with([](demfdm::hello_t& h) { h.protocol_version = 99; });
+  EXPECT_NE(version.find("node 'dem' (fake, pid 1 on here) speaks protocol version 99, the coordinator 1"), std::string::npos)
+      << version;
+  auto hash = start_with([](demfdm::hello_t& h) { h.scene_hash ^= 1; });
+  EXPECT_NE(hash.find("received a different scene (hash mismatch)"), std::string::npos) << hash;
+  auto fp = start_with([](demfdm::hello_t& h) { h.fingerprints[4] ^= 1; });
+  EXPECT_NE(fp.find("different definition of message type report_t (fingerprint mismatch)"), std::string::npos) << fp;
+  auto missing = start_with([](demfdm::hello_t& h) {
+    h.type_names.pop_back();
+    h.fingerprints.pop_back();
+    h.n_types -= 1;
+  });
+  EXPECT_NE(missing.find("does not know message type iface_force_t"), std::string::npos) << missing;
+}
