@@ -49,6 +49,11 @@ class BusDriver : public coord::Driver {
       n.compute_s = r.compute_s;
       n.wait_s = r.wait_s;
       for (int i = 0; i < r.n_values; ++i) n.values[r.names[i]] = r.values[i];
+      for (int j = 0; j < r.n_rows; ++j) {
+        std::map<std::string, double> row;
+        for (int i = 0; i < r.n_values && i < static_cast<int>(r.rows[j].size()); ++i) row[r.names[i]] = r.rows[j][i];
+        n.rows.emplace_back(r.row_steps[j], std::move(row));
+      }
       n.text = r.text;
       out[role] = n;
     }

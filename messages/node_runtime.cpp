@@ -159,6 +159,9 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
         ep->report(c.header.step, demfdm::report_t::OK, c.stage_index, part->time(), part->dt_stable(),
                    compute() - w, w + cmd_wait, values);
       } else if (c.command == demfdm::command_t::GRANT) {
+        const bool block = c.header.step > step + 1;  // a multi-step grant reports one row per step
+        std::vector<std::pair<std::int64_t, std::vector<double>>> rows;
+        proto::Values last_values;
         for (std::int64_t k = step + 1; k <= c.header.step; ++k) {
           if (st.coupled && role == "dem" && kin_applied != k - 1) {
             part->set_interface_kinematics(ep->wait_kin(k - 1));
@@ -178,12 +181,19 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
             ep->send_kin(kin);
           }
           step = k;
+          if (block) {
+            last_values = part->step_values();
+            last_values.insert(last_values.begin(), {"time_s", part->time()});
+            std::vector<double> row;
+            for (auto& kv : last_values) row.push_back(kv.second);
+            rows.emplace_back(k, std::move(row));
+          }
         }
         // Bus waits inside the grant (interface data) are not compute time.
         double w = ep->take_wait_s();
         auto status = part->criterion_met(st) ? demfdm::report_t::STAGE_DONE : demfdm::report_t::OK;
         ep->report(c.header.step, status, c.stage_index, part->time(), part->dt_stable(), compute() - w, w + cmd_wait,
-                   part->step_values());
+                   block ? last_values : part->step_values(), {}, rows);
       } else if (c.command == demfdm::command_t::STAGE_END) {
         auto values = part->stage_end(st, c.header.step);
         log->info("stage {} '{}' ends after step {}", c.stage_index, st.name, c.header.step);

@@ -220,7 +220,8 @@ double NodeEndpoint::take_wait_s() {
 
 void NodeEndpoint::report(std::int64_t step, std::int32_t status, std::int32_t stage, double time,
                           double dt_stable, double compute_s, double wait_s, const Values& values,
-                          const std::string& text) {
+                          const std::string& text,
+                          const std::vector<std::pair<std::int64_t, std::vector<double>>>& rows) {
   // The report answers the most recently taken command.
   demfdm::report_t r;
   r.header.step = step;
@@ -236,6 +237,13 @@ void NodeEndpoint::report(std::int64_t step, std::int32_t status, std::int32_t s
   }
   r.n_values = static_cast<std::int32_t>(r.values.size());
   r.text = text;
+  r.n_rows = 0;
+  for (auto& [k, row] : rows) {
+    if (row.size() != r.values.size()) continue;  // a row must carry the same names
+    r.row_steps.push_back(k);
+    r.rows.push_back(row);
+  }
+  r.n_rows = static_cast<std::int32_t>(r.rows.size());
   r.command = current_command_;
   bus_.publish(bus::channel::kReport, r);
   reports_[{r.command, step}] = r;

@@ -125,7 +125,8 @@ class NodeEndpoint {
   // gets the same report again.
   void report(std::int64_t step, std::int32_t status, std::int32_t stage, double time,
               double dt_stable, double compute_s, double wait_s, const Values& values,
-              const std::string& text = {});
+              const std::string& text = {},
+              const std::vector<std::pair<std::int64_t, std::vector<double>>>& rows = {});
   // Time spent in bus waits since the last report [s] (goes into report.wait_s).
   double take_wait_s();
 

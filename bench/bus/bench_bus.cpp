@@ -66,15 +66,16 @@ double raw_round_trip_us(const std::string& url, int n) {
 }
 
 // Wall time per coupling step of the chain run, from the coordinator's summary.
-double coupled_step_us(const std::string& bin, const std::string& scheme, int steps, int port) {
-  auto dir = fs::temp_directory_path() / ("demfdm-bench-bus-" + scheme + "-" + std::to_string(getpid()));
+double coupled_step_us(const std::string& bin, const std::string& scheme, int steps, int port, int per_grant = 1) {
+  auto dir = fs::temp_directory_path() /
+             ("demfdm-bench-bus-" + scheme + std::to_string(per_grant) + "-" + std::to_string(getpid()));
   fs::remove_all(dir);
   fs::create_directories(dir);
   std::ofstream(dir / "scene.toml")
       << "[dem]\nexecutable = \"chain_dem\"\n[continuum]\nexecutable = \"chain_continuum\"\n[coupling]\nscheme = \""
       << scheme << "\"\n[chain]\nn_masses = 20\nsplit = 10\nrecord_every = 1000000\n"
       << "[[stage]]\nname = \"warmup\"\nsteps = 200\ncoupled = true\n"
-      << "[[stage]]\nname = \"timed\"\nsteps = " << steps << "\ncoupled = true\n";
+      << "[[stage]]\nname = \"timed\"\nsteps = " << steps << "\ncoupled = true\nsteps_per_grant = " << per_grant << "\n";
   std::string url = "udpm://239.255.76.67:" + std::to_string(port) + "?ttl=0";
   auto args = [&](const std::string& exe) {
     return std::vector<std::string>{bin + "/" + exe, "--lcm-url=" + url, "--run-id=99", "--run-dir=" + dir.string()};
@@ -106,6 +107,8 @@ int main(int argc, char** argv) {
   double rtt = raw_round_trip_us(url, rts);
   double serial = coupled_step_us(bin, "serial", steps, 42000 + getpid() % 1000);
   double parallel = coupled_step_us(bin, "parallel", steps, 43000 + getpid() % 1000);
+  double serial16 = coupled_step_us(bin, "serial", steps, 44000 + getpid() % 1000, 16);
+  double parallel16 = coupled_step_us(bin, "parallel", steps, 45000 + getpid() % 1000, 16);
   std::cout << std::fixed << std::setprecision(1);
   std::cout << "bench_bus: lockstep coupling overhead (3 processes, udpm loopback)\n";
   std::cout << "| measure | us per step | raw round trips |\n|---|---|---|\n";
@@ -114,6 +117,10 @@ int main(int argc, char** argv) {
             << serial / rtt << " |\n";
   std::cout << std::setprecision(1) << "| coupled step, parallel scheme (mean of " << steps << ") | " << parallel << " | "
             << std::setprecision(2) << parallel / rtt << " |\n";
+  std::cout << std::setprecision(1) << "| coupled step, serial, 16 steps per grant | " << serial16 << " | "
+            << std::setprecision(2) << serial16 / rtt << " |\n";
+  std::cout << std::setprecision(1) << "| coupled step, parallel, 16 steps per grant | " << parallel16 << " | "
+            << std::setprecision(2) << parallel16 / rtt << " |\n";
   std::cout << "target: at most 2 raw round trips per coupled step\n";
   return 0;
 }

@@ -277,7 +277,9 @@ void declare_stages(config::Section& root) {
             "With until = done: what to do when the budget runs out first.");
   st.boolean("coupled", false, "Exchange interface data every coupling step (needs [coupling]).");
   st.integer("steps_per_grant", "-", 1,
-             "Coupling steps granted per command (uncoupled stages may take large blocks).").min(1);
+             "Coupling steps granted per command. The nodes still report every step's values (one row per step), "
+             "so larger blocks only cut bus traffic; an until = \"done\" stage then ends at a block boundary.")
+      .min(1);
 }
 
 config::Schema build() {
@@ -376,7 +378,7 @@ std::vector<Stage> stages(const config::Scene& s) {
     st.until_done = e.string("until") == "done";
     st.fail_on_budget = e.string("on_budget") == "fail";
     st.coupled = e.boolean("coupled");
-    st.steps_per_grant = st.coupled ? 1 : e.integer("steps_per_grant");
+    st.steps_per_grant = e.integer("steps_per_grant");
     st.view = e;
     out.push_back(std::move(st));
   }

@@ -70,7 +70,36 @@ RunSummary Runner::run() {
         ss.wait_s[r] += rep.wait_s;
         if (rep.status != Status::StageDone) all_done = false;
       }
-      if (observer_) observer_(st, last, reps);
+      if (observer_) {
+        bool rows = false;
+        for (auto& [r, rep] : reps) rows = rows || !rep.rows.empty();
+        if (!rows) {
+          observer_(st, last, reps);
+        } else {
+          // One observation per step of the block, each node's values of that step.
+          for (std::int64_t k = last - st.steps_per_grant + 1; k <= last; ++k) {
+            std::map<std::string, NodeReport> per;
+            for (auto& [r, rep] : reps) {
+              NodeReport n = rep;
+              n.rows.clear();
+              for (auto& [ks, v] : rep.rows)
+                if (ks == k) {
+                  n.values = v;
+                  auto t = n.values.find("time_s");
+                  if (t != n.values.end()) {
+                    n.time = t->second;
+                    n.values.erase(t);
+                  }
+                }
+              per[r] = n;
+            }
+            bool any = false;
+            for (auto& [r, rep] : reps)
+              for (auto& [ks, v] : rep.rows) any = any || ks == k;
+            if (any) observer_(st, k, per);
+          }
+        }
+      }
       if (st.until_done && all_done) done = true;  // collect what is still outstanding, post nothing more
     }
     ss.last_step = step - 1;

@@ -1,8 +1,8 @@
 // The coordinator's stage machine, independent of the transport.
 //
 // A run is a list of stages (scene [[stage]]). For each stage the runner sends STAGE_BEGIN to
-// the stage's nodes, grants coupling steps (one per command in coupled stages, blocks of
-// steps_per_grant otherwise) until the budget is used or, with until = "done", every node has
+// the stage's nodes, grants coupling steps in blocks of steps_per_grant (the nodes report every
+// step's values in the grant's report) until the budget is used or, with until = "done", every node has
 // reported its exit criterion met, then sends STAGE_END. The coupling-step length sent with
 // every grant is the smallest stable step the stage's nodes reported (each node advances
 // exactly that much per coupling step). The step counter is global over the run, so step k of
@@ -33,6 +33,8 @@ struct NodeReport {
   Status status = Status::Ok;
   double time = 0, dt_stable = 0, compute_s = 0, wait_s = 0;
   std::map<std::string, double> values;
+  // Multi-step grants: the values of every step, by step (values holds the last step's).
+  std::vector<std::pair<std::int64_t, std::map<std::string, double>>> rows;
   std::string text;
 };
 
