@@ -187,6 +187,12 @@ class DemParticipant : public node::Participant {
 
   proto::Values step_values() override {
     proto::Values v{{"ratio", world_.unbalanced_ratio()}};
+    if (world_.gravity_on()) {
+      auto sk = skeleton_ratio();
+      v.push_back({"ratio_skeleton", sk.ratio});
+      v.push_back({"rattlers", static_cast<double>(sk.rattlers)});
+      v.push_back({"weight_N", weight()});
+    }
     if (world_.has_footing()) {
       v.push_back({"footing_fz_N", world_.footing_reaction().z});
       v.push_back({"footing_disp_m", footing_disp()});
@@ -195,10 +201,12 @@ class DemParticipant : public node::Participant {
   }
   bool criterion_met(const schema::Stage& st) override {
     if (penetrating_) return footing_disp() >= target_disp_ * (1 - 1e-12);
-    return st.action != "cycle" && world_.unbalanced_ratio() < stage_ratio_;
+    if (st.action == "cycle") return false;
+    return (world_.gravity_on() ? skeleton_ratio().ratio : world_.unbalanced_ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     if (out_) write_frame(last);
+    if (!dir_.empty() && world_.gravity_on() && !is_generation(st.action)) write_profile(st);
     auto m = dem::measure(world_);
     proto::Values v{{"balls", static_cast<double>(world_.num_balls())},
                     {"ratio", m.ratio},
@@ -295,12 +303,22 @@ class DemParticipant : public node::Participant {
     p.psd.scale = s_.real("dem.specimen.scale");
     p.seed = static_cast<std::uint64_t>(s_.integer("run.seed"));
     p.n_particles = static_cast<std::size_t>(s_.integer("dem.specimen.n_particles"));
+    p.porosity_final = s_.real("dem.specimen.porosity");
     p.porosity_target = s_.real("dem.specimen.porosity_target");
     p.initial_scale = s_.real("dem.specimen.initial_scale");
     p.increments = static_cast<int>(s_.integer("dem.specimen.increments"));
     p.ratio_tol = s_.real("dem.specimen.expansion_ratio");
     p.max_steps_per_increment = s_.integer("dem.specimen.max_steps_per_increment");
-    return dem::generate_rev(world_, p);
+    auto r = dem::generate_rev(world_, p);
+    const double z = s_.real("dem.specimen.bond_coordination");
+    if (z > 0) {  // bonds over the gaps that give Table 1's Z (docs/ucs-study.md)
+      auto floor = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
+      auto z0 = dem::coordination(world_).z;  // touching contacts only
+      auto b = dem::install_bonds_to_coordination(world_, z, floor);
+      r.what += "; " + b.what + fmt::format("; Z {:.3f} (touching before bonding: {:.3f})", dem::coordination(world_).z, z0);
+      r.count = world_.num_balls();
+    }
+    return r;
   }
 
   // sigma_v at the bottom of the DEM block for the scene's g-level (physics.md 4.5, 7.4).
@@ -338,6 +356,18 @@ class DemParticipant : public node::Participant {
     spdlog::info("dem: {} ({} steps, ratio {:.3e}, porosity {:.4f}, count {}, converged {})", r.what, r.steps, r.ratio,
                  r.porosity, r.count, r.converged);
     if (!r.converged) spdlog::warn("dem: '{}' did not converge within its budget", r.what);
+    if (!dir_.empty()) {  // one row per staged operation, for the studies (docs/ucs-study.md)
+      const auto path = dir_ / "specimen_stages.csv";
+      const bool fresh = !fs::exists(path);
+      std::ofstream f(path, std::ios::app);
+      const auto c = dem::coordination(world_);
+      if (fresh)
+        f << "balls_unit,steps_unit,ratio_unit,porosity_unit,coordination_unit,coordination_no_rattlers_unit,"
+             "sxx_Pa,syy_Pa,szz_Pa,converged_unit,what\n";
+      f << std::setprecision(10) << world_.num_balls() << ',' << r.steps << ',' << r.ratio << ',' << r.porosity << ','
+        << c.z << ',' << c.z_no_rattlers << ',' << r.stress[0] << ',' << r.stress[4] << ',' << r.stress[8] << ','
+        << (r.converged ? 1 : 0) << ",\"" << r.what << "\"\n";
+    }
     return {{"steps", static_cast<double>(r.steps)}, {"ratio", r.ratio}, {"porosity", r.porosity},
             {"count", static_cast<double>(r.count)}, {"converged", r.converged ? 1.0 : 0.0},
             {"sxx_Pa", r.stress[0]}, {"syy_Pa", r.stress[4]}, {"szz_Pa", r.stress[8]}};
@@ -375,14 +405,122 @@ class DemParticipant : public node::Participant {
     dem::UcsParams p;
     p.strain_rate = st.view.real("strain_rate");
     p.max_strain = st.view.real("max_strain");
-    auto r = dem::unconfined_compression(world_, p);
+    const auto m0 = dem::measure(world_);
+    const double cpu0 = static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
+    const auto t0 = std::chrono::steady_clock::now();
+    // A periodic REV is loaded as a z-periodic column (no platens, no end effects); an opened
+    // specimen between platens (docs/ucs-study.md).
+    const bool column = world_.periodic();
+    auto r = column ? dem::unconfined_compression_column(world_, p) : dem::unconfined_compression(world_, p);
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    const double cpu = static_cast<double>(std::clock()) / CLOCKS_PER_SEC - cpu0;
+    const double steps = static_cast<double>(r.report.steps);
     if (!dir_.empty()) {
       auto csv = io::CsvSeries::create(dir_ / "ucs_curve.csv", {"strain_unit", "stress_Pa"});
       for (auto& s : r.curve) csv.append({s.strain, s.stress});
       csv.close();
     }
-    spdlog::info("dem: UCS {:.4e} Pa, E50 {:.4e} Pa ({} samples)", r.peak, r.e50, r.curve.size());
-    return {{"ucs_Pa", r.peak}, {"e50_Pa", r.e50}, {"samples", static_cast<double>(r.curve.size())}};
+    const auto m1 = dem::measure(world_);
+    spdlog::info("dem: {}", r.report.what);
+    spdlog::info("dem: UCS {:.4e} Pa, E50 {:.4e} Pa ({} samples, {} steps, wall {:.1f} s, cpu {:.1f} s, {:.3e} s/step)",
+                 r.peak, r.e50, r.curve.size(), r.report.steps, wall, cpu, steps > 0 ? wall / steps : 0.0);
+    if (!dir_.empty()) {
+      std::ofstream f(dir_ / "ucs_result.csv");
+      f << "ucs_Pa,e50_Pa,peak_strain_unit,balls_unit,coordination_unit,bonds_unit,bonds_broken_tension_unit,"
+           "bonds_broken_shear_unit,ucs_steps_unit,ucs_wall_s,ucs_cpu_s,settle_steps_unit,peak_reached_unit\n";
+      f << std::setprecision(10) << r.peak << ',' << r.e50 << ',' << r.peak_strain << ',' << world_.num_balls() << ','
+        << m0.coord.z << ',' << (m0.bonds.intact + m0.bonds.softening) << ',' << m1.bonds.broken_tension << ','
+        << m1.bonds.broken_shear << ',' << r.report.steps << ',' << wall << ',' << cpu << ',' << r.settle.steps << ','
+        << (r.report.converged ? 1 : 0) << '\n';
+    }
+    return {{"ucs_Pa", r.peak},
+            {"e50_Pa", r.e50},
+            {"samples", static_cast<double>(r.curve.size())},
+            {"ucs_steps", steps},
+            {"ucs_wall_s", wall},
+            {"ucs_cpu_s", cpu},
+            {"balls", static_cast<double>(world_.num_balls())},
+            {"coordination_before", m0.coord.z},
+            {"bonds_before", static_cast<double>(m0.bonds.intact + m0.bonds.softening)},
+            {"peak_strain", r.peak_strain},
+            {"settle_steps", static_cast<double>(r.settle.steps)},
+            {"peak_reached", r.report.converged ? 1.0 : 0.0}};
+  }
+
+  // Unbalanced-force ratio of the load-bearing skeleton under gravity: the engine's ratio
+  // (mean |F_unb| over balls / mean contact force) without the rattlers, the balls that touch
+  // nothing and whose whole force is their weight. A rattler in the gap of a loose packing
+  // falls at (1 - alpha) N g under local damping and needs a physical time far longer than the
+  // skeleton's equilibration to land; it carries no load, so it only keeps the engine's ratio
+  // at about (rattler share) x (ball weight / mean contact force), e.g. 4e-2 in
+  // scenes/footing_small.toml at 100 g, whatever the budget.
+  struct SkeletonRatio {
+    double ratio = 0;
+    std::size_t rattlers = 0;
+  };
+  SkeletonRatio skeleton_ratio() const {
+    SkeletonRatio r;
+    const auto& b = world_.balls();
+    const dem::Vec3 g = world_.gravity();
+    double sum = 0;
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < b.size(); ++i) {
+      dem::Vec3 f = b.f[i] + b.fa[i];
+      dem::Vec3 c = f - b.m[i] * g;  // contact part of the force
+      if (c.x == 0 && c.y == 0 && c.z == 0) {
+        ++r.rattlers;
+        continue;
+      }
+      double s2 = 0;
+      for (int k = 0; k < 3; ++k)
+        if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
+      sum += std::sqrt(s2);
+      ++n;
+    }
+    const double fc = world_.mean_contact_force();
+    r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
+    return r;
+  }
+
+  // Weight of the balls [N] under the current gravity (constant while no ball is added).
+  double weight() {
+    if (weight_ < 0) {
+      double m = 0;
+      for (double mi : world_.balls().m) m += mi;
+      weight_ = m * std::abs(world_.gravity().z);
+    }
+    return weight_;
+  }
+
+  // Vertical stress profile of the DEM block (Fig. 3): particle-based stress (region_stress)
+  // in horizontal slabs spanning the block's footprint, about 1.5 d_max thick, with the
+  // self-weight line rho_b N g depth, rho_b = ball mass / block volume (the block's own bulk
+  // density). Depth is measured from the block top. Written to dem_profile_<stage>.csv.
+  void write_profile(const schema::Stage& st) {
+    const double h = block_.height();
+    const double d_max = s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
+    const int n = std::max(4, static_cast<int>(std::lround(h / (1.5 * d_max))));
+    const double lx = block_.cell.x * block_.nx, ly = block_.cell.y * block_.ny;
+    const double g = std::abs(world_.gravity().z);
+    const double rho_b = g > 0 ? weight() / g / (lx * ly * h) : 0.0;
+    auto csv = io::CsvSeries::create(dir_ / ("dem_profile_" + st.name + ".csv"),
+                                     {"depth_m", "depth_top_m", "depth_bottom_m", "szz_Pa", "sxx_Pa", "syy_Pa",
+                                      "balls_1", "selfweight_szz_Pa", "rho_b_kg_m3", "d_max_m"});
+    for (int i = 0; i < n; ++i) {
+      dem::Region r;
+      r.kind = dem::Region::Kind::kBox;
+      double z_hi = block_.z_top() - h * i / n, z_lo = block_.z_top() - h * (i + 1) / n;
+      r.lo = {block_.origin.x, block_.origin.y, z_lo};
+      r.hi = {block_.origin.x + lx, block_.origin.y + ly, z_hi};
+      std::size_t count = 0;
+      const auto& b = world_.balls();
+      for (std::size_t k = 0; k < b.size(); ++k) count += r.contains(b.x[k]) ? 1 : 0;
+      auto sig = dem::region_stress(world_, r);
+      double d = block_.z_top() - 0.5 * (z_lo + z_hi);
+      csv.append({d, block_.z_top() - z_hi, block_.z_top() - z_lo, sig[8], sig[0], sig[4], static_cast<double>(count),
+                  -rho_b * g * d, rho_b, d_max});
+    }
+    csv.close();
   }
 
   void write_frame(std::int64_t step) {
@@ -422,6 +560,7 @@ class DemParticipant : public node::Participant {
   std::size_t n_iface_ = 0;
   bool coupling_setup_pending_ = false, penetrating_ = false;
   double footing_z0_ = 0, target_disp_ = 0;
+  double weight_ = -1;
 };
 
 }  // namespace

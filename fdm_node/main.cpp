@@ -155,6 +155,7 @@ class FdmParticipant : public node::Participant {
   proto::Values step_values() override {
     auto b = model_.base_reaction();
     proto::Values v{{"ratio", last_ratios_.average}, {"base_fz_N", b[2]}, {"kinetic_J", model_.kinetic_energy()}};
+    if (model_.params().gravity_level > 0) v.push_back({"weight_N", weight()});
     if (coupled_) {
       // Largest relative difference so far between the force sum the continuum applied and the
       // DEM's own total of the same step (action = reaction, physics.md 6.9).
@@ -174,8 +175,9 @@ class FdmParticipant : public node::Participant {
     if (a == "equilibrium" || a == "geostatic" || a == "couple") return last_ratios_.average < st.view.real("ratio");
     return a == "penetrate";
   }
-  proto::Values stage_end(const schema::Stage&, std::int64_t last) override {
+  proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     if (out_ && last != last_frame_) write_frame(last);
+    if (!ctx_.options.run_dir.empty() && model_.params().gravity_level > 0) write_profile(st);
     return step_values();
   }
   void finish() override {
@@ -236,6 +238,39 @@ class FdmParticipant : public node::Participant {
   }
   // Upward force the punch exerts on... the soil pushes back: reaction on the punch gridpoints.
   double punch_force() const { return punch_.empty() ? 0.0 : model_.reaction_sum(punch_)[2]; }
+
+  double weight() const {
+    return model_.total_gravitational_mass() * model_.params().gravity_level * fdm::kStandardGravity;
+  }
+
+  // Vertical stress profile (Fig. 3): zone stresses averaged per horizontal layer of zones
+  // (weighted by zone volume), with the line rho N g depth from the mesh top, rho the density of
+  // the first material group. Written to fdm_profile_<stage>.csv.
+  void write_profile(const schema::Stage& st) {
+    const auto& m = model_.mesh();
+    const std::size_t nk = m.grid_z.size() - 1;
+    std::vector<double> vol(nk, 0.0), szz(nk, 0.0), sxx(nk, 0.0);
+    std::vector<std::size_t> count(nk, 0);
+    auto stress = model_.zone_stress();
+    for (std::size_t z = 0; z < model_.num_zones(); ++z) {
+      auto i = m.zone_ijk[3 * z], j = m.zone_ijk[3 * z + 1], k = m.zone_ijk[3 * z + 2];
+      double v = (m.grid_x[i + 1] - m.grid_x[i]) * (m.grid_y[j + 1] - m.grid_y[j]) * (m.grid_z[k + 1] - m.grid_z[k]);
+      vol[k] += v;
+      szz[k] += v * stress[6 * z + 2];
+      sxx[k] += v * stress[6 * z];
+      ++count[k];
+    }
+    const double top = m.grid_z.back(), g = model_.params().gravity_level * fdm::kStandardGravity;
+    const double rho = model_.params().materials.front().material.density;
+    auto csv = io::CsvSeries::create(fs::path(ctx_.options.run_dir) / ("fdm_profile_" + st.name + ".csv"),
+                                     {"depth_m", "szz_Pa", "sxx_Pa", "zones_1", "selfweight_szz_Pa", "rho_kg_m3"});
+    for (std::size_t k = nk; k-- > 0;) {
+      if (count[k] == 0) continue;
+      double d = top - 0.5 * (m.grid_z[k] + m.grid_z[k + 1]);
+      csv.append({d, szz[k] / vol[k], sxx[k] / vol[k], static_cast<double>(count[k]), -rho * g * d, rho});
+    }
+    csv.close();
+  }
 
   void write_frame(std::int64_t step) {
     auto stress = model_.zone_stress();

@@ -5,6 +5,8 @@
 //
 // Usage: bench_dem [packing] [linear|softbond] [threads] [steps]
 //        bench_dem [packing]            → runs the four configurations in child processes
+// BENCH_DEM_HASH=1 also prints (stderr) an FNV-1a hash of x, v, ω after the run and the
+// number of ball–ball pairs in the list: two builds compare bit for bit on the same input.
 // Output: one CSV line per configuration:
 //   model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib
 #include <sys/resource.h>
@@ -12,7 +14,9 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -89,6 +93,19 @@ int run(const std::string& file, const std::string& model, int threads, int step
   const double cpu = double(c1.tv_sec - c0.tv_sec) + 1e-9 * double(c1.tv_nsec - c0.tv_nsec);
   const double sec = std::chrono::duration<double>(t1 - t0).count();
   const auto z = coordination(w);
+  if (std::getenv("BENCH_DEM_HASH")) {  // FNV-1a over x, v, ω: compare builds bit for bit
+    std::uint64_t h = 1469598103934665603ULL;
+    auto mix = [&](double d) {
+      std::uint64_t u;
+      std::memcpy(&u, &d, 8);
+      for (int k = 0; k < 8; ++k) { h ^= (u >> (8 * k)) & 0xff; h *= 1099511628211ULL; }
+    };
+    const auto& pt = w.balls();
+    for (std::size_t i = 0; i < w.num_balls(); ++i)
+      for (int k = 0; k < 3; ++k) { mix(pt.x[i][k]); mix(pt.v[i][k]); mix(pt.w[i][k]); }
+    std::fprintf(stderr, "hash %s threads %d steps %d: %016llx (pairs %zu)\n", model.c_str(), threads, steps,
+                 static_cast<unsigned long long>(h), w.pair_contacts().size());
+  }
   std::printf("%s,%d,%d,%.4f,%.4f,%.4e,%.4e,%lld,%zu,%.1f\n", model.c_str(), threads, steps, sec, cpu,
               double(w.num_balls()) * steps / sec, double(w.num_balls()) * steps / cpu,
               static_cast<long long>(w.rebuild_count() - reb0), z.active, peak_rss_mib());

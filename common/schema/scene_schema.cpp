@@ -185,8 +185,14 @@ void declare_dem(config::Section& root) {
   sp.reals("origin", "m", std::vector<double>{},
            "Minimum corner of the REV (and of the replicated block); empty: the continuum's pocket if there is "
            "a [continuum], else [0, 0, 0].");
-  sp.integer("n_particles", "-", 0, "Number of balls; 0: fill the cell at porosity_target.").min(0);
-  sp.real("porosity_target", "-", 0.40, "Porosity reached by frictionless radius expansion (4.3).").min(0.0).max(1.0, true);
+  sp.integer("n_particles", "-", 0,
+             "Number of balls; 0: the PSD's expected count at 'porosity' in the cell (Table 1 N_p).").min(0);
+  sp.real("porosity", "-", 0.5195, "Final porosity n of the specimen (Table 1, scale 1); sets N_p.").min(0.0, true).max(1.0, true);
+  sp.real("porosity_target", "-", -1.0,
+          "Porosity reached by frictionless radius expansion (4.3); negative: 'porosity'.").max(1.0, true);
+  sp.real("bond_coordination", "-", -1.0,
+          "generate: after the expansion, bond every pair up to the gap that gives this bonded coordination "
+          "number (Table 1: 6.82; docs/ucs-study.md); negative: no bonding in 'generate'.");
   sp.real("initial_scale", "-", 0.6, "Initial radii = d/2 * this (4.3).").min(0.0, true).max(1.0);
   sp.integer("increments", "-", 5, "Radius-expansion increments.").min(1);
   sp.real("expansion_ratio", "-", 1e-3, "Unbalanced ratio to reach after each expansion increment.").min(0.0, true);

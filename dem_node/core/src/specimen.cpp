@@ -27,15 +27,26 @@ double min_diameter(const World& w) {
   return d;
 }
 
+void quench(World& w) {
+  auto& pt = w.balls();
+  std::fill(pt.v.begin(), pt.v.end(), Vec3{});
+  std::fill(pt.w.begin(), pt.w.end(), Vec3{});
+}
+
 // Cycle until ratio < tol (checked every `every` steps) or budget; returns steps run.
-std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, int every = 50) {
+// With quench_every > 0 the velocities are zeroed every quench_every steps (a multiple of
+// the check interval is used).
+std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, int every = 50,
+                   std::int64_t quench_every = 0) {
   std::int64_t s = 0;
   ok = false;
+  if (quench_every > 0) every = static_cast<int>(std::min<std::int64_t>(every, quench_every));
   while (s < budget) {
     const std::int64_t k = std::min<std::int64_t>(every, budget - s);
     w.step(k);
     s += k;
     if (w.unbalanced_ratio() < tol) { ok = true; break; }
+    if (quench_every > 0 && s % quench_every == 0) quench(w);
   }
   return s;
 }
@@ -54,14 +65,30 @@ std::uint64_t Rng::next() {  // splitmix64
   return z ^ (z >> 31);
 }
 
+double psd_mean_volume(const PsdParams& p) {
+  const double a = p.d_min * p.scale, b = p.d_max * p.scale;
+  return kPi / 6.0 * 2.0 * (b - a) / (1.0 / (a * a) - 1.0 / (b * b));
+}
+
+double psd_expected_count(const PsdParams& p, double volume, double porosity) {
+  return (1.0 - porosity) * volume / psd_mean_volume(p);
+}
+
 StageReport generate_rev(World& w, const RevParams& p) {
   if (!w.periodic())
     throw std::invalid_argument("generate_rev: the world must have a periodic cell (periodic.enabled = true).");
   if (w.num_balls() != 0)
     throw std::invalid_argument("generate_rev: the world must be empty, found balls in it.");
-  if (!(p.porosity_target > 0.0 && p.porosity_target < 1.0)) {
+  if (!(p.porosity_final > 0.0 && p.porosity_final < 1.0)) {
     std::ostringstream s;
-    s << "generate_rev: 'porosity_target' must be in (0, 1), found " << p.porosity_target << ".";
+    s << "generate_rev: 'porosity' (final porosity) must be in (0, 1), found " << p.porosity_final << ".";
+    throw std::invalid_argument(s.str());
+  }
+  const double n1 = p.porosity_target < 0.0 ? p.porosity_final : p.porosity_target;
+  if (!(n1 > 0.0 && n1 < 1.0)) {
+    std::ostringstream s;
+    s << "generate_rev: 'porosity_target' must be in (0, 1) (or negative: the final porosity), found "
+      << p.porosity_target << ".";
     throw std::invalid_argument(s.str());
   }
   if (!(p.initial_scale > 0.0 && p.initial_scale <= 1.0) || p.increments < 1) {
@@ -75,7 +102,12 @@ StageReport generate_rev(World& w, const RevParams& p) {
   const double V = w.cell_volume();
   std::vector<double> d;
   double vs = 0.0;
-  while (p.n_particles ? d.size() < p.n_particles : vs < (1.0 - p.porosity_target) * V) {
+  // N_p: the given count, or the PSD's expected count at the final porosity (§0.4); the radius
+  // expansion then reaches n₁ exactly whatever the sampled volume.
+  const std::size_t np = p.n_particles ? p.n_particles
+                                       : static_cast<std::size_t>(std::llround(psd_expected_count(p.psd, V, p.porosity_final)));
+  if (np == 0) throw std::invalid_argument("generate_rev: the cell holds no ball at this PSD and porosity.");
+  while (d.size() < np) {
     d.push_back(psd_diameter(p.psd, rng.uniform()));
     vs += kPi / 6.0 * d.back() * d.back() * d.back();
   }
@@ -89,7 +121,7 @@ StageReport generate_rev(World& w, const RevParams& p) {
   w.prepare();
   w.refresh_contact_constants();
   const double n0 = cell_porosity(w);
-  const double mtot = std::cbrt((1.0 - p.porosity_target) / (1.0 - n0));
+  const double mtot = std::cbrt((1.0 - n1) / (1.0 - n0));
   const double minc = std::pow(mtot, 1.0 / p.increments);
   StageReport r;
   bool ok_all = true;
@@ -98,9 +130,10 @@ StageReport generate_rev(World& w, const RevParams& p) {
     w.prepare();
     w.refresh_contact_constants();
     bool ok;
-    r.steps += cycle(w, p.ratio_tol, p.max_steps_per_increment, ok);
+    r.steps += cycle(w, p.ratio_tol, p.max_steps_per_increment, ok, 50, p.quench_every);
     ok_all &= ok;
   }
+  quench(w);  // the REV starts at rest
   w.mutable_params().ball_ball.linear.fric = mu_final;
   w.refresh_contact_constants();
   fill_report(w, r);
@@ -218,6 +251,7 @@ StageReport servo_until(World& w, const ServoParams& p, double stress_tol, doubl
       over = std::max(over, side[a] * rel);
       in &= std::abs(rel) <= stress_tol;
     }
+    if (p.quench_every > 0 && r.steps % p.quench_every == 0) quench(w);
     if (r.steps % 10 == 0) {
       if (in && w.unbalanced_ratio() < ratio_tol) held += 10;
       else held = 0;
@@ -243,6 +277,46 @@ StageReport install_bonds(World& w, double lo, double hi) {
   s << "installed " << r.count << " " << to_string(w.params().ball_ball.model) << " bonds ("
     << (w.num_balls() ? 2.0 * double(r.count) / double(w.num_balls()) : 0.0) << " per ball) on gaps in ["
     << lo << ", " << hi << "] m";
+  r.what = s.str();
+  return r;
+}
+
+double gap_for_coordination(World& w, double z_target, double gap_floor) {
+  if (!(z_target > 0.0)) {
+    std::ostringstream s;
+    s << "gap_for_coordination: target coordination number must be > 0, found " << z_target << ".";
+    throw std::invalid_argument(s.str());
+  }
+  w.prepare();
+  const auto& pc = w.pair_contacts();
+  const auto& pt = w.balls();
+  std::size_t have = 0;
+  std::vector<double> gaps;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
+    const Vec3 d = w.branch(c);
+    const double gap = norm(d) - pt.r[pc.a[c]] - pt.r[pc.b[c]];
+    if (bd || (pc.h[c].flags & ContactHist::kActive) || gap <= 0.0) { ++have; continue; }
+    gaps.push_back(gap);
+  }
+  const auto need = static_cast<std::size_t>(std::ceil(0.5 * z_target * double(w.num_balls())));
+  if (need <= have) return gap_floor;
+  const std::size_t extra = need - have;
+  if (extra > gaps.size()) {
+    std::ostringstream s;
+    s << "gap_for_coordination: Z = " << z_target << " needs " << extra << " more pairs but only " << gaps.size()
+      << " separated pairs lie within the Verlet skin (" << w.skin() << " m); the packing is too loose for this Z.";
+    throw std::invalid_argument(s.str());
+  }
+  std::nth_element(gaps.begin(), gaps.begin() + std::ptrdiff_t(extra - 1), gaps.end());
+  return std::max(gap_floor, gaps[extra - 1]);
+}
+
+StageReport install_bonds_to_coordination(World& w, double z_target, double gap_floor) {
+  const double g = gap_for_coordination(w, z_target, gap_floor);
+  StageReport r = install_bonds(w, -std::numeric_limits<double>::infinity(), g);
+  std::ostringstream s;
+  s << r.what << " (gap chosen for Z = " << z_target << ")";
   r.what = s.str();
   return r;
 }
@@ -418,6 +492,20 @@ StageReport cycle_to_equilibrium(World& w, double ratio_tol, std::int64_t budget
 UcsResult unconfined_compression(World& w, const UcsParams& p) {
   if (w.periodic())
     throw std::invalid_argument("unconfined_compression: the world must not be periodic (replicate with keep_periodic = false first).");
+  if (!(p.strain_rate > 0.0) || !(p.max_strain > 0.0) || p.sample_every < 1) {
+    std::ostringstream s;
+    s << "unconfined_compression: 'strain_rate' and 'max_strain' must be > 0 and 'sample_every' >= 1, found "
+      << p.strain_rate << ", " << p.max_strain << ", " << p.sample_every << ".";
+    throw std::invalid_argument(s.str());
+  }
+  UcsResult res;
+  // Opening the periodic cell releases the confinement: let the free specimen settle first
+  // so that the transient does not enter the stress-strain curve.
+  // Local damping does not conserve momentum: zero the velocities before and after settling so
+  // that the specimen does not drift into one platen as a rigid body.
+  quench(w);
+  res.settle = cycle_to_equilibrium(w, p.settle_ratio, p.settle_steps);
+  quench(w);
   const auto& pt = w.balls();
   Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
   for (std::size_t i = 0; i < pt.size(); ++i)
@@ -425,9 +513,10 @@ UcsResult unconfined_compression(World& w, const UcsParams& p) {
       lo[k] = std::min(lo[k], pt.x[i][k] - pt.r[i]);
       hi[k] = std::max(hi[k], pt.x[i][k] + pt.r[i]);
     }
-  const double H0 = hi.z - lo.z;
+  double H0 = hi.z - lo.z;
   const double area = (hi.x - lo.x) * (hi.y - lo.y);
   const double v = 0.5 * p.strain_rate * H0;
+  const bool seat = p.seat_stress > 0.0;
   PlaneWallParams bot, top;
   bot.point = {0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), lo.z};
   bot.normal = {0, 0, 1};
@@ -435,8 +524,38 @@ UcsResult unconfined_compression(World& w, const UcsParams& p) {
   top.point = {bot.point.x, bot.point.y, hi.z};
   top.normal = {0, 0, -1};
   top.velocity = {0, 0, -v};
+  for (PlaneWallParams* q : {&bot, &top}) {
+    q->servo = seat;
+    q->servo_stress = p.seat_stress;
+    q->servo_area = area;
+    q->servo_vmax = p.seat_speed * v;
+  }
   const int ib = w.add_plane(bot), it = w.add_plane(top);
-  UcsResult res;
+  auto platen_stress = [&] { return 0.5 * (-w.plane(ib).reaction.z + w.plane(it).reaction.z) / area; };
+  if (seat) {
+    // Seating: both platens servo onto the rough ends until each carries seat_stress within 5 %
+    // for 5 consecutive checks (only the tallest grains touch a platen placed at the extremes).
+    int held = 0;
+    while (res.seat.steps < p.seat_steps) {
+      w.step(p.sample_every);
+      res.seat.steps += p.sample_every;
+      const double sb = -w.plane(ib).reaction.z / area, st = w.plane(it).reaction.z / area;
+      const bool in = std::abs(sb / p.seat_stress - 1.0) < 0.05 && std::abs(st / p.seat_stress - 1.0) < 0.05;
+      held = in ? held + 1 : 0;
+      if (held >= 5) break;
+    }
+    res.seat.converged = held >= 5;
+    res.seat.ratio = w.unbalanced_ratio();
+    std::ostringstream s;
+    s << "platens seated at " << platen_stress() << " Pa in " << res.seat.steps << " steps"
+      << (res.seat.converged ? "" : " (budget spent)");
+    res.seat.what = s.str();
+    for (int i : {ib, it}) w.plane(i).p.servo = false;
+    w.plane(ib).p.velocity = {0, 0, v};
+    w.plane(it).p.velocity = {0, 0, -v};
+    H0 = w.plane(it).p.point.z - w.plane(ib).p.point.z;
+  }
+  const double s_seat = seat ? platen_stress() : 0.0;
   std::int64_t steps = 0;
   bool past_peak = false;
   while (true) {
@@ -444,22 +563,96 @@ UcsResult unconfined_compression(World& w, const UcsParams& p) {
     steps += p.sample_every;
     const double H = w.plane(it).p.point.z - w.plane(ib).p.point.z;
     const double strain = (H0 - H) / H0;
-    const double stress = 0.5 * (-w.plane(ib).reaction.z + w.plane(it).reaction.z) / area;
+    const double stress = platen_stress();
     res.curve.push_back({strain, stress});
-    if (stress > res.peak) res.peak = stress;
-    else if (stress < p.stop_fraction * res.peak && res.peak > 0.0) past_peak = true;
+    if (stress > res.peak) {
+      res.peak = stress;
+      res.peak_strain = strain;
+    } else if (stress < p.stop_fraction * res.peak && res.peak > 4.0 * s_seat && res.peak > 0.0 &&
+               strain >= 1.2 * res.peak_strain) {
+      past_peak = true;
+    }
     if (past_peak || strain >= p.max_strain) break;
   }
   for (std::size_t k = 0; k < res.curve.size(); ++k)
     if (res.curve[k].stress >= 0.5 * res.peak) {
-      res.e50 = res.curve[k].stress / res.curve[k].strain;
+      res.e50 = (res.curve[k].stress - s_seat) / res.curve[k].strain;
       break;
     }
   res.report.steps = steps;
   res.report.converged = past_peak;
   res.report.ratio = w.unbalanced_ratio();
   std::ostringstream s;
-  s << "unconfined compression: peak " << res.peak << " Pa, E50 " << res.e50 << " Pa in " << steps << " steps";
+  s << "unconfined compression (after settling: " << res.settle.what << "; " << res.seat.what << "): peak " << res.peak << " Pa at strain "
+    << res.peak_strain << ", E50 " << res.e50 << " Pa in " << steps << " steps"
+    << (past_peak ? "" : " (stopped at max_strain before the post-peak drop)");
+  res.report.what = s.str();
+  return res;
+}
+
+UcsResult unconfined_compression_column(World& w, const UcsParams& p, double lateral_factor) {
+  if (!w.periodic())
+    throw std::invalid_argument("unconfined_compression_column: the world must have a periodic cell (the servoed REV).");
+  if (!(p.strain_rate > 0.0) || !(p.max_strain > 0.0) || p.sample_every < 1 || !(lateral_factor >= 2.0)) {
+    std::ostringstream s;
+    s << "unconfined_compression_column: 'strain_rate' and 'max_strain' must be > 0, 'sample_every' >= 1 and "
+         "the lateral factor >= 2, found "
+      << p.strain_rate << ", " << p.max_strain << ", " << p.sample_every << ", " << lateral_factor << ".";
+    throw std::invalid_argument(s.str());
+  }
+  w.prepare();  // wrap positions into the cell, current image shifts
+  const Vec3 o = w.cell_origin(), L = w.cell_length();
+  const PairContacts old = w.pair_contacts();
+  w.clear_contacts();
+  std::size_t kept = 0, dropped = 0;
+  for (std::size_t q = 0; q < old.size(); ++q) {
+    if (old.shift[q][0] != 0 || old.shift[q][1] != 0) { ++dropped; continue; }
+    w.append_pair(old.a[q], old.b[q], old.shift[q], old.h[q], old.bond.empty() ? nullptr : &old.bond[q]);
+    ++kept;
+  }
+  const double f = lateral_factor;
+  w.set_cell({o.x - 0.5 * (f - 1.0) * L.x, o.y - 0.5 * (f - 1.0) * L.y, o.z}, {f * L.x, f * L.y, L.z});
+  w.prepare();
+  UcsResult res;
+  quench(w);
+  res.settle = cycle_to_equilibrium(w, p.settle_ratio, p.settle_steps);
+  quench(w);
+  const double area_ratio = f * f;  // cell cross-section / REV cross-section
+  const double Lz0 = w.cell_length().z;
+  std::int64_t steps = 0;
+  bool past_peak = false;
+  w.set_strain_rate({0.0, 0.0, -p.strain_rate});
+  while (true) {
+    w.step(p.sample_every);
+    steps += p.sample_every;
+    const double strain = 1.0 - w.cell_length().z / Lz0;
+    const double stress = -cell_stress(w)[8] * area_ratio;
+    res.curve.push_back({strain, stress});
+    if (stress > res.peak) {
+      res.peak = stress;
+      res.peak_strain = strain;
+    } else if (res.peak > 0.0 && stress < p.stop_fraction * res.peak && strain >= 1.2 * res.peak_strain) {
+      past_peak = true;
+    }
+    if (past_peak || strain >= p.max_strain) break;
+  }
+  w.set_strain_rate({});
+  // E50: secant from the start of loading to the first sample at half the peak (the settled
+  // column starts near zero axial stress).
+  const double s0 = 0.0;
+  for (const auto& c : res.curve)
+    if (c.stress >= 0.5 * res.peak) {
+      res.e50 = (c.stress - s0) / c.strain;
+      break;
+    }
+  res.report.steps = steps;
+  res.report.converged = past_peak;
+  res.report.ratio = w.unbalanced_ratio();
+  std::ostringstream s;
+  s << "unconfined compression of a z-periodic column (" << kept << " contacts kept, " << dropped
+    << " across the lateral faces dropped; settling: " << res.settle.what << "): peak " << res.peak
+    << " Pa at strain " << res.peak_strain << ", E50 " << res.e50 << " Pa in " << steps << " steps"
+    << (past_peak ? "" : " (stopped at max_strain before the post-peak drop)");
   res.report.what = s.str();
   return res;
 }

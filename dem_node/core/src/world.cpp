@@ -20,6 +20,10 @@ namespace demfdm::dem {
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::size_t kChunk = 2048;  // fixed chunking: reductions independent of threads
+// Software prefetch distances of the ball–ball pass (bench/dem): the B rows are scattered and
+// the history stream is not kept in flight by the hardware prefetcher alone (+20 % measured).
+constexpr std::int64_t kPrefetchB = 12;  // contacts ahead for the B rows
+constexpr std::int64_t kPrefetchH = 24;  // contacts ahead for the history records
 
 inline bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
 
@@ -882,6 +886,25 @@ void World::pair_pass(double dt) {
     Vec3 fa_acc{}, ta_acc{};
     for (std::int64_t c = c0; c < c1; ++c) {
       const std::uint32_t a = A[c], b = B[c];
+      // Software prefetch (see kPrefetchB/H): the scattered B rows, and the history records
+      // (96 B, plus 104 B of bond state) that the loop streams through.
+      if (c + kPrefetchH < c1) {
+        __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH), 1);
+        __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH) + 64, 1);
+        if (BD) {
+          __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH), 1);
+          __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH) + 64, 1);
+        }
+      }
+      if (c + kPrefetchB < c1) {
+        const std::uint32_t bp = B[c + kPrefetchB];
+        __builtin_prefetch(X + bp);
+        __builtin_prefetch(V + bp);
+        __builtin_prefetch(W + bp);
+        __builtin_prefetch(R + bp);
+        __builtin_prefetch(f + bp, 1);
+        __builtin_prefetch(t + bp, 1);
+      }
       if (a != cur) {
         f[cur] += fa_acc;
         t[cur] += ta_acc;
@@ -948,27 +971,26 @@ void World::pair_pass(double dt) {
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
   for (int k = 1; k < nt; ++k) tbuf_[static_cast<std::size_t>(k)].resize(2 * n);
-  int used = 1;
+  // One parallel region per pass: contact blocks, a barrier, then the fixed-order
+  // reduction of the thread buffers split by particle rows (one fork/join per step).
+  const std::int64_t ni = static_cast<std::int64_t>(n);
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num(), T = omp_get_num_threads();
-#pragma omp single
-    used = T;
     Vec3* f = tid == 0 ? pt_.f.data() : tbuf_[static_cast<std::size_t>(tid)].data();
     Vec3* t = tid == 0 ? pt_.t.data() : f + n;
     std::fill(f, f + n, Vec3{});
     std::fill(t, t + n, Vec3{});
     const std::int64_t c0 = m * tid / T, c1 = m * (tid + 1) / T;
     body(c0, c1, f, t);
+#pragma omp barrier
+#pragma omp for schedule(static)
+    for (std::int64_t i = 0; i < ni; ++i)
+      for (int k = 1; k < T; ++k) {
+        pt_.f[static_cast<std::size_t>(i)] += tbuf_[static_cast<std::size_t>(k)][static_cast<std::size_t>(i)];
+        pt_.t[static_cast<std::size_t>(i)] += tbuf_[static_cast<std::size_t>(k)][n + static_cast<std::size_t>(i)];
+      }
   }
-  // fixed-order reduction of the thread buffers
-  const std::int64_t ni = static_cast<std::int64_t>(n);
-#pragma omp parallel for schedule(static) num_threads(nt)
-  for (std::int64_t i = 0; i < ni; ++i)
-    for (int k = 1; k < used; ++k) {
-      pt_.f[i] += tbuf_[static_cast<std::size_t>(k)][i];
-      pt_.t[i] += tbuf_[static_cast<std::size_t>(k)][n + i];
-    }
 }
 
 template <ContactModel M>

@@ -42,12 +42,19 @@ class Rng {
   std::uint64_t s_;
 };
 
+/// Mean particle volume of the PSD, E[πd³/6] = (π/6)·2(b − a)/(a⁻² − b⁻²), a, b = d_min, d_max × scale.
+double psd_mean_volume(const PsdParams& p);
+/// Expected number of balls whose solid volume is (1 − porosity)·volume (Table 1 counts, §0.4).
+double psd_expected_count(const PsdParams& p, double volume, double porosity);
+
 /// REV generation in the world's periodic cell (§4.3).
 struct RevParams {
   PsdParams psd;
   std::uint64_t seed = 1;          // [-] random seed
-  std::size_t n_particles = 0;     // [-] number of balls; 0 → fill (1 − porosity_target) V
-  double porosity_target = 0.40;   // [-] n₁ reached by frictionless radius expansion (§4.3)
+  std::size_t n_particles = 0;     // [-] number of balls; 0 → draw until the solid volume is (1 − porosity_final) V
+  double porosity_final = 0.5195;  // [-] the specimen's final porosity (Table 1, scale 1), sets N_p
+  double porosity_target = -1.0;   // [-] n₁ reached by frictionless radius expansion (§4.3); < 0 → porosity_final
+  std::int64_t quench_every = 50;  // [steps] zero all velocities every n steps while cycling (0: never)
   double initial_scale = 0.6;      // [-] s₀: initial radii d/2 · s₀
   int increments = 5;              // [-] radius-expansion increments
   double ratio_tol = 1e-3;         // [-] unbalanced ratio after each increment
@@ -71,6 +78,8 @@ struct ServoParams {
   double max_face_step = 1e-4;  // [-] face displacement per step / d_min
   ServoStiffness stiffness = ServoStiffness::kAffine;
   bool coupled = true;        // [-] use the full 3×3 affine stiffness (axes coupled)
+  std::int64_t quench_every = 0;  // [steps] servo_until zeroes all velocities every n steps (0: never);
+                                  // removes the free flight that local damping cannot stop (§1.3)
 };
 
 /// Effect that sets the cell strain rate each step from the last stress (kPreStep).
@@ -96,6 +105,14 @@ StageReport servo_until(World& w, const ServoParams& p, double stress_tol, doubl
 
 /// Bond ball–ball contacts with gap in [gap_lo, gap_hi] (§4.6).
 StageReport install_bonds(World& w, double gap_lo, double gap_hi);
+
+/// Smallest bond gap g_hi such that bonding every ball–ball pair with gap ≤ g_hi (together
+/// with the contacts already active) gives the coordination number 2 N_c/N_p ≥ z_target.
+/// Only pairs in the contact list (within the Verlet skin) are candidates; throws if they are
+/// too few. `gap_floor` is the smallest value returned (the §4.6 tolerance).
+double gap_for_coordination(World& w, double z_target, double gap_floor);
+/// install_bonds(w, −∞, gap_for_coordination(w, z_target, gap_floor)) (PFC "bond gap", U15).
+StageReport install_bonds_to_coordination(World& w, double z_target, double gap_floor);
 
 /// Brick replication α×β×γ of a periodic cell (§4.7). With keep_periodic the result is a
 /// periodic cell of size (α L_x, β L_y, γ L_z); otherwise periodicity is switched off and
@@ -135,17 +152,35 @@ StageReport cycle_to_equilibrium(World& w, double ratio_tol, std::int64_t budget
 struct UcsParams {
   double strain_rate = 0.5;     // [1/s] platen approach rate / specimen height (each platen half)
   double max_strain = 0.01;     // [-] stop at this axial strain
-  double stop_fraction = 0.7;   // [-] stop once stress < stop_fraction · peak after the peak
+  double stop_fraction = 0.7;   // [-] stop once stress < stop_fraction · peak, at a strain ≥ 1.2 × the
+                                // peak's, for a peak above 4 × seat_stress
   int sample_every = 100;       // [steps]
+  double settle_ratio = 1e-4;   // [-] before loading: cycle the free specimen to this unbalanced ratio
+  std::int64_t settle_steps = 20000;  // [steps] budget of that settling
+  double seat_stress = 0.0;     // [Pa] > 0: seat the platens on the rough ends with a stress servo to
+                                // this stress before loading (strain and E50 count from there); 0: no seating
+  double seat_speed = 20.0;     // [-] seating speed limit / loading platen speed
+  std::int64_t seat_steps = 200000;  // [steps] budget of the seating
 };
 struct UcsSample { double strain, stress; };
 struct UcsResult {
   std::vector<UcsSample> curve;  // axial strain, axial compressive stress [Pa]
   double peak = 0.0;             // [Pa] UCS
   double e50 = 0.0;              // [Pa] secant modulus at 50 % of the peak
+  double peak_strain = 0.0;      // [-] axial strain at the peak
+  StageReport settle;            // the settling before loading
+  StageReport seat;              // the platen seating before loading
   StageReport report;
 };
 /// The world must be non-periodic; platens are added at z_min and z_max of the balls.
 UcsResult unconfined_compression(World& w, const UcsParams& p);
+
+/// Unconfined compression without platens (docs/ucs-study.md): the periodic REV is opened in x
+/// and y (contacts across those faces dropped, the cell widened `lateral_factor` times so that
+/// lateral images never meet) and stays periodic in z, an endless column loaded by the cell's
+/// axial strain rate. Axial stress = Love–Weber σ_zz of the cell × cell area / REV area
+/// (engineering stress on the REV's cross-section); no end effects, no seating. The seat_*
+/// fields of UcsParams are not used.
+UcsResult unconfined_compression_column(World& w, const UcsParams& p, double lateral_factor = 3.0);
 
 }  // namespace demfdm::dem

@@ -1,0 +1,329 @@
+#include "fem_model.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace demfdm::fem {
+
+namespace {
+constexpr double kGauss = 0.57735026918962576451;  // 1/sqrt(3)
+// Natural coordinates of the 8 corners in fdm::Mesh unit-cube order.
+constexpr int kCorner[8][3] = {{-1, -1, -1}, {1, -1, -1}, {1, 1, -1}, {-1, 1, -1},
+                               {-1, -1, 1},  {1, -1, 1},  {1, 1, 1},  {-1, 1, 1}};
+
+// Isotropic elasticity, Voigt order xx yy zz xy yz xz with engineering shear strains.
+void elasticity(double E, double nu, double D[6][6]) {
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) D[i][j] = 0;
+  double lam = E * nu / ((1 + nu) * (1 - 2 * nu)), G = E / (2 * (1 + nu));
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) D[i][j] = lam;
+    D[i][i] = lam + 2 * G;
+    D[3 + i][3 + i] = G;
+  }
+}
+
+// B (6 x 24) from shape-function gradients.
+void strain_matrix(const double dN[8][3], double B[6][24]) {
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 24; ++j) B[i][j] = 0;
+  for (int a = 0; a < 8; ++a) {
+    double gx = dN[a][0], gy = dN[a][1], gz = dN[a][2];
+    B[0][3 * a] = gx;
+    B[1][3 * a + 1] = gy;
+    B[2][3 * a + 2] = gz;
+    B[3][3 * a] = gy, B[3][3 * a + 1] = gx;      // xy
+    B[4][3 * a + 1] = gz, B[4][3 * a + 2] = gy;  // yz
+    B[5][3 * a] = gz, B[5][3 * a + 2] = gx;      // xz
+  }
+}
+}  // namespace
+
+Model::Model(const Params& p) : p_(p), mesh_(fdm::generate_mesh(p.mesh)) {
+  if (p_.materials.empty()) throw std::invalid_argument("fem: at least one material group is needed");
+  const std::size_t n = mesh_.num_points(), nz = mesh_.num_zones();
+  // Materials by zone centroid, later groups override earlier ones (as fdm::Model).
+  zone_mat_.assign(nz, Mat{0, 0, 0});
+  std::vector<bool> assigned(nz, false);
+  for (const auto& g : p_.materials) {
+    if (!(g.young > 0) || !(g.poisson > -1 && g.poisson < 0.5) || !(g.density >= 0)) {
+      std::ostringstream os;
+      os << "fem: material needs young > 0, poisson in (-1, 0.5), density >= 0; found " << g.young << ", " << g.poisson
+         << ", " << g.density;
+      throw std::invalid_argument(os.str());
+    }
+    for (std::size_t z = 0; z < nz; ++z) {
+      std::array<double, 3> c{0, 0, 0};
+      for (int k = 0; k < 8; ++k)
+        for (int d = 0; d < 3; ++d) c[d] += mesh_.points[3 * mesh_.zones[8 * z + k] + d] / 8;
+      if (!g.region || g.region->contains(c)) {
+        zone_mat_[z] = Mat{g.density, g.young, g.poisson};
+        assigned[z] = true;
+      }
+    }
+  }
+  for (std::size_t z = 0; z < nz; ++z)
+    if (!assigned[z]) throw std::invalid_argument("fem: zone " + std::to_string(z) + " is in no material group");
+
+  // Supports: strongbox (base fixed, rollers on x and y sides), as fdm::Model.
+  fix_.assign(3 * n, 0);
+  const int nx = static_cast<int>(mesh_.grid_x.size()) - 1, ny = static_cast<int>(mesh_.grid_y.size()) - 1;
+  for (std::size_t g = 0; g < n; ++g) {
+    const std::int32_t* ijk = &mesh_.point_ijk[3 * g];
+    if (ijk[2] == 0) {
+      fix_[3 * g] = fix_[3 * g + 1] = fix_[3 * g + 2] = 1;
+      base_.push_back(static_cast<std::int32_t>(g));
+    }
+    if (ijk[0] == 0 || ijk[0] == nx) fix_[3 * g] = 1;
+    if (ijk[1] == 0 || ijk[1] == ny) fix_[3 * g + 1] = 1;
+  }
+  free_of_.assign(3 * n, -1);
+  for (std::size_t i = 0; i < 3 * n; ++i)
+    if (!fix_[i]) free_of_[i] = nfree_++;
+
+  fgrav_.assign(3 * n, 0.0);
+  f0_.assign(3 * n, 0.0);
+  fif_.assign(3 * mesh_.interface_points.size(), 0.0);
+  fapp_.assign(3 * n, 0.0);
+  u_.assign(3 * n, 0.0);
+  sigma0_.assign(nz * 8 * 6, 0.0);
+  assemble();
+}
+
+void Model::element_geometry(std::size_t z, double xi, double eta, double zeta, double dNdx[8][3],
+                             double& detJ) const {
+  double dN[8][3];
+  for (int a = 0; a < 8; ++a) {
+    double sx = kCorner[a][0], sy = kCorner[a][1], sz = kCorner[a][2];
+    dN[a][0] = sx * (1 + sy * eta) * (1 + sz * zeta) / 8;
+    dN[a][1] = sy * (1 + sx * xi) * (1 + sz * zeta) / 8;
+    dN[a][2] = sz * (1 + sx * xi) * (1 + sy * eta) / 8;
+  }
+  double J[3][3] = {};  // J[i][j] = d x_j / d xi_i
+  for (int a = 0; a < 8; ++a) {
+    const double* x = &mesh_.points[3 * mesh_.zones[8 * z + a]];
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) J[i][j] += dN[a][i] * x[j];
+  }
+  detJ = J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1]) - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0]) +
+         J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]);
+  if (!(detJ > 0))
+    throw std::invalid_argument("fem: zone " + std::to_string(z) + " has a non-positive Jacobian (inverted hexahedron)");
+  double inv[3][3];
+  inv[0][0] = (J[1][1] * J[2][2] - J[1][2] * J[2][1]) / detJ;
+  inv[0][1] = (J[0][2] * J[2][1] - J[0][1] * J[2][2]) / detJ;
+  inv[0][2] = (J[0][1] * J[1][2] - J[0][2] * J[1][1]) / detJ;
+  inv[1][0] = (J[1][2] * J[2][0] - J[1][0] * J[2][2]) / detJ;
+  inv[1][1] = (J[0][0] * J[2][2] - J[0][2] * J[2][0]) / detJ;
+  inv[1][2] = (J[0][2] * J[1][0] - J[0][0] * J[1][2]) / detJ;
+  inv[2][0] = (J[1][0] * J[2][1] - J[1][1] * J[2][0]) / detJ;
+  inv[2][1] = (J[0][1] * J[2][0] - J[0][0] * J[2][1]) / detJ;
+  inv[2][2] = (J[0][0] * J[1][1] - J[0][1] * J[1][0]) / detJ;
+  // dN/dx_j = sum_i dN/dxi_i * (J^-1)[j][i]
+  for (int a = 0; a < 8; ++a)
+    for (int j = 0; j < 3; ++j) dNdx[a][j] = inv[j][0] * dN[a][0] + inv[j][1] * dN[a][1] + inv[j][2] * dN[a][2];
+}
+
+void Model::assemble() {
+  auto t0 = std::chrono::steady_clock::now();
+  const std::size_t n = mesh_.num_points(), nz = mesh_.num_zones();
+  std::vector<Eigen::Triplet<double>> all, freefree;
+  all.reserve(nz * 576);
+  freefree.reserve(nz * 576);
+  for (std::size_t z = 0; z < nz; ++z) {
+    double D[6][6];
+    elasticity(zone_mat_[z].young, zone_mat_[z].nu, D);
+    double Ke[24][24] = {};
+    double vol = 0;
+    double Ne_int[8] = {};
+    for (int gp = 0; gp < 8; ++gp) {
+      double xi = kCorner[gp][0] * kGauss, eta = kCorner[gp][1] * kGauss, zeta = kCorner[gp][2] * kGauss;
+      double dNdx[8][3], detJ;
+      element_geometry(z, xi, eta, zeta, dNdx, detJ);
+      double B[6][24];
+      strain_matrix(dNdx, B);
+      double DB[6][24];
+      for (int i = 0; i < 6; ++i)
+        for (int j = 0; j < 24; ++j) {
+          double s = 0;
+          for (int k = 0; k < 6; ++k) s += D[i][k] * B[k][j];
+          DB[i][j] = s;
+        }
+      for (int i = 0; i < 24; ++i)
+        for (int j = 0; j < 24; ++j) {
+          double s = 0;
+          for (int k = 0; k < 6; ++k) s += B[k][i] * DB[k][j];
+          Ke[i][j] += s * detJ;
+        }
+      for (int a = 0; a < 8; ++a)
+        Ne_int[a] += (1 + kCorner[a][0] * xi) * (1 + kCorner[a][1] * eta) * (1 + kCorner[a][2] * zeta) / 8 * detJ;
+      vol += detJ;
+    }
+    (void)vol;
+    const std::int32_t* c = &mesh_.zones[8 * z];
+    for (int a = 0; a < 8; ++a) {
+      // Consistent gravity load: int N_a rho g dV.
+      for (int d = 0; d < 3; ++d) fgrav_[3 * c[a] + d] += Ne_int[a] * zone_mat_[z].rho * p_.gravity[d];
+      for (int b = 0; b < 8; ++b)
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j) {
+            double v = Ke[3 * a + i][3 * b + j];
+            int r = 3 * c[a] + i, s = 3 * c[b] + j;
+            all.emplace_back(r, s, v);
+            if (free_of_[r] >= 0 && free_of_[s] >= 0) freefree.emplace_back(free_of_[r], free_of_[s], v);
+          }
+    }
+  }
+  kfull_.resize(static_cast<Eigen::Index>(3 * n), static_cast<Eigen::Index>(3 * n));
+  kfull_.setFromTriplets(all.begin(), all.end());
+  Eigen::SparseMatrix<double> kff(nfree_, nfree_);
+  kff.setFromTriplets(freefree.begin(), freefree.end());
+  ldlt_.compute(kff);
+  if (ldlt_.info() != Eigen::Success)
+    throw std::runtime_error("fem: the stiffness matrix could not be factorised (singular: check the supports)");
+  factor_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void Model::set_geostatic_stress(double k0) {
+  const std::size_t nz = mesh_.num_zones();
+  const double ztop = mesh_.grid_z.back();
+  const double g = std::sqrt(p_.gravity[0] * p_.gravity[0] + p_.gravity[1] * p_.gravity[1] +
+                             p_.gravity[2] * p_.gravity[2]);
+  std::fill(f0_.begin(), f0_.end(), 0.0);
+  for (std::size_t z = 0; z < nz; ++z) {
+    const Mat& m = zone_mat_[z];
+    double K0 = std::isnan(k0) ? m.nu / (1 - m.nu) : k0;
+    const std::int32_t* c = &mesh_.zones[8 * z];
+    for (int gp = 0; gp < 8; ++gp) {
+      double xi = kCorner[gp][0] * kGauss, eta = kCorner[gp][1] * kGauss, zeta = kCorner[gp][2] * kGauss;
+      double zp = 0;
+      for (int a = 0; a < 8; ++a)
+        zp += (1 + kCorner[a][0] * xi) * (1 + kCorner[a][1] * eta) * (1 + kCorner[a][2] * zeta) / 8 *
+              mesh_.points[3 * c[a] + 2];
+      double szz = -m.rho * g * (ztop - zp);
+      double* s = &sigma0_[(z * 8 + gp) * 6];
+      s[0] = s[1] = K0 * szz;
+      s[2] = szz;
+      s[3] = s[4] = s[5] = 0;
+      double dNdx[8][3], detJ;
+      element_geometry(z, xi, eta, zeta, dNdx, detJ);
+      double B[6][24];
+      strain_matrix(dNdx, B);
+      for (int a = 0; a < 8; ++a)
+        for (int d = 0; d < 3; ++d) {
+          double f = 0;
+          for (int k = 0; k < 6; ++k) f += B[k][3 * a + d] * s[k];
+          f0_[3 * c[a] + d] += f * detJ;
+        }
+    }
+  }
+}
+
+void Model::clear_initial_stress() {
+  std::fill(f0_.begin(), f0_.end(), 0.0);
+  std::fill(sigma0_.begin(), sigma0_.end(), 0.0);
+}
+
+void Model::set_interface_forces(const std::vector<double>& f) {
+  if (f.size() != fif_.size())
+    throw std::invalid_argument("fem: interface forces for " + std::to_string(f.size() / 3) + " points, the mesh has " +
+                                std::to_string(fif_.size() / 3));
+  fif_ = f;
+}
+
+void Model::set_applied_forces(const std::vector<double>& f) {
+  if (f.size() != fapp_.size()) throw std::invalid_argument("fem: applied forces must have 3 values per gridpoint");
+  fapp_ = f;
+}
+
+std::vector<double> Model::rhs_full() const {
+  std::vector<double> r(fgrav_.size());
+  for (std::size_t i = 0; i < r.size(); ++i) r[i] = fgrav_[i] + fapp_[i] - f0_[i];
+  const auto& ip = mesh_.interface_points;
+  for (std::size_t k = 0; k < ip.size(); ++k)
+    for (int d = 0; d < 3; ++d) r[3 * ip[k] + d] += fif_[3 * k + d];
+  return r;
+}
+
+void Model::solve() {
+  auto r = rhs_full();
+  Eigen::VectorXd b(nfree_);
+  for (std::size_t i = 0; i < r.size(); ++i)
+    if (free_of_[i] >= 0) b[free_of_[i]] = r[i];
+  Eigen::VectorXd x = ldlt_.solve(b);
+  double fmax = 0;
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    u_[i] = free_of_[i] >= 0 ? x[free_of_[i]] : 0.0;
+    if (free_of_[i] >= 0) fmax = std::max(fmax, std::abs(r[i]));
+  }
+  // Out-of-balance force of every dof, K u - (f_ext - f_0): the residual on free dofs, the
+  // support reactions on fixed ones. One sparse product per solve, kept for reaction_sum().
+  Eigen::Map<const Eigen::VectorXd> u(u_.data(), static_cast<Eigen::Index>(u_.size()));
+  Eigen::VectorXd ku = kfull_ * u;
+  unbalanced_.resize(r.size());
+  double res = 0;
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    unbalanced_[i] = ku[static_cast<Eigen::Index>(i)] - r[i];
+    if (free_of_[i] >= 0) res = std::max(res, std::abs(unbalanced_[i]));
+  }
+  residual_ = res / std::max(fmax, 1e-300);
+}
+
+std::vector<double> Model::interface_positions() const {
+  const auto& ip = mesh_.interface_points;
+  std::vector<double> x(3 * ip.size());
+  for (std::size_t k = 0; k < ip.size(); ++k)
+    for (int d = 0; d < 3; ++d) x[3 * k + d] = mesh_.points[3 * ip[k] + d] + u_[3 * ip[k] + d];
+  return x;
+}
+
+std::vector<double> Model::interface_displacements() const {
+  const auto& ip = mesh_.interface_points;
+  std::vector<double> x(3 * ip.size());
+  for (std::size_t k = 0; k < ip.size(); ++k)
+    for (int d = 0; d < 3; ++d) x[3 * k + d] = u_[3 * ip[k] + d];
+  return x;
+}
+
+std::array<double, 3> Model::reaction_sum(const std::vector<std::int32_t>& gps) const {
+  std::array<double, 3> s{0, 0, 0};
+  if (unbalanced_.empty()) return s;  // nothing solved yet
+  for (auto g : gps)
+    for (int d = 0; d < 3; ++d) s[d] += unbalanced_[3 * g + d];
+  return s;
+}
+
+std::vector<double> Model::zone_stress() const {
+  const std::size_t nz = mesh_.num_zones();
+  std::vector<double> out(nz * 6, 0.0);
+  for (std::size_t z = 0; z < nz; ++z) {
+    double D[6][6];
+    elasticity(zone_mat_[z].young, zone_mat_[z].nu, D);
+    double dNdx[8][3], detJ, B[6][24];
+    element_geometry(z, 0, 0, 0, dNdx, detJ);
+    strain_matrix(dNdx, B);
+    double eps[6] = {};
+    const std::int32_t* c = &mesh_.zones[8 * z];
+    for (int k = 0; k < 6; ++k)
+      for (int a = 0; a < 8; ++a)
+        for (int d = 0; d < 3; ++d) eps[k] += B[k][3 * a + d] * u_[3 * c[a] + d];
+    for (int i = 0; i < 6; ++i) {
+      double s = 0;
+      for (int k = 0; k < 6; ++k) s += D[i][k] * eps[k];
+      double s0 = 0;
+      for (int gp = 0; gp < 8; ++gp) s0 += sigma0_[(z * 8 + gp) * 6 + i] / 8;
+      out[6 * z + i] = s + s0;
+    }
+  }
+  return out;
+}
+
+std::array<double, 3> Model::gravity_load() const {
+  std::array<double, 3> s{0, 0, 0};
+  for (std::size_t i = 0; i < fgrav_.size(); ++i) s[i % 3] += fgrav_[i];
+  return s;
+}
+
+}  // namespace demfdm::fem

@@ -1,0 +1,102 @@
+// fem_core: quasi-static, implicit, linear-elastic finite elements on the FDM node's
+// hexahedral mesh (fdm::generate_mesh), so that the coupling interface (points, triangles,
+// walls) is identical to fdm_node's.
+//
+// Element: 8-node trilinear hexahedron (unit-cube corner order of fdm::Mesh), full 2x2x2
+// Gauss integration, isotropic linear elasticity (small strain). The 5-tet split of the FDM
+// is not used: the full-integration hexahedron is the textbook choice for an implicit code
+// and is exact for the axis-aligned boxes the mesh generator produces under uniform stress.
+//
+// Equilibrium: K u = f_gravity + f_interface + f_applied - f_0, where f_0 = sum B^T sigma_0
+// is the internal force of the initial (geostatic) stress. K (free dofs only; strongbox: base
+// fixed, rollers on the 4 sides) is factorised once with Eigen::SimplicialLDLT; every solve is
+// one back-substitution. The model has no history: u is a function of the current loads.
+#pragma once
+
+#include <Eigen/Sparse>
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "demfdm/fdm/mesh.hpp"
+#include "demfdm/fdm/params.hpp"
+
+namespace demfdm::fem {
+
+struct ElasticGroup {
+  double density = 1272.0;  // [kg/m^3]
+  double young = 2.0e9;     // [Pa]
+  double poisson = 0.25;    // [-]
+  std::optional<fdm::Box> region;  // zones whose centroid lies in it; nullopt: all
+};
+
+struct Params {
+  fdm::MeshParams mesh{};
+  std::vector<ElasticGroup> materials = std::vector<ElasticGroup>(1);
+  std::array<double, 3> gravity{0.0, 0.0, 0.0};  // [m/s^2] acceleration vector (0, 0, -N g0)
+  bool strongbox = true;
+};
+
+class Model {
+ public:
+  explicit Model(const Params& p);
+
+  const fdm::Mesh& mesh() const { return mesh_; }
+  std::size_t num_points() const { return mesh_.num_points(); }
+  std::size_t num_zones() const { return mesh_.num_zones(); }
+  std::size_t num_free_dofs() const { return static_cast<std::size_t>(nfree_); }
+  double factorisation_s() const { return factor_s_; }
+
+  // Geostatic initial stress (same rule as fdm::Model): sigma_zz = -rho |g| (z_top - z),
+  // sigma_xx = sigma_yy = K0 sigma_zz; k0 NaN: nu/(1-nu) of each zone. Evaluated per Gauss point.
+  void set_geostatic_stress(double k0);
+  void clear_initial_stress();
+
+  // External nodal loads [N] on the interface points [n_if,3] (replaces the previous ones).
+  void set_interface_forces(const std::vector<double>& f);
+  // Extra nodal loads [N] on any gridpoints [n,3] (tests); replaces the previous ones.
+  void set_applied_forces(const std::vector<double>& f);
+
+  // One back-substitution with the current loads; updates u.
+  void solve();
+
+  const std::vector<double>& displacements() const { return u_; }  // [n,3] total
+  std::vector<double> interface_positions() const;                 // x0 + u
+  std::vector<double> interface_displacements() const;
+
+  // Residual of the free equations after the last solve, |K u - f|_inf / max(|f|_inf, tiny).
+  double residual_ratio() const { return residual_; }
+  // Reaction [N] the supports exert on the given gridpoints at the last solve: f_int - f_ext summed.
+  std::array<double, 3> reaction_sum(const std::vector<std::int32_t>& gps) const;
+  std::array<double, 3> base_reaction() const { return reaction_sum(base_); }
+  // Zone stress at the centroid [nz,6] (xx yy zz xy yz xz, tension positive), incl. sigma_0.
+  std::vector<double> zone_stress() const;
+  // Total gravity load [N].
+  std::array<double, 3> gravity_load() const;
+
+ private:
+  struct Mat {
+    double rho, young, nu;
+  };
+  void element_geometry(std::size_t z, double xi, double eta, double zeta, double dNdx[8][3], double& detJ) const;
+  void assemble();
+  std::vector<double> rhs_full() const;
+
+  Params p_;
+  fdm::Mesh mesh_;
+  std::vector<Mat> zone_mat_;
+  std::vector<std::uint8_t> fix_;      // [3n] 1: fixed dof
+  std::vector<std::int32_t> free_of_;  // [3n] free index or -1
+  std::int32_t nfree_ = 0;
+  std::vector<std::int32_t> base_;
+  Eigen::SparseMatrix<double> kfull_;  // [3n x 3n], all dofs
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt_;
+  std::vector<double> fgrav_, f0_, fif_, fapp_, u_;
+  std::vector<double> unbalanced_;  // [3n] K u - (f_ext - f_0) at the last solve
+  std::vector<double> sigma0_;  // [nz*8*6] initial stress at the Gauss points
+  double residual_ = 0, factor_s_ = 0;
+};
+
+}  // namespace demfdm::fem

@@ -1,0 +1,241 @@
+// fem_node: quasi-static implicit linear-elastic FEM (fem_model.hpp) as the bus's continuum
+// role. A drop-in replacement for fdm_node: choose it with `[continuum] executable = "fem_node"`.
+//
+// Same scene keys as fdm_node ([continuum.mesh], [[continuum.material]] elastic only,
+// boundary = "strongbox", [gravity]); keys that only make sense for an explicit solver
+// (mode, damping, timestep_safety, static_mass_factor, averaging) are read by fdm_node and
+// ignored here. Rejected with one clear error: a mohr_coulomb material, large_strain = true,
+// boundary = "none" (a free body has a singular stiffness) and [continuum.punch].
+//
+// Each coupling step: apply the DEM's interface forces as nodal loads, one back-substitution
+// with the factor computed at start-up, send x0 + u and (u_k - u_{k-1}) / dt (dt = the
+// coupling step; m/step when dt = 0). A static solve is in equilibrium, so the stage
+// criterion (equilibrium / geostatic / couple) is met after every solve; penetrate has its
+// consent. Outputs: fem.h5 + mesh.xmf (displacement, velocity, zone stress) and
+// fem_history.csv in the run folder.
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <optional>
+
+#include <spdlog/spdlog.h>
+
+#include "demfdm/io/csv_series.hpp"
+#include "demfdm/io/results_output.hpp"
+#include "fem_model.hpp"
+#include "messages/node_runtime.hpp"
+
+using namespace demfdm;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::array<double, 3> vec3(const std::vector<double>& v) { return {v[0], v[1], v[2]}; }
+
+fem::Params fem_params(const config::Scene& s) {
+  fem::Params p;
+  auto& m = p.mesh;
+  auto size = s.reals("continuum.mesh.size");
+  m.length = size[0];
+  m.width = size[1];
+  m.height = size[2];
+  m.pocket = s.boolean("continuum.mesh.pocket");
+  m.inner_size = vec3(s.reals("continuum.mesh.inner_size"));
+  auto origin = s.reals("continuum.mesh.inner_origin");
+  if (origin.size() == 3)
+    m.inner_origin = vec3(origin);
+  else if (!origin.empty())
+    s.fail("continuum.mesh.inner_origin", "an empty list or 3 numbers [x, y, z] in m",
+           std::to_string(origin.size()) + " numbers");
+  m.size_near = s.real("continuum.mesh.size_near");
+  m.size_far = s.real("continuum.mesh.size_far");
+  m.growth = s.real("continuum.mesh.growth");
+  try {
+    fdm::validate(m);
+  } catch (const std::invalid_argument& e) {
+    s.fail("continuum.mesh", "a valid mesh", e.what());
+  }
+
+  p.materials.clear();
+  std::size_t n = s.count("continuum.material");
+  if (n == 0) p.materials.push_back(fem::ElasticGroup{});
+  for (std::size_t i = 0; i < n; ++i) {
+    auto e = s.at("continuum.material", i);
+    if (e.string("model") != "elastic")
+      e.fail("model", "\"elastic\" (fem_node is a linear-elastic solver; use fdm_node for plasticity)",
+             "\"" + e.string("model") + "\"");
+    fem::ElasticGroup g;
+    g.density = e.real("density");
+    g.young = e.real("young");
+    g.poisson = e.real("poisson");
+    auto lo = e.reals("region_lo"), hi = e.reals("region_hi");
+    if (lo.size() != hi.size() || (lo.size() != 0 && lo.size() != 3))
+      e.fail("region_lo", "region_lo and region_hi both empty or both [x, y, z]",
+             std::to_string(lo.size()) + " and " + std::to_string(hi.size()) + " numbers");
+    if (lo.size() == 3) g.region = fdm::Box{vec3(lo), vec3(hi)};
+    p.materials.push_back(g);
+  }
+  if (s.boolean("continuum.large_strain"))
+    s.fail("continuum.large_strain", "false (fem_node is a small-strain solver)", "true");
+  if (s.string("continuum.boundary") != "strongbox")
+    s.fail("continuum.boundary", "\"strongbox\" (fem_node needs supports: a free body has a singular stiffness)",
+           "\"" + s.string("continuum.boundary") + "\"");
+  if (s.has("continuum.punch"))
+    s.fail("continuum.punch", "no [continuum.punch] section (fem_node has no prescribed-displacement punch)",
+           "a [continuum.punch] section");
+  double g = s.has("gravity") ? s.real("gravity.level") * s.real("gravity.g0") : 0.0;
+  p.gravity = {0.0, 0.0, -g};
+  p.strongbox = true;
+  return p;
+}
+
+class FemParticipant : public node::Participant {
+ public:
+  explicit FemParticipant(const node::Context& ctx) : ctx_(ctx), model_(fem_params(ctx.scene)) {
+    const auto& s = ctx.scene;
+    frame_every_ = s.integer("continuum.output.frame_every");
+    history_every_ = s.integer("continuum.output.history_every");
+    u_prev_ = model_.interface_displacements();
+    spdlog::info("fem: {} gridpoints, {} zones, {} free dofs, {} interface points; K factorised in {:.3f} s",
+                 model_.num_points(), model_.num_zones(), model_.num_free_dofs(),
+                 model_.mesh().interface_points.size(), model_.factorisation_s());
+    if (!ctx.options.run_dir.empty()) {
+      fs::path dir = ctx.options.run_dir;
+      io::FileInfo info{"fem_node", std::to_string(ctx.options.run_id), std::to_string(s.hash()), {}};
+      std::vector<std::int64_t> conn(model_.mesh().zones.begin(), model_.mesh().zones.end());
+      out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8), io::H5StorageParams{},
+                   "fem.h5");
+      if (history_every_ > 0)
+        history_.emplace(io::CsvSeries::create(dir / "fem_history.csv",
+                                               {"step_unit", "time_s", "residual_unit", "base_fx_N", "base_fy_N",
+                                                "base_fz_N", "iface_fz_N", "solve_s"}));
+    }
+  }
+
+  double dt_stable() const override { return 0.0; }  // implicit: no limit
+  double time() const override { return time_; }
+
+  proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
+    const auto& a = st.action;
+    if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
+      throw std::invalid_argument("fem_node does not support stage action '" + a + "'");
+    if (a == "geostatic" || a == "couple") {
+      double k0 = st.view.real("k0");
+      model_.set_geostatic_stress(k0 < 0 ? fdm::kNaN : k0);
+      spdlog::info("fem: geostatic stresses assigned (K0 {})", k0 < 0 ? std::string("nu/(1-nu)") : std::to_string(k0));
+    }
+    if (st.view.boolean("reset_displacements")) u_ref_ = model_.displacements();
+    return {{"zones", static_cast<double>(model_.num_zones())},
+            {"gridpoints", static_cast<double>(model_.num_points())}};
+  }
+
+  void advance(const schema::Stage&, std::int64_t step, double dt, const std::vector<double>&) override {
+    auto t0 = std::chrono::steady_clock::now();
+    u_prev_ = model_.interface_displacements();
+    model_.solve();
+    last_solve_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    total_solve_s_ += last_solve_s_;
+    ++solves_;
+    dt_ = dt;
+    time_ += dt > 0 ? dt : 1.0;
+    solved_ = true;
+    if (history_ && history_every_ > 0 && step % history_every_ == 0) {
+      auto b = model_.base_reaction();
+      history_->append({static_cast<double>(step), time_, model_.residual_ratio(), b[0], b[1], b[2], iface_fz_,
+                        last_solve_s_});
+    }
+    if (out_ && frame_every_ > 0 && step % frame_every_ == 0) write_frame(step);
+  }
+
+  proto::Values step_values() override {
+    auto b = model_.base_reaction();
+    proto::Values v{{"ratio", model_.residual_ratio()}, {"base_fz_N", b[2]}, {"solve_s", last_solve_s_}};
+    if (coupled_) {
+      v.push_back({"iface_imbalance", max_imbalance_});
+      v.push_back({"iface_fz_N", iface_fz_});
+    }
+    return v;
+  }
+  bool criterion_met(const schema::Stage& st) override {
+    const auto& a = st.action;
+    if (a == "equilibrium" || a == "geostatic" || a == "couple") return solved_;
+    return a == "penetrate";
+  }
+  proto::Values stage_end(const schema::Stage&, std::int64_t last) override {
+    if (out_ && last != last_frame_) write_frame(last);
+    solved_ = false;
+    auto v = step_values();
+    v.push_back({"solves", static_cast<double>(solves_)});
+    v.push_back({"solve_total_s", total_solve_s_});
+    return v;
+  }
+  void finish() override {
+    spdlog::info("fem: {} solves, {:.3f} s in back-substitutions, {:.3f} s factorisation", solves_, total_solve_s_,
+                 model_.factorisation_s());
+    if (history_) history_->close();
+  }
+
+  proto::InterfaceMesh interface_mesh() override {
+    const auto& mesh = model_.mesh();
+    proto::InterfaceMesh m;
+    m.point_ids.assign(mesh.interface_points.begin(), mesh.interface_points.end());
+    m.positions = model_.interface_positions();
+    m.triangles.assign(mesh.interface_triangles.begin(), mesh.interface_triangles.end());
+    m.wall_of_triangle.assign(mesh.interface_triangle_side.begin(), mesh.interface_triangle_side.end());
+    m.n_walls = 6;
+    return m;
+  }
+  proto::Kinematics interface_kinematics() override {
+    proto::Kinematics k;
+    k.positions = model_.interface_positions();
+    auto u = model_.interface_displacements();
+    k.velocities.resize(u.size());
+    double h = dt_ > 0 ? dt_ : 1.0;
+    for (std::size_t i = 0; i < u.size(); ++i) k.velocities[i] = (u[i] - u_prev_[i]) / h;
+    return k;
+  }
+  void apply_interface_forces(const proto::Forces& f) override {
+    std::array<double, 3> sum{0, 0, 0};
+    for (std::size_t i = 0; i < f.forces.size(); ++i) sum[i % 3] += f.forces[i];
+    double scale = std::max({std::abs(f.total[0]), std::abs(f.total[1]), std::abs(f.total[2]), 1e-300});
+    double imbalance =
+        std::max({std::abs(sum[0] - f.total[0]), std::abs(sum[1] - f.total[1]), std::abs(sum[2] - f.total[2])});
+    max_imbalance_ = std::max(max_imbalance_, imbalance / scale);
+    coupled_ = true;
+    iface_fz_ = sum[2];
+    model_.set_interface_forces(f.forces);  // throws naming the sizes on a mismatch
+  }
+
+ private:
+  void write_frame(std::int64_t step) {
+    if (has_frame_ && time_ <= last_frame_time_) return;
+    const auto& u = model_.displacements();
+    std::vector<double> disp(u.size()), vel(u.size(), 0.0);
+    for (std::size_t i = 0; i < u.size(); ++i) disp[i] = u[i] - (u_ref_.empty() ? 0.0 : u_ref_[i]);
+    auto stress = model_.zone_stress();
+    io::MeshFrame f;
+    f.node_arrays.push_back({"displacement", io::ArrayView(disp, 3)});
+    f.zone_arrays.push_back({"stress", io::ArrayView(stress, 6)});
+    out_->write_frame(step, time_, f);
+    has_frame_ = true;
+    last_frame_time_ = time_;
+    last_frame_ = step;
+  }
+
+  node::Context ctx_;
+  fem::Model model_;
+  std::optional<io::MeshOutput> out_;
+  std::optional<io::CsvSeries> history_;
+  std::int64_t frame_every_ = 0, history_every_ = 1, last_frame_ = -2, solves_ = 0;
+  std::vector<double> u_prev_, u_ref_;
+  double time_ = 0, dt_ = 0, last_solve_s_ = 0, total_solve_s_ = 0, last_frame_time_ = 0;
+  double max_imbalance_ = 0, iface_fz_ = 0;
+  bool coupled_ = false, solved_ = false, has_frame_ = false;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  return node::run_node(argc, argv, "continuum", "fem_node",
+                        [](const node::Context& ctx) { return std::make_unique<FemParticipant>(ctx); });
+}

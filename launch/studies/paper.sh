@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# The paper's coupled footing study (Figs. 3-7): SBM at 1, 50, 100, 200 g and PBM at 100 g, upscaling 1.5.
+#
+# Usage: launch/study paper [--only "100g_sbm 100g_pbm ..."] [--runs-root DIR] [--figures STUDY_DIR]
+#   --only LIST      run only these scenes (names after scenes/paper_, default: all five)
+#   --runs-root DIR  where the study folder goes (default ./runs; env DEMFDM_RUNS_ROOT)
+#   --figures DIR    do not run anything: redraw the figures of an existing study folder
+# Writes DIR/studies/<date>-paper/ with one run folder per scene (scenes/paper_*.toml, each
+# about 10 minutes on this 2-core machine), run_wall_s.txt in each, then fig3..fig7 as CSV and PNG
+# and summary.csv (peak load, initial stiffness, bond counts per run) via
+# launch/py/paper_figures.py. Procedure and decisions: docs/paper-study.md.
+set -euo pipefail
+root="${DEMFDM_ROOT:?run through launch/study}"
+runs_root="${DEMFDM_RUNS_ROOT:-$PWD/runs}"
+all="100g_sbm 100g_pbm 1g_sbm 50g_sbm 200g_sbm"
+only="$all"; study=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --only) only="$2"; shift ;;
+    --runs-root) runs_root="$2"; shift ;;
+    --figures) study="$2"; shift ;;
+    -h|--help) sed -n '3,11p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "paper study: unknown option '$1' (see launch/study paper --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+for n in $only; do
+  [ -f "$root/scenes/paper_$n.toml" ] || { echo "paper study: no scene scenes/paper_$n.toml" >&2; exit 2; }
+done
+if [ -z "$study" ]; then
+  study="$runs_root/studies/$(date +%Y%m%d-%H%M%S)-paper"
+  mkdir -p "$study"
+  echo "paper study: folder $study" >&2
+  for n in $only; do
+    t0=$(date +%s.%N)
+    "$root/launch/run" "$root/scenes/paper_$n.toml" --no-build --run-dir "$study/$n" >"$study/$n.log" 2>&1 \
+      || { echo "paper study: run $n failed, see $study/$n.log" >&2; exit 3; }
+    t1=$(date +%s.%N)
+    /usr/bin/python3 -c "print(f'{$t1 - $t0:.1f}')" > "$study/$n/run_wall_s.txt"
+    echo "paper study: $n done in $(cat "$study/$n/run_wall_s.txt") s" >&2
+  done
+fi
+[ -d "$study" ] || { echo "paper study: no folder $study" >&2; exit 2; }
+# Finished runs only (a run folder gets summary.txt when its coordinator ends).
+have() { [ -f "$study/$1/summary.txt" ] && ! grep -q '^FAILED' "$study/$1/summary.txt"; }
+args=()
+for n in $all; do have "$n" && args+=(--run "$n=$study/$n"); done
+[ ${#args[@]} -gt 0 ] || { echo "paper study: no finished runs in $study" >&2; exit 3; }
+have 100g_sbm && args+=(--fig3 100g_sbm --fig7 100g_sbm)
+have 100g_sbm && have 100g_pbm && args+=(--fig4 100g_sbm 100g_pbm)
+g=(); for l in 1 50 100 200; do have "${l}g_sbm" && g+=("${l}g_sbm:$l"); done
+[ ${#g[@]} -gt 0 ] && args+=(--glevels "${g[@]}")
+d_f=$(sed -n 's/^diameter = //p' "$root/scenes/paper_100g_sbm.toml" | head -1)
+/usr/bin/python3 "$root/launch/py/paper_figures.py" "$study/figures" --d-f "$d_f" "${args[@]}"
+# Stage and run wall times, bus-wait shares, particles and zones: from each run's summary.txt.
+for n in $all; do
+  [ -f "$study/$n/summary.txt" ] || continue
+  echo "== $n ($(cat "$study/$n/run_wall_s.txt" 2>/dev/null || echo ?) s)"
+  sed -n '/^stages:/,/^total:/p' "$study/$n/summary.txt"
+done > "$study/figures/timings.txt"
+echo "paper study: figures in $study/figures" >&2

@@ -1,0 +1,120 @@
+// Specimen generation for the paper's UCS study (physics.md §0.3, §0.4, §4.3–4.6;
+// docs/ucs-study.md): Table 1 particle counts from the PSD, porosity and coordination number
+// of a generated REV, servo of the bonded REV, determinism.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/specimen.hpp"
+#include "demfdm/dem/world.hpp"
+
+using namespace demfdm::dem;
+
+namespace {
+constexpr double kN = 0.5195;  // Table 1 porosity (scale 1)
+constexpr double kZ = 6.82;    // Table 1 coordination number
+
+WorldParams cell_params(double Lx, double Ly, double Lz) {
+  WorldParams p;
+  p.periodic.enabled = true;
+  p.periodic.length = {Lx, Ly, Lz};
+  p.local_damping = 0.7;
+  p.threads = 1;
+  p.skin_factor = 0.8;  // the bonding gaps reach ~0.35 d_min (docs/ucs-study.md)
+  p.ball_ball.model = ContactModel::kSoftBond;
+  return p;
+}
+
+RevParams rev(double scale, std::uint64_t seed) {
+  RevParams g;
+  g.psd.scale = scale;
+  g.seed = seed;
+  g.porosity_final = kN;
+  return g;
+}
+}  // namespace
+
+// §0.4: N_p = (1 − n) V / E[V_p] with E[d³] = 2(b − a)/(a⁻² − b⁻²) against Table 1
+// (25835, 11781, 7664 in 4 × 4 × 2 mm), within the 2 % bound of the study.
+TEST(SpecimenGeneration, ExpectedCountMatchesTable1) {
+  const double V = 4e-3 * 4e-3 * 2e-3;
+  const double scales[3] = {1.0, 1.3, 1.5};
+  const double table[3] = {25835, 11781, 7664};
+  for (int k = 0; k < 3; ++k) {
+    PsdParams p;
+    p.scale = scales[k];
+    const double n = psd_expected_count(p, V, kN);
+    EXPECT_NEAR(n / table[k], 1.0, 0.02) << "scale " << scales[k] << ": " << n;
+  }
+  // the closed-form mean volume agrees with the sampled inverse CDF (200k draws, 1 %)
+  PsdParams p;
+  Rng rng(5);
+  double sum = 0.0;
+  const int m = 200000;
+  for (int i = 0; i < m; ++i) {
+    const double d = psd_diameter(p, rng.uniform());
+    sum += 3.14159265358979323846 / 6.0 * d * d * d;
+  }
+  EXPECT_NEAR(sum / m / psd_mean_volume(p), 1.0, 0.01);
+}
+
+// §4.3–4.6 on a 1.2 × 1.2 × 0.8 mm cell at scale 1.5 (~270 balls): N_p is the expected count,
+// porosity n of Table 1 within 0.01, bonded Z of Table 1 within 0.3 (and not below it); the
+// bonded REV servos to (σ_h, σ_h, σ_v) within 1 % with ratio below 1e-4 and keeps its porosity.
+TEST(SpecimenGeneration, PorosityCoordinationAndServo) {
+  World w(cell_params(1.2e-3, 1.2e-3, 0.8e-3));
+  const RevParams g = rev(1.5, 3);
+  const StageReport r = generate_rev(w, g);
+  EXPECT_EQ(w.num_balls(), static_cast<std::size_t>(std::llround(psd_expected_count(g.psd, w.cell_volume(), kN))));
+  EXPECT_TRUE(r.converged) << r.what;
+  EXPECT_NEAR(cell_porosity(w), kN, 0.01);
+  const StageReport b = install_bonds_to_coordination(w, kZ, 1e-3 * g.psd.d_min * g.psd.scale);
+  const Coordination c = coordination(w);
+  EXPECT_GE(c.z, kZ);
+  EXPECT_NEAR(c.z, kZ, 0.3) << b.what;
+  EXPECT_EQ(bond_counts(w).intact, b.count);
+
+  ServoParams s;
+  s.target = {6.25e3, 6.25e3, 12.5e3};  // σ_v = 12.5 kPa (100 g, §7.4), K0 = 0.5
+  const StageReport sv = servo_until(w, s, 0.005, 1e-4, 200, 20000);
+  EXPECT_TRUE(sv.converged) << sv.what;
+  EXPECT_LT(sv.ratio, 1e-4);
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(-sv.stress[4 * a] / s.target[a], 1.0, 0.01) << "axis " << a;
+  EXPECT_NEAR(sv.porosity, kN, 0.01);
+  EXPECT_NEAR(coordination(w).z, kZ, 0.3);
+}
+
+// Determinism: the same seed gives the same N_p and bit-identical positions and radii;
+// another seed gives other positions.
+TEST(SpecimenGeneration, SameSeedSameSpecimen) {
+  auto make = [](std::uint64_t seed) {
+    auto w = std::make_unique<World>(cell_params(0.8e-3, 0.8e-3, 0.8e-3));
+    generate_rev(*w, rev(1.5, seed));
+    install_bonds_to_coordination(*w, kZ, 1e-7);
+    return w;
+  };
+  auto a = make(11), b = make(11), c = make(12);
+  ASSERT_EQ(a->num_balls(), b->num_balls());
+  ASSERT_GT(a->num_balls(), 50u);
+  for (std::size_t i = 0; i < a->num_balls(); ++i) {
+    EXPECT_EQ(a->balls().x[i].x, b->balls().x[i].x);
+    EXPECT_EQ(a->balls().x[i].y, b->balls().x[i].y);
+    EXPECT_EQ(a->balls().x[i].z, b->balls().x[i].z);
+    EXPECT_EQ(a->balls().r[i], b->balls().r[i]);
+  }
+  EXPECT_EQ(bond_counts(*a).intact, bond_counts(*b).intact);
+  EXPECT_NE(a->balls().x[0].x, c->balls().x[0].x);
+}
+
+// Bad input: one clear error each.
+TEST(SpecimenGeneration, BadInput) {
+  World w(cell_params(0.8e-3, 0.8e-3, 0.8e-3));
+  RevParams g = rev(1.5, 1);
+  g.porosity_final = 1.2;
+  EXPECT_THROW(generate_rev(w, g), std::invalid_argument);
+  g.porosity_final = kN;
+  generate_rev(w, g);
+  EXPECT_THROW(gap_for_coordination(w, 0.0, 0.0), std::invalid_argument);
+  EXPECT_THROW(gap_for_coordination(w, 40.0, 0.0), std::invalid_argument);  // more than the skin holds
+}
