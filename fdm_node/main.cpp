@@ -11,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include "demfdm/fdm/model.hpp"
+#include "fdm_node/scene_params.hpp"
 #include "demfdm/io/csv_series.hpp"
 #include "demfdm/io/results_output.hpp"
 #include "messages/node_runtime.hpp"
@@ -20,26 +21,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::array<double, 3> vec3(const std::vector<double>& v) { return {v[0], v[1], v[2]}; }
 
 fdm::ModelParams model_params(const config::Scene& s) {
   fdm::ModelParams p;
-  auto& m = p.mesh;
-  auto size = s.reals("continuum.mesh.size");
-  m.length = size[0];
-  m.width = size[1];
-  m.height = size[2];
-  m.pocket = s.boolean("continuum.mesh.pocket");
-  m.inner_size = vec3(s.reals("continuum.mesh.inner_size"));
-  auto origin = s.reals("continuum.mesh.inner_origin");
-  if (origin.size() == 3)
-    m.inner_origin = vec3(origin);
-  else if (!origin.empty())
-    s.fail("continuum.mesh.inner_origin", "an empty list or 3 numbers [x, y, z] in m",
-           std::to_string(origin.size()) + " numbers");
-  m.size_near = s.real("continuum.mesh.size_near");
-  m.size_far = s.real("continuum.mesh.size_far");
-  m.growth = s.real("continuum.mesh.growth");
+  p.mesh = fdm::mesh_from_scene(s);
 
   p.materials.clear();
   std::size_t n = s.count("continuum.material");
@@ -56,11 +41,7 @@ fdm::ModelParams model_params(const config::Scene& s) {
     mat.friction_deg = e.real("friction_deg");
     mat.dilation_deg = e.real("dilation_deg");
     mat.tension = e.real("tension") < 0 ? fdm::kNaN : e.real("tension");
-    auto lo = e.reals("region_lo"), hi = e.reals("region_hi");
-    if (lo.size() != hi.size() || (lo.size() != 0 && lo.size() != 3))
-      e.fail("region_lo", "region_lo and region_hi both empty or both [x, y, z]",
-             std::to_string(lo.size()) + " and " + std::to_string(hi.size()) + " numbers");
-    if (lo.size() == 3) g.region = fdm::Box{vec3(lo), vec3(hi)};
+    g.region = fdm::region_from_scene(e);
     p.materials.push_back(g);
   }
   p.mode = s.string("continuum.mode") == "static" ? fdm::Mode::kStatic : fdm::Mode::kDynamic;

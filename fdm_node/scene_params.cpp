@@ -1,0 +1,44 @@
+#include "fdm_node/scene_params.hpp"
+
+#include <string>
+
+namespace demfdm::fdm {
+namespace {
+std::array<double, 3> vec3(const std::vector<double>& v) { return {v[0], v[1], v[2]}; }
+}  // namespace
+
+MeshParams mesh_from_scene(const config::Scene& s) {
+  MeshParams m;
+  auto size = s.reals("continuum.mesh.size");
+  m.length = size[0];
+  m.width = size[1];
+  m.height = size[2];
+  m.pocket = s.boolean("continuum.mesh.pocket");
+  m.inner_size = vec3(s.reals("continuum.mesh.inner_size"));
+  auto origin = s.reals("continuum.mesh.inner_origin");
+  if (origin.size() == 3)
+    m.inner_origin = vec3(origin);
+  else if (!origin.empty())
+    s.fail("continuum.mesh.inner_origin", "an empty list or 3 numbers [x, y, z] in m",
+           std::to_string(origin.size()) + " numbers");
+  m.size_near = s.real("continuum.mesh.size_near");
+  m.size_far = s.real("continuum.mesh.size_far");
+  m.growth = s.real("continuum.mesh.growth");
+  try {
+    validate(m);
+  } catch (const std::invalid_argument& e) {
+    s.fail("continuum.mesh", "a valid mesh", e.what());
+  }
+  return m;
+}
+
+std::optional<Box> region_from_scene(const config::Scene& e) {
+  auto lo = e.reals("region_lo"), hi = e.reals("region_hi");
+  if (lo.size() != hi.size() || (lo.size() != 0 && lo.size() != 3))
+    e.fail("region_lo", "region_lo and region_hi both empty or both [x, y, z]",
+           std::to_string(lo.size()) + " and " + std::to_string(hi.size()) + " numbers");
+  if (lo.size() == 3) return Box{vec3(lo), vec3(hi)};
+  return std::nullopt;
+}
+
+}  // namespace demfdm::fdm
