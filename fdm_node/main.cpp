@@ -68,6 +68,7 @@ class FdmParticipant : public node::Participant {
     omp_set_num_threads(static_cast<int>(s.integer("run.threads")));
     frame_every_ = s.integer("continuum.output.frame_every");
     history_every_ = s.integer("continuum.output.history_every");
+    if (s.string("continuum.boundary") == "symmetry") setup_symmetry(s);
     if (s.has("continuum.punch")) setup_punch(s);
     spdlog::info("fdm: {} gridpoints, {} zones, {} interface points, {} interface triangles; critical dt {:.3e} s",
                  model_.num_gridpoints(), model_.num_zones(), model_.interface_gridpoints().size(),
@@ -118,7 +119,11 @@ class FdmParticipant : public node::Participant {
       double h = dt > 0 ? dt / n : crit;
       if (h != model_.timestep()) model_.set_timestep(h);
       for (int i = 0; i < n; ++i) model_.step();
-      if (!punch_.empty()) punch_disp_ += punch_velocity_ * (dt > 0 ? dt : crit);
+      if (!punch_.empty() && !released_) punch_disp_ += punch_velocity_ * (dt > 0 ? dt : crit);
+      if (!punch_.empty() && release_after_ > 0 && !released_ && model_.time() >= release_after_ * (1 - 1e-12)) {
+        for (auto g : punch_) model_.free_velocity(g, fdm::kFixZ);
+        released_ = true;
+      }
     } else {
       model_.step();
       if (!punch_.empty()) punch_disp_ += punch_velocity_;
@@ -201,7 +206,26 @@ class FdmParticipant : public node::Participant {
   }
 
  private:
+  // Element-test boundary: rollers on the three coordinate planes through the origin; the
+  // confining pressure on the x = L and y = W faces, with the matching hydrostatic initial stress
+  // so that the specimen starts in equilibrium.
+  void setup_symmetry(const config::Scene& s) {
+    for (int axis = 0; axis < 3; ++axis)
+      for (auto g : model_.gridpoints_on_plane(axis, 0.0))
+        model_.fix_velocity(g, static_cast<std::uint8_t>(1u << axis), {0.0, 0.0, 0.0});
+    double p = s.real("continuum.confining");
+    if (p > 0) {
+      std::vector<fdm::BoundaryFace> faces;
+      for (auto& f : fdm::boundary_faces(model_.mesh()))
+        if (f.side == fdm::Side::kPlusX || f.side == fdm::Side::kPlusY) faces.push_back(f);
+      model_.add_face_pressure(faces, p);
+      model_.set_uniform_stress({-p, -p, -p, 0.0, 0.0, 0.0});
+    }
+    spdlog::info("fdm: symmetry boundary, confining pressure {} Pa", p);
+  }
+
   void setup_punch(const config::Scene& s) {
+    release_after_ = s.real("continuum.punch.release_after");
     double a = s.real("continuum.punch.radius");
     punch_velocity_ = s.real("continuum.punch.velocity");
     auto c = s.reals("continuum.punch.centre");
@@ -214,7 +238,8 @@ class FdmParticipant : public node::Participant {
       if (dx * dx + dy * dy <= a * a * (1 + 1e-9)) punch_.push_back(g);
     }
     if (punch_.empty()) s.fail("continuum.punch.radius", "a radius that covers at least one top gridpoint", std::to_string(a));
-    for (auto g : punch_) model_.fix_velocity(g, fdm::kFixAll, {0.0, 0.0, -punch_velocity_});
+    const std::uint8_t mask = s.boolean("continuum.punch.rough") ? fdm::kFixAll : fdm::kFixZ;
+    for (auto g : punch_) model_.fix_velocity(g, mask, {0.0, 0.0, -punch_velocity_});
     spdlog::info("fdm: rigid punch radius {} m on {} top gridpoints, speed {} m/s", a, punch_.size(), punch_velocity_);
   }
   // Upward force the punch exerts on... the soil pushes back: reaction on the punch gridpoints.
@@ -277,7 +302,8 @@ class FdmParticipant : public node::Participant {
   double last_frame_time_ = 0;
   fdm::Ratios last_ratios_{};
   std::vector<std::int32_t> punch_;
-  double punch_velocity_ = 0, punch_disp_ = 0;
+  double punch_velocity_ = 0, punch_disp_ = 0, release_after_ = 0;
+  bool released_ = false;
   double max_imbalance_ = 0, iface_fz_ = 0;
   bool coupled_ = false;
 };

@@ -69,8 +69,12 @@ void declare_continuum(config::Section& root) {
   c.real("timestep_safety", "-", 0.5, "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).")
       .min(0.0, true).max(1.0);
   c.real("static_mass_factor", "-", 1.0, "Multiplier on the static-mode inertial masses (5.6).").min(1.0);
-  c.choice("boundary", {"strongbox", "none"}, std::string("strongbox"),
-           "strongbox: fixed base, rollers on the four sides, free top (physics.md 5.10); none: all free.");
+  c.choice("boundary", {"strongbox", "symmetry", "none"}, std::string("strongbox"),
+           "strongbox: fixed base, rollers on the four sides, free top (physics.md 5.10); symmetry: rollers on "
+           "the x = 0, y = 0 and z = 0 planes only (element tests: a quarter of a triaxial specimen); none: all free.");
+  c.real("confining", "Pa", 0.0,
+         "Confining pressure on the x = L and y = W faces (with boundary = \"symmetry\"), also set as the initial "
+         "hydrostatic stress; 0: none.").min(0.0);
   auto& m = c.section("mesh", "FDM mesh: a box of hexahedra around the DEM pocket (physics.md 5.1).",
                       config::Presence::Optional);
   m.reals("size", "m", std::vector<double>{16e-3, 16e-3, 16e-3}, "Box L x W x H.").length(3).min(0.0, true);
@@ -107,6 +111,10 @@ void declare_continuum(config::Section& root) {
   punch.real("velocity", "m/s", std::nullopt, "Downward speed (dynamic mode) or displacement per step (static).")
       .min(0.0);
   punch.reals("centre", "m", std::vector<double>{}, "Centre [x, y]; empty: the centre of the top face.");
+  punch.boolean("rough", true, "Rough punch (all velocity components fixed) or smooth platen (vertical only).");
+  punch.real("release_after", "s", 0.0,
+             "Free the punch's vertical velocity after this time (a pulse, e.g. for wave-speed checks); 0: never.")
+      .min(0.0);
   auto& out = c.section("output", "Continuum results (fdm.h5 + mesh.xmf, fdm_history.csv).",
                         config::Presence::Optional);
   out.integer("frame_every", "steps", 0, "HDF5 frame every n coupling steps; 0: only at the end of each stage.")
