@@ -305,6 +305,28 @@ void NodeEndpoint::store(std::int32_t type, std::int64_t step, std::vector<std::
   }
 }
 
+template <class Msg, class Fill>
+void NodeEndpoint::publish_chunked(const std::string& channel, std::int32_t type, std::int64_t step, std::size_t n,
+                                   Fill fill) {
+  auto pc = chunks(n);
+  std::vector<std::function<void()>> resend;
+  for (std::size_t i = 0; i < pc.size(); ++i) {
+    auto [off, cnt] = pc[i];
+    auto msg = std::make_shared<Msg>();
+    msg->header.step = step;
+    msg->chunk_index = static_cast<std::int32_t>(i);
+    msg->n_chunks = static_cast<std::int32_t>(pc.size());
+    msg->n_points_total = static_cast<std::int32_t>(n);
+    msg->point_offset = static_cast<std::int32_t>(off);
+    msg->n_points = static_cast<std::int32_t>(cnt);
+    msg->n_coords = static_cast<std::int32_t>(3 * cnt);
+    fill(*msg, off, cnt);
+    bus_.publish(channel, *msg);
+    resend.push_back([this, msg, channel] { bus_.republish(channel, *msg); });
+  }
+  store(type, step, std::move(resend));
+}
+
 void NodeEndpoint::send_mesh(const InterfaceMesh& m) {
   auto pc = chunks(m.n_points());
   auto tc = chunks(m.triangles.size() / 3);
@@ -379,24 +401,13 @@ InterfaceMesh NodeEndpoint::wait_mesh() {
 
 void NodeEndpoint::send_kin(const Kinematics& k) {
   std::size_t n = k.positions.size() / 3;
-  auto pc = chunks(n);
-  std::vector<std::function<void()>> resend;
-  for (std::size_t i = 0; i < pc.size(); ++i) {
-    auto [off, cnt] = pc[i];
-    auto msg = std::make_shared<demfdm::iface_kin_t>();
-    msg->header.step = k.step;
-    msg->chunk_index = static_cast<std::int32_t>(i);
-    msg->n_chunks = static_cast<std::int32_t>(pc.size());
-    msg->n_points_total = static_cast<std::int32_t>(n);
-    msg->point_offset = static_cast<std::int32_t>(off);
-    msg->n_points = static_cast<std::int32_t>(cnt);
-    msg->n_coords = static_cast<std::int32_t>(3 * cnt);
-    msg->positions.assign(k.positions.begin() + 3 * off, k.positions.begin() + 3 * (off + cnt));
-    msg->velocities.assign(k.velocities.begin() + 3 * off, k.velocities.begin() + 3 * (off + cnt));
-    bus_.publish(bus::channel::kIfaceKin, *msg);
-    resend.push_back([this, msg] { bus_.republish(bus::channel::kIfaceKin, *msg); });
-  }
-  store(demfdm::msg_types_t::MSG_IFACE_KIN, k.step, std::move(resend));
+  publish_chunked<demfdm::iface_kin_t>(bus::channel::kIfaceKin, demfdm::msg_types_t::MSG_IFACE_KIN, k.step, n,
+                                       [&](demfdm::iface_kin_t& msg, std::size_t off, std::size_t cnt) {
+                                         msg.positions.assign(k.positions.begin() + 3 * off,
+                                                              k.positions.begin() + 3 * (off + cnt));
+                                         msg.velocities.assign(k.velocities.begin() + 3 * off,
+                                                               k.velocities.begin() + 3 * (off + cnt));
+                                       });
 }
 
 Kinematics NodeEndpoint::wait_kin(std::int64_t step) {
@@ -429,26 +440,14 @@ Kinematics NodeEndpoint::wait_kin(std::int64_t step) {
 
 void NodeEndpoint::send_forces(const Forces& f) {
   std::size_t n = f.forces.size() / 3;
-  auto pc = chunks(n);
-  std::vector<std::function<void()>> resend;
-  for (std::size_t i = 0; i < pc.size(); ++i) {
-    auto [off, cnt] = pc[i];
-    auto msg = std::make_shared<demfdm::iface_force_t>();
-    msg->header.step = f.step;
-    msg->chunk_index = static_cast<std::int32_t>(i);
-    msg->n_chunks = static_cast<std::int32_t>(pc.size());
-    msg->n_points_total = static_cast<std::int32_t>(n);
-    msg->point_offset = static_cast<std::int32_t>(off);
-    msg->n_points = static_cast<std::int32_t>(cnt);
-    msg->n_coords = static_cast<std::int32_t>(3 * cnt);
-    msg->forces.assign(f.forces.begin() + 3 * off, f.forces.begin() + 3 * (off + cnt));
-    msg->stiffness.resize(cnt);
-    for (std::size_t p = 0; p < cnt; ++p) msg->stiffness[p] = f.stiffness.empty() ? 0.0 : f.stiffness[off + p];
-    for (int d = 0; d < 3; ++d) msg->total[d] = f.total[d];
-    bus_.publish(bus::channel::kIfaceForce, *msg);
-    resend.push_back([this, msg] { bus_.republish(bus::channel::kIfaceForce, *msg); });
-  }
-  store(demfdm::msg_types_t::MSG_IFACE_FORCE, f.step, std::move(resend));
+  publish_chunked<demfdm::iface_force_t>(
+      bus::channel::kIfaceForce, demfdm::msg_types_t::MSG_IFACE_FORCE, f.step, n,
+      [&](demfdm::iface_force_t& msg, std::size_t off, std::size_t cnt) {
+        msg.forces.assign(f.forces.begin() + 3 * off, f.forces.begin() + 3 * (off + cnt));
+        msg.stiffness.resize(cnt);
+        for (std::size_t p = 0; p < cnt; ++p) msg.stiffness[p] = f.stiffness.empty() ? 0.0 : f.stiffness[off + p];
+        for (int d = 0; d < 3; ++d) msg.total[d] = f.total[d];
+      });
 }
 
 Forces NodeEndpoint::wait_forces(std::int64_t step) {

@@ -152,6 +152,10 @@ class NodeEndpoint {
   void on_any_from_coordinator();
   void check_coordinator_alive();
   void store(std::int32_t type, std::int64_t step, std::vector<std::function<void()>> resend);
+  // Chunks n interface points (kPointsPerChunk per message), fills each chunk's arrays with
+  // fill(msg, offset, count), publishes, and keeps the chunks for resends after a NACK.
+  template <class Msg, class Fill>
+  void publish_chunked(const std::string& channel, std::int32_t type, std::int64_t step, std::size_t n, Fill fill);
 
   bus::Bus& bus_;
   std::string role_, solver_;

@@ -993,6 +993,31 @@ void World::pair_pass(double dt) {
   }
 }
 
+// One ball against a rigid moving wall (platen or footing): contact kinematics at the middle of
+// the overlap (physics.md 1.4-1.5), the family's law, and the per-contact results stored in wc.
+// Returns the force on the wall.
+template <ContactModel M>
+Vec3 rigid_wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const Vec3& n, double dist,
+                        const Vec3& v_wall, const LawConst& lc, double dt) {
+  const std::uint32_t i = wc.ball[c];
+  Kin k;
+  k.n = n;
+  k.gap = dist - pt.r[i];
+  const Vec3 la = (pt.r[i] + 0.5 * k.gap) * n;
+  const Vec3 vr = v_wall - (pt.v[i] + cross(pt.w[i], la));
+  k.du = vr * dt;
+  k.dtheta = -pt.w[i] * dt;
+  k.wmean = 0.5 * pt.w[i];
+  k.dt = dt;
+  Vec3 Mo;
+  const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
+  wc.F[c] = F;
+  wc.M[c] = Mo;
+  wc.TA[c] = cross(F, la) - Mo;
+  wc.xc[c] = pt.x[i] + la;
+  return F;
+}
+
 template <ContactModel M>
 void World::plane_pass(double dt) {
   const LawConst lc = law_const(p_.ball_wall);
@@ -1004,22 +1029,7 @@ void World::plane_pass(double dt) {
     PlaneWall& pw = planes_[wc.wall[c]];
     Vec3 n;
     const double dist = plane_distance(pt_.x[i], pw, n);
-    Kin k;
-    k.n = n;
-    k.gap = dist - pt_.r[i];
-    const Vec3 la = (pt_.r[i] + 0.5 * k.gap) * n;
-    const Vec3 vr = pw.p.velocity - (pt_.v[i] + cross(pt_.w[i], la));
-    k.du = vr * dt;
-    k.dtheta = -pt_.w[i] * dt;
-    k.wmean = 0.5 * pt_.w[i];
-    k.dt = dt;
-    Vec3 Mo;
-    const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
-    wc.F[c] = F;
-    wc.M[c] = Mo;
-    wc.TA[c] = cross(F, la) - Mo;
-    wc.xc[c] = pt_.x[i] + la;
-    pw.reaction += F;
+    pw.reaction += rigid_wall_contact<M>(pt_, wc, c, n, dist, pw.p.velocity, lc, dt);
     if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
   }
 }
@@ -1101,22 +1111,7 @@ void World::footing_pass(double dt) {
     const std::uint32_t i = wc.ball[c];
     Vec3 q, n;
     const double dist = closest_point_cylinder(pt_.x[i], footing_.p.bottom_centre, R, footing_.p.height, q, n);
-    Kin k;
-    k.n = n;
-    k.gap = dist - pt_.r[i];
-    const Vec3 la = (pt_.r[i] + 0.5 * k.gap) * n;
-    const Vec3 vr = footing_.p.velocity - (pt_.v[i] + cross(pt_.w[i], la));
-    k.du = vr * dt;
-    k.dtheta = -pt_.w[i] * dt;
-    k.wmean = 0.5 * pt_.w[i];
-    k.dt = dt;
-    Vec3 Mo;
-    const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
-    wc.F[c] = F;
-    wc.M[c] = Mo;
-    wc.TA[c] = cross(F, la) - Mo;
-    wc.xc[c] = pt_.x[i] + la;
-    footing_.reaction += F;
+    footing_.reaction += rigid_wall_contact<M>(pt_, wc, c, n, dist, footing_.p.velocity, lc, dt);
   }
 }
 
