@@ -7,6 +7,9 @@
 //        bench_dem [packing]            → runs the four configurations in child processes
 // BENCH_DEM_HASH=1 also prints (stderr) an FNV-1a hash of x, v, ω after the run and the
 // number of ball–ball pairs in the list: two builds compare bit for bit on the same input.
+// BENCH_DEM_DUMP=file writes x, v, ω after the run as raw doubles [n,9] (row order of the
+// world): two builds that differ by rounding are compared with bench/dem/compare_dumps.py.
+// BENCH_DEM_PHASES=1 prints (stderr) World::phase_times() of the timed window.
 // Output: one CSV line per configuration:
 //   model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib
 #include <sys/resource.h>
@@ -83,6 +86,7 @@ int run(const std::string& file, const std::string& model, int threads, int step
   w.prepare();
   if (model == "softbond") w.bond_ball_ball(-1.0, 0.0);  // bond every touching pair
   w.step(20);  // warm-up (first-touch of all arrays)
+  w.reset_phase_times();
   const auto reb0 = w.rebuild_count();
   timespec c0{}, c1{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
@@ -105,6 +109,20 @@ int run(const std::string& file, const std::string& model, int threads, int step
       for (int k = 0; k < 3; ++k) { mix(pt.x[i][k]); mix(pt.v[i][k]); mix(pt.w[i][k]); }
     std::fprintf(stderr, "hash %s threads %d steps %d: %016llx (pairs %zu)\n", model.c_str(), threads, steps,
                  static_cast<unsigned long long>(h), w.pair_contacts().size());
+  }
+  if (const char* dump = std::getenv("BENCH_DEM_DUMP")) {
+    std::ofstream out(dump, std::ios::binary);
+    const auto& pt = w.balls();
+    for (std::size_t i = 0; i < w.num_balls(); ++i)
+      for (const Vec3* a : {&pt.x[i], &pt.v[i], &pt.w[i]}) out.write(reinterpret_cast<const char*>(a), sizeof(Vec3));
+    if (!out) throw std::runtime_error(std::string("cannot write '") + dump + "'");
+  }
+  if (std::getenv("BENCH_DEM_PHASES")) {
+    const PhaseTimes& t = w.phase_times();
+    std::fprintf(stderr, "phases %s threads %d (%lld steps, wall %.4f s): rebuild %.4f pair %.4f gather %.4f "
+                 "motion %.4f effects %.4f, sum %.4f s\n",
+                 t.pair_model, threads, static_cast<long long>(t.steps), sec, t.rebuild, t.pair, t.gather, t.motion,
+                 t.effects_total, t.total());
   }
   std::printf("%s,%d,%d,%.4f,%.4f,%.4e,%.4e,%lld,%zu,%.1f\n", model.c_str(), threads, steps, sec, cpu,
               double(w.num_balls()) * steps / sec, double(w.num_balls()) * steps / cpu,

@@ -42,7 +42,7 @@ struct BondHist {
   double kn = 0.0;    // [Pa/m] bond normal stiffness per area k_n = E/L (§1.7, §2.2);
                       // k_s = k_n/κ and the strengths are family constants (LawConst)
   double sigma_t = 0.0; // [Pa] current tensile strength (soft bond, §3.3)
-  double e_soft = 0.0;  // [J] softening dissipation (§8.18)
+  double e_soft = 0.0;  // [J] bond dissipation (§8.18): softening, and the elastic energy released at breakage
   BondState state = BondState::kNeverBonded;
   std::uint8_t slip_b = 0, slip_t = 0;  // soft-bond unbonded moment slip flags (§3.5)
   // Disc geometry derived from R̄ (cheaper than storing it: the loop is memory bound).
@@ -178,6 +178,11 @@ inline void softbond_clamp_unbonded(ContactHist& h, BondHist& b, const LawConst&
     b.state = BondState::kBrokenShear;
   }
   if (b.state != BondState::kIntact) {  // §2.5: force, moment and stiffness removed
+    // The bond's elastic energy leaves with it: book it as bond dissipation (§8.18), so that
+    // the energy balance closes across breakage.
+    const double ks = b.kn * c.ks_kn;
+    b.e_soft += 0.5 * (b.nb * b.nb * iA / b.kn + norm2(b.fsb) * iA / ks + b.mt * b.mt / (ks * b.polar()) +
+                       norm2(b.mb) / (b.kn * b.inertia()));
     b.nb = 0.0;
     b.fsb = Vec3{};
     b.mt = 0.0;
@@ -260,8 +265,20 @@ inline double softbond_plastic_elongation(const BondHist& b, const LawConst& c) 
       if (tau > ceff - (N * iA) * c.tanphi) b.state = BondState::kBrokenShear;
     }
     if (b.state == BondState::kBrokenShear || b.state == BondState::kBrokenTension) {
+      // Elastic energy removed by the break (clamp to the unbonded limits, or release of an
+      // open contact) is booked as bond dissipation (§8.18), measured with the same springs
+      // as World::energy().
+      const double ks_b = b.kn * c.ks_kn;
+      auto stored = [&] {
+        double e = norm2(b.mb) / (b.kn * b.inertia()) + b.mt * b.mt / (ks_b * b.polar());
+        if (h.kn > 0.0) e += h.fn * h.fn / h.kn;
+        if (h.ks > 0.0) e += norm2(h.fs) / h.ks;
+        return 0.5 * e;
+      };
+      const double e0 = stored();
       softbond_clamp_unbonded(h, b, c, n);  // §3.5: keep the state, clamp to limits
       if (gs > 0.0) { h.fn = 0.0; h.fs = Vec3{}; b.mb = Vec3{}; b.mt = 0.0; }
+      b.e_soft += e0 - stored();
     }
     M = b.mt * n + b.mb;
     return h.fn * n + h.fs;

@@ -19,6 +19,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "demfdm/dem/contact_kernels.hpp"
@@ -145,7 +146,31 @@ struct Energy {
   double strain = 0.0;     // [J] linear springs and bonds (current)
   double damping = 0.0;    // [J] dissipated by local damping (cumulative)
   double friction = 0.0;   // [J] dissipated by Coulomb slip (cumulative, live contacts)
-  double softening = 0.0;  // [J] dissipated by soft-bond softening (cumulative, live contacts)
+  double softening = 0.0;  // [J] bond dissipation: soft-bond softening plus the elastic energy released when
+                           //     a bond breaks (cumulative, live and dead contacts)
+};
+
+/// Cumulative wall-clock time [s] per phase of the cycle since construction or the last
+/// World::reset_phase_times() (steady clock, always on: one clock read per phase boundary,
+/// about 10 per step; cost measured in bench/dem/results_2core_kvm.csv). The phases
+/// partition the work done inside step() and prepare(), so their sum is at most the wall
+/// time spent in those calls (the remainder is loop and call overhead).
+struct PhaseTimes {
+  double rebuild = 0.0;  // neighbour check and, when needed, the neighbour-list rebuild
+  double pair = 0.0;     // ball–ball force pass (contact model: `pair_model`)
+  double plane = 0.0;    // ball–plane pass; exactly 0 while the world has no planar wall
+  double facet = 0.0;    // ball–facet pass incl. §6.4/6.5 vertex sums; 0 without facet walls
+  double footing = 0.0;  // ball–footing pass; exactly 0 without a footing
+  double gather = 0.0;   // wall-contact forces and torques added onto the balls
+  double motion = 0.0;   // law of motion + local damping, timestep estimate, wall motion
+  double effects_total = 0.0;  // all effects (pre-step, force, end-of-step phases)
+  /// One entry per effect name (Effect::name()), in order of first addition; effects that
+  /// share a name (gravity switched off and on) share the entry.
+  std::vector<std::pair<std::string, double>> effect;
+  std::int64_t steps = 0;           // step() calls timed
+  const char* pair_model = "";      // to_string(params().ball_ball.model)
+  /// Sum of the phases above (effects counted once, through effects_total).
+  double total() const { return rebuild + pair + plane + facet + footing + gather + motion + effects_total; }
 };
 
 class World {
@@ -221,6 +246,9 @@ class World {
   /// Force a neighbour rebuild and a force pass with zero increments (after edits).
   void prepare();
   std::int64_t rebuild_count() const { return rebuilds_; }
+  /// Per-phase wall times (see PhaseTimes); reset keeps the effect names, zeroes the times.
+  const PhaseTimes& phase_times() const;
+  void reset_phase_times();
 
   // ---- periodic cell (§4.2, §4.5) ----
   bool periodic() const { return p_.periodic.enabled; }
@@ -284,6 +312,8 @@ class World {
   template <ContactModel M> void footing_pass(double dt);
   void gather();  // add the wall-contact forces to the balls (serial, contact order)
   void integrate(double dt);
+  template <bool Energy, bool Periodic>
+  void integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3& sc, double& ed, double& dmax);
   void update_facet_spin(FacetWall& fw);
   LawConst law_const(const ContactFamilyParams& f) const;
 
@@ -295,7 +325,12 @@ class World {
   std::vector<FacetWall> fwalls_;
   Footing footing_;
   std::vector<std::unique_ptr<Effect>> effects_;
-  std::vector<Effect*> by_phase_[3];
+  struct EffectSlot {
+    Effect* e;
+    std::size_t slot;  // index into times_.effect
+  };
+  std::vector<EffectSlot> by_phase_[3];
+  void run_effects(int phase);
   Effect* gravity_ = nullptr;
   double time_ = 0.0, dt_ = 0.0, skin_ = 0.0;
   std::int64_t step_ = 0, rebuilds_ = 0, last_dt_step_ = -1;
@@ -305,8 +340,11 @@ class World {
   double e_damp_ = 0.0;
   std::vector<double> chunk_e_;
   double max_disp2_ = 0.0;
-  std::vector<std::vector<Vec3>> tbuf_;  // per-thread force/torque buffers [2n] (thread ≥ 1)
+  std::vector<std::vector<Vec3>> tbuf_;  // per-thread force/torque buffers [2n] (thread ≥ 1),
+                                         // all zero between passes
+  std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each thread's block
   double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
+  PhaseTimes times_;
 };
 
 /// Gravity as an optional force effect (§1.2).
