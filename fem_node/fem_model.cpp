@@ -41,7 +41,27 @@ void strain_matrix(const double dN[8][3], double B[6][24]) {
 }
 }  // namespace
 
+bool have_cholmod() {
+#ifdef DEMFDM_HAVE_CHOLMOD
+  return true;
+#else
+  return false;
+#endif
+}
+
+LinearSolver linear_solver_from_name(const std::string& name) {
+  if (name == "auto") return LinearSolver::kAuto;
+  if (name == "cholmod") return LinearSolver::kCholmod;
+  if (name == "ldlt") return LinearSolver::kLdlt;
+  throw std::invalid_argument("fem: linear solver must be \"auto\", \"cholmod\" or \"ldlt\", found \"" + name + "\"");
+}
+
 Model::Model(const Params& p) : p_(p), mesh_(fdm::generate_mesh(p.mesh)) {
+  if (p_.solver == LinearSolver::kCholmod && !have_cholmod())
+    throw std::invalid_argument(
+        "fem: continuum.linear_solver = \"cholmod\" but this build has no CHOLMOD (install libsuitesparse-dev and "
+        "rebuild, or use \"ldlt\")");
+  use_cholmod_ = p_.solver == LinearSolver::kCholmod || (p_.solver == LinearSolver::kAuto && have_cholmod());
   if (p_.materials.empty()) throw std::invalid_argument("fem: at least one material group is needed");
   const std::size_t n = mesh_.num_points(), nz = mesh_.num_zones();
   // Materials by zone centroid, later groups override earlier ones (as fdm::Model).
@@ -180,10 +200,22 @@ void Model::assemble() {
   kfull_.setFromTriplets(all.begin(), all.end());
   Eigen::SparseMatrix<double> kff(nfree_, nfree_);
   kff.setFromTriplets(freefree.begin(), freefree.end());
-  ldlt_.compute(kff);
-  if (ldlt_.info() != Eigen::Success)
+  auto t1 = std::chrono::steady_clock::now();
+  assembly_s_ = std::chrono::duration<double>(t1 - t0).count();
+  Eigen::ComputationInfo info;
+#ifdef DEMFDM_HAVE_CHOLMOD
+  if (use_cholmod_) {
+    cholmod_.compute(kff);
+    info = cholmod_.info();
+  } else
+#endif
+  {
+    ldlt_.compute(kff);
+    info = ldlt_.info();
+  }
+  if (info != Eigen::Success)
     throw std::runtime_error("fem: the stiffness matrix could not be factorised (singular: check the supports)");
-  factor_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  factor_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
 }
 
 void Model::set_geostatic_stress(double k0) {
@@ -252,7 +284,11 @@ void Model::solve() {
   Eigen::VectorXd b(nfree_);
   for (std::size_t i = 0; i < r.size(); ++i)
     if (free_of_[i] >= 0) b[free_of_[i]] = r[i];
+#ifdef DEMFDM_HAVE_CHOLMOD
+  Eigen::VectorXd x = use_cholmod_ ? Eigen::VectorXd(cholmod_.solve(b)) : Eigen::VectorXd(ldlt_.solve(b));
+#else
   Eigen::VectorXd x = ldlt_.solve(b);
+#endif
   double fmax = 0;
   for (std::size_t i = 0; i < r.size(); ++i) {
     u_[i] = free_of_[i] >= 0 ? x[free_of_[i]] : 0.0;

@@ -1,8 +1,16 @@
 #include "messages/bus.hpp"
 
+#include <lcm/eventlog.h>
 #include <poll.h>
+#include <unistd.h>
 
+#include <atomic>
+#include <cctype>
+#include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <optional>
+#include <regex>
 #include <sstream>
 
 #include <spdlog/spdlog.h>
@@ -65,10 +73,66 @@ Bus::Bus(const std::string& url, std::int64_t run_id, std::string sender)
   url_ = url;
 }
 
+struct Bus::TeeLog {
+  lcm_eventlog_t* log = nullptr;
+  std::optional<std::regex> channels;
+  std::map<std::string, bool> match;  // channel -> recorded (cache of the regex)
+  std::int64_t eventnum = 0;
+  std::string path;
+  ~TeeLog() {
+    if (log) lcm_eventlog_destroy(log);
+  }
+};
+
 Bus::Bus(std::shared_ptr<lcm::LCM> shared, std::int64_t run_id, std::string sender)
     : lcm_(std::move(shared)), run_id_(run_id), sender_(std::move(sender)) {
   if (!lcm_ || !lcm_->good()) throw BusError("the shared LCM instance is not usable");
   faults_ = parse_faults();
+  open_tee();
+}
+
+void Bus::open_tee() {
+  const char* dir = std::getenv("DEMFDM_TRAFFIC_DIR");
+  if (!dir || !*dir) return;
+  auto t = std::make_unique<TeeLog>();
+  const char* ch = std::getenv("DEMFDM_TRAFFIC_CHANNELS");
+  if (ch && *ch) {
+    try {
+      t->channels.emplace(ch, std::regex::ECMAScript);
+    } catch (const std::regex_error& e) {
+      throw BusError(std::string("DEMFDM_TRAFFIC_CHANNELS: '") + ch + "' is not a regular expression: " + e.what());
+    }
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  // One file per Bus: several Bus objects of one process (tests) never share a file.
+  static std::atomic<int> instance{0};
+  std::string safe = sender_;
+  for (char& c : safe)
+    if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_') c = '_';
+  t->path = std::string(dir) + "/" + safe + "-" + std::to_string(::getpid()) + "-" + std::to_string(instance++) +
+            ".lcmlog";
+  t->log = lcm_eventlog_create(t->path.c_str(), "w");
+  if (!t->log) throw BusError("DEMFDM_TRAFFIC_DIR: cannot create the traffic log '" + t->path + "'");
+  tee_ = std::move(t);
+}
+
+// Called with pub_mu_ held, before the message goes to LCM. Flushed per message so that a
+// process that is killed loses nothing it has sent.
+void Bus::tee(const std::string& ch, const std::vector<std::uint8_t>& buf) {
+  auto it = tee_->match.find(ch);
+  if (it == tee_->match.end())
+    it = tee_->match.emplace(ch, !tee_->channels || std::regex_match(ch, *tee_->channels)).first;
+  if (!it->second) return;
+  lcm_eventlog_event_t ev{};
+  ev.eventnum = tee_->eventnum++;
+  ev.timestamp = now_us();
+  ev.channellen = static_cast<std::int32_t>(ch.size());
+  ev.datalen = static_cast<std::int32_t>(buf.size());
+  ev.channel = const_cast<char*>(ch.c_str());
+  ev.data = const_cast<std::uint8_t*>(buf.data());
+  if (lcm_eventlog_write_event(tee_->log, &ev) != 0 || std::fflush(tee_->log->f) != 0)
+    throw BusError("cannot write the traffic log '" + tee_->path + "' (disk full?)");
 }
 
 std::shared_ptr<lcm::LCM> Bus::open_lcm(const std::string& url) {
@@ -109,8 +173,11 @@ void Bus::send_bytes(const std::string& ch, const std::vector<std::uint8_t>& buf
     stats_.bytes_published += static_cast<std::int64_t>(buf.size());
     if (action == 'u') ++stats_.injected_dups;
   }
-  lcm_->publish(ch, buf.data(), static_cast<unsigned>(buf.size()));
-  if (action == 'u') lcm_->publish(ch, buf.data(), static_cast<unsigned>(buf.size()));
+  const int copies = action == 'u' ? 2 : 1;
+  for (int i = 0; i < copies; ++i) {
+    if (tee_) tee(ch, buf);
+    lcm_->publish(ch, buf.data(), static_cast<unsigned>(buf.size()));
+  }
 }
 
 void Bus::trampoline(const lcm::ReceiveBuffer* rbuf, const std::string& channel, Sub* sub) {

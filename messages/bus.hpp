@@ -11,7 +11,12 @@
 //  * subscription queues are unbounded (LCM's default of 30 silently drops bursts) and udpm
 //    URLs get recv_buf_size=4 MiB unless the URL sets it;
 //  * fault injection for tests: DEMFDM_FAULT="drop:CHANNEL:N,dup:CHANNEL:N" drops or
-//    duplicates this process's N-th publication on CHANNEL (1-based).
+//    duplicates this process's N-th publication on CHANNEL (1-based);
+//  * lossless traffic log (tee): DEMFDM_TRAFFIC_DIR=DIR makes every Bus write each message it
+//    hands to LCM (resends and injected duplicates included, injected drops not) into its own
+//    standard LCM event log DIR/<sender>-<pid>-<n>.lcmlog, before sending, with the exact
+//    encoded bytes and the send time; DEMFDM_TRAFFIC_CHANNELS=REGEX (ECMAScript, whole channel
+//    name) limits it to the matching channels. `demfdm_log merge` joins the parts.
 // Only the owning thread pumps; publish() may be called from any thread (heartbeats).
 #pragma once
 
@@ -186,6 +191,8 @@ class Bus {
     send_bytes(ch, buf);
   }
   void send_bytes(const std::string& ch, const std::vector<std::uint8_t>& buf);
+  void open_tee();
+  void tee(const std::string& ch, const std::vector<std::uint8_t>& buf);
 
   std::shared_ptr<lcm::LCM> lcm_;
   std::string url_;
@@ -202,6 +209,9 @@ class Bus {
   // Fault injection: channel -> (publication number -> action)
   std::map<std::string, std::map<std::int64_t, char>> faults_;
   std::map<std::string, std::int64_t> pub_count_;
+  // Tee (DEMFDM_TRAFFIC_DIR): the open event log (lcm_eventlog_t*, owned), its channel filter.
+  struct TeeLog;
+  std::unique_ptr<TeeLog> tee_;
 };
 
 }  // namespace demfdm::bus

@@ -6,10 +6,18 @@
 //     coupled steps with complete kin/force data; per-step latency from the logger's clock:
 //     DEM step = kin(k-1) -> force(k), continuum step = force(k) -> kin(k) (serial scheme;
 //     the parallel scheme pairs force(k-1) -> kin(k)), as min / median / max.
-//   demfdm_log export LOG --steps A:B --out FILE.csv
-//     interface data of steps A..B (inclusive), one row per step, kind and point:
+//   demfdm_log export LOG --steps A:B --out FILE [--format csv|h5]
+//     interface data of steps A..B (inclusive). csv: one row per step, kind and point:
 //     step,kind,point,x,y,z,vx,vy,vz,fx,fy,fz,stiffness (kin rows leave the force columns
-//     empty and the other way round).
+//     empty and the other way round). h5: the interface mesh and per-step arrays (layout in
+//     h5_export.hpp). The format defaults to h5 for an .h5/.hdf5 file name, else csv.
+//   demfdm_log merge OUT INPUT...
+//     joins per-process tee logs (files, or folders of *.lcmlog) into one standard event log
+//     ordered by send time (ties: inputs in path order, then file order).
+//   demfdm_log compare LOG WIRE_LOG
+//     per channel: messages in the (lossless, merged) log, on the wire capture (lcm-logger),
+//     lost on the wire (in LOG, not in WIRE_LOG), only on the wire; messages are matched by
+//     channel and exact bytes. Prints "lost on the wire: N of M messages".
 // Exit codes: 0 ok, 2 bad command line or unreadable log.
 #include <algorithm>
 #include <cmath>
@@ -18,6 +26,7 @@
 #include <iostream>
 #include <set>
 
+#include "h5_export.hpp"
 #include "traffic_log.hpp"
 
 using namespace demfdm;
@@ -26,7 +35,8 @@ namespace {
 
 int usage(const std::string& why) {
   std::cerr << "demfdm_log: " << why
-            << "\nusage: demfdm_log summary LOG\n       demfdm_log export LOG --steps A:B --out FILE.csv\n";
+            << "\nusage: demfdm_log summary LOG\n       demfdm_log export LOG --steps A:B --out FILE [--format csv|h5]\n"
+               "       demfdm_log merge OUT INPUT...\n       demfdm_log compare LOG WIRE_LOG\n";
   return 2;
 }
 
@@ -174,14 +184,68 @@ int export_csv(const traffic::Log& log, std::int64_t a, std::int64_t b, const st
   return 0;
 }
 
+int export_hdf5(const traffic::Log& log, std::int64_t a, std::int64_t b, const std::string& out) {
+  try {
+    auto c = traffic::export_h5(log, a, b, out);
+    std::cout << "wrote steps " << a << ".." << b << " to " << out << ": " << c.kin_steps << " with kinematics, "
+              << c.force_steps << " with forces" << (c.mesh ? ", interface mesh" : ", no interface mesh in the log")
+              << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "demfdm_log: " << out << ": " << e.what() << "\n";
+    return 2;
+  }
+}
+
+int merge(int argc, char** argv) {
+  if (argc < 4) return usage("merge needs OUT and at least one INPUT");
+  std::vector<std::string> inputs(argv + 3, argv + argc);
+  try {
+    auto r = traffic::merge_logs(inputs, argv[2]);
+    std::cout << "merged " << r.events << " messages from " << r.inputs << " logs into " << argv[2] << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "demfdm_log: " << e.what() << "\n";
+    return 2;
+  }
+}
+
+int compare(const traffic::Log& log, const traffic::Log& wire) {
+  auto d = traffic::compare_logs(log, wire);
+  std::printf("%-20s %9s %9s %13s %13s\n", "channel", "log", "wire", "lost-on-wire", "only-on-wire");
+  std::int64_t lost = 0, total = 0, only = 0;
+  for (const auto& [ch, c] : d) {
+    std::printf("%-20s %9lld %9lld %13lld %13lld\n", ch.c_str(), static_cast<long long>(c.in_log),
+                static_cast<long long>(c.on_wire), static_cast<long long>(c.lost_on_wire),
+                static_cast<long long>(c.only_on_wire));
+    lost += c.lost_on_wire;
+    total += c.in_log;
+    only += c.only_on_wire;
+  }
+  std::printf("lost on the wire: %lld of %lld messages; only on the wire: %lld\n", static_cast<long long>(lost),
+              static_cast<long long>(total), static_cast<long long>(only));
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   if (argc < 3) return usage("expected a command and a log file");
   std::string cmd = argv[1], path = argv[2];
-  if (cmd != "summary" && cmd != "export") return usage("unknown command '" + cmd + "'");
+  if (cmd != "summary" && cmd != "export" && cmd != "merge" && cmd != "compare")
+    return usage("unknown command '" + cmd + "'");
+  if (cmd == "merge") return merge(argc, argv);
+  if (cmd == "compare") {
+    if (argc != 4) return usage("compare needs LOG and WIRE_LOG");
+    try {
+      return compare(traffic::read_log(path), traffic::read_log(argv[3]));
+    } catch (const std::exception& e) {
+      std::cerr << "demfdm_log: " << e.what() << "\n";
+      return 2;
+    }
+  }
   std::int64_t a = 0, b = -1;
-  std::string out;
+  std::string out, format;
   bool have_steps = false;
   for (int i = 3; i < argc; ++i) {
     std::string arg = argv[i];
@@ -204,10 +268,14 @@ int main(int argc, char** argv) {
       have_steps = true;
     } else if (auto o = value("--out")) {
       out = *o;
+    } else if (auto f = value("--format")) {
+      format = *f;
+      if (format != "csv" && format != "h5") return usage("--format: expected csv or h5, found '" + format + "'");
     } else {
       return usage("unknown argument '" + arg + "'");
     }
   }
+  if (cmd == "export" && (!have_steps || out.empty())) return usage("export needs --steps A:B and --out FILE");
   traffic::Log log;
   try {
     log = traffic::read_log(path);
@@ -216,6 +284,9 @@ int main(int argc, char** argv) {
     return 2;
   }
   if (cmd == "summary") return summary(log);
-  if (!have_steps || out.empty()) return usage("export needs --steps A:B and --out FILE.csv");
-  return export_csv(log, a, b, out);
+  if (format.empty()) {
+    auto ends = [&](const std::string& x) { return out.size() >= x.size() && out.compare(out.size() - x.size(), x.size(), x) == 0; };
+    format = ends(".h5") || ends(".hdf5") ? "h5" : "csv";
+  }
+  return format == "h5" ? export_hdf5(log, a, b, out) : export_csv(log, a, b, out);
 }
