@@ -8,8 +8,11 @@ Usage:
 Each figure is written as figN_*.csv and figN_*.png in OUT_DIR, plus summary.csv (one row per
 run: peak load, initial stiffness, displacement at the peak, bond counts after penetration).
 
-Initial stiffness: least-squares slope of load against footing displacement over 0.005 D_f from
-the first contact (first row with load > 0); the same rule as tests/coupled/coupled_checks_test.cpp.
+Initial stiffness k50: least-squares slope of load against footing displacement over the rising
+branch, from the first contact (first row with load > 0) to the first row at half the first peak load
+(first peak: the largest load before the load first falls below half of the largest so far, within
+0.02 D_f of the first contact); the same rule as
+tests/coupled/coupled_checks_test.cpp (docs/paper-study.md).
 """
 import argparse
 import csv
@@ -21,7 +24,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-INITIAL_WINDOW = 0.005  # [D_f] initial-stiffness window after the first contact
+PEAK_WINDOW = 0.02  # [D_f] how far after the first contact the first peak is sought
 INITIAL_PART = 0.05  # [D_f] span of the initial-part figure (Fig. 6)
 STATE_NAMES = {1: "intact", 2: "softening", 3: "broken_tension", 4: "broken_shear"}
 
@@ -41,16 +44,28 @@ def curve(run):
 
 
 def initial_stiffness(disp, load, d_f):
-    """[N/m] least-squares slope over INITIAL_WINDOW D_f from the first contact (first row with
-    load > 0); returns (slope, first-contact displacement)."""
+    """k50 [N/m]: least-squares slope of the rising branch, from the first contact (first row with
+    load > 0) to the first row at half the first peak load (first peak: the largest load before
+    the load first falls below half of the largest so far, within PEAK_WINDOW D_f of the first
+    contact); returns (slope, intercept [N], first-contact
+    displacement, displacement at half the first peak)."""
     hit = np.nonzero(load > 0)[0]
     if len(hit) == 0:
-        return float("nan"), float("nan")
-    dc = disp[hit[0]]
-    m = (np.arange(len(disp)) >= hit[0]) & (disp <= dc + INITIAL_WINDOW * d_f)
-    if m.sum() < 5:
-        return float("nan"), float(dc)
-    return float(np.polyfit(disp[m], load[m], 1)[0]), float(dc)
+        return float("nan"), float("nan"), float("nan"), float("nan")
+    i0 = hit[0]
+    dc = disp[i0]
+    ip = i = i0
+    while i < len(disp) and disp[i] <= dc + PEAK_WINDOW * d_f:
+        if load[i] > load[ip]:
+            ip = i
+        elif load[i] < 0.5 * load[ip]:
+            break  # the first particle-scale failure
+        i += 1
+    ih = i0 + int(np.nonzero(load[i0:ip + 1] >= 0.5 * load[ip])[0][0])
+    if ih - i0 + 1 < 5:
+        return float("nan"), float("nan"), float(dc), float(disp[ih])
+    k, b = np.polyfit(disp[i0:ih + 1], load[i0:ih + 1], 1)
+    return float(k), float(b), float(dc), float(disp[ih])
 
 
 def write_csv(path, names, cols):
@@ -93,12 +108,12 @@ def load_figure(out, stem, title, runs, labels, d_f, initial=False):
         cols[1] += list(d)
         cols[2] += list(f)
         if initial:
-            k, dc = initial_stiffness(d, f, d_f)
+            k, b, dc, dp = initial_stiffness(d, f, d_f)
             m = d <= dc + INITIAL_PART * d_f
-            line, = ax.plot(d[m] * 1e3, f[m], label="%s (k0 %.3g N/m)" % (lab, k))
+            line, = ax.plot(d[m] * 1e3, f[m], label="%s (k50 %.3g N/m)" % (lab, k))
             if np.isfinite(k):
-                dd = np.array([dc, dc + INITIAL_WINDOW * d_f])
-                ax.plot(dd * 1e3, k * (dd - dc), "--", color=line.get_color())
+                dd = np.array([dc, dp])
+                ax.plot(dd * 1e3, k * dd + b, "--", color=line.get_color())
         else:
             ax.plot(d * 1e3, f, label=lab)
     write_csv(os.path.join(out, stem + ".csv"), names, cols)
@@ -165,13 +180,14 @@ def main():
     rows = []
     for lab, d in runs.items():
         disp, load = curve(d)
-        k, dc = initial_stiffness(disp, load, a.d_f)
+        k, _, dc, dp = initial_stiffness(disp, load, a.d_f)
         i = int(np.argmax(load))
         _, _, state = bond_state(d)
-        rows.append([lab, float(load[i]), float(disp[i]), k, dc, float(disp[-1])] +
+        rows.append([lab, float(load[i]), float(disp[i]), k, dc, dp, float(disp[-1])] +
                     [int((state == s).sum()) for s in STATE_NAMES])
     write_csv(os.path.join(a.out, "summary.csv"),
-              ["label", "peak_load_N", "disp_at_peak_m", "initial_stiffness_N_m", "first_contact_m", "final_disp_m"] +
+              ["label", "peak_load_N", "disp_at_peak_m", "initial_stiffness_N_m", "first_contact_m", "half_first_peak_m",
+               "final_disp_m"] +
               ["bonds_%s_1" % n for n in STATE_NAMES.values()], list(zip(*rows)))
     if a.fig3:
         fig3(a.out, runs[a.fig3], a.fig3)

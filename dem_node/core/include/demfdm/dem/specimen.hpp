@@ -137,9 +137,30 @@ struct DepthScaleParams {
 /// [0,1], switching them to incremental mode (§4.9).
 StageReport depth_scale(World& w, const DepthScaleParams& p);
 
-/// §2.6/§4.9: set the normal bond force of every bonded ball–facet contact to the mean
-/// normal force of active ball–ball contacts within ±band of its height whose normals are
-/// within 30° of the facet normal (global mean if none), in compression.
+/// §2.6/§4.9 [RECON]: initial normal force of the bonded ball–facet contacts (shear and
+/// moment start at 0), in compression.
+enum class InterfaceBondForce : std::uint8_t {
+  /// Default. Traction-consistent: the geostatic stress σ_zz = −γ d, σ_xx = σ_yy = K0 σ_zz
+  /// (d = z_top − z, γ = ρ_b N g0) is integrated over each plane face of the interface
+  /// (the facets sharing one normal): F_face = Σ_facets A n·σ·n at the facet centroid
+  /// (exact for a stress linear in z). F_face is split over the bonds on that face in
+  /// proportion to n·σ·n at each bond's contact point. The bonds then carry the block's
+  /// weight (bottom) and its lateral thrust (sides) from the first step.
+  kTraction = 0,
+  /// The paper's wording: the mean normal force of active ball–ball contacts within ±band of
+  /// the bond's height whose normals are within 30° of the facet normal (all contacts in the
+  /// band if none; global mean if the band is empty).
+  kMeanContact = 1,
+};
+struct InterfaceBondParams {
+  InterfaceBondForce mode = InterfaceBondForce::kTraction;
+  double band = 0.0;         // [m] kMeanContact: half-height of the averaging band
+  double z_top = 0.0;        // [m] kTraction: top of the DEM block (zero stress)
+  double unit_weight = 0.0;  // [N/m^3] kTraction: γ = ρ_b N g0 of the block
+  double k0 = 0.5;           // [-] kTraction: σ_h / σ_v
+};
+StageReport assign_interface_bond_forces(World& w, const InterfaceBondParams& p);
+/// kMeanContact with the given band.
 StageReport assign_interface_bond_forces(World& w, double band);
 
 /// Gravity on or off (§4.9 step 5).
