@@ -12,15 +12,19 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iomanip>
 #include <limits>
+#include <map>
 #include <optional>
+#include <sstream>
 
 #include <spdlog/spdlog.h>
 
+#include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
@@ -106,13 +110,18 @@ bool is_generation(const std::string& a) { return a == "generate" || a == "servo
 class DemParticipant : public node::Participant {
  public:
   explicit DemParticipant(const node::Context& ctx)
-      : ctx_(ctx), s_(ctx_.scene), block_(block_of(ctx.scene)), world_(world_params()) {
+      : ctx_(ctx), s_(ctx_.scene), block_(block_of(ctx.scene)), world_(world_params()), energy_jump_(ctx.scene) {
     interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
+    user_dt_ = s_.real("dem.dt_fixed");
+    escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
+    kick_ = s_.reals("dem.kick");
+    if (!kick_.empty() && kick_.size() != 3) s_.fail("dem.kick", "an empty list or [vx, vy, vz] in m/s", std::to_string(kick_.size()) + " numbers");
     frame_every_ = s_.integer("dem.output.frame_every");
     history_every_ = s_.integer("dem.output.history_every");
     gravity_level_ = s_.has("gravity") ? s_.real("gravity.level") : 0.0;
-    if (!ctx.options.run_dir.empty()) {
-      dir_ = ctx.options.run_dir;
+    if (!ctx.options.run_dir.empty()) dir_ = ctx.options.run_dir;
+    // Result files only when the scene has [dem.output] (a scene writes only what it asks for).
+    if (!dir_.empty() && s_.has("dem.output")) {
       io::FileInfo info{"dem_node", std::to_string(ctx.options.run_id), std::to_string(s_.hash()), {}};
       out_.emplace(dir_, info, io::H5StorageParams{}, std::vector<std::string>{"bonds"});
       if (history_every_ > 0)
@@ -122,15 +131,33 @@ class DemParticipant : public node::Participant {
     }
   }
 
+  // A user dt_fixed (checked against the critical step at every stage begin) is the node's
+  // step; else dt_safety x critical. The coordinator grants the smallest dt_stable of the nodes.
   double dt_stable() const override {
     if (world_.num_balls() == 0) return 0.0;
-    return interval_ * const_cast<dem::World&>(world_).critical_timestep();
+    if (user_dt_ > 0) return interval_ * user_dt_;
+    return interval_ * safe_dt();
   }
+  // dt_safety x the critical step of 1.8 [s], computed once per state (O(contacts)).
+  double safe_dt() const {
+    const std::array<std::int64_t, 3> key{world_.step_count(), world_.rebuild_count(),
+                                          static_cast<std::int64_t>(world_.num_balls())};
+    if (key != safe_dt_key_) {
+      safe_dt_ = const_cast<dem::World&>(world_).critical_timestep();
+      safe_dt_key_ = key;
+    }
+    return safe_dt_;
+  }
+  // Critical step of 1.8 without the safety factor [s].
+  double critical_dt() const { return safe_dt() / world_.params().dt_safety; }
   double time() const override { return world_.time(); }
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     const auto& a = st.action;
     stage_ratio_ = st.view.real("ratio");
+    effect_s_.clear();
+    world_.reset_phase_times();
+    check_dt_fixed(st);
     if (!is_generation(a) && gravity_level_ > 0 && !world_.gravity_on()) {
       auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
       spdlog::info("dem: {}", r.what);
@@ -163,20 +190,68 @@ class DemParticipant : public node::Participant {
     }
     penetrating_ = a == "penetrate";
     if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
+    if (!is_generation(a) && !kick_.empty() && !kicked_) kick();
     world_.prepare();
+    if (user_dt_ > 0 && world_.num_balls() > 0) check_dt_fixed("end of the set-up of stage '" + st.name + "'");
+    energy_pending_ = true;  // the stage's energy balance starts at its first step
     return v;
   }
 
-  void advance(const schema::Stage&, std::int64_t step, double dt, const std::vector<double>& values) override {
+  // Blow-up guard (docs/stability.md): non-finite ball state, a ball out of the domain, a
+  // kinetic-energy jump.
+  std::optional<node::HealthReport> check_health(std::int64_t) override {
+    node::Timed t(effect_s_["guard"]);
+    if (auto f = dem::check_finite(world_)) return node::HealthReport{f->cause, f->detail};
+    if (escape_margin_ > 0 && !world_.periodic()) {
+      auto [lo, hi] = domain();
+      if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
+    }
+    const double ke = dem::kinetic_energy(world_);
+    if (auto jump = energy_jump_.check(ke)) {
+      // Name the ball with the largest kinetic energy and its neighbourhood.
+      const auto& b = world_.balls();
+      std::size_t worst = 0;
+      double e_worst = -1;
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        double e = 0.5 * (b.m[i] * dem::dot(b.v[i], b.v[i]) + b.inertia[i] * dem::dot(b.w[i], b.w[i]));
+        if (e > e_worst) e_worst = e, worst = i;
+      }
+      return node::HealthReport{
+          "DEM " + *jump + "; fastest ball id " + std::to_string(b.id[worst]),
+          "ball with the largest kinetic energy (" + std::to_string(e_worst) + " J): " + dem::describe_ball(world_, worst) +
+              "\n10 nearest balls:\n" + dem::neighbourhood(world_, worst, 10)};
+    }
+    return std::nullopt;
+  }
+
+  void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
     if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
     if (penetrating_) {
       if (values.empty()) throw std::runtime_error("penetrate: the coordinator sent no footing speed");
       world_.set_footing_velocity({0.0, 0.0, -values[0]});
     }
+    if (energy_pending_) {
+      // Energy balance of the stage (docs/stability.md) from the state before its first step,
+      // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN).
+      energy_pending_ = false;
+      energy_begin_ = total_energy();
+      const auto e0 = world_.energy();
+      mechanical_begin_ = e0.kinetic + e0.strain;
+      x_begin_ = world_.balls().x;
+      work_ = 0;
+    }
+    // A user dt_fixed must stay below the critical step as contacts change (O(contacts) per
+    // step, only when dem.dt_fixed is set).
+    if (user_dt_ > 0 && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
     // Exactly 'interval' DEM steps per coupling step of length dt.
     if (dt > 0) world_.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
-    world_.step(interval_);
+    {
+      node::Timed t(effect_s_["dem_cycle"]);  // the whole engine cycle (its phases: add_phase_times)
+      world_.step(interval_);
+    }
+    work_ += boundary_power() * world_.dt() * static_cast<double>(interval_);
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
+      node::Timed t(effect_s_["output.history"]);
       auto fz = world_.has_footing() ? world_.footing_reaction().z : 0.0;
       auto facet = world_.num_facet_walls() > 0 ? world_.facet_walls_total_force().z : 0.0;
       history_->append({static_cast<double>(step), world_.time(), world_.unbalanced_ratio(), world_.energy().kinetic, fz,
@@ -186,7 +261,7 @@ class DemParticipant : public node::Participant {
   }
 
   proto::Values step_values() override {
-    proto::Values v{{"ratio", world_.unbalanced_ratio()}};
+    proto::Values v{{"ratio", world_.unbalanced_ratio()}, {"dt_s", world_.dt()}, {"dt_critical_s", critical_dt()}};
     if (world_.gravity_on()) {
       auto sk = skeleton_ratio();
       v.push_back({"ratio_skeleton", sk.ratio});
@@ -206,7 +281,8 @@ class DemParticipant : public node::Participant {
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     if (out_) write_frame(last);
-    if (!dir_.empty() && world_.gravity_on() && !is_generation(st.action)) write_profile(st);
+    if (out_ && world_.gravity_on() && !is_generation(st.action)) write_profile(st);
+    const double crit = world_.num_balls() > 0 ? critical_dt() : 0.0;
     auto m = dem::measure(world_);
     proto::Values v{{"balls", static_cast<double>(world_.num_balls())},
                     {"ratio", m.ratio},
@@ -216,6 +292,22 @@ class DemParticipant : public node::Participant {
                     {"bonds_broken_tension", static_cast<double>(m.bonds.broken_tension)},
                     {"bonds_broken_shear", static_cast<double>(m.bonds.broken_shear)}};
     if (world_.num_facet_walls() > 0) v.push_back({"facet_fz_N", world_.facet_walls_total_force().z});
+    v.push_back({"dt_s", world_.dt()});
+    v.push_back({"dt_critical_s", crit});
+    if (!is_generation(st.action) && !energy_pending_) {
+      const auto e = world_.energy();
+      const double total = total_energy(), w = work_ + gravity_work();
+      const double dissipated = total - e.kinetic - e.strain - (energy_begin_ - mechanical_begin_);
+      // Relative to the largest energy flow of the stage.
+      const double scale = std::max({std::abs(w), mechanical_begin_, e.kinetic + e.strain, std::abs(dissipated), 1e-300});
+      v.push_back({"energy_kinetic_J", e.kinetic});
+      v.push_back({"energy_strain_J", e.strain});
+      v.push_back({"energy_dissipated_J", dissipated});
+      v.push_back({"energy_work_J", w});
+      v.push_back({"energy_balance_error", (total - energy_begin_ - w) / scale});
+    }
+    add_phase_times();
+    for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
     spdlog::info("dem: stage '{}' ends: {} balls, ratio {:.3e}, Z {:.3f}, bonds intact {} softening {} broken T {} S {}",
                  st.name, world_.num_balls(), m.ratio, m.coord.z, m.bonds.intact, m.bonds.softening,
                  m.bonds.broken_tension, m.bonds.broken_shear);
@@ -244,15 +336,24 @@ class DemParticipant : public node::Participant {
         p.height = block_.height();
         spdlog::info("dem: {}", dem::depth_scale(world_, p).what);
       }
-      spdlog::info("dem: {}", dem::assign_interface_bond_forces(world_, s_.real("dem.specimen.d50") * s_.real("dem.specimen.scale")).what);
+      dem::InterfaceBondParams ib;
+      ib.mode = s_.string("dem.specimen.interface_bond_force") == "mean_contact" ? dem::InterfaceBondForce::kMeanContact
+                                                                                 : dem::InterfaceBondForce::kTraction;
+      ib.band = s_.real("dem.specimen.d50") * s_.real("dem.specimen.scale");
+      ib.z_top = block_.z_top();
+      ib.unit_weight = weight() / (block_.cell.x * block_.nx * block_.cell.y * block_.ny * block_.height());
+      ib.k0 = s_.real("dem.specimen.k0");
+      spdlog::info("dem: {}", dem::assign_interface_bond_forces(world_, ib).what);
       world_.prepare();
     }
   }
   void set_interface_kinematics(const proto::Kinematics& k) override {
+    node::Timed t(effect_s_["coupling"]);
     if (wall_ < 0) throw std::runtime_error("interface kinematics before the interface mesh");
     world_.set_vertex_kinematics(wall_, k.positions, k.velocities);
   }
   proto::Forces interface_forces() override {
+    node::Timed timed(effect_s_["coupling"]);
     proto::Forces f;
     auto vf = world_.vertex_forces(wall_);
     auto vk = world_.vertex_stiffness(wall_);
@@ -270,7 +371,7 @@ class DemParticipant : public node::Participant {
     p.local_damping = s_.real("dem.damping");
     p.dt_safety = s_.real("dem.dt_safety");
     p.dt_interval = static_cast<int>(s_.integer("dem.dt_interval"));
-    p.dt_fixed = s_.real("dem.dt_fixed");
+    p.dt_fixed = 0.0;  // dem.dt_fixed is checked, then applied, at the first stage that begins with balls
     p.skin_factor = s_.real("dem.skin_factor");
     p.facet_spin = s_.boolean("dem.facet_spin");
     p.track_energy = s_.boolean("dem.track_energy");
@@ -294,6 +395,92 @@ class DemParticipant : public node::Participant {
       s_.fail("dem", "valid DEM parameters", e.what());
     }
     return p;
+  }
+
+  // dem.dt_fixed above the critical step (1.8, without dt_safety): refused, or reduced to
+  // dt_safety x critical when dem.dt_above_critical = "reduce".
+  void check_dt_fixed(const schema::Stage& st) {
+    if (user_dt_ <= 0 || world_.num_balls() == 0) return;
+    world_.prepare();  // contacts of the current state
+    check_dt_fixed("begin of stage '" + st.name + "'");
+  }
+  void check_dt_fixed(const std::string& when) {
+    const double crit = critical_dt();
+    if (user_dt_ <= crit) {
+      world_.mutable_params().dt_fixed = user_dt_;
+      return;
+    }
+    const double safe = world_.params().dt_safety * crit;
+    std::ostringstream os;
+    os.precision(6);
+    os << "dem.dt_fixed = " << user_dt_ << " s exceeds the critical timestep " << crit << " s (physics.md 1.8) at the "
+       << when;
+    if (s_.string("dem.dt_above_critical") != "reduce")
+      throw std::invalid_argument(os.str() + "; use a smaller dt_fixed, or dem.dt_above_critical = \"reduce\"");
+    spdlog::warn("dem: {}; reduced to dt_safety x critical = {} s (dem.dt_above_critical = \"reduce\")", os.str(), safe);
+    user_dt_ = safe;
+    world_.mutable_params().dt_fixed = safe;
+  }
+
+  // The engine's phase times of the stage (its set-up procedures included) as effects: only
+  // the phases present in this world (no wall, facet or footing pass without one).
+  void add_phase_times() {
+    const auto& t = world_.phase_times();
+    if (t.steps == 0) return;
+    effect_s_["neighbour"] = t.rebuild;
+    effect_s_[std::string("contacts.ball_ball.") + t.pair_model] = t.pair;
+    effect_s_["motion_damping"] = t.motion;
+    effect_s_["gather"] = t.gather;
+    if (world_.num_planes() > 0) effect_s_["walls"] = t.plane;
+    if (world_.num_facet_walls() > 0) effect_s_["facets"] = t.facet;
+    if (world_.has_footing() || t.footing > 0) effect_s_["footing"] = t.footing;
+    for (auto& [name, sec] : t.effect) effect_s_[name] = sec;
+  }
+
+  // Kinetic + strain + dissipated energy of the DEM [J] (physics.md 8.18).
+  double total_energy() const {
+    const auto e = world_.energy();
+    return e.kinetic + e.strain + e.damping + e.friction + e.softening;
+  }
+  // Power of the moving boundaries on the balls [W]: footing and interface facets (the force
+  // of a wall on the balls is minus the balls' force on it).
+  double boundary_power() {
+    double p = 0;
+    if (world_.has_footing()) p -= dem::dot(world_.footing_reaction(), world_.footing().p.velocity);
+    for (int w = 0; w < world_.num_facet_walls(); ++w) {
+      const auto& fw = world_.facet_wall(w);
+      for (std::size_t k = 0; k < fw.vel.size() && k < fw.vforce.size(); ++k) p -= dem::dot(fw.vforce[k], fw.vel[k]);
+    }
+    return p;
+  }
+  // Work of gravity on the balls since the stage began [J].
+  double gravity_work() const {
+    if (!world_.gravity_on()) return 0.0;
+    const auto& b = world_.balls();
+    const dem::Vec3 g = world_.gravity();
+    double w = 0;
+    for (std::size_t i = 0; i < b.size() && i < x_begin_.size(); ++i) w += b.m[i] * dem::dot(g, b.x[i] - x_begin_[i]);
+    return w;
+  }
+
+  // Box the balls must stay in: the continuum's pocket if coupled, else the DEM block.
+  std::pair<dem::Vec3, dem::Vec3> domain() const {
+    dem::Vec3 lo = block_.origin;
+    dem::Vec3 hi{lo.x + block_.cell.x * block_.nx, lo.y + block_.cell.y * block_.ny, block_.z_top()};
+    return {lo, hi};
+  }
+
+  // dem.kick: the highest ball gets the given velocity (stability studies).
+  void kick() {
+    kicked_ = true;
+    const auto& b = world_.balls();
+    if (b.size() == 0) return;
+    std::size_t top = 0;
+    for (std::size_t i = 1; i < b.size(); ++i)
+      if (b.x[i].z + b.r[i] > b.x[top].z + b.r[top]) top = i;
+    world_.balls().v[top] = {kick_[0], kick_[1], kick_[2]};
+    spdlog::info("dem: kick: ball id {} at ({}, {}, {}) gets velocity ({}, {}, {}) m/s", b.id[top], b.x[top].x,
+                 b.x[top].y, b.x[top].z, kick_[0], kick_[1], kick_[2]);
   }
 
   dem::StageReport generate() {
@@ -525,6 +712,7 @@ class DemParticipant : public node::Participant {
 
   void write_frame(std::int64_t step) {
     if (world_.num_balls() == 0) return;
+    node::Timed t(effect_s_["output.h5"]);
     if (has_frame_ && world_.time() <= last_frame_time_) return;  // frame times must increase
     auto snap = dem::snapshot(world_);
     std::vector<std::int64_t> ids(snap.id.begin(), snap.id.end());
@@ -561,6 +749,16 @@ class DemParticipant : public node::Participant {
   bool coupling_setup_pending_ = false, penetrating_ = false;
   double footing_z0_ = 0, target_disp_ = 0;
   double weight_ = -1;
+  node::EnergyJump energy_jump_;
+  double user_dt_ = 0, escape_margin_ = 0;
+  std::vector<double> kick_;
+  bool kicked_ = false;
+  std::map<std::string, double> effect_s_;
+  mutable std::array<std::int64_t, 3> safe_dt_key_{-1, -1, -1};
+  mutable double safe_dt_ = 0;
+  double energy_begin_ = 0, mechanical_begin_ = 0, work_ = 0;
+  bool energy_pending_ = false;
+  std::vector<dem::Vec3> x_begin_;  // [s] wall time of each effect in the current stage
 };
 
 }  // namespace

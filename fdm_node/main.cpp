@@ -6,10 +6,13 @@
 
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <optional>
+#include <sstream>
 
 #include <spdlog/spdlog.h>
 
+#include "demfdm/fdm/guard.hpp"
 #include "demfdm/fdm/model.hpp"
 #include "fdm_node/scene_params.hpp"
 #include "demfdm/io/csv_series.hpp"
@@ -63,7 +66,8 @@ fdm::ModelParams model_params(const config::Scene& s) {
 
 class FdmParticipant : public node::Participant {
  public:
-  explicit FdmParticipant(const node::Context& ctx) : ctx_(ctx), model_(model_params(ctx.scene)) {
+  explicit FdmParticipant(const node::Context& ctx)
+      : ctx_(ctx), model_(model_params(ctx.scene)), energy_jump_(ctx.scene) {
     const auto& s = ctx.scene;
     omp_set_num_threads(static_cast<int>(s.integer("run.threads")));
     frame_every_ = s.integer("continuum.output.frame_every");
@@ -73,7 +77,8 @@ class FdmParticipant : public node::Participant {
     spdlog::info("fdm: {} gridpoints, {} zones, {} interface points, {} interface triangles; critical dt {:.3e} s",
                  model_.num_gridpoints(), model_.num_zones(), model_.interface_gridpoints().size(),
                  model_.interface_triangles().size() / 3, model_.critical_timestep());
-    if (!ctx.options.run_dir.empty()) {
+    // Result files only when the scene has [continuum.output] (a scene writes only what it asks for).
+    if (!ctx.options.run_dir.empty() && s.has("continuum.output")) {
       fs::path dir = ctx.options.run_dir;
       io::FileInfo info{"fdm_node", std::to_string(ctx.options.run_id), std::to_string(s.hash()), {}};
       std::vector<std::int64_t> conn(model_.connectivity().begin(), model_.connectivity().end());
@@ -107,6 +112,8 @@ class FdmParticipant : public node::Participant {
       model_.reset_displacements();
       punch_disp_ = 0;
     }
+    model_.reset_phase_times();
+    effect_s_.clear();
     return {{"zones", static_cast<double>(model_.num_zones())},
             {"gridpoints", static_cast<double>(model_.num_gridpoints())}};
   }
@@ -117,8 +124,16 @@ class FdmParticipant : public node::Participant {
       double crit = model_.critical_timestep();
       int n = dt > 0 ? static_cast<int>(std::ceil(dt / crit * (1 - 1e-12))) : 1;
       double h = dt > 0 ? dt / n : crit;
-      if (h != model_.timestep()) model_.set_timestep(h);
-      for (int i = 0; i < n; ++i) model_.step();
+      try {
+        if (h != model_.timestep()) model_.set_timestep(h);
+        for (int i = 0; i < n; ++i) model_.step();
+      } catch (const std::exception& e) {
+        std::ostringstream os;
+        os.precision(6);
+        os << "continuum timestep " << h << " s (coupling step " << dt << " s in " << n
+           << " sub-steps) against the critical timestep " << model_.critical_timestep() << " s: " << e.what();
+        throw std::runtime_error(os.str());
+      }
       if (!punch_.empty() && !released_) punch_disp_ += punch_velocity_ * (dt > 0 ? dt : crit);
       if (!punch_.empty() && release_after_ > 0 && !released_ && model_.time() >= release_after_ * (1 - 1e-12)) {
         for (auto g : punch_) model_.free_velocity(g, fdm::kFixZ);
@@ -130,6 +145,7 @@ class FdmParticipant : public node::Participant {
     }
     last_ratios_ = model_.ratios();
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
+      node::Timed t(effect_s_["output.history"]);
       auto b = model_.base_reaction();
       history_->append({static_cast<double>(step), model_.time(), last_ratios_.average, last_ratios_.max,
                         model_.kinetic_energy(), b[0], b[1], b[2], punch_force(), punch_disp_});
@@ -141,6 +157,10 @@ class FdmParticipant : public node::Participant {
   proto::Values step_values() override {
     auto b = model_.base_reaction();
     proto::Values v{{"ratio", last_ratios_.average}, {"base_fz_N", b[2]}, {"kinetic_J", model_.kinetic_energy()}};
+    if (model_.params().mode == fdm::Mode::kDynamic) {
+      v.push_back({"dt_s", model_.timestep()});
+      v.push_back({"dt_critical_s", model_.critical_timestep()});
+    }
     if (model_.params().gravity_level > 0) v.push_back({"weight_N", weight()});
     if (coupled_) {
       // Largest relative difference so far between the force sum the continuum applied and the
@@ -163,8 +183,38 @@ class FdmParticipant : public node::Participant {
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     if (out_ && last != last_frame_) write_frame(last);
-    if (!ctx_.options.run_dir.empty() && model_.params().gravity_level > 0) write_profile(st);
-    return step_values();
+    if (out_ && model_.params().gravity_level > 0) {
+      node::Timed t(effect_s_["output.profile"]);
+      write_profile(st);
+    }
+    auto v = step_values();
+    const auto& pt = model_.phase_times();
+    effect_s_["zones"] = pt.zones;
+    effect_s_["gridpoints"] = pt.gridpoints;  // with gravity and local damping (fused loop)
+    if (coupled_) effect_s_["interface"] = pt.interface + effect_s_["interface"];
+    for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
+    return v;
+  }
+
+  // Blow-up guard (docs/stability.md): non-finite gridpoint or zone state, kinetic-energy jump.
+  std::optional<node::HealthReport> check_health(std::int64_t) override {
+    node::Timed t(effect_s_["guard"]);
+    if (auto f = fdm::check_finite(model_)) return node::HealthReport{f->cause, f->detail};
+    if (model_.params().mode != fdm::Mode::kDynamic) return std::nullopt;  // static: scaled masses
+    if (auto jump = energy_jump_.check(model_.kinetic_energy())) {
+      const auto v = model_.velocities();
+      const auto m = model_.inertial_masses();
+      std::size_t worst = 0;
+      double e_worst = -1;
+      for (std::size_t g = 0; g < model_.num_gridpoints(); ++g) {
+        double e = 0.5 * m[g] * (v[3 * g] * v[3 * g] + v[3 * g + 1] * v[3 * g + 1] + v[3 * g + 2] * v[3 * g + 2]);
+        if (e > e_worst) e_worst = e, worst = g;
+      }
+      const auto g = static_cast<std::int32_t>(worst);
+      return node::HealthReport{"continuum " + *jump + "; fastest gridpoint " + std::to_string(g),
+                                fdm::describe_gridpoint(model_, g) + "\nzones around it:\n" + fdm::zones_around(model_, g)};
+    }
+    return std::nullopt;
   }
   void finish() override {
     if (history_) history_->close();
@@ -184,12 +234,14 @@ class FdmParticipant : public node::Participant {
     return m;
   }
   proto::Kinematics interface_kinematics() override {
+    node::Timed t(effect_s_["interface"]);
     proto::Kinematics k;
     k.positions = model_.interface_positions();
     k.velocities = model_.interface_velocities();
     return k;
   }
   void apply_interface_forces(const proto::Forces& f) override {
+    node::Timed t(effect_s_["interface"]);
     if (f.forces.size() != 3 * model_.interface_gridpoints().size())
       throw std::runtime_error("interface forces for " + std::to_string(f.forces.size() / 3) + " points, the mesh has " +
                                std::to_string(model_.interface_gridpoints().size()));
@@ -279,6 +331,7 @@ class FdmParticipant : public node::Participant {
   }
 
   void write_frame(std::int64_t step) {
+    node::Timed t(effect_s_["output.h5"]);
     auto stress = model_.zone_stress();
     io::MeshFrame f;
     f.node_arrays.push_back({"displacement", io::ArrayView(model_.displacements(), 3)});
@@ -306,6 +359,8 @@ class FdmParticipant : public node::Participant {
   bool released_ = false;
   double max_imbalance_ = 0, iface_fz_ = 0;
   bool coupled_ = false;
+  node::EnergyJump energy_jump_;
+  std::map<std::string, double> effect_s_;  // [s] wall time of each effect in the current stage
 };
 
 }  // namespace

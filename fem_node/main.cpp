@@ -13,10 +13,13 @@
 // criterion (equilibrium / geostatic / couple) is met after every solve; penetrate has its
 // consent. Outputs: fem.h5 + mesh.xmf (displacement, velocity, zone stress) and
 // fem_history.csv in the run folder.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <optional>
+#include <sstream>
 
 #include <spdlog/spdlog.h>
 
@@ -62,6 +65,7 @@ fem::Params fem_params(const config::Scene& s) {
   double g = s.has("gravity") ? s.real("gravity.level") * s.real("gravity.g0") : 0.0;
   p.gravity = {0.0, 0.0, -g};
   p.strongbox = true;
+  p.solver = fem::linear_solver_from_name(s.string("continuum.linear_solver"));
   return p;
 }
 
@@ -72,10 +76,11 @@ class FemParticipant : public node::Participant {
     frame_every_ = s.integer("continuum.output.frame_every");
     history_every_ = s.integer("continuum.output.history_every");
     u_prev_ = model_.interface_displacements();
-    spdlog::info("fem: {} gridpoints, {} zones, {} free dofs, {} interface points; K factorised in {:.3f} s",
+    spdlog::info("fem: {} gridpoints, {} zones, {} free dofs, {} interface points; K factorised in {:.3f} s ({})",
                  model_.num_points(), model_.num_zones(), model_.num_free_dofs(),
-                 model_.mesh().interface_points.size(), model_.factorisation_s());
-    if (!ctx.options.run_dir.empty()) {
+                 model_.mesh().interface_points.size(), model_.factorisation_s(), model_.solver_name());
+    // Result files only when the scene has [continuum.output] (a scene writes only what it asks for).
+    if (!ctx.options.run_dir.empty() && s.has("continuum.output")) {
       fs::path dir = ctx.options.run_dir;
       io::FileInfo info{"fem_node", std::to_string(ctx.options.run_id), std::to_string(s.hash()), {}};
       std::vector<std::int64_t> conn(model_.mesh().zones.begin(), model_.mesh().zones.end());
@@ -101,6 +106,7 @@ class FemParticipant : public node::Participant {
       spdlog::info("fem: geostatic stresses assigned (K0 {})", k0 < 0 ? std::string("nu/(1-nu)") : std::to_string(k0));
     }
     if (st.view.boolean("reset_displacements")) u_ref_ = model_.displacements();
+    effect_s_.clear();
     return {{"zones", static_cast<double>(model_.num_zones())},
             {"gridpoints", static_cast<double>(model_.num_points())}};
   }
@@ -110,12 +116,14 @@ class FemParticipant : public node::Participant {
     u_prev_ = model_.interface_displacements();
     model_.solve();
     last_solve_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    effect_s_["solve"] += last_solve_s_;
     total_solve_s_ += last_solve_s_;
     ++solves_;
     dt_ = dt;
     time_ += dt > 0 ? dt : 1.0;
     solved_ = true;
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
+      node::Timed t(effect_s_["output.history"]);
       auto b = model_.base_reaction();
       history_->append({static_cast<double>(step), time_, model_.residual_ratio(), b[0], b[1], b[2], iface_fz_,
                         last_solve_s_});
@@ -143,7 +151,23 @@ class FemParticipant : public node::Participant {
     auto v = step_values();
     v.push_back({"solves", static_cast<double>(solves_)});
     v.push_back({"solve_total_s", total_solve_s_});
+    for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
     return v;
+  }
+
+  // Blow-up guard (docs/stability.md): the first gridpoint with a non-finite displacement,
+  // named with its position and the zones around it (their corner displacements).
+  std::optional<node::HealthReport> check_health(std::int64_t) override {
+    node::Timed t(effect_s_["guard"]);
+    const auto& u = model_.displacements();
+    for (std::size_t i = 0; i < u.size(); ++i) {
+      if (std::isfinite(u[i])) continue;
+      const auto g = static_cast<std::int32_t>(i / 3);
+      return node::HealthReport{"non-finite displacement of gridpoint " + std::to_string(g) + " at " + point(g) + " m",
+                                "gridpoint " + std::to_string(g) + " at " + point(g) + " m, displacement " +
+                                    disp(g) + " m\nzones around it:\n" + zones_around(g)};
+    }
+    return std::nullopt;
   }
   void finish() override {
     spdlog::info("fem: {} solves, {:.3f} s in back-substitutions, {:.3f} s factorisation", solves_, total_solve_s_,
@@ -162,6 +186,7 @@ class FemParticipant : public node::Participant {
     return m;
   }
   proto::Kinematics interface_kinematics() override {
+    node::Timed t(effect_s_["interface"]);
     proto::Kinematics k;
     k.positions = model_.interface_positions();
     auto u = model_.interface_displacements();
@@ -171,6 +196,7 @@ class FemParticipant : public node::Participant {
     return k;
   }
   void apply_interface_forces(const proto::Forces& f) override {
+    node::Timed t(effect_s_["interface"]);
     std::array<double, 3> sum{0, 0, 0};
     for (std::size_t i = 0; i < f.forces.size(); ++i) sum[i % 3] += f.forces[i];
     double scale = std::max({std::abs(f.total[0]), std::abs(f.total[1]), std::abs(f.total[2]), 1e-300});
@@ -183,8 +209,30 @@ class FemParticipant : public node::Participant {
   }
 
  private:
+  std::string triple(const std::vector<double>& a, std::int32_t g) const {
+    std::ostringstream os;
+    os.precision(9);
+    const auto i = 3 * static_cast<std::size_t>(g);
+    os << "(" << a[i] << ", " << a[i + 1] << ", " << a[i + 2] << ")";
+    return os.str();
+  }
+  std::string point(std::int32_t g) const { return triple(model_.mesh().points, g); }
+  std::string disp(std::int32_t g) const { return triple(model_.displacements(), g); }
+  std::string zones_around(std::int32_t g) const {
+    const auto& z = model_.mesh().zones;
+    std::ostringstream os;
+    for (std::size_t k = 0; k < z.size() / 8; ++k) {
+      if (std::find(z.begin() + 8 * k, z.begin() + 8 * k + 8, g) == z.begin() + 8 * k + 8) continue;
+      os << "  zone " << k << ":";
+      for (int c = 0; c < 8; ++c) os << " gp " << z[8 * k + c] << " u " << disp(z[8 * k + c]);
+      os << "\n";
+    }
+    return os.str();
+  }
+
   void write_frame(std::int64_t step) {
     if (has_frame_ && time_ <= last_frame_time_) return;
+    node::Timed t(effect_s_["output.h5"]);
     const auto& u = model_.displacements();
     std::vector<double> disp(u.size()), vel(u.size(), 0.0);
     for (std::size_t i = 0; i < u.size(); ++i) disp[i] = u[i] - (u_ref_.empty() ? 0.0 : u_ref_[i]);
@@ -207,6 +255,7 @@ class FemParticipant : public node::Participant {
   double time_ = 0, dt_ = 0, last_solve_s_ = 0, total_solve_s_ = 0, last_frame_time_ = 0;
   double max_imbalance_ = 0, iface_fz_ = 0;
   bool coupled_ = false, solved_ = false, has_frame_ = false;
+  std::map<std::string, double> effect_s_;  // [s] wall time of each effect in the current stage
 };
 
 }  // namespace

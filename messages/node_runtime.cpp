@@ -1,8 +1,11 @@
 #include "messages/node_runtime.hpp"
 
+#include <cmath>
 #include <csignal>
 #include <cstdlib>
+#include <fstream>
 #include <iostream>
+#include <sstream>
 #include <unistd.h>
 
 #include "common/log/log.hpp"
@@ -27,6 +30,55 @@ void Participant::set_interface_kinematics(const proto::Kinematics&) {
 proto::Forces Participant::interface_forces() {
   throw std::logic_error("this solver cannot play the DEM side of a coupled stage");
 }
+
+EnergyJump::EnergyJump(const config::Scene& s)
+    : EnergyJump(s.real("run.guard_energy_jump"), s.real("run.guard_energy_floor"),
+                 static_cast<std::size_t>(s.integer("run.guard_energy_window"))) {}
+
+std::optional<std::string> EnergyJump::check(double e) {
+  if (factor_ <= 0) return std::nullopt;
+  while (!at_.empty() && at_.front() + window_ < n_) {
+    at_.pop_front();
+    last_.pop_front();
+  }
+  const double ref = std::max(floor_, last_.empty() ? 0.0 : last_.front());
+  if (e > factor_ * ref) {
+    std::ostringstream os;
+    os << "kinetic energy jumped to " << e << " J, above " << factor_ << " x " << ref
+       << " J (the largest of the previous " << window_ << " checks, floor " << floor_ << " J)";
+    return os.str();
+  }
+  while (!last_.empty() && last_.back() <= e) {
+    last_.pop_back();
+    at_.pop_back();
+  }
+  last_.push_back(e);
+  at_.push_back(n_++);
+  return std::nullopt;
+}
+
+namespace {
+// A guard report stops the run: the text names the cause and the step.
+struct BlowUp : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+void guard(Participant& part, std::int64_t step, std::int64_t every, const std::string& role, const Options& opt) {
+  if (every <= 0 || step % every != 0) return;
+  auto h = part.check_health(step);
+  if (!h) return;
+  std::string where = "no run folder";
+  if (!opt.run_dir.empty()) {
+    auto path = opt.run_dir + "/blowup_" + role + ".txt";
+    std::ofstream f(path);
+    f << "blow-up guard of the " << role << " node at step " << step << " (time " << part.time() << " s)\n"
+      << "cause: " << h->cause << "\n\n"
+      << h->detail << (h->detail.empty() || h->detail.back() == '\n' ? "" : "\n");
+    where = "report in " + path;
+  }
+  throw BlowUp("blow-up guard: " + h->cause + " (" + where + ")");
+}
+}  // namespace
 
 Options parse_options(int argc, char** argv, std::vector<std::string>* positional,
                       const std::vector<std::string>& flags) {
@@ -109,6 +161,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
     auto stages = schema::stages(ctx.scene);
     std::string scheme = ctx.scene.has("coupling") ? ctx.scene.string("coupling.scheme") : "serial";
     bool parallel = scheme == "parallel";
+    const std::int64_t guard_every = ctx.scene.integer("run.guard_every");
     bool mesh_done = false;
     std::int64_t kin_applied = -2;  // DEM: step of the continuum kinematics last applied
     ep->hello(part->dt_stable());
@@ -169,6 +222,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
           }
           if (st.coupled && role == "continuum") part->apply_interface_forces(ep->wait_forces(parallel ? k - 1 : k));
           part->advance(st, k, c.dt, c.values);
+          guard(*part, k, guard_every, role, opt);
           ep->heartbeat().tick();
           if (st.coupled && role == "dem") {
             auto f = part->interface_forces();
@@ -196,7 +250,10 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
                    block ? last_values : part->step_values(), {}, rows);
       } else if (c.command == demfdm::command_t::STAGE_END) {
         auto values = part->stage_end(st, c.header.step);
-        log->info("stage {} '{}' ends after step {}", c.stage_index, st.name, c.header.step);
+        std::ostringstream vs;
+        vs.precision(10);
+        for (auto& [k, v] : values) vs << " " << k << "=" << v;
+        log->info("stage {} '{}' ends after step {}; values:{}", c.stage_index, st.name, c.header.step, vs.str());
         double w = ep->take_wait_s();
         ep->report(c.header.step, demfdm::report_t::OK, c.stage_index, part->time(), part->dt_stable(),
                    compute() - w, w + cmd_wait, values);

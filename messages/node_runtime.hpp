@@ -14,8 +14,11 @@
 // begin it sends kin(s0-1), and in the parallel scheme the DEM answers with force(s0-1).
 #pragma once
 
+#include <chrono>
+#include <deque>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "common/schema/scene_schema.hpp"
@@ -28,6 +31,45 @@ struct Options {
   std::int64_t run_id = 0;
   std::string run_dir;  // outputs and the node's log go here ("" = no files)
   bool verbose = false;
+};
+
+// What the blow-up guard found (issue 7 item 4): `cause` is one line (what, which object, its
+// value), `detail` the full report (where, values, neighbourhood) written by run_node to
+// blowup_<role>.txt in the run folder.
+struct HealthReport {
+  std::string cause;
+  std::string detail;
+};
+
+// Kinetic-energy jump test shared by the nodes: trips when the energy exceeds `factor` times
+// the larger of `floor` and the largest value of the previous `window` checks (scene keys
+// run.guard_energy_jump, run.guard_energy_floor, run.guard_energy_window; factor 0 = off).
+class EnergyJump {
+ public:
+  EnergyJump(double factor, double floor, std::size_t window) : factor_(factor), floor_(floor), window_(window) {}
+  explicit EnergyJump(const config::Scene& s);
+  // Returns the cause text on a jump, and records e otherwise.
+  std::optional<std::string> check(double e);
+
+ private:
+  double factor_, floor_;
+  std::size_t window_;
+  std::deque<double> last_;  // previous checks (monotone deque of the window's maximum)
+  std::deque<std::size_t> at_;
+  std::size_t n_ = 0;
+};
+
+// Wall time of a scope added to a total [s] (the nodes' STAGE_END values effect_s.<name>).
+class Timed {
+ public:
+  explicit Timed(double& total) : total_(total), t0_(std::chrono::steady_clock::now()) {}
+  ~Timed() { total_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count(); }
+  Timed(const Timed&) = delete;
+  Timed& operator=(const Timed&) = delete;
+
+ private:
+  double& total_;
+  std::chrono::steady_clock::time_point t0_;
 };
 
 // What an engine adapter implements. Called on the node's main thread only.
@@ -49,6 +91,9 @@ class Participant {
   virtual proto::Values stage_end(const schema::Stage& stage, std::int64_t last_step) = 0;
   // Flush outputs; called once before exit (also after an error, best effort).
   virtual void finish() {}
+  // Blow-up guard, called after the advance of every run.guard_every-th step: the first
+  // non-finite value (or energy jump) found, or nothing. A report stops the run at that step.
+  virtual std::optional<HealthReport> check_health(std::int64_t /*step*/) { return std::nullopt; }
 
   // Coupling hooks, continuum role.
   virtual proto::InterfaceMesh interface_mesh();

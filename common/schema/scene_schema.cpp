@@ -12,6 +12,20 @@ void declare_run(config::Section& root) {
   run.string("description", std::string(""), "Free text copied into the run summary.");
   run.integer("seed", "-", 1, "Seed of every random generator (same seed + same threads = same results).").min(0);
   run.integer("threads", "-", 1, "OpenMP threads per node.").min(1).max(256);
+  run.integer("guard_every", "steps", 1,
+              "Blow-up guard (docs/stability.md): every node scans its state for non-finite values and energy "
+              "jumps after every n-th coupling step and stops the run at the first finding, writing "
+              "blowup_<role>.txt (0: off).")
+      .min(0);
+  run.real("guard_energy_jump", "-", 1000.0,
+           "Guard: stop when a node's kinetic energy exceeds this factor times the larger of guard_energy_floor "
+           "and the largest value of its previous guard_energy_window checks (0: no energy test).")
+      .min(0.0);
+  run.real("guard_energy_floor", "J", 1e-6,
+           "Guard: smallest reference energy of the jump test, so that a start from rest does not trip it.")
+      .min(0.0);
+  run.integer("guard_energy_window", "checks", 100, "Guard: number of previous checks the jump test looks back on.")
+      .min(1);
 }
 
 void declare_bus(config::Section& root) {
@@ -69,6 +83,11 @@ void declare_continuum(config::Section& root) {
   c.real("timestep_safety", "-", 0.5, "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).")
       .min(0.0, true).max(1.0);
   c.real("static_mass_factor", "-", 1.0, "Multiplier on the static-mode inertial masses (5.6).").min(1.0);
+  c.choice("linear_solver", {"auto", "cholmod", "ldlt"}, std::string("auto"),
+           "fem_node only (fdm_node ignores it): sparse direct solver for the stiffness matrix, factorised once. "
+           "cholmod = CHOLMOD supernodal Cholesky (fast on large meshes); ldlt = Eigen SimplicialLDLT (no "
+           "extra library, slow beyond ~10^4 dofs); auto = cholmod when the build has it, else ldlt. Same "
+           "answer to round-off (docs/continuum-solvers.md).");
   c.choice("boundary", {"strongbox", "symmetry", "none"}, std::string("strongbox"),
            "strongbox: fixed base, rollers on the four sides, free top (physics.md 5.10); symmetry: rollers on "
            "the x = 0, y = 0 and z = 0 planes only (element tests: a quarter of a triaxial specimen); none: all free.");
@@ -115,7 +134,8 @@ void declare_continuum(config::Section& root) {
   punch.real("release_after", "s", 0.0,
              "Free the punch's vertical velocity after this time (a pulse, e.g. for wave-speed checks); 0: never.")
       .min(0.0);
-  auto& out = c.section("output", "Continuum results (fdm.h5 + mesh.xmf, fdm_history.csv).",
+  auto& out = c.section("output", "Continuum results (fdm.h5 or fem.h5 + mesh.xmf, fdm_history.csv or fem_history.csv, fdm_profile_<stage>.csv). "
+                        "Without this table the continuum writes no result files.",
                         config::Presence::Optional);
   out.integer("frame_every", "steps", 0, "HDF5 frame every n coupling steps; 0: only at the end of each stage.")
       .min(0);
@@ -175,10 +195,23 @@ void declare_dem(config::Section& root) {
   d.real("damping", "-", 0.7, "Local (non-viscous) damping alpha (physics.md 1.3).").min(0.0).max(1.0, true);
   d.real("dt_safety", "-", 0.8, "Time step = safety * critical step (1.8).").min(0.0, true).max(1.0);
   d.integer("dt_interval", "steps", 100, "Recompute the critical step every n steps.").min(1);
-  d.real("dt_fixed", "s", 0.0, "Fixed time step instead of the automatic one (0: automatic).").min(0.0);
+  d.real("dt_fixed", "s", 0.0,
+         "Fixed time step instead of the automatic one (0: automatic); checked against the critical step "
+         "once balls exist (see dt_above_critical); specimen generation always uses the automatic one.")
+      .min(0.0);
   d.real("skin_factor", "-", 0.15, "Verlet skin as a fraction of d_min (1.4).").min(0.0, true);
   d.boolean("facet_spin", true, "Kinematic facet spin for ball-facet contacts (6.2).");
   d.boolean("track_energy", true, "Accumulate dissipated energies (damping, friction, softening).");
+  d.choice("dt_above_critical", {"error", "reduce"}, std::string("error"),
+           "A dt_fixed above the critical step (1.8, without dt_safety) at a stage begin: error stops the run "
+           "naming both values; reduce uses dt_safety x critical instead, with a warning (docs/stability.md).");
+  d.real("escape_margin", "-", 5.0,
+         "A ball whose centre leaves the DEM block (or the continuum's pocket) by more than this many d_max "
+         "(upscaled) stops the run with an error naming it (docs/stability.md); 0: no check.")
+      .min(0.0);
+  d.reals("kick", "m/s", std::vector<double>{},
+          "Stability studies: velocity [vx, vy, vz] given to the highest ball at the first stage that is not "
+          "a specimen-generation stage; empty: none.");
   declare_family(d, "ball_ball", {"softbond", 0.6248693519093275, false, "Ball-ball contacts."});
   declare_family(d, "ball_wall", {"linear", 0.0, false, "Ball-platen contacts (UCS test, boxes)."});
   declare_family(d, "ball_facet", {"pbond", 0.6248693519093275, true,
@@ -222,12 +255,19 @@ void declare_dem(config::Section& root) {
   sp.choice("depth_scaling", {"depth_ratio", "paper_literal", "none"}, std::string("depth_ratio"),
             "Scaling of contact and bond forces with depth (4.9, U7): depth_ratio (default) f = depth/H_D; "
             "paper_literal f = height above the block bottom / H_D; none.");
+  sp.choice("interface_bond_force", {"traction", "mean_contact"}, std::string("traction"),
+            "Initial normal force of the ball-facet bonds (4.9, a reconstruction; docs/paper-study.md): traction "
+            "(default) splits the geostatic traction n.sigma.n of each plane face of the interface (sigma_zz = "
+            "-rho_b N g0 depth, sigma_h = k0 sigma_zz, rho_b = ball mass / block volume) over the bonds on that "
+            "face, so the bonds carry the block's weight and lateral thrust from the start; mean_contact: the "
+            "mean normal force of the ball-ball contacts within d50 of the bond's height (the paper's wording).");
   auto& ft = d.section("footing", "Rigid cylindrical footing (paper: D_f 1.2 mm, H_f 0.6 mm). Absent: none.",
                        config::Presence::Optional);
   ft.real("diameter", "m", 1.2e-3, "Footing diameter D_f.").min(0.0, true);
   ft.real("height", "m", 0.6e-3, "Footing height H_f.").min(0.0, true);
   ft.reals("centre", "m", std::vector<double>{}, "Axis position [x, y]; empty: the centre of the DEM block.");
-  auto& o = d.section("output", "DEM results (dem.h5 + particles.xmf + bonds.xmf, dem_history.csv).",
+  auto& o = d.section("output", "DEM results (dem.h5 + particles.xmf + bonds.xmf, dem_history.csv, dem_profile_<stage>.csv). "
+                      "Without this table the DEM writes no result files.",
                       config::Presence::Optional);
   o.integer("frame_every", "steps", 0, "HDF5 frame every n coupling steps; 0: only at the end of each stage.").min(0);
   o.integer("history_every", "steps", 1, "dem_history.csv row every n coupling steps; 0: none.").min(0);
@@ -235,7 +275,8 @@ void declare_dem(config::Section& root) {
 
 void declare_output(config::Section& root) {
   auto& out = root.section("output", "What a run writes to its run folder.", config::Presence::Optional);
-  out.boolean("traffic_log", true, "Record the bus traffic with lcm-logger (traffic.lcmlog).");
+  out.boolean("traffic_log", true,
+              "Record the bus traffic (traffic.lcmlog: every process's own publications, merged; lossless).");
   out.strings("traffic_channels", std::vector<std::string>{},
               "Channels to record (regular expressions); empty: all channels.");
 }

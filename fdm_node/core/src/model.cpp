@@ -2,6 +2,7 @@
 #include "demfdm/fdm/model.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -411,12 +412,16 @@ void Model::step() {
        << "call set_timestep() with a smaller value";
     throw std::runtime_error(os.str());
   }
+  using Clock = std::chrono::steady_clock;
+  auto seconds = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); };
+  const auto t0 = Clock::now();
   // Coupling forces join the zone-force sum for this law of motion only; the zone pass
   // below overwrites fzone_ with the new zone forces.
   if (has_coupling_)
     for (std::size_t l = 0; l < mesh_.interface_points.size(); ++l)
       for (int d = 0; d < 3; ++d) fzone_[3 * mesh_.interface_points[l] + d] += fcouple_[3 * l + d];
 
+  const auto t1 = Clock::now();
   // Law of motion with local damping (physics.md 5.6).
   const double dt = dt_;
   const double alpha = params_.damping;
@@ -441,7 +446,12 @@ void Model::step() {
       x_[i] += v * dt;
     }
   }
+  const auto t2 = Clock::now();
   zone_pass(true);
+  const auto t3 = Clock::now();
+  phase_times_.interface += seconds(t0, t1);
+  phase_times_.gridpoints += seconds(t1, t2);
+  phase_times_.zones += seconds(t2, t3);
   ++step_;
   time_ += dt_;
   if (params_.large_strain && params_.mode == Mode::kDynamic && step_ % kTimestepCheckInterval == 0) {

@@ -40,6 +40,16 @@ struct Ratios {
   double local = 0.0;    // [-] R_local = max (|F_unb| / F_app)
 };
 
+// Wall time [s] spent in each phase of step() since the last reset_phase_times(): the
+// interface forces joining the force sum, the gridpoint law of motion (which includes gravity
+// and local damping: they are fused into the same loop and have no separate cost), and the
+// zone pass (strain rates, constitutive law, nodal forces, gather).
+struct PhaseTimes {
+  double interface = 0.0;
+  double gridpoints = 0.0;
+  double zones = 0.0;
+};
+
 // One line of the time series.
 struct HistoryRecord {
   std::int64_t step = 0;         // [-]
@@ -136,6 +146,8 @@ class Model {
   [[nodiscard]] std::span<const double> tet_stresses() const { return stress_; }  // [nz*10, 6]
   [[nodiscard]] double total_gravitational_mass() const;  // [kg]
   [[nodiscard]] std::uint64_t state_hash() const;  // FNV-1a over x, v, u, stresses (bitwise)
+  [[nodiscard]] const PhaseTimes& phase_times() const { return phase_times_; }
+  void reset_phase_times() { phase_times_ = {}; }
 
   // ---- output arrays (flat, row-major) ---------------------------------------------------
   [[nodiscard]] std::size_t num_gridpoints() const { return n_; }
@@ -200,6 +212,7 @@ class Model {
   static constexpr std::int64_t kTimestepCheckInterval = 100;
   Vec3 gravity_{0.0, 0.0, 0.0};
   std::vector<HistoryRecord> history_;
+  PhaseTimes phase_times_;
 };
 
 }  // namespace demfdm::fdm

@@ -1,0 +1,159 @@
+#include "demfdm/dem/guard.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <vector>
+
+namespace demfdm::dem {
+namespace {
+
+bool finite(const Vec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); }
+
+std::string str(const Vec3& v) {
+  std::ostringstream os;
+  os.precision(9);
+  os << "(" << v.x << ", " << v.y << ", " << v.z << ")";
+  return os.str();
+}
+
+Vec3 min_image(const World& w, Vec3 d) {
+  if (!w.periodic()) return d;
+  const Vec3 L = w.cell_length();
+  for (int k = 0; k < 3; ++k)
+    if (L[k] > 0) d[k] -= L[k] * std::round(d[k] / L[k]);
+  return d;
+}
+
+// True if every component of every vector is finite: x * 0 is 0 for finite x and NaN for
+// NaN or inf, so the three sums stay 0 unless some value is non-finite (no branch per ball).
+bool all_finite(const std::vector<Vec3>& a) {
+  double sx = 0, sy = 0, sz = 0;
+  for (const Vec3& v : a) {
+    sx += v.x * 0.0;
+    sy += v.y * 0.0;
+    sz += v.z * 0.0;
+  }
+  return sx + sy + sz == 0.0;
+}
+
+GuardFinding finding(const World& w, std::size_t row, std::string cause, std::size_t neighbours) {
+  GuardFinding f;
+  f.row = row;
+  f.id = w.balls().id[row];
+  f.cause = std::move(cause);
+  f.detail = "ball: " + describe_ball(w, row) + "\n" + std::to_string(neighbours) + " nearest balls:\n" +
+             neighbourhood(w, row, neighbours);
+  return f;
+}
+
+}  // namespace
+
+std::string describe_ball(const World& w, std::size_t i) {
+  const auto& b = w.balls();
+  std::ostringstream os;
+  os.precision(9);
+  os << "id " << b.id[i] << " (row " << i << ") at " << str(b.x[i]) << " m, radius " << b.r[i] << " m, velocity "
+     << str(b.v[i]) << " m/s, spin " << str(b.w[i]) << " rad/s, force " << str(b.f[i]) << " N, torque "
+     << str(b.t[i]) << " N m, fixity " << static_cast<int>(b.fix[i]);
+  return os.str();
+}
+
+std::string neighbourhood(const World& w, std::size_t row, std::size_t k) {
+  const auto& b = w.balls();
+  std::vector<std::pair<double, std::size_t>> d;
+  d.reserve(b.size());
+  const bool here = finite(b.x[row]);
+  for (std::size_t j = 0; j < b.size(); ++j) {
+    if (j == row) continue;
+    double dist = here && finite(b.x[j]) ? norm(min_image(w, b.x[j] - b.x[row])) : std::numeric_limits<double>::infinity();
+    d.push_back({dist, j});
+  }
+  k = std::min(k, d.size());
+  std::partial_sort(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(k), d.end());
+  std::ostringstream os;
+  os.precision(9);
+  for (std::size_t n = 0; n < k; ++n)
+    os << "  distance " << d[n].first << " m: " << describe_ball(w, d[n].second) << "\n";
+  return os.str();
+}
+
+double kinetic_energy(const World& w) {
+  const auto& b = w.balls();
+  double e = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) e += b.m[i] * dot(b.v[i], b.v[i]) + b.inertia[i] * dot(b.w[i], b.w[i]);
+  return 0.5 * e;
+}
+
+std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours) {
+  const auto& b = w.balls();
+  const std::size_t n = b.size();
+  const bool clean = all_finite(b.x) && all_finite(b.v) && all_finite(b.w) && all_finite(b.f) && all_finite(b.t);
+  for (std::size_t i = 0; i < n && !clean; ++i) {
+    const char* what = !finite(b.x[i])   ? "position"
+                       : !finite(b.v[i]) ? "velocity"
+                       : !finite(b.w[i]) ? "spin"
+                       : !finite(b.f[i]) ? "force"
+                       : !finite(b.t[i]) ? "torque"
+                                         : nullptr;
+    if (!what) continue;
+    const Vec3 v = std::string(what) == "position" ? b.x[i]
+                   : std::string(what) == "velocity" ? b.v[i]
+                   : std::string(what) == "spin" ? b.w[i]
+                   : std::string(what) == "force" ? b.f[i]
+                                                  : b.t[i];
+    auto f = finding(w, i, std::string("non-finite ") + what + " " + str(v) + " of ball id " + std::to_string(b.id[i]),
+                     neighbours);
+    // The contact that produced a non-finite force or torque, if a ball-ball one did.
+    const auto& pc = w.pair_contacts();
+    std::ostringstream os;
+    os.precision(9);
+    for (std::size_t c = 0; c < pc.size(); ++c) {
+      if (pc.a[c] != i && pc.b[c] != i) continue;
+      const Vec3 fc = w.pair_force(c), mc = w.pair_moment(c);
+      const auto& h = pc.h[c];
+      const bool bad = !finite(fc) || !finite(mc) || !std::isfinite(h.fn) || !finite(h.fs);
+      if (bad && !f.contact) {
+        f.contact = true;
+        f.other_id = b.id[pc.a[c] == i ? pc.b[c] : pc.a[c]];
+        f.cause += "; first non-finite contact: ball-ball pair " + std::to_string(b.id[pc.a[c]]) + "-" +
+                   std::to_string(b.id[pc.b[c]]) + " (" + to_string(w.params().ball_ball.model) + ")";
+      }
+      os << "  pair " << b.id[pc.a[c]] << "-" << b.id[pc.b[c]] << (bad ? " NON-FINITE" : "") << ": fn " << h.fn
+         << " N, fs " << str(h.fs) << " N, kn " << h.kn << " N/m, force on B " << str(fc) << " N, moment "
+         << str(mc) << " N m\n";
+    }
+    f.detail += "ball-ball contacts of ball " + std::to_string(b.id[i]) + " (model " +
+                to_string(w.params().ball_ball.model) + "):\n" + os.str();
+    return f;
+  }
+  if (w.has_footing() && !finite(w.footing_reaction())) {
+    GuardFinding f;
+    f.cause = "non-finite footing reaction " + str(w.footing_reaction());
+    f.detail = f.cause + "\n";
+    return f;
+  }
+  return std::nullopt;
+}
+
+std::optional<GuardFinding> check_escape(const World& w, const Vec3& lo, const Vec3& hi, double margin,
+                                         std::size_t neighbours) {
+  const auto& b = w.balls();
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const Vec3& x = b.x[i];
+    double out = 0;
+    for (int k = 0; k < 3; ++k) out = std::max({out, lo[k] - x[k], x[k] - hi[k]});
+    if (out > margin) {
+      std::ostringstream os;
+      os.precision(9);
+      os << "ball id " << b.id[i] << " left the DEM domain: centre " << str(x) << " m is " << out
+         << " m outside the box " << str(lo) << " - " << str(hi) << " m (limit " << margin << " m), velocity "
+         << str(b.v[i]) << " m/s";
+      return finding(w, i, os.str(), neighbours);
+    }
+  }
+  return std::nullopt;
+}
+
+}  // namespace demfdm::dem
