@@ -18,6 +18,7 @@
 
 #include "common/log/log.hpp"
 #include "coordinator/core/runner.hpp"
+#include "coordinator/core/summary.hpp"
 #include "messages/node_runtime.hpp"
 #include "messages/protocol.hpp"
 
@@ -108,29 +109,16 @@ class History {
 
 void on_signal(int s) { proto::request_interrupt(s); }
 
-std::string summary_text(const config::Scene& scene, const coord::RunSummary& sum,
-                         const proto::CoordinatorEndpoint& ep, const bus::BusStats& bs) {
+coord::RunInfo run_info(const config::Scene& scene, const proto::CoordinatorEndpoint& ep, const bus::BusStats& bs) {
+  coord::RunInfo info;
+  info.scene = scene.origin();
+  info.hash = scene.hash();
+  for (auto& [r, n] : ep.nodes()) info.nodes.push_back({r, n.solver, n.host, n.build_id, static_cast<std::int64_t>(n.pid)});
   std::ostringstream os;
-  os << std::fixed << std::setprecision(3);
-  os << "scene: " << scene.origin() << " (hash " << std::hex << scene.hash() << std::dec << ")\n";
-  os << "nodes:\n";
-  for (auto& [r, n] : ep.nodes())
-    os << "  " << r << ": " << n.solver << " pid " << n.pid << " on " << n.host << " (" << n.build_id << ")\n";
-  os << "stages:\n";
-  for (auto& s : sum.stages) {
-    os << "  " << s.name << " [" << s.action << "]: steps " << s.first_step << ".." << s.last_step << " ("
-       << (s.last_step - s.first_step + 1) << "), wall " << s.wall_s << " s, ended by " << s.ended_by << "\n";
-    for (auto& [r, c] : s.compute_s) {
-      double w = s.wait_s.count(r) ? s.wait_s.at(r) : 0.0;
-      double tot = c + w;
-      os << "    " << r << ": compute " << c << " s, bus wait " << w << " s ("
-         << (tot > 0 ? 100.0 * w / tot : 0.0) << " %)\n";
-    }
-  }
-  os << "total: " << sum.steps << " coupling steps in " << sum.wall_s << " s\n";
-  os << "coordinator bus: published " << bs.published << ", accepted " << bs.accepted << ", foreign-run "
-     << bs.foreign_run << ", duplicates " << bs.duplicates << ", decode errors " << bs.decode_errors << "\n";
-  return os.str();
+  os << "published " << bs.published << ", accepted " << bs.accepted << ", foreign-run " << bs.foreign_run
+     << ", duplicates " << bs.duplicates << ", decode errors " << bs.decode_errors;
+  info.bus = os.str();
+  return info;
 }
 
 }  // namespace
@@ -222,9 +210,13 @@ int main(int argc, char** argv) {
     runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
     auto sum = runner.run();
     ep->shutdown("run finished");
-    auto text = summary_text(scene, sum, *ep, bus->stats());
+    auto info = run_info(scene, *ep, bus->stats());
+    auto text = coord::summary_text(info, sum);
     log->info("run finished\n{}", text);
-    if (!opt.run_dir.empty()) std::ofstream(opt.run_dir + "/summary.txt") << text;
+    if (!opt.run_dir.empty()) {
+      std::ofstream(opt.run_dir + "/summary.txt") << text;
+      std::ofstream(opt.run_dir + "/summary.json") << coord::summary_json(info, sum);
+    }
     std::cout << text;
     return 0;
   } catch (const proto::ShutdownRequested& e) {

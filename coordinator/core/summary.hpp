@@ -1,0 +1,48 @@
+// The run summary: summary.txt (for people) and summary.json (for studies), built from the
+// stage machine's RunSummary, independent of the transport.
+//
+// Effects: a node reports, in its STAGE_END values, one entry `effect_s.<name>` per effect that
+// ran in the stage (seconds spent on it). The summary lists them per stage and node with their
+// share of the node's compute time in the stage, and sums them over the run per node. An effect
+// the scene does not enable is never reported, so it appears nowhere.
+#pragma once
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "coordinator/core/runner.hpp"
+
+namespace demfdm::coord {
+
+inline constexpr const char* kEffectPrefix = "effect_s.";
+
+struct NodeInfo {
+  std::string role, solver, host, build_id;
+  std::int64_t pid = 0;
+};
+
+struct RunInfo {
+  std::string scene;          // scene file
+  std::uint64_t hash = 0;     // scene hash
+  std::vector<NodeInfo> nodes;
+  std::string bus;            // one line of the coordinator's bus counters (text summary only)
+};
+
+// effect name -> seconds, from one node's STAGE_END values.
+std::map<std::string, double> effects_of(const NodeReport& end);
+
+// role -> effect -> seconds summed over the run; role -> compute seconds summed over the run.
+struct RunTotals {
+  std::map<std::string, std::map<std::string, double>> effects;
+  std::map<std::string, double> compute_s, wait_s;
+};
+RunTotals run_totals(const RunSummary& sum);
+
+std::string summary_text(const RunInfo& info, const RunSummary& sum);
+std::string summary_json(const RunInfo& info, const RunSummary& sum);
+
+// JSON string literal (quotes, backslashes and control characters escaped).
+std::string json_string(const std::string& s);
+
+}  // namespace demfdm::coord

@@ -1,0 +1,137 @@
+// The run summary (summary.txt, summary.json) with the effects the nodes report, driven by a
+// fake transport whose STAGE_END reports carry effect_s.<name> values (no LCM, no nodes).
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+
+#include <unistd.h>
+
+#include "coordinator/core/summary.hpp"
+
+using namespace demfdm;
+
+namespace {
+// Every command: compute 1 s, wait 0.5 s per node. STAGE_END adds the effects of 'effects'
+// (stage name -> role -> values) to the report.
+class EffectDriver : public coord::Driver {
+ public:
+  std::map<std::string, std::map<std::string, std::map<std::string, double>>> effects;
+  std::string stage;
+  void post(coord::Cmd, const std::vector<std::string>&, std::int64_t, std::int32_t, const std::string& name, double,
+            const std::vector<double>&) override {
+    stage = name;
+  }
+  std::map<std::string, coord::NodeReport> collect(coord::Cmd cmd, const std::vector<std::string>& targets,
+                                                   std::int64_t, std::int32_t) override {
+    std::map<std::string, coord::NodeReport> out;
+    for (auto& t : targets) {
+      coord::NodeReport r;
+      r.compute_s = 1.0;
+      r.wait_s = 0.5;
+      r.values["ratio"] = 1e-3;  // an ordinary value: not an effect
+      if (cmd == coord::Cmd::StageEnd)
+        for (auto& [k, v] : effects[stage][t]) r.values[std::string(coord::kEffectPrefix) + k] = v;
+      out[t] = r;
+    }
+    return out;
+  }
+};
+
+coord::RunSummary run_two_stages(EffectDriver& d) {
+  auto sc = config::Scene::parse(
+      "[dem]\n[continuum]\n[coupling]\n"
+      "[[stage]]\nname = \"settle\"\nnodes = [\"dem\"]\nsteps = 2\n"
+      "[[stage]]\nname = \"load\"\nsteps = 3\ncoupled = true\n",
+      "test.toml", schema::scene_schema());
+  coord::Runner r(schema::stages(sc), d, {}, 1);
+  return r.run();
+}
+
+coord::RunInfo info() {
+  coord::RunInfo i;
+  i.scene = "scenes/x \"quoted\".toml";
+  i.hash = 0xabc;
+  i.nodes = {{"continuum", "fdm", "host", "b1", 12}, {"dem", "dem", "host", "b1", 11}};
+  return i;
+}
+
+// Python's json module as the independent parser: exit 0 when 'text' is valid JSON and
+// the expression 'check' (over the parsed object j) holds.
+bool python_json_check(const std::string& text, const std::string& check) {
+  auto path = std::filesystem::temp_directory_path() / ("demfdm-summary-" + std::to_string(getpid()) + ".json");
+  std::ofstream(path) << text;
+  std::string cmd = "/usr/bin/python3 -c \"import json,sys; j = json.load(open(sys.argv[1])); sys.exit(0 if (" + check +
+                    ") else 1)\" " + path.string();
+  int rc = std::system(cmd.c_str());
+  std::filesystem::remove(path);
+  return rc == 0;
+}
+}  // namespace
+
+TEST(Summary, EffectsComeFromStageEndValuesOnly) {
+  coord::NodeReport r;
+  r.values = {{"effect_s.gravity", 0.25}, {"effect_s.", 9.0}, {"effect_sx", 1.0}, {"ratio", 2.0}};
+  auto e = coord::effects_of(r);
+  ASSERT_EQ(e.size(), 1u);
+  EXPECT_DOUBLE_EQ(e.at("gravity"), 0.25);
+}
+
+TEST(Summary, TextListsEffectsPerStageAndNodeWithShares) {
+  EffectDriver d;
+  d.effects["settle"]["dem"] = {{"gravity", 0.5}, {"bonds", 1.0}};
+  d.effects["load"]["dem"] = {{"gravity", 1.0}, {"coupling", 2.0}};
+  d.effects["load"]["continuum"] = {{"gravity", 0.25}};
+  auto sum = run_two_stages(d);
+  // settle: begin + 2 grants + end = 4 s compute for dem; load: begin + 3 grants + end = 5 s.
+  ASSERT_DOUBLE_EQ(sum.stages[0].compute_s.at("dem"), 4.0);
+  ASSERT_DOUBLE_EQ(sum.stages[1].compute_s.at("dem"), 5.0);
+  auto t = coord::summary_text(info(), sum);
+  std::cout << t;
+  EXPECT_NE(t.find("      effects: bonds 1.000 s (25.0 %), gravity 0.500 s (12.5 %)\n"), std::string::npos) << t;
+  EXPECT_NE(t.find("      effects: coupling 2.000 s (40.0 %), gravity 1.000 s (20.0 %)\n"), std::string::npos) << t;
+  EXPECT_NE(t.find("      effects: gravity 0.250 s (5.0 %)\n"), std::string::npos) << t;
+  // Run totals: dem computed 9 s; gravity 1.5 s = 16.7 %, coupling 2 s = 22.2 %, bonds 1 s = 11.1 %.
+  auto totals = t.substr(t.find("run totals per node"));
+  EXPECT_NE(totals.find("  dem: compute 9.000 s, bus wait 4.500 s\n"), std::string::npos) << totals;
+  EXPECT_NE(totals.find("    gravity                    1.500 s   16.7 %\n"), std::string::npos) << totals;
+  EXPECT_NE(totals.find("    coupling                   2.000 s   22.2 %\n"), std::string::npos) << totals;
+  EXPECT_NE(totals.find("  continuum: compute 5.000 s, bus wait 2.500 s\n"), std::string::npos) << totals;
+  // Unchanged stage line (bench/bus parses it).
+  EXPECT_NE(t.find("  load [cycle]: steps 2..4 (3), wall "), std::string::npos) << t;
+}
+
+TEST(Summary, NodeWithoutEffectsListsNone) {
+  EffectDriver d;
+  auto t = coord::summary_text(info(), run_two_stages(d));
+  EXPECT_EQ(t.find("effects:"), std::string::npos) << t;
+  EXPECT_NE(t.find("(no effects reported)"), std::string::npos) << t;
+}
+
+TEST(Summary, JsonIsValidAndCarriesStagesTotalsAndNodes) {
+  EffectDriver d;
+  d.effects["settle"]["dem"] = {{"gravity", 0.5}};
+  d.effects["load"]["dem"] = {{"gravity", 1.0}, {"coupling", 2.0}};
+  auto sum = run_two_stages(d);
+  auto j = coord::summary_json(info(), sum);
+  std::cout << j;
+  EXPECT_TRUE(python_json_check(j, "j['scene'] == 'scenes/x \\\"quoted\\\".toml' and j['hash'] == 'abc'")) << j;
+  EXPECT_TRUE(python_json_check(j, "[n['role'] for n in j['nodes']] == ['continuum', 'dem'] and j['nodes'][1]['pid'] == 11"));
+  EXPECT_TRUE(python_json_check(
+      j, "[(s['name'], s['action'], s['steps']) for s in j['stages']] == [('settle', 'cycle', 2), ('load', 'cycle', 3)]"));
+  EXPECT_TRUE(python_json_check(j, "list(j['stages'][0]['nodes']) == ['dem'] and j['stages'][0]['nodes']['dem']"
+                                   "['effects'] == {'gravity': {'s': 0.5, 'share': 0.125}}"));
+  EXPECT_TRUE(python_json_check(j, "j['stages'][1]['nodes']['continuum']['effects'] == {} and "
+                                   "j['stages'][1]['nodes']['dem']['compute_s'] == 5 and "
+                                   "j['stages'][1]['nodes']['dem']['wait_s'] == 2.5"));
+  EXPECT_TRUE(python_json_check(j, "j['totals']['steps'] == 5 and j['totals']['nodes']['dem']['compute_s'] == 9 and "
+                                   "j['totals']['nodes']['dem']['effects']['gravity']['s'] == 1.5 and "
+                                   "abs(j['totals']['nodes']['dem']['effects']['coupling']['share'] - 2 / 9) < 1e-9"));
+}
+
+TEST(Summary, JsonStringEscapes) {
+  EXPECT_EQ(coord::json_string("a\"b\\c\n\x01"), "\"a\\\"b\\\\c\\n\\u0001\"");
+}
