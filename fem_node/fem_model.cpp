@@ -198,24 +198,52 @@ void Model::assemble() {
   }
   kfull_.resize(static_cast<Eigen::Index>(3 * n), static_cast<Eigen::Index>(3 * n));
   kfull_.setFromTriplets(all.begin(), all.end());
-  Eigen::SparseMatrix<double> kff(nfree_, nfree_);
-  kff.setFromTriplets(freefree.begin(), freefree.end());
+  kff_.resize(nfree_, nfree_);
+  kff_.setFromTriplets(freefree.begin(), freefree.end());
   auto t1 = std::chrono::steady_clock::now();
   assembly_s_ = std::chrono::duration<double>(t1 - t0).count();
+  factorise(kff_);
+  factor_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+}
+
+void Model::factorise(const Eigen::SparseMatrix<double>& a) {
   Eigen::ComputationInfo info;
 #ifdef DEMFDM_HAVE_CHOLMOD
   if (use_cholmod_) {
-    cholmod_.compute(kff);
+    cholmod_.compute(a);
     info = cholmod_.info();
   } else
 #endif
   {
-    ldlt_.compute(kff);
+    ldlt_.compute(a);
     info = ldlt_.info();
   }
   if (info != Eigen::Success)
     throw std::runtime_error("fem: the stiffness matrix could not be factorised (singular: check the supports)");
-  factor_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+}
+
+void Model::set_interface_springs(const std::vector<double>& k) {
+  const auto& ip = mesh_.interface_points;
+  if (!k.empty() && k.size() != ip.size())
+    throw std::invalid_argument("fem: interface springs for " + std::to_string(k.size()) + " points, the mesh has " +
+                                std::to_string(ip.size()));
+  auto t0 = std::chrono::steady_clock::now();
+  springs_.assign(3 * ip.size(), 0.0);
+  Eigen::SparseMatrix<double> a = kff_;
+  for (std::size_t p = 0; p < k.size(); ++p) {
+    if (!(k[p] >= 0) || !std::isfinite(k[p]))
+      throw std::invalid_argument("fem: interface spring " + std::to_string(p) + " must be finite and >= 0, found " +
+                                  std::to_string(k[p]));
+    for (int d = 0; d < 3; ++d) {
+      const auto j = free_of_[3 * ip[p] + d];
+      if (j < 0) continue;
+      springs_[3 * p + d] = k[p];
+      a.coeffRef(j, j) += k[p];
+    }
+  }
+  factorise(a);
+  ++refactorisations_;
+  refactor_s_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
 void Model::set_geostatic_stress(double k0) {
@@ -279,23 +307,41 @@ std::vector<double> Model::rhs_full() const {
   return r;
 }
 
-void Model::solve() {
+Eigen::VectorXd Model::solve_free(const Eigen::VectorXd& b) const {
+#ifdef DEMFDM_HAVE_CHOLMOD
+  if (use_cholmod_) return cholmod_.solve(b);
+#endif
+  return ldlt_.solve(b);
+}
+
+void Model::solve(double omega) {
+  if (!(omega > 0 && omega <= 1))
+    throw std::invalid_argument("fem: relaxation factor must be in (0, 1], found " + std::to_string(omega));
   auto r = rhs_full();
   Eigen::VectorXd b(nfree_);
   for (std::size_t i = 0; i < r.size(); ++i)
     if (free_of_[i] >= 0) b[free_of_[i]] = r[i];
-#ifdef DEMFDM_HAVE_CHOLMOD
-  Eigen::VectorXd x = use_cholmod_ ? Eigen::VectorXd(cholmod_.solve(b)) : Eigen::VectorXd(ldlt_.solve(b));
-#else
-  Eigen::VectorXd x = ldlt_.solve(b);
-#endif
-  double fmax = 0;
+  // Interface springs D: (K + D) u_s = f + D u_{k-1} (set_interface_springs).
+  const auto& ip = mesh_.interface_points;
+  for (std::size_t k = 0; k < springs_.size(); ++k)
+    if (springs_[k] > 0) b[free_of_[3 * ip[k / 3] + k % 3]] += springs_[k] * u_[3 * ip[k / 3] + k % 3];
+  Eigen::VectorXd x = solve_free(b);
+  double fmax = 0, umax = 0, dmax = 0;
   for (std::size_t i = 0; i < r.size(); ++i) {
-    u_[i] = free_of_[i] >= 0 ? x[free_of_[i]] : 0.0;
-    if (free_of_[i] >= 0) fmax = std::max(fmax, std::abs(r[i]));
+    if (free_of_[i] < 0) {
+      u_[i] = 0.0;
+      continue;
+    }
+    const double us = x[free_of_[i]];
+    umax = std::max(umax, std::abs(us));
+    dmax = std::max(dmax, std::abs(us - u_[i]));
+    u_[i] = omega == 1.0 ? us : u_[i] + omega * (us - u_[i]);
+    fmax = std::max(fmax, std::abs(r[i]));
   }
-  // Out-of-balance force of every dof, K u - (f_ext - f_0): the residual on free dofs, the
-  // support reactions on fixed ones. One sparse product per solve, kept for reaction_sum().
+  gap_ = dmax / std::max(umax, 1e-300);
+  // Out-of-balance force of every dof, K u - (f_ext - f_0): the residual on free dofs (not 0
+  // while an under-relaxed state approaches the static answer), the support reactions on
+  // fixed ones. One sparse product per solve, kept for reaction_sum().
   Eigen::Map<const Eigen::VectorXd> u(u_.data(), static_cast<Eigen::Index>(u_.size()));
   Eigen::VectorXd ku = kfull_ * u;
   unbalanced_.resize(r.size());
@@ -305,6 +351,63 @@ void Model::solve() {
     if (free_of_[i] >= 0) res = std::max(res, std::abs(unbalanced_[i]));
   }
   residual_ = res / std::max(fmax, 1e-300);
+}
+
+std::vector<double> Model::interface_response(const std::vector<double>& f_if) const {
+  const auto& ip = mesh_.interface_points;
+  if (f_if.size() != 3 * ip.size())
+    throw std::invalid_argument("fem: interface loads for " + std::to_string(f_if.size() / 3) +
+                                " points, the mesh has " + std::to_string(ip.size()));
+  Eigen::VectorXd b = Eigen::VectorXd::Zero(nfree_);
+  for (std::size_t k = 0; k < ip.size(); ++k)
+    for (int d = 0; d < 3; ++d) {
+      const auto j = free_of_[3 * ip[k] + d];
+      if (j >= 0) b[j] += f_if[3 * k + d];
+    }
+  Eigen::VectorXd x = solve_free(b);
+  std::vector<double> out(3 * ip.size(), 0.0);
+  for (std::size_t k = 0; k < ip.size(); ++k)
+    for (int d = 0; d < 3; ++d) {
+      const auto j = free_of_[3 * ip[k] + d];
+      if (j >= 0) out[3 * k + d] = x[j];
+    }
+  return out;
+}
+
+double Model::coupling_gain(const std::vector<double>& k, int max_iterations, double tol, int* iterations) const {
+  const std::size_t n = mesh_.interface_points.size();
+  if (k.size() != n)
+    throw std::invalid_argument("fem: interface stiffness for " + std::to_string(k.size()) + " points, the mesh has " +
+                                std::to_string(n));
+  std::vector<double> sq(3 * n), x(3 * n), y(3 * n);
+  double norm = 0;
+  for (std::size_t i = 0; i < 3 * n; ++i) {
+    sq[i] = std::sqrt(std::max(k[i / 3], 0.0));
+    x[i] = sq[i];  // start: D^1/2 1, deterministic and in the span of every loaded dof
+    norm += x[i] * x[i];
+  }
+  if (iterations) *iterations = 0;
+  if (!(norm > 0)) return 0.0;
+  double lambda = 0;
+  for (int it = 1; it <= max_iterations; ++it) {
+    norm = std::sqrt(norm);
+    for (auto& v : x) v /= norm;
+    for (std::size_t i = 0; i < 3 * n; ++i) y[i] = sq[i] * x[i];
+    auto cy = interface_response(y);
+    double rq = 0, yy = 0;
+    for (std::size_t i = 0; i < 3 * n; ++i) {
+      y[i] = sq[i] * cy[i];  // y = D^1/2 C D^1/2 x
+      rq += x[i] * y[i];
+      yy += y[i] * y[i];
+    }
+    if (iterations) *iterations = it;
+    const bool done = it > 1 && std::abs(rq - lambda) <= tol * std::abs(rq);
+    lambda = rq;
+    if (done || !(yy > 0)) break;
+    x = y;
+    norm = yy;
+  }
+  return lambda;
 }
 
 std::vector<double> Model::interface_positions() const {

@@ -80,8 +80,34 @@ class Model {
   // Extra nodal loads [N] on any gridpoints [n,3] (tests); replaces the previous ones.
   void set_applied_forces(const std::vector<double>& f);
 
-  // One back-substitution with the current loads; updates u.
-  void solve();
+  // One back-substitution with the current loads: u_static = K^-1 f. With omega = 1, u = u_static;
+  // with 0 < omega < 1 the update is under-relaxed, u_k = u_{k-1} + omega (u_static - u_{k-1})
+  // (interface relaxation of a partitioned coupling, docs/continuum-solvers.md). Repeated solves
+  // with fixed loads converge geometrically, with factor (1 - omega), to the same static answer.
+  void solve(double omega = 1.0);
+  // Interface springs [N/m] per interface point (on its free dofs), D: from now on a solve
+  // answers (K + D) u_s = f + D u_{k-1} instead of K u_s = f, i.e. u_s = u_{k-1} +
+  // (K + D)^-1 (f - K u_{k-1}). The fixed point is the same static answer K u = f; D makes the
+  // update of a coupling with contacts of stiffness k <= 2 D contractive (docs/continuum-
+  // solvers.md). Refactorises K + D (cost of the start-up factorisation). Empty: D = 0.
+  void set_interface_springs(const std::vector<double>& k);
+  std::int64_t refactorisations() const { return refactorisations_; }
+  double refactorisation_s() const { return refactor_s_; }  // total wall time [s]
+
+  // max |u_static - u_{k-1}| / max |u_static| of the last solve: how far the previous state was
+  // from the static answer (0 when omega = 1 reaches it; 1 on the first solve from rest).
+  double relaxation_gap() const { return gap_; }
+
+  // Interface displacements [n_if,3] under the given interface loads alone (no gravity, no
+  // initial stress), i.e. the interface compliance C applied to f; does not change the state.
+  std::vector<double> interface_response(const std::vector<double>& f_if) const;
+  // Largest eigenvalue of C D (D = diag of the per-point stiffness k [n_if], on each of the 3
+  // dofs of a point): the gain of one unrelaxed coupling step of a continuum that answers forces
+  // statically against contacts of stiffness k. Power iteration on the symmetric D^1/2 C D^1/2
+  // from a fixed start vector, until the Rayleigh quotient changes by < tol (relative) or after
+  // max_iterations solves. The Rayleigh quotient never exceeds the true value.
+  double coupling_gain(const std::vector<double>& k, int max_iterations = 40, double tol = 1e-4,
+                       int* iterations = nullptr) const;
 
   const std::vector<double>& displacements() const { return u_; }  // [n,3] total
   std::vector<double> interface_positions() const;                 // x0 + u
@@ -121,7 +147,12 @@ class Model {
   std::vector<double> fgrav_, f0_, fif_, fapp_, u_;
   std::vector<double> unbalanced_;  // [3n] K u - (f_ext - f_0) at the last solve
   std::vector<double> sigma0_;  // [nz*8*6] initial stress at the Gauss points
-  double residual_ = 0, assembly_s_ = 0, factor_s_ = 0;
+  double residual_ = 0, gap_ = 0, assembly_s_ = 0, factor_s_ = 0, refactor_s_ = 0;
+  std::int64_t refactorisations_ = 0;
+  Eigen::SparseMatrix<double> kff_;  // [nfree x nfree] K of the free dofs
+  std::vector<double> springs_;      // [3 n_if] interface springs on free dofs (0 on fixed ones)
+  void factorise(const Eigen::SparseMatrix<double>& a);
+  Eigen::VectorXd solve_free(const Eigen::VectorXd& b) const;
 };
 
 }  // namespace demfdm::fem

@@ -8,10 +8,13 @@
 // boundary = "none" (a free body has a singular stiffness) and [continuum.punch].
 //
 // Each coupling step: apply the DEM's interface forces as nodal loads, one back-substitution
-// with the factor computed at start-up, send x0 + u and (u_k - u_{k-1}) / dt (dt = the
-// coupling step; m/step when dt = 0). A static solve is in equilibrium, so the stage
-// criterion (equilibrium / geostatic / couple) is met after every solve; penetrate has its
-// consent. Outputs: fem.h5 + mesh.xmf (displacement, velocity, zone stress) and
+// with the factor computed at start-up, relax the update (continuum.relaxation: a scalar
+// u_k = u_{k-1} + omega (u_static - u_{k-1}), or by default interface springs from the DEM's
+// interface stiffness, see relaxation_factor()), send x0 + u_k and (u_k - u_{k-1}) / dt
+// (dt = the coupling step; m/step when dt = 0), i.e. the velocity of the relaxed state. The
+// stage criterion (equilibrium / geostatic / couple) is the out-of-balance ratio
+// |K u_k - f| / |f| below the stage's ratio (met after every unrelaxed solve); penetrate has
+// its consent. Outputs: fem.h5 + mesh.xmf (displacement, velocity, zone stress) and
 // fem_history.csv in the run folder.
 #include <algorithm>
 #include <chrono>
@@ -75,6 +78,7 @@ class FemParticipant : public node::Participant {
     const auto& s = ctx.scene;
     frame_every_ = s.integer("continuum.output.frame_every");
     history_every_ = s.integer("continuum.output.history_every");
+    relaxation_ = s.real("continuum.relaxation");
     u_prev_ = model_.interface_displacements();
     spdlog::info("fem: {} gridpoints, {} zones, {} free dofs, {} interface points; K factorised in {:.3f} s ({})",
                  model_.num_points(), model_.num_zones(), model_.num_free_dofs(),
@@ -114,7 +118,8 @@ class FemParticipant : public node::Participant {
   void advance(const schema::Stage&, std::int64_t step, double dt, const std::vector<double>&) override {
     auto t0 = std::chrono::steady_clock::now();
     u_prev_ = model_.interface_displacements();
-    model_.solve();
+    omega_ = relaxation_factor();
+    model_.solve(omega_);
     last_solve_s_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     effect_s_["solve"] += last_solve_s_;
     total_solve_s_ += last_solve_s_;
@@ -133,16 +138,21 @@ class FemParticipant : public node::Participant {
 
   proto::Values step_values() override {
     auto b = model_.base_reaction();
-    proto::Values v{{"ratio", model_.residual_ratio()}, {"base_fz_N", b[2]}, {"solve_s", last_solve_s_}};
+    proto::Values v{{"ratio", model_.residual_ratio()}, {"base_fz_N", b[2]}, {"solve_s", last_solve_s_},
+                    {"relax_omega", omega_}, {"relax_gap", model_.relaxation_gap()},
+                    {"weight_N", -model_.gravity_load()[2]}};
     if (coupled_) {
       v.push_back({"iface_imbalance", max_imbalance_});
       v.push_back({"iface_fz_N", iface_fz_});
+      if (relaxation_ > 0) v.push_back({"coupling_gain", gain_});
+      if (relaxation_ == 0) v.push_back({"refactorisations", static_cast<double>(model_.refactorisations())});
     }
     return v;
   }
   bool criterion_met(const schema::Stage& st) override {
     const auto& a = st.action;
-    if (a == "equilibrium" || a == "geostatic" || a == "couple") return solved_;
+    if (a == "equilibrium" || a == "geostatic" || a == "couple")
+      return solved_ && model_.residual_ratio() < st.view.real("ratio");
     return a == "penetrate";
   }
   proto::Values stage_end(const schema::Stage&, std::int64_t last) override {
@@ -151,6 +161,7 @@ class FemParticipant : public node::Participant {
     auto v = step_values();
     v.push_back({"solves", static_cast<double>(solves_)});
     v.push_back({"solve_total_s", total_solve_s_});
+    v.push_back({"refactorisation_s", model_.refactorisation_s()});
     for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
     return v;
   }
@@ -206,9 +217,64 @@ class FemParticipant : public node::Participant {
     coupled_ = true;
     iface_fz_ = sum[2];
     model_.set_interface_forces(f.forces);  // throws naming the sizes on a mismatch
+    if (!f.stiffness.empty() && f.stiffness.size() != model_.mesh().interface_points.size())
+      throw std::invalid_argument("fem: interface stiffness for " + std::to_string(f.stiffness.size()) +
+                                  " points, the mesh has " + std::to_string(model_.mesh().interface_points.size()));
+    stiffness_ = f.stiffness;
   }
 
  private:
+  // The interface update of this step (docs/continuum-solvers.md); returns omega.
+  // * continuum.relaxation = omega in (0, 1]: scalar under-relaxation, u_k = u_{k-1} + omega
+  //   (u_static - u_{k-1}); 1 is the unrelaxed static continuum. The DEM's contacts answer an
+  //   interface displacement du with dF = -k du within one step (k per point, physics.md 6.5), so
+  //   the error modes of this iteration are multiplied by 1 - omega (1 + lambda_i), lambda_i the
+  //   eigenvalues of C k (C the interface compliance): contractive iff omega < 2 / (1 + lambda_max).
+  //   At the first coupled step with stiffness the node estimates lambda_max (power iteration,
+  //   Model::coupling_gain), reports it and warns when omega is beyond that limit.
+  // * 0 (automatic): interface springs D = the DEM's stiffness, floored at kFloor max k, so that
+  //   a solve answers (K + D) u_k = f + D u_{k-1}: u_k = u_{k-1} + (K + D)^-1 K (u_static -
+  //   u_{k-1}), an under-relaxation whose factor (K + D)^-1 K is ~1 away from the contacts and
+  //   ~K/k at stiff ones. Error factor (K + D)^-1 (D - k): contractive for every k <= 2 D, so K + D
+  //   is refactorised only when some k exceeds kRefresh D, or when max k drops below kDrop max D
+  //   (D then over-damps the interface), or D = 0 when the DEM reports no stiffness (scripted
+  //   forces: the static answer in one step, omega = 1).
+  double relaxation_factor() {
+    double kmax = 0;
+    for (double k : stiffness_) kmax = std::max(kmax, k);
+    if (relaxation_ > 0) {
+      if (kmax > 0 && !gain_checked_) {
+        node::Timed t(effect_s_["relax.gain"]);
+        gain_checked_ = true;
+        gain_ = model_.coupling_gain(stiffness_);
+        const double limit = 2.0 / (1.0 + gain_);
+        if (relaxation_ >= limit)
+          spdlog::warn("fem: continuum.relaxation = {} is beyond the stability limit 2 / (1 + lambda) = {:.4g} of the "
+                       "interface iteration (coupling gain lambda = {:.4g} for the DEM's interface stiffness); the "
+                       "coupled run will diverge or lose contact. Use 0 (automatic) or omega < {:.4g}",
+                       relaxation_, limit, gain_, limit);
+      }
+      return relaxation_;
+    }
+    constexpr double kFloor = 0.25, kRefresh = 1.5, kDrop = 0.5;
+    double dmax = 0;
+    bool refresh = false;
+    for (std::size_t i = 0; i < springs_.size(); ++i) {
+      dmax = std::max(dmax, springs_[i]);
+      if (i < stiffness_.size() && stiffness_[i] > kRefresh * springs_[i]) refresh = true;
+    }
+    if (springs_.size() != stiffness_.size() || kmax < kDrop * dmax) refresh = kmax > 0 || dmax > 0;
+    if (refresh) {
+      node::Timed t(effect_s_["relax.refactorise"]);
+      springs_.assign(stiffness_.size(), 0.0);
+      if (kmax > 0)
+        for (std::size_t i = 0; i < stiffness_.size(); ++i) springs_[i] = std::max(stiffness_[i], kFloor * kmax);
+      model_.set_interface_springs(kmax > 0 ? springs_ : std::vector<double>{});
+      if (!(kmax > 0)) springs_.clear();
+    }
+    return 1.0;
+  }
+
   std::string triple(const std::vector<double>& a, std::int32_t g) const {
     std::ostringstream os;
     os.precision(9);
@@ -252,6 +318,9 @@ class FemParticipant : public node::Participant {
   std::optional<io::CsvSeries> history_;
   std::int64_t frame_every_ = 0, history_every_ = 1, last_frame_ = -2, solves_ = 0;
   std::vector<double> u_prev_, u_ref_;
+  std::vector<double> stiffness_, springs_;  // [n_if] DEM interface stiffness [N/m]; interface springs D [N/m]
+  double relaxation_ = 0, omega_ = 1, gain_ = 0;
+  bool gain_checked_ = false;
   double time_ = 0, dt_ = 0, last_solve_s_ = 0, total_solve_s_ = 0, last_frame_time_ = 0;
   double max_imbalance_ = 0, iface_fz_ = 0;
   bool coupled_ = false, solved_ = false, has_frame_ = false;
