@@ -162,6 +162,7 @@ class DemParticipant : public node::Participant {
       auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
       spdlog::info("dem: {}", r.what);
     }
+    if (!is_generation(a) && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
     proto::Values v;
     if (a == "generate") {
       v = report(generate());
@@ -328,14 +329,7 @@ class DemParticipant : public node::Participant {
       world_.prepare();  // detect the ball-facet contacts before bonding them
       std::size_t nb = world_.bond_ball_facet(1e-3 * d_min);
       spdlog::info("dem: {} ball-facet bonds installed", nb);
-      auto mode = s_.string("dem.specimen.depth_scaling");
-      if (mode != "none") {
-        dem::DepthScaleParams p;
-        p.mode = mode == "paper_literal" ? dem::DepthScaling::kPaperLiteral : dem::DepthScaling::kDepthRatio;
-        p.z_top = block_.z_top();
-        p.height = block_.height();
-        spdlog::info("dem: {}", dem::depth_scale(world_, p).what);
-      }
+      scale_with_depth();
       dem::InterfaceBondParams ib;
       ib.mode = s_.string("dem.specimen.interface_bond_force") == "mean_contact" ? dem::InterfaceBondForce::kMeanContact
                                                                                  : dem::InterfaceBondForce::kTraction;
@@ -481,6 +475,52 @@ class DemParticipant : public node::Participant {
     world_.balls().v[top] = {kick_[0], kick_[1], kick_[2]};
     spdlog::info("dem: kick: ball id {} at ({}, {}, {}) gets velocity ({}, {}, {}) m/s", b.id[top], b.x[top].x,
                  b.x[top].y, b.x[top].z, kick_[0], kick_[1], kick_[2]);
+  }
+
+  // Contact and bond forces scaled with depth below the block top (physics.md 4.9).
+  void scale_with_depth() {
+    auto mode = s_.string("dem.specimen.depth_scaling");
+    if (mode == "none") return;
+    dem::DepthScaleParams p;
+    p.mode = mode == "paper_literal" ? dem::DepthScaling::kPaperLiteral : dem::DepthScaling::kDepthRatio;
+    p.z_top = block_.z_top();
+    p.height = block_.height();
+    spdlog::info("dem: {}", dem::depth_scale(world_, p).what);
+  }
+
+  // DEM-only box (dem.specimen.box = "walls"): planes on the bottom and the four sides of the
+  // replicated block, normals pointing inwards, then the depth scaling of the coupled set-up.
+  void box_walls() {
+    if (world_.periodic())
+      throw std::invalid_argument("dem.specimen.box = \"walls\": the block is still periodic (no replicate stage before)");
+    // Walls touch the outermost ball surfaces: the cut faces of the replicated block have balls
+    // that reach past them, and a linear wall contact would push those out at once.
+    const auto& b = world_.balls();
+    dem::Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    for (std::size_t i = 0; i < b.size(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], b.x[i][k] - b.r[i]);
+        hi[k] = std::max(hi[k], b.x[i][k] + b.r[i]);
+      }
+    const double lx = hi.x - lo.x, ly = hi.y - lo.y;
+    const dem::Vec3 o = lo, c{0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.5 * (lo.z + hi.z)};
+    auto plane = [&](dem::Vec3 point, dem::Vec3 normal, dem::Vec3 axis1) {
+      dem::PlaneWallParams p;
+      p.point = point;
+      p.normal = normal;
+      p.axis1 = axis1;
+      world_.add_plane(p);
+    };
+    plane({c.x, c.y, o.z}, {0, 0, 1}, {1, 0, 0});
+    plane({o.x, c.y, c.z}, {1, 0, 0}, {0, 1, 0});
+    plane({o.x + lx, c.y, c.z}, {-1, 0, 0}, {0, 1, 0});
+    plane({c.x, o.y, c.z}, {0, 1, 0}, {1, 0, 0});
+    plane({c.x, o.y + ly, c.z}, {0, -1, 0}, {1, 0, 0});
+    box_done_ = true;
+    spdlog::info("dem: DEM-only box: 5 walls around the {} x {} m block (bottom at z = {} m)", lx, ly, lo.z);
+    world_.prepare();
+    scale_with_depth();
+    world_.prepare();
   }
 
   dem::StageReport generate() {
@@ -746,7 +786,7 @@ class DemParticipant : public node::Participant {
   double last_frame_time_ = 0;
   int wall_ = -1;
   std::size_t n_iface_ = 0;
-  bool coupling_setup_pending_ = false, penetrating_ = false;
+  bool coupling_setup_pending_ = false, penetrating_ = false, box_done_ = false;
   double footing_z0_ = 0, target_disp_ = 0;
   double weight_ = -1;
   node::EnergyJump energy_jump_;

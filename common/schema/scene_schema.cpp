@@ -88,6 +88,14 @@ void declare_continuum(config::Section& root) {
            "cholmod = CHOLMOD supernodal Cholesky (fast on large meshes); ldlt = Eigen SimplicialLDLT (no "
            "extra library, slow beyond ~10^4 dofs); auto = cholmod when the build has it, else ldlt. Same "
            "answer to round-off (docs/continuum-solvers.md).");
+  c.real("relaxation", "-", 0.0,
+         "fem_node only (fdm_node ignores it): under-relaxation factor omega of the static continuum's coupling "
+         "update, u_k = u_(k-1) + omega (u_static - u_(k-1)); 1 = unrelaxed (diverges against stiff DEM contacts: "
+         "the node warns when omega exceeds the stability limit it estimates). 0 = automatic: the DEM's interface "
+         "stiffness k is added as springs D to the stiffness, (K + D) u_k = f + D u_(k-1), contractive for k <= 2 D; "
+         "the static answer in one step when the DEM reports no stiffness. Both converge to the same static answer "
+         "(docs/continuum-solvers.md).")
+      .min(0.0).max(1.0);
   c.choice("boundary", {"strongbox", "symmetry", "none"}, std::string("strongbox"),
            "strongbox: fixed base, rollers on the four sides, free top (physics.md 5.10); symmetry: rollers on "
            "the x = 0, y = 0 and z = 0 planes only (element tests: a quarter of a triaxial specimen); none: all free.");
@@ -252,6 +260,11 @@ void declare_dem(config::Section& root) {
   sp.real("bond_gap", "m", -1.0, "Bond contacts with gap <= this; negative: 1e-3 d_min (4.6).");
   sp.integers("replicate", "-", std::vector<std::int64_t>{1, 1, 5}, "Copies alpha x beta x gamma (4.7).")
       .length(3).min(1);
+  sp.choice("box", {"none", "walls"}, std::string("none"),
+            "DEM-only model of a block (no continuum): walls places frictional planes (family ball_wall) on the "
+            "bottom and the four sides of the replicated block at the first stage that is not a generation stage, "
+            "and scales the forces with depth there (depth_scaling), as the coupled interface set-up does; the "
+            "reference of the accuracy study's coupled-versus-DEM-only knob (docs/accuracy-study.md).");
   sp.choice("depth_scaling", {"depth_ratio", "paper_literal", "none"}, std::string("depth_ratio"),
             "Scaling of contact and bond forces with depth (4.9, U7): depth_ratio (default) f = depth/H_D; "
             "paper_literal f = height above the block bottom / H_D; none.");

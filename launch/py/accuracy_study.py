@@ -79,9 +79,36 @@ def set_stage_key(text, stage, key, value):
     raise KeyError("scene has no stage named '%s'" % stage)
 
 
+def dem_only_box(text):
+    """The footing scene without its continuum: drops [continuum*] and [coupling], turns the
+    coupled gravity stage into a DEM equilibrium stage and puts the block in a box of walls
+    (dem.specimen.box = "walls"). The caller sets the replication so that the DEM block fills
+    the outer size of the coupled model."""
+    out, skip = [], False
+    for line in text.split("\n"):
+        s = line.strip()
+        if s.startswith("["):
+            name = s.strip("[]")
+            skip = name.startswith("continuum") or name == "coupling"
+        if skip:
+            continue
+        if re.match(r"^coupled\s*=", s):
+            continue
+        out.append(line)
+    text = "\n".join(out)
+    text, n = re.subn(r'(?m)^action\s*=\s*"couple"\s*$', 'action = "equilibrium"', text)
+    if n != 1:
+        raise KeyError("footing scene: expected one stage with action \"couple\", found %d" % n)
+    if "\n[dem.specimen]\n" not in text:
+        raise KeyError("footing scene has no [dem.specimen] table")
+    return text.replace("\n[dem.specimen]\n", '\n[dem.specimen]\nbox = "walls"\n', 1)
+
+
 def apply(text, edits):
     for k, v in edits.items():
-        if k.startswith("stage:"):
+        if k == "transform" and v == "dem_only_box":
+            text = dem_only_box(text)
+        elif k.startswith("stage:"):
             stage, _, key = k[len("stage:"):].partition(".")
             text = set_stage_key(text, stage, key, v)
         else:
@@ -103,6 +130,14 @@ def knobs(quick):
                       ("10", {"coupling.interval": 10})], "1", ["1", "5"])
     f["scheme"] = ("footing", "serial (no lag) or parallel (one-step lag, both cores busy) coupling",
                    [("serial", {}), ("parallel", {"coupling.scheme": '"parallel"'})], "serial", ["serial", "parallel"])
+    # Coupled DEM-FDM against a DEM-only box of the same 4 x 4 x 4 mm outer size, at upscaling 2
+    # (the smallest practical DEM-only model): the DEM box is the reference.
+    small = {"dem.specimen.scale": 2, "continuum.mesh.size": "[4e-3, 4e-3, 4e-3]"}
+    f["dem_only"] = ("footing", "a DEM block in an FDM continuum instead of DEM everywhere (same 4 mm box, scale 2)",
+                     [("dem_box", dict(small, **{"dem.specimen.replicate": "[2, 2, 4]", "transform": "dem_only_box"})),
+                      ("coupled", dict(small, **{"dem.specimen.replicate": "[1, 1, 2]",
+                                                 "continuum.mesh.inner_size": "[2e-3, 2e-3, 2e-3]"}))],
+                     "dem_box", [])
     f["dt_safety"] = ("footing", "time step as a fraction of the critical step (DEM dt_safety; FDM "
                       "timestep_safety scaled by the same factor)",
                       [("0.4", {"dem.dt_safety": 0.4, "continuum.timestep_safety": 0.25}),
@@ -158,8 +193,13 @@ def existing_runs(study):
     return out
 
 
-def plan(root, quick, only, existing=None):
+def plan(root, quick, only, existing=None, seeds=1):
+    """Runs to make and table entries. With seeds > 1 every footing setting runs with the generator
+    seeds 1..seeds and is measured on the seed-averaged curve (the footing's single-run scatter is
+    large at this size); the seed knob is then dropped (its role is the table's scatter column)."""
     ks = knobs(quick)
+    if seeds > 1:
+        ks.pop("seed", None)
     if only:
         bad = [k for k in only if k not in ks]
         if bad:
@@ -173,13 +213,19 @@ def plan(root, quick, only, existing=None):
     for k, (prob, what, sets, ref, _) in ks.items():
         base = base_text(root, prob, quick)
         for label, edits in sets:
-            text = apply(base, edits)
-            h = text_hash(text)
-            r = runs.setdefault(h, {"name": "%s_%s_%s" % (prob, k, label), "text": text})
-            r["text"] = text
-            name = r["name"]
+            names = []
+            for sd in (range(1, seeds + 1) if prob == "footing" and seeds > 1 else [None]):
+                e2 = dict(edits)
+                if sd is not None:
+                    e2["run.seed"] = sd
+                text = apply(base, e2)
+                h = text_hash(text)
+                r = runs.setdefault(h, {"name": "%s_%s_%s%s" % (prob, k, label, "" if sd is None else "_s%d" % sd),
+                                        "text": text})
+                r["text"] = text
+                names.append(r["name"])
             entries.append({"problem": prob, "knob": k, "what": what, "setting": label, "reference": label == ref,
-                            "run": name})
+                            "run": names[0], "runs": names})
     return {h: r for h, r in runs.items() if r["text"] is not None}, entries
 
 
@@ -217,11 +263,32 @@ def run_wall(d):
     return float(m.group(2)), float("nan"), int(m.group(1))
 
 
+def mean_curve(curves, n=400):
+    """Seed average: the loads of several curves interpolated onto a common displacement grid
+    (0 to the shortest stroke) and averaged; also the standard error of that mean, as the RMS over
+    the grid of the seeds' standard deviation / sqrt(seeds)."""
+    xmax = min(float(np.max(x)) for x, _ in curves)
+    grid = np.linspace(0.0, xmax, n)
+    ys = np.array([np.interp(grid, x, y) for x, y in curves])
+    se = float(np.sqrt(np.mean(ys.std(axis=0, ddof=1) ** 2)) / np.sqrt(len(curves))) if len(curves) > 1 else float("nan")
+    return grid, ys.mean(axis=0), se
+
+
 def measures(problem, d, d_f):
-    """(peak, initial stiffness, x, y) of a finished run: footing load-displacement or UCS stress-strain."""
+    """(peak, initial stiffness, x, y) of a finished run: footing load-displacement or UCS stress-strain.
+    d: a run folder, or a list of run folders (seeds) measured on their mean curve."""
     if problem == "footing":
-        x, y = paper_figures.curve(d)
-        return float(np.max(y)), paper_figures.initial_stiffness(x, y, d_f)[0], x, y
+        # Several seeds: peak and initial stiffness are the means of the runs' own figures (a peak
+        # of the mean curve would be smoothed away where the runs' peaks fall at different
+        # displacements); the curve is the seed-mean curve.
+        ds = d if isinstance(d, list) else [d]
+        curves = [paper_figures.curve(r) for r in ds]
+        peak = float(np.mean([np.max(y) for _, y in curves]))
+        ks = [paper_figures.initial_stiffness(x, y, d_f)[0] for x, y in curves]
+        ks = [k for k in ks if np.isfinite(k)]
+        k = float(np.mean(ks)) if ks else float("nan")
+        x, y = (mean_curve(curves)[:2]) if len(ds) > 1 else curves[0]
+        return peak, k, x, y
     res = paper_figures.read_csv(os.path.join(d, "ucs_result.csv"))
     c = paper_figures.read_csv(os.path.join(d, "ucs_curve.csv"))
     return float(res["ucs_Pa"][0]), float(res["e50_Pa"][0]), c["strain_unit"], c["stress_Pa"]
@@ -234,14 +301,23 @@ def rel(a, b):
 def table(study):
     meta = json.load(open(os.path.join(study, "plan.json")))
     d_f = meta["d_f"]
-    done = {}
-    for e in meta["entries"]:
-        d = os.path.join(study, e["run"])
-        ok = os.path.exists(os.path.join(d, "summary.json")) or (
+    done, scatter = {}, {}
+
+    def finished(name):
+        d = os.path.join(study, name)
+        return os.path.exists(os.path.join(d, "summary.json")) or (
             os.path.exists(os.path.join(d, "summary.txt")) and not open(os.path.join(d, "summary.txt")).read().startswith("FAILED"))
-        if ok and e["run"] not in done:
+    for e in meta["entries"]:
+        names = e.get("runs", [e["run"]])
+        if all(finished(n) for n in names) and e["run"] not in done:
+            ds = [os.path.join(study, n) for n in names]
             try:
-                done[e["run"]] = (run_wall(d),) + measures(e["problem"], d, d_f)
+                walls = [run_wall(d) for d in ds]  # per-setting cost: the mean over its seeds
+                cost = tuple(float(np.mean([w[i] for w in walls])) for i in range(3))
+                done[e["run"]] = (cost,) + measures(e["problem"], ds if len(ds) > 1 else ds[0], d_f)
+                if len(ds) > 1:
+                    _, _, se = mean_curve([paper_figures.curve(d) for d in ds])
+                    scatter[e["run"]] = se / abs(done[e["run"]][1])
             except (OSError, ValueError, KeyError) as ex:
                 print("accuracy study: %s: no result (%s)" % (e["run"], ex), file=sys.stderr)
     refs = {}
@@ -256,7 +332,8 @@ def table(study):
                    reference=(2 if is_ref and not e["reference"] else int(is_ref)),
                    run=e["run"], wall_s=float("nan"), compute_s=float("nan"), steps=float("nan"), peak=float("nan"),
                    peak_err=float("nan"),
-                   stiffness=float("nan"), stiffness_err=float("nan"), curve_err=float("nan"))
+                   stiffness=float("nan"), stiffness_err=float("nan"), curve_err=float("nan"),
+                   seeds=len(e.get("runs", [e["run"]])), curve_se=scatter.get(e["run"], float("nan")))
         if e["run"] in done:
             (wall, comp, steps), peak, k, x, y = done[e["run"]]
             row.update(wall_s=wall, compute_s=comp, steps=steps, peak=peak, stiffness=k)
@@ -272,7 +349,7 @@ def table(study):
         w.writerows(rows)
     units = {"footing": ("peak load [N]", "k0 [N/m]"), "ucs": ("UCS [Pa]", "E50 [Pa]")}
     lines = ["| problem | knob | setting | wall [s] | compute [s] | coupling steps | peak | peak err | initial stiffness "
-             "| stiffness err | curve err |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| stiffness err | curve err | seeds | curve s.e. |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def pct(v):
         return "-" if not np.isfinite(v) else "%.2f %%" % (100 * v)
@@ -280,14 +357,18 @@ def table(study):
     def num(v, spec):
         return "-" if not np.isfinite(v) else format(v, spec)
     for r in rows:
-        lines.append("| %s | %s | %s%s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+        lines.append("| %s | %s | %s%s | %s | %s | %s | %s | %s | %s | %s | %s | %d | %s |" % (
             r["problem"], r["knob"], r["setting"], {0: "", 1: " (ref)", 2: " (ref*)"}[r["reference"]], num(r["wall_s"], ".0f"),
             num(r["compute_s"], ".0f"), num(r["steps"], ".0f"), num(r["peak"], ".4g"), pct(r["peak_err"]), num(r["stiffness"], ".4g"),
-            pct(r["stiffness_err"]), pct(r["curve_err"])))
+            pct(r["stiffness_err"]), pct(r["curve_err"]), r["seeds"], pct(r["curve_se"])))
     text = ("# Accuracy-cost study\n\nErrors against the reference (most accurate) setting of each knob. "
             "Footing: peak = %s, initial stiffness = %s; UCS: peak = %s, initial stiffness = %s. Curve err: RMS "
             "difference over the common range / reference peak. wall: the coordinator's run wall time; compute: "
-            "CPU-busy seconds of all nodes; coupling steps: the run's total (DEM steps = steps x interval). ref*: the knob's most accurate setting did not finish; the most accurate "
+            "CPU-busy seconds of all nodes; coupling steps: the run's total (DEM steps = steps x interval); with several "
+            "seeds, peak, initial stiffness (k50) and the costs are means over the seeds' runs, the curve error compares "
+            "the seed-mean curves (mean load on a common displacement grid up to the shortest stroke); curve s.e.: the "
+            "standard error of the seed-mean curve (RMS over the stroke) / its peak: curve errors below about twice "
+            "the two settings' s.e. are not resolved. ref*: the knob's most accurate setting did not finish; the most accurate "
             "finished one is the reference.\n\n" % (units["footing"] + units["ucs"])) + "\n".join(lines) + "\n"
     open(os.path.join(study, "accuracy_table.md"), "w").write(text)
     print(text)
@@ -346,6 +427,7 @@ def main():
     ap.add_argument("study", nargs="?")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", nargs="+", default=[])
+    ap.add_argument("--seeds", type=int, default=1)
     a = ap.parse_args()
     root = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     if a.command == "list":
@@ -356,7 +438,7 @@ def main():
     if not a.study:
         ap.error("%s needs STUDY_DIR" % a.command)
     if a.command == "run":
-        runs, entries = plan(root, a.quick, a.only, existing_runs(a.study))
+        runs, entries = plan(root, a.quick, a.only, existing_runs(a.study), a.seeds)
         os.makedirs(a.study, exist_ok=True)
         d_f = float(re.search(r"(?m)^diameter = (\S+)", open(os.path.join(root, FOOTING_SCENE)).read()).group(1))
         plan_path = os.path.join(a.study, "plan.json")
@@ -364,9 +446,11 @@ def main():
             old = json.load(open(plan_path))
             if old["quick"] != a.quick:
                 raise SystemExit("accuracy study: %s is a %s study" % (a.study, "quick" if old["quick"] else "full"))
+            if old.get("seeds", 1) != a.seeds:
+                raise SystemExit("accuracy study: %s was planned with --seeds %d" % (a.study, old.get("seeds", 1)))
             have = {(e["knob"], e["setting"]) for e in entries}
             entries = [e for e in old["entries"] if (e["knob"], e["setting"]) not in have] + entries
-        json.dump({"quick": a.quick, "d_f": d_f, "entries": entries}, open(plan_path, "w"), indent=1)
+        json.dump({"quick": a.quick, "seeds": a.seeds, "d_f": d_f, "entries": entries}, open(plan_path, "w"), indent=1)
         print("accuracy study: %d settings, %d distinct runs in %s" % (len(entries), len(runs), a.study), file=sys.stderr)
         run_all(root, a.study, runs)
     table(a.study)
