@@ -158,6 +158,10 @@ class DemParticipant : public node::Participant {
     effect_s_.clear();
     world_.reset_phase_times();
     check_dt_fixed(st);
+    {  // local damping of this stage (physics.md 1.3): the stage's own, else the scene's
+      const double alpha = st.view.real("damping");
+      world_.mutable_params().local_damping = alpha >= 0 ? alpha : s_.real("dem.damping");
+    }
     if (!is_generation(a) && gravity_level_ > 0 && !world_.gravity_on()) {
       auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
       spdlog::info("dem: {}", r.what);

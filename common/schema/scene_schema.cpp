@@ -335,6 +335,10 @@ void declare_stages(config::Section& root) {
   st.real("depth_ratio", "-", 0.2, "penetrate: stop when the footing has moved this many D_f (paper: 0.2).")
       .min(0.0, true);
   st.real("speed_factor", "-", 1.0, "penetrate: multiply the rate-rule speed (stability studies).").min(0.0, true);
+  st.real("damping", "-", -1.0,
+          "DEM local damping alpha in this stage (physics.md 1.3: the penetration stage may use less than the "
+          "0.7 of equilibration); negative: dem.damping.")
+      .max(0.99);
   st.real("strain_rate", "1/s", 0.5, "ucs: platen approach rate / specimen height.").min(0.0, true);
   st.real("max_strain", "-", 0.01, "ucs: stop at this axial strain.").min(0.0, true);
   st.strings("nodes", std::vector<std::string>{}, "Roles taking part ('dem', 'continuum'); empty: all of the scene's.");

@@ -66,12 +66,17 @@ def set_key(text, dotted, value):
     raise KeyError("table [%s] of the scene has no key '%s'" % (table, key))
 
 
-def set_stage_key(text, stage, key, value):
-    """Sets `key = value` in the [[stage]] named `stage`; fails when the stage or key is absent."""
+def set_stage_key(text, stage, key, value, add=False):
+    """Sets `key = value` in the [[stage]] named `stage`; fails when the stage is absent, and when
+    the key is absent unless add (then the line is appended to the stage)."""
     parts = re.split(r"(?m)^(?=\[\[stage\]\])", text)
     for i, p in enumerate(parts):
         if p.startswith("[[stage]]") and re.search(r'(?m)^name\s*=\s*"%s"\s*$' % re.escape(stage), p):
             new, n = re.subn(r"(?m)^%s\s*=.*$" % re.escape(key), "%s = %s" % (key, value), p)
+            if n == 0 and add:
+                body = p.rstrip("\n")
+                new, n = body + "\n%s = %s\n" % (key, value) + p[len(body):].lstrip("\n"), 1
+                new = new if new.endswith("\n") else new + "\n"
             if n != 1:
                 raise KeyError("stage '%s' has %d '%s' keys (expected 1)" % (stage, n, key))
             parts[i] = new
@@ -108,9 +113,9 @@ def apply(text, edits):
     for k, v in edits.items():
         if k == "transform" and v == "dem_only_box":
             text = dem_only_box(text)
-        elif k.startswith("stage:"):
-            stage, _, key = k[len("stage:"):].partition(".")
-            text = set_stage_key(text, stage, key, v)
+        elif k.startswith("stage:") or k.startswith("stage+:"):
+            stage, _, key = k.partition(":")[2].partition(".")
+            text = set_stage_key(text, stage, key, v, add=k.startswith("stage+:"))
         else:
             text = set_key(text, k, v)
     return text
@@ -150,8 +155,9 @@ def knobs(quick):
                        ("2", {"continuum.mesh.size_near": 1e-3, "continuum.mesh.size_far": 3e-3})], "0.5", ["1", "2"])
     f["continuum"] = ("footing", "explicit FDM or the implicit continuum solver (fem_node)",
                       [("fdm", {}), ("fem", {"continuum.executable": '"fem_node"'})], "fdm", [])
-    f["damping"] = ("footing", "DEM local damping alpha (scene key: all stages)",
-                    [("0.1", {"dem.damping": 0.1}), ("0.3", {"dem.damping": 0.3}), ("0.7", {})], "0.1", [])
+    f["damping"] = ("footing", "DEM local damping alpha of the penetration stage (the gravity stage keeps 0.7)",
+                    [("0.1", {"stage+:penetrate.damping": 0.1}), ("0.3", {"stage+:penetrate.damping": 0.3}),
+                     ("0.7", {})], "0.1", [])
     f["seed"] = ("footing", "generator seed: not a trade, the run-to-run scatter an error must exceed to mean anything",
                  [("1", {}), ("2", {"run.seed": 2}), ("3", {"run.seed": 3})], "1", [])
     f["ucs_scale"] = ("ucs", "particle upscaling factor of the UCS test",

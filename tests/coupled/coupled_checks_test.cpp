@@ -10,9 +10,9 @@
 // Initial stiffness k50: least-squares slope of load against displacement over the rising branch,
 // from the first contact (first row with load > 0) to the first row at half the first peak load
 // (first peak: the largest load before the load first falls below half of the largest so far,
-// within 0.02 D_f of the first contact), the footing analogue of the UCS test's E50. The first particle-scale bond failure ends the rising branch and the load then
-// drops by up to 100 %, so a slope over a fixed window depends on where that failure falls
-// (docs/paper-study.md). launch/py/paper_figures.py uses the same rule.
+// within 0.02 D_f of the first contact), the footing analogue of the UCS test's E50. The first
+// particle-scale bond failure ends the rising branch and the load then drops by up to 100 %, so
+// a slope over a fixed window depends on where that failure falls (docs/paper-study.md). launch/py/paper_figures.py uses the same rule.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "tests/integration/process.hpp"
+#include "tests/stability/scene_run.hpp"  // slurp, read_columns, replace_once
 
 namespace fs = std::filesystem;
 using namespace demfdm::testing;
@@ -30,37 +31,7 @@ using namespace demfdm::testing;
 namespace {
 const std::string kBin = DEMFDM_BIN_DIR;
 const std::string kSrc = DEMFDM_SOURCE_DIR;
-using Columns = std::map<std::string, std::vector<double>>;
 constexpr double kPeakWindow = 0.02;  // [D_f] how far after the first contact the first peak is sought
-
-Columns read_columns(const fs::path& p) {
-  std::ifstream f(p);
-  if (!f) throw std::runtime_error("cannot open " + p.string());
-  std::string line, cell;
-  std::getline(f, line);
-  std::vector<std::string> names;
-  std::stringstream hs(line);
-  while (std::getline(hs, cell, ',')) names.push_back(cell);
-  Columns cols;
-  while (std::getline(f, line)) {
-    std::stringstream ss(line);
-    for (std::size_t i = 0; std::getline(ss, cell, ','); ++i) cols[names.at(i)].push_back(std::stod(cell));
-  }
-  return cols;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-void replace_once(std::string& s, const std::string& from, const std::string& to) {
-  auto i = s.find(from);
-  if (i == std::string::npos) throw std::runtime_error("scene text has no '" + from + "'");
-  s.replace(i, from.size(), to);
-}
 
 // Run folders of this process, removed at the end if every test passed (kept for inspection
 // otherwise).
