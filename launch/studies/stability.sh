@@ -50,7 +50,9 @@ edits = {
     "soft_continuum": [(r"^young = ([0-9.e+-]+)$", lambda m: f"young = {float(m.group(1)) / 100:g}")],
     "stiff_continuum": [(r"^young = ([0-9.e+-]+)$", lambda m: f"young = {float(m.group(1)) * 100:g}")],
     "fast_footing": [(r"^mean_stress = (.*)$", r"mean_stress = \1\nspeed_factor = 10")],
-    "bond_cascade": [(r"^\[dem.specimen\]$", "[dem.ball_ball]\nsb_ten = 4.5e3\nsb_coh = 4.5e3\n\n[dem.specimen]")],
+    "bond_cascade": [(r"^\[dem.ball_ball\]$", "[dem.ball_ball]\nsb_ten = 4.5e3\nsb_coh = 4.5e3")
+                     if re.search(r"^\[dem.ball_ball\]$", text, re.M) else
+                     (r"^\[dem.specimen\]$", "[dem.ball_ball]\nsb_ten = 4.5e3\nsb_coh = 4.5e3\n\n[dem.specimen]")],
     "undamped": [(r"^\[dem\]$", "[dem]\ndamping = 0.0"), (r"^\[dem.specimen\]$", "[dem.specimen]\ndepth_scaling = \"none\"")],
     "dt_09": [(r"^\[dem\]$", f"[dem]\ndt_fixed = {0.9 * lo:.6e}")],
     "dt_above": [(r"^\[dem\]$", f"[dem]\ndt_fixed = {3 * hi:.6e}")],
