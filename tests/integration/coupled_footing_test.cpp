@@ -8,6 +8,7 @@
 #include <map>
 
 #include "tests/integration/process.hpp"
+#include "tests/integration/scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace demfdm::testing;
@@ -35,7 +36,7 @@ std::map<std::string, std::vector<double>> read_columns(const fs::path& p) {
 }  // namespace
 
 TEST(CoupledFooting, SmallSceneRunsAllStagesWithBalancedInterfaceForces) {
-  auto runs = fs::temp_directory_path() / ("demfdm-footing-" + std::to_string(getpid()));
+  auto runs = scratch("demfdm-footing-" + std::to_string(getpid()));
   fs::remove_all(runs);
   fs::create_directories(runs);
   auto dir = runs / "run";

@@ -11,6 +11,7 @@
 #include "messages/bus.hpp"
 #include "tests/chain/chain_model.hpp"
 #include "tests/integration/process.hpp"
+#include "tests/integration/scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace demfdm;
@@ -46,7 +47,7 @@ std::string chain_scene(const std::string& scheme, int steps, double startup_s =
 }
 
 fs::path fresh_dir(const std::string& name) {
-  auto d = fs::temp_directory_path() / ("demfdm-it-" + std::to_string(getpid()) + "-" + name);
+  auto d = scratch("demfdm-it-" + std::to_string(getpid()) + "-" + name);
   fs::remove_all(d);
   fs::create_directories(d);
   return d;

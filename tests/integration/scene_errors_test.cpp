@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "tests/integration/process.hpp"
+#include "tests/integration/scratch.hpp"
 
 namespace fs = std::filesystem;
 using namespace demfdm::testing;
@@ -25,7 +26,7 @@ struct Check {
 };
 
 Check check_text(const std::string& name, const std::string& text) {
-  auto dir = fs::temp_directory_path() / ("demfdm-scenes-" + std::to_string(getpid()));
+  auto dir = scratch("demfdm-scenes-" + std::to_string(getpid()));
   fs::create_directories(dir);
   auto path = dir / (name + ".toml");
   std::ofstream(path) << text;
@@ -85,7 +86,7 @@ TEST(SceneErrors, EachKindOfBadSceneGivesOneLineAndExitTwo) {
 }
 
 TEST(SceneErrors, MissingSceneFileIsNamed) {
-  auto out = fs::temp_directory_path() / ("demfdm-missing-" + std::to_string(getpid()) + ".out");
+  auto out = scratch("demfdm-missing-" + std::to_string(getpid()) + ".out");
   auto p = spawn({kBin + "/coordinator", "/nonexistent/scene.toml", "--check"}, {}, out.string());
   auto st = wait_for(p, 10);
   ASSERT_TRUE(st);
@@ -94,8 +95,8 @@ TEST(SceneErrors, MissingSceneFileIsNamed) {
 }
 
 TEST(SceneErrors, BrokenSceneThroughLaunchRun) {
-  auto out = fs::temp_directory_path() / ("demfdm-broken-" + std::to_string(getpid()) + ".out");
-  auto runs = fs::temp_directory_path() / ("demfdm-broken-runs-" + std::to_string(getpid()));
+  auto out = scratch("demfdm-broken-" + std::to_string(getpid()) + ".out");
+  auto runs = scratch("demfdm-broken-runs-" + std::to_string(getpid()));
   auto p = spawn({"/bin/bash", kSrc + "/launch/run", kSrc + "/scenes/broken.toml", "--no-build", "--runs-root", runs.string()},
                  {"DEMFDM_BUILD=" + fs::path(kBin).parent_path().string()}, out.string());
   auto st = wait_for(p, 30);
@@ -107,7 +108,7 @@ TEST(SceneErrors, BrokenSceneThroughLaunchRun) {
 }
 
 TEST(LaunchRun, WritesACompleteRunFolderAndNeverOverwritesOne) {
-  auto runs = fs::temp_directory_path() / ("demfdm-launch-" + std::to_string(getpid()));
+  auto runs = scratch("demfdm-launch-" + std::to_string(getpid()));
   fs::remove_all(runs);
   auto dir = runs / "one";
   fs::create_directories(runs);
@@ -134,7 +135,7 @@ TEST(LaunchRun, WritesACompleteRunFolderAndNeverOverwritesOne) {
 }
 
 TEST(LaunchRun, CtrlCStopsEveryProcess) {
-  auto runs = fs::temp_directory_path() / ("demfdm-sigint-" + std::to_string(getpid()));
+  auto runs = scratch("demfdm-sigint-" + std::to_string(getpid()));
   fs::remove_all(runs);
   fs::create_directories(runs);
   auto dir = runs / "run";
