@@ -155,6 +155,7 @@ class DemParticipant : public node::Participant {
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     const auto& a = st.action;
     stage_ratio_ = st.view.real("ratio");
+    ratio_valid_ = skeleton_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
     check_dt_fixed(st);
@@ -211,7 +212,7 @@ class DemParticipant : public node::Participant {
       auto [lo, hi] = domain();
       if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
     }
-    const double ke = dem::kinetic_energy(world_);
+    const double ke = world_.kinetic_energy();
     if (auto jump = energy_jump_.check(ke)) {
       // Name the ball with the largest kinetic energy and its neighbourhood.
       const auto& b = world_.balls();
@@ -231,6 +232,7 @@ class DemParticipant : public node::Participant {
 
   void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
     if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
+    ratio_valid_ = skeleton_valid_ = false;
     if (penetrating_) {
       if (values.empty()) throw std::runtime_error("penetrate: the coordinator sent no footing speed");
       world_.set_footing_velocity({0.0, 0.0, -values[0]});
@@ -250,25 +252,22 @@ class DemParticipant : public node::Participant {
     if (user_dt_ > 0 && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
     // Exactly 'interval' DEM steps per coupling step of length dt.
     if (dt > 0) world_.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
-    {
-      node::Timed t(effect_s_["dem_cycle"]);  // the whole engine cycle (its phases: add_phase_times)
-      world_.step(interval_);
-    }
+    world_.step(interval_);  // its phases are reported by add_phase_times()
     work_ += boundary_power() * world_.dt() * static_cast<double>(interval_);
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
       node::Timed t(effect_s_["output.history"]);
       auto fz = world_.has_footing() ? world_.footing_reaction().z : 0.0;
       auto facet = world_.num_facet_walls() > 0 ? world_.facet_walls_total_force().z : 0.0;
-      history_->append({static_cast<double>(step), world_.time(), world_.unbalanced_ratio(), world_.energy().kinetic, fz,
+      history_->append({static_cast<double>(step), world_.time(), ratio(), world_.kinetic_energy(), fz,
                         footing_disp(), facet});
     }
     if (out_ && frame_every_ > 0 && step % frame_every_ == 0) write_frame(step);
   }
 
   proto::Values step_values() override {
-    proto::Values v{{"ratio", world_.unbalanced_ratio()}, {"dt_s", world_.dt()}, {"dt_critical_s", critical_dt()}};
+    proto::Values v{{"ratio", ratio()}, {"dt_s", world_.dt()}, {"dt_critical_s", critical_dt()}};
     if (world_.gravity_on()) {
-      auto sk = skeleton_ratio();
+      auto sk = skeleton();
       v.push_back({"ratio_skeleton", sk.ratio});
       v.push_back({"rattlers", static_cast<double>(sk.rattlers)});
       v.push_back({"weight_N", weight()});
@@ -282,7 +281,7 @@ class DemParticipant : public node::Participant {
   bool criterion_met(const schema::Stage& st) override {
     if (penetrating_) return footing_disp() >= target_disp_ * (1 - 1e-12);
     if (st.action == "cycle") return false;
-    return (world_.gravity_on() ? skeleton_ratio().ratio : world_.unbalanced_ratio()) < stage_ratio_;
+    return (world_.gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     if (out_) write_frame(last);
@@ -324,6 +323,7 @@ class DemParticipant : public node::Participant {
 
   // Coupling (DEM role).
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
+    ratio_valid_ = skeleton_valid_ = false;
     wall_ = world_.add_facet_wall(m.positions, m.triangles);
     n_iface_ = m.n_points();
     spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
@@ -713,6 +713,24 @@ class DemParticipant : public node::Participant {
     return r;
   }
 
+  // The engine's unbalanced-force ratio of the current state, computed once per state (the
+  // history row, the step report and the exit criterion all read it; it rebuilds every
+  // contact force).
+  double ratio() {
+    if (!ratio_valid_) {
+      ratio_ = world_.unbalanced_ratio();
+      ratio_valid_ = true;
+    }
+    return ratio_;
+  }
+  const SkeletonRatio& skeleton() {
+    if (!skeleton_valid_) {
+      skeleton_ = skeleton_ratio();
+      skeleton_valid_ = true;
+    }
+    return skeleton_;
+  }
+
   // Weight of the balls [N] under the current gravity (constant while no ball is added).
   double weight() {
     if (weight_ < 0) {
@@ -793,6 +811,10 @@ class DemParticipant : public node::Participant {
   bool coupling_setup_pending_ = false, penetrating_ = false, box_done_ = false;
   double footing_z0_ = 0, target_disp_ = 0;
   double weight_ = -1;
+  double ratio_ = 0;           // engine ratio of the current state (ratio())
+  bool ratio_valid_ = false;   // cleared by every call that changes the state
+  SkeletonRatio skeleton_;     // skeleton ratio of the current state (skeleton())
+  bool skeleton_valid_ = false;
   node::EnergyJump energy_jump_;
   double user_dt_ = 0, escape_margin_ = 0;
   std::vector<double> kick_;

@@ -145,10 +145,10 @@ double expelled_energy_ratio(double dt_safety) {
   for (int s = 0; s < 40000 && w.balls().x[0].z < 2 * kR; ++s) {
     w.step();
     EXPECT_FALSE(check_finite(w).has_value()) << "step " << s;
-    ke_max = std::max(ke_max, kinetic_energy(w));
+    ke_max = std::max(ke_max, w.kinetic_energy());
   }
   EXPECT_GT(w.balls().x[0].z, kR) << "the ball must have left the wall";
-  const double ke = kinetic_energy(w);
+  const double ke = w.kinetic_energy();
   std::cout << "[ figures  ] dt_safety " << dt_safety << ": initial strain energy " << e0 << " J, final kinetic " << ke
             << " J, ratio " << ke / e0 << ", largest kinetic / initial strain " << ke_max / e0 << "\n";
   return std::max(ke, ke_max) / e0;

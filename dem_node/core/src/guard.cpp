@@ -79,13 +79,6 @@ std::string neighbourhood(const World& w, std::size_t row, std::size_t k) {
   return os.str();
 }
 
-double kinetic_energy(const World& w) {
-  const auto& b = w.balls();
-  double e = 0;
-  for (std::size_t i = 0; i < b.size(); ++i) e += b.m[i] * dot(b.v[i], b.v[i]) + b.inertia[i] * dot(b.w[i], b.w[i]);
-  return 0.5 * e;
-}
-
 std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours) {
   const auto& b = w.balls();
   const std::size_t n = b.size();

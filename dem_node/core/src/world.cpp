@@ -1078,12 +1078,13 @@ void World::pair_pass(double dt) {
   }
 }
 
-// One ball against a rigid moving wall (platen or footing): contact kinematics at the middle of
-// the overlap (physics.md 1.4-1.5), the family's law, and the per-contact results stored in wc.
-// Returns the force on the wall.
+// One ball against a wall (platen, footing or facet) whose surface point moves at v_wall and
+// spins at w_wall (0 for the rigid walls): contact kinematics at the middle of the overlap
+// (physics.md 1.4-1.5), the family's law, and the per-contact results stored in wc. Returns the
+// force on the wall.
 template <ContactModel M>
-Vec3 rigid_wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const Vec3& n, double dist,
-                        const Vec3& v_wall, const LawConst& lc, double dt) {
+Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const Vec3& n, double dist,
+                  const Vec3& v_wall, const Vec3& w_wall, const LawConst& lc, double dt) {
   const std::uint32_t i = wc.ball[c];
   Kin k;
   k.n = n;
@@ -1091,8 +1092,8 @@ Vec3 rigid_wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, c
   const Vec3 la = (pt.r[i] + 0.5 * k.gap) * n;
   const Vec3 vr = v_wall - (pt.v[i] + cross(pt.w[i], la));
   k.du = vr * dt;
-  k.dtheta = -pt.w[i] * dt;
-  k.wmean = 0.5 * pt.w[i];
+  k.dtheta = (w_wall - pt.w[i]) * dt;
+  k.wmean = 0.5 * (pt.w[i] + w_wall);
   k.dt = dt;
   Vec3 Mo;
   const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
@@ -1114,7 +1115,7 @@ void World::plane_pass(double dt) {
     PlaneWall& pw = planes_[wc.wall[c]];
     Vec3 n;
     const double dist = plane_distance(pt_.x[i], pw, n);
-    pw.reaction += rigid_wall_contact<M>(pt_, wc, c, n, dist, pw.p.velocity, lc, dt);
+    pw.reaction += wall_contact<M>(pt_, wc, c, n, dist, pw.p.velocity, Vec3{}, lc, dt);
     if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
   }
 }
@@ -1141,23 +1142,8 @@ void World::facet_pass(double dt) {
     wc.facet[c] = ft;
     wc.bary[c] = w;
     const auto& tr = fw.tri[static_cast<std::size_t>(ft)];
-    Kin k;
-    k.n = n;
-    k.gap = best - pt_.r[i];
-    const Vec3 la = (pt_.r[i] + 0.5 * k.gap) * n;
     const Vec3 vf = w.x * fw.vel[tr[0]] + w.y * fw.vel[tr[1]] + w.z * fw.vel[tr[2]];
-    const Vec3 wf = fw.tri_spin[static_cast<std::size_t>(ft)];
-    const Vec3 vr = vf - (pt_.v[i] + cross(pt_.w[i], la));
-    k.du = vr * dt;
-    k.dtheta = (wf - pt_.w[i]) * dt;
-    k.wmean = 0.5 * (pt_.w[i] + wf);
-    k.dt = dt;
-    Vec3 Mo;
-    const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
-    wc.F[c] = F;
-    wc.M[c] = Mo;
-    wc.TA[c] = cross(F, la) - Mo;
-    wc.xc[c] = pt_.x[i] + la;
+    wall_contact<M>(pt_, wc, c, n, best, vf, fw.tri_spin[static_cast<std::size_t>(ft)], lc, dt);
   }
   // §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order
   for (auto& fw : fwalls_) {
@@ -1196,7 +1182,7 @@ void World::footing_pass(double dt) {
     const std::uint32_t i = wc.ball[c];
     Vec3 q, n;
     const double dist = closest_point_cylinder(pt_.x[i], footing_.p.bottom_centre, R, footing_.p.height, q, n);
-    footing_.reaction += rigid_wall_contact<M>(pt_, wc, c, n, dist, footing_.p.velocity, lc, dt);
+    footing_.reaction += wall_contact<M>(pt_, wc, c, n, dist, footing_.p.velocity, Vec3{}, lc, dt);
   }
 }
 
@@ -1549,10 +1535,16 @@ std::size_t World::bond_ball_facet(double hi) {
 // ------------------------------------------------------------------------------------------
 // measurements
 
+double World::kinetic_energy() const {
+  double e = 0.0;
+  for (std::size_t i = 0; i < pt_.size(); ++i)
+    e += 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]);
+  return e;
+}
+
 Energy World::energy() const {
   Energy e;
-  for (std::size_t i = 0; i < pt_.size(); ++i)
-    e.kinetic += 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]);
+  e.kinetic = kinetic_energy();
   e.damping = e_damp_;
   e.friction = e_slip_dead_;
   e.softening = e_soft_dead_;

@@ -30,9 +30,6 @@ std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours 
 std::optional<GuardFinding> check_escape(const World& w, const Vec3& lo, const Vec3& hi, double margin,
                                          std::size_t neighbours = 10);
 
-/// Translational + rotational kinetic energy [J] (O(n), no contact pass).
-double kinetic_energy(const World& w);
-
 /// The `k` balls nearest to ball `row` (minimum image in a periodic cell), one line each:
 /// id, distance, position, radius, velocity, force.
 std::string neighbourhood(const World& w, std::size_t row, std::size_t k);

@@ -292,6 +292,8 @@ class World {
 
   // ---- measurements ----
   Energy energy() const;
+  /// Translational + rotational kinetic energy [J]: O(balls), no contact loop.
+  double kinetic_energy() const;
   /// PFC average ratio: mean ‖F_unb‖ over balls / mean ‖F_c‖ over active contacts (§5.11).
   double unbalanced_ratio() const;
   double max_unbalanced_force() const;
