@@ -281,8 +281,9 @@ def mean_curve(curves, n=400):
 
 
 def measures(problem, d, d_f):
-    """(peak, initial stiffness, x, y) of a finished run: footing load-displacement or UCS stress-strain.
-    d: a run folder, or a list of run folders (seeds) measured on their mean curve."""
+    """(peak, initial stiffness, x, y, se) of a finished run: footing load-displacement or UCS
+    stress-strain. d: a run folder, or a list of run folders (seeds) measured on their mean curve;
+    se: the mean curve's standard error over its peak (NaN for one run)."""
     if problem == "footing":
         # Several seeds: peak and initial stiffness are the means of the runs' own figures (a peak
         # of the mean curve would be smoothed away where the runs' peaks fall at different
@@ -293,11 +294,13 @@ def measures(problem, d, d_f):
         ks = [paper_figures.initial_stiffness(x, y, d_f)[0] for x, y in curves]
         ks = [k for k in ks if np.isfinite(k)]
         k = float(np.mean(ks)) if ks else float("nan")
-        x, y = (mean_curve(curves)[:2]) if len(ds) > 1 else curves[0]
-        return peak, k, x, y
+        if len(ds) == 1:
+            return peak, k, curves[0][0], curves[0][1], float("nan")
+        x, y, se = mean_curve(curves)
+        return peak, k, x, y, se / abs(peak)
     res = paper_figures.read_csv(os.path.join(d, "ucs_result.csv"))
     c = paper_figures.read_csv(os.path.join(d, "ucs_curve.csv"))
-    return float(res["ucs_Pa"][0]), float(res["e50_Pa"][0]), c["strain_unit"], c["stress_Pa"]
+    return float(res["ucs_Pa"][0]), float(res["e50_Pa"][0]), c["strain_unit"], c["stress_Pa"], float("nan")
 
 
 def rel(a, b):
@@ -307,7 +310,7 @@ def rel(a, b):
 def table(study):
     meta = json.load(open(os.path.join(study, "plan.json")))
     d_f = meta["d_f"]
-    done, scatter = {}, {}
+    done = {}
 
     def finished(name):
         d = os.path.join(study, name)
@@ -321,9 +324,6 @@ def table(study):
                 walls = [run_wall(d) for d in ds]  # per-setting cost: the mean over its seeds
                 cost = tuple(float(np.mean([w[i] for w in walls])) for i in range(3))
                 done[e["run"]] = (cost,) + measures(e["problem"], ds if len(ds) > 1 else ds[0], d_f)
-                if len(ds) > 1:
-                    _, _, se = mean_curve([paper_figures.curve(d) for d in ds])
-                    scatter[e["run"]] = se / abs(done[e["run"]][1])
             except (OSError, ValueError, KeyError) as ex:
                 print("accuracy study: %s: no result (%s)" % (e["run"], ex), file=sys.stderr)
     refs = {}
@@ -339,12 +339,12 @@ def table(study):
                    run=e["run"], wall_s=float("nan"), compute_s=float("nan"), steps=float("nan"), peak=float("nan"),
                    peak_err=float("nan"),
                    stiffness=float("nan"), stiffness_err=float("nan"), curve_err=float("nan"),
-                   seeds=len(e.get("runs", [e["run"]])), curve_se=scatter.get(e["run"], float("nan")))
+                   seeds=len(e.get("runs", [e["run"]])), curve_se=float("nan"))
         if e["run"] in done:
-            (wall, comp, steps), peak, k, x, y = done[e["run"]]
-            row.update(wall_s=wall, compute_s=comp, steps=steps, peak=peak, stiffness=k)
+            (wall, comp, steps), peak, k, x, y, se = done[e["run"]]
+            row.update(wall_s=wall, compute_s=comp, steps=steps, peak=peak, stiffness=k, curve_se=se)
             if ref is not None:
-                _, rpeak, rk, rx, ry = done[ref["run"]]
+                _, rpeak, rk, rx, ry, _ = done[ref["run"]]
                 row.update(peak_err=rel(peak, rpeak), stiffness_err=rel(k, rk),
                            curve_err=compare_curves.curve_difference((rx, ry), (x, y), abs(rpeak))[0])
         rows.append(row)
