@@ -13,6 +13,9 @@ branch, from the first contact (first row with load > 0) to the first row at hal
 (first peak: the largest load before the load first falls below half of the largest so far, within
 0.02 D_f of the first contact); the same rule as
 tests/coupled/coupled_checks_test.cpp (docs/paper-study.md).
+Elastic initial stiffness k_e: the same slope from the first contact to the last row before the
+first ball-ball bond leaves the intact state (column dem.bonds_failed; empty for runs recorded
+before the column existed), also as in the test.
 """
 import argparse
 import csv
@@ -37,9 +40,13 @@ def read_csv(path):
     return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
 
 
+def history_path(run):
+    p = os.path.join(run, "history_4_penetrate.csv")
+    return p if os.path.exists(p) else os.path.join(run, "history_5_penetrate.csv")
+
+
 def curve(run):
-    h = read_csv(os.path.join(run, "history_4_penetrate.csv") if os.path.exists(
-        os.path.join(run, "history_4_penetrate.csv")) else os.path.join(run, "history_5_penetrate.csv"))
+    h = read_csv(history_path(run))
     return h["dem.footing_disp_m"], h["dem.footing_fz_N"]
 
 
@@ -66,6 +73,25 @@ def initial_stiffness(disp, load, d_f):
         return float("nan"), float("nan"), float(dc), float(disp[ih])
     k, b = np.polyfit(disp[i0:ih + 1], load[i0:ih + 1], 1)
     return float(k), float(b), float(dc), float(disp[ih])
+
+
+def elastic_stiffness(run):
+    """k_e [N/m] and the load [N] at the end of the elastic branch (first contact to the last row
+    before the first bond failure); (nan, nan) without the dem.bonds_failed column or with fewer
+    than 5 rows."""
+    h = read_csv(history_path(run))
+    if "dem.bonds_failed" not in h:
+        return float("nan"), float("nan")
+    disp, load, failed = h["dem.footing_disp_m"], h["dem.footing_fz_N"], h["dem.bonds_failed"]
+    hit = np.nonzero(load > 0)[0]
+    if len(hit) == 0:
+        return float("nan"), float("nan")
+    i0 = ie = int(hit[0])
+    while ie + 1 < len(disp) and failed[ie + 1] <= failed[i0]:
+        ie += 1
+    if ie - i0 + 1 < 5:
+        return float("nan"), float(load[ie])
+    return float(np.polyfit(disp[i0:ie + 1], load[i0:ie + 1], 1)[0]), float(load[ie])
 
 
 def write_csv(path, names, cols):
@@ -183,11 +209,12 @@ def main():
         k, _, dc, dp = initial_stiffness(disp, load, a.d_f)
         i = int(np.argmax(load))
         _, _, state = bond_state(d)
-        rows.append([lab, float(load[i]), float(disp[i]), k, dc, dp, float(disp[-1])] +
+        ke, fe = elastic_stiffness(d)
+        rows.append([lab, float(load[i]), float(disp[i]), k, dc, dp, float(disp[-1]), ke, fe] +
                     [int((state == s).sum()) for s in STATE_NAMES])
     write_csv(os.path.join(a.out, "summary.csv"),
               ["label", "peak_load_N", "disp_at_peak_m", "initial_stiffness_N_m", "first_contact_m", "half_first_peak_m",
-               "final_disp_m"] +
+               "final_disp_m", "elastic_stiffness_N_m", "first_bond_failure_load_N"] +
               ["bonds_%s_1" % n for n in STATE_NAMES.values()], list(zip(*rows)))
     if a.fig3:
         fig3(a.out, runs[a.fig3], a.fig3)
@@ -200,7 +227,8 @@ def main():
     if a.fig7:
         fig7(a.out, runs[a.fig7], a.fig7, None)
     for r in rows:
-        print("%-12s peak %.4g N at %.4g mm, initial stiffness %.4g N/m" % (r[0], r[1], r[2] * 1e3, r[3]))
+        print("%-12s peak %.4g N at %.4g mm, initial stiffness k50 %.4g N/m, k_e %.4g N/m (to %.3g N)" %
+              (r[0], r[1], r[2] * 1e3, r[3], r[7], r[8]))
 
 
 if __name__ == "__main__":

@@ -216,10 +216,16 @@ void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondH
     h.kn = kna * area;
     h.ks = kna / fam.linear.kratio * area;
   } else {
-    const double kn = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed
-                                                : kPi * rbar * rbar * fam.linear.emod / L;
+    // Same operations in the same order as the soft bond's K_n = (E*/L)·A and
+    // K_s = (E*/(L κ*))·A above: an unbonded soft-bond contact and a linear one then carry
+    // bit-identical stiffnesses, so a SBM and a PBM sample of one seed are the same sample
+    // until the bonds are installed (tests/coupled compares the two on one sample).
+    const double area = kPi * rbar * rbar;
+    const double kn = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed : fam.linear.emod / L * area;
+    const double ks = fam.linear.kn_fixed > 0.0 ? kn / fam.linear.kratio
+                                                : fam.linear.emod / L / fam.linear.kratio * area;
     h.kn = zero_lin ? 0.0 : kn;
-    h.ks = zero_lin ? 0.0 : kn / fam.linear.kratio;
+    h.ks = zero_lin ? 0.0 : ks;
     if (fam.model == ContactModel::kLinearPBond) {
       const auto& pb = fam.pbond;
       const double rb = pb.rmul * rbar;
@@ -1345,18 +1351,23 @@ double World::critical_timestep() {
     const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
     const bool bd = b && bonded(b->state);
     if (!(h.flags & ContactHist::kActive) && !bd) continue;
-    double k = h.kn, krot = 0.0;
+    // A parallel bond's linear part is stiff only while its contact is active (a bond across a
+    // gap has none); a soft bond's one spring set (h.kn, h.ks) acts in both states (§3.1).
+    const bool lin = (h.flags & ContactHist::kActive) || p_.ball_ball.model != ContactModel::kLinearPBond;
+    double k = lin ? h.kn : 0.0, krot = 0.0;
     if (b) {
       if (p_.ball_ball.model == ContactModel::kLinearPBond) {
         if (bd) { k += b->kn * b->area(); krot += b->kn * b->inertia(); }
-      } else {
+      } else if (bd || p_.ball_ball.softbond.moments != UnbondedMoments::kNone) {
+        // An unbonded soft-bond contact without the §3.5 moment law carries no moment: it
+        // is a linear contact, and its critical step is the linear one.
         krot += b->kn * b->inertia();
       }
     }
     const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
     kt[a] += k;
     kt[bb] += k;
-    const double ks = h.ks + ((bd && p_.ball_ball.model == ContactModel::kLinearPBond)
+    const double ks = (lin ? h.ks : 0.0) + ((bd && p_.ball_ball.model == ContactModel::kLinearPBond)
                                   ? b->kn / p_.ball_ball.pbond.kratio * b->area() : 0.0);
     kr[a] += krot + ks * pt_.r[a] * pt_.r[a];
     kr[bb] += krot + ks * pt_.r[bb] * pt_.r[bb];
@@ -1367,12 +1378,13 @@ double World::critical_timestep() {
       const BondHist* b = wc.bond.empty() ? nullptr : &wc.bond[c];
       const bool bd = b && bonded(b->state);
       if (!(h.flags & ContactHist::kActive) && !bd) continue;
-      double k = h.kn, ks = h.ks, krot = 0.0;
+      const bool lin = (h.flags & ContactHist::kActive) || fam.model != ContactModel::kLinearPBond;
+      double k = lin ? h.kn : 0.0, ks = lin ? h.ks : 0.0, krot = 0.0;
       if (b && fam.model == ContactModel::kLinearPBond && bd) {
         k += b->kn * b->area();
         ks += b->kn / fam.pbond.kratio * b->area();
         krot += b->kn * b->inertia();
-      } else if (b && fam.model == ContactModel::kSoftBond) {
+      } else if (b && fam.model == ContactModel::kSoftBond && (bd || fam.softbond.moments != UnbondedMoments::kNone)) {
         krot += b->kn * b->inertia();
       }
       const std::uint32_t i = wc.ball[c];
