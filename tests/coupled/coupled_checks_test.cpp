@@ -119,10 +119,9 @@ double initial_stiffness(const Curve& c, double d_f) {
   return slope(c, i0, ih);
 }
 
-// The reduced footing scene at a g-level with a ball-ball model. Unbonded soft-bond contacts
-// without the moment limits of 3.5 (sb_unbonded_moments = "none") behave as linear ones, as
-// unbonded parallel-bond contacts do: generation and servo then give the same sample for
-// both models (same balls, same positions), and only the bonds differ.
+// The reduced footing scene at a g-level with a ball-ball model (defaults otherwise). The REV's
+// expansion uses plain linear contacts whatever the model (dem_core generate_rev), so one seed
+// gives the same sample for both models (same balls, same positions), and only the bonds differ.
 std::string footing_scene(double level, const std::string& model) {
   auto s = slurp(kSrc + "/tests/coupled/footing_stiffness.toml");
   std::ostringstream lv;
@@ -131,7 +130,7 @@ std::string footing_scene(double level, const std::string& model) {
   // The initial part is all these checks need: stop at 0.05 D_f (the scene's own stop is 0.2 D_f).
   replace_once(s, "inertial_number = 2.5e-3", "inertial_number = 2.5e-3\ndepth_ratio = 0.05");
   replace_once(s, "[dem.specimen]",
-               "[dem.ball_ball]\nmodel = \"" + model + "\"\nsb_unbonded_moments = \"none\"\n\n[dem.specimen]");
+               "[dem.ball_ball]\nmodel = \"" + model + "\"\n\n[dem.specimen]");
   return s;
 }
 
@@ -226,10 +225,10 @@ TEST(CoupledFootingChecks, InitialStiffnessIndependentOfGLevel) {
   EXPECT_LT(std::abs(e200 / e1 - 1), 0.10);
 }
 
-// Same seed = same sample for both models: generation and servo see the same springs (an
-// unbonded soft-bond contact without the 3.5 moment law is a linear contact with bit-identical
-// K_n, K_s; a parallel bond across a gap has no linear stiffness, also in the critical step and
-// the servo), and a bond across a gap is the same spring set in both models. So up to the first
+// Same seed = same sample for both models: the expansion uses linear contacts (the soft bond's
+// unbonded law without moments, with bit-identical K_n, K_s), the servo and the critical step
+// count a parallel bond's linear part only where its contact is active, and a bond across a gap
+// is the same spring set in both models. So up to the first
 // bond failure the two footing curves are the same curve, and k_e must agree; after it the soft
 // bond softens and the parallel bond breaks. Measured on this scene (seed 3): k_e 6.742e5 N/m in
 // both (23 rows, 0.29 um, first failure at 0.204 N), k50 9.70e5 against 1.05e6 N/m (+7.8 %).

@@ -119,6 +119,14 @@ StageReport generate_rev(World& w, const RevParams& p) {
   // low friction during generation (§4.3 step 2); restored afterwards
   const double mu_final = w.params().ball_ball.linear.fric;
   w.mutable_params().ball_ball.linear.fric = p.fric;
+  // The expansion is a granular set-up, not the material: its contacts are plain linear ones
+  // whatever the ball-ball model (as PFC users generate with the linear model and assign the
+  // bond model afterwards). An unbonded soft bond without the §3.5 moment law is exactly that, so
+  // a soft-bond and a parallel-bond REV of one seed are the same packing (tests/coupled). After
+  // the expansion no two balls touch (touching coordination 0), so restoring the moment law
+  // changes no force.
+  const UnbondedMoments moments_final = w.params().ball_ball.softbond.moments;
+  w.mutable_params().ball_ball.softbond.moments = UnbondedMoments::kNone;
   w.prepare();
   w.refresh_contact_constants();
   const double n0 = cell_porosity(w);
@@ -136,6 +144,7 @@ StageReport generate_rev(World& w, const RevParams& p) {
   }
   quench(w);  // the REV starts at rest
   w.mutable_params().ball_ball.linear.fric = mu_final;
+  w.mutable_params().ball_ball.softbond.moments = moments_final;
   w.refresh_contact_constants();
   fill_report(w, r);
   r.count = w.num_balls();
