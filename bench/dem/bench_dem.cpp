@@ -4,17 +4,22 @@
 // μ = tan 32°, ρ = 2650 kg/m³, periodic, 2,000 held steps with no neighbour rebuild.
 //
 // Usage: bench_dem [packing] [linear|softbond] [threads] [steps]
-//        bench_dem [packing]            → runs the four configurations in child processes
+//        bench_dem [packing]            → runs the configurations in child processes: per model,
+//                                          1 thread, and 2 threads with the default OpenMP wait
+//                                          policy and with OMP_WAIT_POLICY=PASSIVE (labelled)
+// BENCH_DEM_KERNEL=auto|scalar|baseline|avx2|avx512 selects the ball–ball pass implementation
+// (World::set_pair_kernel; default auto = vectorised with the best instruction set).
 // BENCH_DEM_HASH=1 also prints (stderr) an FNV-1a hash of x, v, ω after the run and the
 // number of ball–ball pairs in the list: two builds compare bit for bit on the same input.
 // BENCH_DEM_DUMP=file writes x, v, ω after the run as raw doubles [n,9] (row order of the
 // world): two builds that differ by rounding are compared with bench/dem/compare_dumps.py.
 // BENCH_DEM_PHASES=1 prints (stderr) World::phase_times() of the timed window.
 // Output: one CSV line per configuration:
-//   model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib
+//   model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib,pair_kernel,omp_wait_policy
 #include <sys/resource.h>
 #include <time.h>
 
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <cstdint>
@@ -58,6 +63,25 @@ Packing load(const std::string& path) {
   return p;
 }
 
+PairKernel kernel_from_env(std::string& name) {
+  const char* k = std::getenv("BENCH_DEM_KERNEL");
+  name = k ? k : "auto";
+  if (name == "auto") return PairKernel::kAuto;
+  if (name == "scalar") return PairKernel::kScalar;
+  if (name == "baseline") return PairKernel::kBlockBaseline;
+  if (name == "avx2") return PairKernel::kBlockAvx2;
+  if (name == "avx512") return PairKernel::kBlockAvx512;
+  throw std::runtime_error("BENCH_DEM_KERNEL must be auto, scalar, baseline, avx2 or avx512, found '" + name + "'");
+}
+
+std::string wait_policy() {
+  const char* w = std::getenv("OMP_WAIT_POLICY");
+  if (!w) return "default";
+  std::string s(w);
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
 double peak_rss_mib() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
@@ -81,6 +105,8 @@ int run(const std::string& file, const std::string& model, int threads, int step
   p.skin = 0.1 * 2.0 * 0.058e-3;  // 0.1 d50 (anchors.md second LAMMPS row uses the same)
   (void)rsum;
   World w(p);
+  std::string kname;
+  w.set_pair_kernel(kernel_from_env(kname));
   for (std::size_t i = 0; i < pk.x.size(); ++i) w.add_ball(pk.x[i], pk.r[i]);
   w.reorder_spatially();  // cache locality: the dump order is random in space
   w.prepare();
@@ -124,9 +150,10 @@ int run(const std::string& file, const std::string& model, int threads, int step
                  t.pair_model, threads, static_cast<long long>(t.steps), sec, t.rebuild, t.pair, t.gather, t.motion,
                  t.effects_total, t.total());
   }
-  std::printf("%s,%d,%d,%.4f,%.4f,%.4e,%.4e,%lld,%zu,%.1f\n", model.c_str(), threads, steps, sec, cpu,
+  std::printf("%s,%d,%d,%.4f,%.4f,%.4e,%.4e,%lld,%zu,%.1f,%s,%s\n", model.c_str(), threads, steps, sec, cpu,
               double(w.num_balls()) * steps / sec, double(w.num_balls()) * steps / cpu,
-              static_cast<long long>(w.rebuild_count() - reb0), z.active, peak_rss_mib());
+              static_cast<long long>(w.rebuild_count() - reb0), z.active, peak_rss_mib(), kname.c_str(),
+              wait_policy().c_str());
   return 0;
 }
 }  // namespace
@@ -135,14 +162,23 @@ int main(int argc, char** argv) {
   const std::string file = argc > 1 ? argv[1] : "/work/shared/data/bench_packing_25835.txt";
   try {
     if (argc > 2) return run(file, argv[2], argc > 3 ? std::atoi(argv[3]) : 1, argc > 4 ? std::atoi(argv[4]) : 2000);
-    // Passive OpenMP waiting: on a shared machine spinning threads steal the core that the
-    // other thread needs (the children read this at start-up).
-    setenv("OMP_WAIT_POLICY", "PASSIVE", 0);
-    std::printf("model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib\n");
+    // The 2-thread rows run twice: with the default OpenMP wait policy (threads spin briefly
+    // at the barrier: fastest on a quiet machine) and with OMP_WAIT_POLICY=PASSIVE (on a
+    // shared machine spinning threads steal the core that the other thread needs). The
+    // children read the policy at start-up.
+    std::printf("model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,"
+                "rebuilds_in_window,contacts,peak_rss_mib,pair_kernel,omp_wait_policy\n");
     std::fflush(stdout);
+    struct Config {
+      int threads;
+      const char* policy;  // nullptr: default (unset)
+    };
     for (const char* m : {"linear", "softbond"})
-      for (int t : {1, 2}) {
-        const std::string cmd = std::string("\"") + argv[0] + "\" \"" + file + "\" " + m + " " + std::to_string(t);
+      for (const Config& c : {Config{1, nullptr}, Config{2, nullptr}, Config{2, "PASSIVE"}}) {
+        if (c.policy) setenv("OMP_WAIT_POLICY", c.policy, 1);
+        else unsetenv("OMP_WAIT_POLICY");
+        const std::string cmd =
+            std::string("\"") + argv[0] + "\" \"" + file + "\" " + m + " " + std::to_string(c.threads);
         if (std::system(cmd.c_str()) != 0) return 1;
       }
   } catch (const std::exception& e) {

@@ -14,7 +14,7 @@ branch, from the first contact (first row with load > 0) to the first row at hal
 0.02 D_f of the first contact); the same rule as
 tests/coupled/coupled_checks_test.cpp (docs/paper-study.md).
 Elastic initial stiffness k_e: the same slope from the first contact to the last row before the
-first ball-ball bond leaves the intact state (column dem.bonds_failed; empty for runs recorded
+first ball-ball bond leaves the intact state (column dem.bond_failures; empty for runs recorded
 before the column existed), also as in the test.
 """
 import argparse
@@ -77,12 +77,12 @@ def initial_stiffness(disp, load, d_f):
 
 def elastic_stiffness(run):
     """k_e [N/m] and the load [N] at the end of the elastic branch (first contact to the last row
-    before the first bond failure); (nan, nan) without the dem.bonds_failed column or with fewer
+    before the first bond failure); (nan, nan) without the dem.bond_failures column or with fewer
     than 5 rows."""
     h = read_csv(history_path(run))
-    if "dem.bonds_failed" not in h:
+    if "dem.bond_failures" not in h:
         return float("nan"), float("nan")
-    disp, load, failed = h["dem.footing_disp_m"], h["dem.footing_fz_N"], h["dem.bonds_failed"]
+    disp, load, failed = h["dem.footing_disp_m"], h["dem.footing_fz_N"], h["dem.bond_failures"]
     hit = np.nonzero(load > 0)[0]
     if len(hit) == 0:
         return float("nan"), float("nan")

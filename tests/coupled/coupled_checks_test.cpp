@@ -9,7 +9,7 @@
 //    parallel bond initial stiffness (k_e) within 10 % on the same sample.
 // Elastic initial stiffness k_e: least-squares slope of load against displacement from the first
 // contact (first row with load > 0) to the last row before the first ball-ball bond leaves the
-// intact state (dem.bonds_failed rises): the footing's response before any particle-scale
+// intact state (dem.bond_failures rises): the footing's response before any particle-scale
 // failure, where a soft bond and a parallel bond across a gap are the same springs (physics.md
 // 2.2, 3.1). Used for the soft bond against parallel bond check.
 // Initial stiffness k50: least-squares slope of load against displacement over the rising branch,
@@ -77,7 +77,7 @@ struct Curve {
 };
 Curve footing_curve(const fs::path& dir) {
   auto h = read_columns(dir / "history_4_penetrate.csv");
-  return {h.at("dem.footing_disp_m"), h.at("dem.footing_fz_N"), h.at("dem.bonds_failed")};
+  return {h.at("dem.footing_disp_m"), h.at("dem.footing_fz_N"), h.at("dem.bond_failures")};
 }
 
 // Rows [i0, ie] of the elastic branch: first contact to the last row before the first bond failure.

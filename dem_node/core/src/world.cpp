@@ -15,6 +15,7 @@
 #include <tuple>
 
 #include "demfdm/dem/geometry.hpp"
+#include "demfdm/dem/pair_block.hpp"
 
 namespace demfdm::dem {
 
@@ -42,6 +43,51 @@ class Lap {
 };
 
 inline bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
+
+// Force and torque sums of a run of ball–ball contacts onto the balls, in contact order. The
+// list is sorted by A: the sums on A are kept in registers for the run of contacts that share
+// it and flushed when A changes (fixed order, hence deterministic). The scalar pass calls at()
+// for every contact, the block pass for live ones only: the sums are the same, since idle
+// contacts add nothing and flushing a zero sum cannot change a ball's sum (the sums start at
+// +0 and never become −0).
+struct BallSums {
+  Vec3* __restrict__ f;
+  Vec3* __restrict__ t;
+  std::uint32_t cur;
+  Vec3 fa{}, ta{};
+  // Contact with A = a next: flush the sums of the previous A.
+  [[gnu::always_inline]] void at(std::uint32_t a) {
+    if (a != cur) {
+      f[cur] += fa;
+      t[cur] += ta;
+      fa = Vec3{};
+      ta = Vec3{};
+      cur = a;
+    }
+  }
+  [[gnu::always_inline]] void add(std::uint32_t b, const Vec3& F, const Vec3& TA, const Vec3& TB) {
+    fa -= F;
+    f[b] += F;
+    ta += TA;
+    t[b] += TB;
+  }
+  void flush() {
+    f[cur] += fa;
+    t[cur] += ta;
+  }
+};
+
+// Instruction set of the lane kernels for a PairKernel choice; false: scalar loops.
+bool block_isa(PairKernel k, pairblock::Isa& isa) {
+  switch (k) {
+    case PairKernel::kScalar: return false;
+    case PairKernel::kBlockBaseline: isa = pairblock::Isa::kBaseline; return true;
+    case PairKernel::kBlockAvx2: isa = pairblock::Isa::kAvx2; return true;
+    case PairKernel::kBlockAvx512: isa = pairblock::Isa::kAvx512; return true;
+    case PairKernel::kAuto: isa = pairblock::best_isa(); return true;
+  }
+  return false;
+}
 
 struct Key {
   std::uint64_t lo, hi;
@@ -425,6 +471,20 @@ void World::run_effects(int phase) {
     total += t;
   }
   times_.effects_total += total;
+}
+
+bool World::pair_kernel_available(PairKernel k) {
+  switch (k) {
+    case PairKernel::kBlockAvx2: return pairblock::isa_available(pairblock::Isa::kAvx2);
+    case PairKernel::kBlockAvx512: return pairblock::isa_available(pairblock::Isa::kAvx512);
+    default: return true;
+  }
+}
+
+void World::set_pair_kernel(PairKernel k) {
+  if (!pair_kernel_available(k))
+    throw std::invalid_argument("set_pair_kernel: this CPU lacks the instruction set of the requested kernel.");
+  kernel_ = k;
 }
 
 const PhaseTimes& World::phase_times() const { return times_; }
@@ -928,103 +988,216 @@ void World::pair_pass(double dt) {
   const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
   const bool par = nt > 1 && m > 4096;
   const bool strained = ed.x != 0.0 || ed.y != 0.0 || ed.z != 0.0;
+  // Vectorised blocks (pair_block.hpp) where the law has a lane kernel; bit-identical to the
+  // scalar loop below (tests/dem/simd_kernel_test.cpp).
+  pairblock::Fn kern = nullptr;
+  if constexpr (M != ContactModel::kLinearPBond) {
+    pairblock::Isa isa;
+    if (block_isa(kernel_, isa) && lc.rescale && (M == ContactModel::kLinear || lc.unload == SoftUnload::kElastic)) {
+      kern = M == ContactModel::kLinear ? pairblock::linear_kernel(isa) : pairblock::softbond_kernel(isa);
+    }
+  }
+  const pairblock::Ctx ctx{V, W, R, H, BD, lc, dt, ed, Periodic && strained};
+  // The helpers below are forced inline: left to GCC, the soft-bond block pass measured 1.27 x
+  // slower (bench/dem/results_2core_kvm.csv).
+  // Software prefetch (see kPrefetchB/H): the scattered B rows, and the history records
+  // (96 B, plus 104 B of bond state) that the loop streams through.
+  auto prefetch = [&](std::int64_t c, std::int64_t c1, const Vec3* f, const Vec3* t) __attribute__((always_inline)) {
+    if (c + kPrefetchH < c1) {
+      __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH), 1);
+      __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH) + 64, 1);
+      if (BD) {
+        __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH), 1);
+        __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH) + 64, 1);
+      }
+    }
+    if (c + kPrefetchB < c1) {
+      const std::uint32_t bp = B[c + kPrefetchB];
+      __builtin_prefetch(X + bp);
+      __builtin_prefetch(V + bp);
+      __builtin_prefetch(W + bp);
+      __builtin_prefetch(R + bp);
+      __builtin_prefetch(f + bp, 1);
+      __builtin_prefetch(t + bp, 1);
+    }
+  };
+  // Branch vector d (periodic image) and its square.
+  auto branch_d = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, Vec3& d, double& d2)
+                      __attribute__((always_inline)) {
+    d = X[b] - X[a];
+    if constexpr (Periodic) {
+      std::uint32_t any;  // most contacts lie inside the cell: skip the conversion
+      std::memcpy(&any, S[c].data(), 4);
+      if (any) d += cmul(Vec3{double(S[c][0]), double(S[c][1]), double(S[c][2])}, L);
+    }
+    d2 = norm2(d);
+  };
+  // Separated and force-free: nothing to do. F_n = 0 implies F_s = 0 (Coulomb limit
+  // μF_n = 0), so the stale n_old is never used to rotate a non-zero vector. Soft bond:
+  // the same for an unbonded contact (never bonded or broken), whose §3.5 moment limits
+  // are proportional to F_n, so M_b = M_t = 0 as well; the result of the full law
+  // would be F = M = 0 with kActive and kSlip cleared. (Bitwise & on purpose: one
+  // unpredictable branch at most.)
+  auto idle = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, double d2) __attribute__((always_inline)) {
+    if constexpr (M == ContactModel::kLinearPBond) {
+      return false;
+    } else {
+      const double reach = R[a] + R[b] + rgap;
+      return (d2 > reach * reach) & (H[c].fn == 0.0) & (M == ContactModel::kLinear || !bonded(BD[c].state));
+    }
+  };
+  constexpr std::uint8_t kActSlip = ContactHist::kActive | ContactHist::kSlip;
+  // Scalar kinematics and law of one live contact: force F on B and the torques added to A
+  // (TA) and B (TB).
+  auto law = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, const Vec3& d, double d2, Vec3& F, Vec3& TA,
+                 Vec3& TB) __attribute__((always_inline)) {
+    const double dist = std::sqrt(d2);
+    const double gap = dist - R[a] - R[b];
+    const Vec3 nn = d * (1.0 / dist);
+    Kin k;
+    k.n = nn;
+    k.gap = gap;
+    // Lever arms ℓ_A = s_A n̂ and ℓ_B = −s_B n̂ (contact point mid-overlap, §1.4), so
+    // ω_B × ℓ_B − ω_A × ℓ_A = −(s_A ω_A + s_B ω_B) × n̂ and ℓ_A × (−F) = s_A F × n̂,
+    // ℓ_B × F = s_B F × n̂: one cross product each for the velocity and the torques
+    // (agrees with the two-cross form to rounding, 1e-13 of the per-ball torque sums).
+    const double sa = R[a] + 0.5 * gap, sb = R[b] + 0.5 * gap;
+    Vec3 vr = (V[b] - V[a]) - cross(sa * W[a] + sb * W[b], nn);
+    if constexpr (Periodic) {
+      if (strained) vr += cmul(ed, d);  // affine cell motion (§4.5)
+    }
+    k.du = vr * dt;
+    k.dtheta = (W[b] - W[a]) * dt;
+    k.wmean = 0.5 * (W[a] + W[b]);
+    k.dt = dt;
+    Vec3 Mo;
+    if constexpr (M != ContactModel::kLinear) {
+      // A bond leaving the intact state is rare: one compare per contact, an atomic add per event.
+      const bool was_intact = BD[c].state == BondState::kIntact;
+      F = contact_law<M>(k, H[c], BD + c, lc, Mo);
+      if (was_intact && BD[c].state != BondState::kIntact) {
+#pragma omp atomic
+        ++bond_failures_;
+      }
+    } else {
+      F = contact_law<M>(k, H[c], BD ? BD + c : nullptr, lc, Mo);
+    }
+    // (F_s × n̂ would drop the rounding noise of the normal part, but reloading h.fs right
+    // after the law's store measured 3 % slower than using F from registers.)
+    const Vec3 fxn = cross(F, nn);
+    if constexpr (M != ContactModel::kLinear) {
+      TA = sa * fxn - Mo;  // ℓ_A × (−F) − M
+      TB = sb * fxn + Mo;
+    } else {
+      TA = sa * fxn;
+      TB = sb * fxn;
+    }
+  };
+  // The same law out of line, for the rare lanes of the block pass that need it.
+  auto law_rare = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, const Vec3& d, double d2, Vec3& F, Vec3& TA,
+                      Vec3& TB) __attribute__((noinline)) { law(c, a, b, d, d2, F, TA, TB); };
+  // One contact at a time (the reference).
   auto body = [&](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
-    // The list is sorted by A: the sums on A are kept in registers for the run of contacts
-    // that share it and flushed when A changes (fixed order, hence deterministic).
-    std::uint32_t cur = c0 < c1 ? A[c0] : 0u;
-    Vec3 fa_acc{}, ta_acc{};
+    BallSums sums{f, t, c0 < c1 ? A[c0] : 0u};
     for (std::int64_t c = c0; c < c1; ++c) {
       const std::uint32_t a = A[c], b = B[c];
-      // Software prefetch (see kPrefetchB/H): the scattered B rows, and the history records
-      // (96 B, plus 104 B of bond state) that the loop streams through.
-      if (c + kPrefetchH < c1) {
-        __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH), 1);
-        __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH) + 64, 1);
-        if (BD) {
-          __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH), 1);
-          __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH) + 64, 1);
+      prefetch(c, c1, f, t);
+      sums.at(a);
+      Vec3 d;
+      double d2;
+      branch_d(c, a, b, d, d2);
+      if (idle(c, a, b, d2)) {
+        if (H[c].flags & ContactHist::kActive) H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
+        continue;
+      }
+      Vec3 F, TA, TB;
+      law(c, a, b, d, d2, F, TA, TB);
+      sums.add(b, F, TA, TB);
+    }
+    if (c0 < c1) sums.flush();
+  };
+  // Blocks of kLanes live contacts: stage 1 (lane list), stage 2 (kern), stage 3 (histories
+  // and sums in contact order; lanes flagged `scalar` are redone by the scalar law from their
+  // untouched history).
+  auto body_block = [&](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
+    constexpr int K = pairblock::kLanes;
+    BallSums sums{f, t, c0 < c1 ? A[c0] : 0u};
+    pairblock::In in;
+    pairblock::Out out;
+    std::int64_t c = c0;
+    while (c < c1) {
+      int n = 0;
+      for (; c < c1 && n < K; ++c) {
+        const std::uint32_t a = A[c], b = B[c];
+        prefetch(c, c1, f, t);
+        Vec3 d;
+        double d2;
+        branch_d(c, a, b, d, d2);
+        // Branch-free: the lane is written for every contact and kept (n advances) only for a
+        // live one; an idle contact gets kActive and kSlip cleared (the same flags as `body`).
+        const bool skip = idle(c, a, b, d2);
+        const std::uint8_t fl = H[c].flags;
+        H[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
+        in.c[n] = c;
+        in.a[n] = a;
+        in.b[n] = b;
+        in.dx[n] = d.x;
+        in.dy[n] = d.y;
+        in.dz[n] = d.z;
+        in.d2[n] = d2;
+        in.hasn[n] = (fl & ContactHist::kHasNormal) != 0;
+        in.incr[n] = (fl & ContactHist::kIncremental) != 0;
+        in.scalar[n] = M == ContactModel::kSoftBond && !bonded(BD[c].state);
+        n += !skip;
+      }
+      if (n == 0) break;
+      for (int l = n; l < K; ++l) {  // padding lanes repeat lane 0
+        in.c[l] = in.c[0]; in.a[l] = in.a[0]; in.b[l] = in.b[0];
+        in.dx[l] = in.dx[0]; in.dy[l] = in.dy[0]; in.dz[l] = in.dz[0]; in.d2[l] = in.d2[0];
+        in.hasn[l] = in.hasn[0]; in.incr[l] = in.incr[0]; in.scalar[l] = in.scalar[0];
+      }
+      kern(ctx, in, out);
+      for (int l = 0; l < n; ++l) {
+        const std::int64_t cl = in.c[l];
+        const std::uint32_t a = static_cast<std::uint32_t>(in.a[l]), b = static_cast<std::uint32_t>(in.b[l]);
+        Vec3 F, TA, TB;
+        if (out.scalar[l]) {
+          law_rare(cl, a, b, Vec3{in.dx[l], in.dy[l], in.dz[l]}, in.d2[l], F, TA, TB);
+        } else {
+          ContactHist& h = H[cl];
+          h.fs = {out.fs[0][l], out.fs[1][l], out.fs[2][l]};
+          h.fn = out.fn[l];
+          h.n_old = {out.n[0][l], out.n[1][l], out.n[2][l]};
+          if constexpr (M == ContactModel::kLinear) {
+            h.e_slip = out.e_slip[l];
+            std::uint8_t fl = static_cast<std::uint8_t>(
+                (h.flags | ContactHist::kHasNormal) & ~(ContactHist::kActive | ContactHist::kSlip));
+            if (out.active[l]) fl |= ContactHist::kActive;
+            if (out.slip[l]) fl |= ContactHist::kSlip;
+            h.flags = fl;
+          } else {
+            h.flags |= ContactHist::kHasNormal;
+            BD[cl].mb = {out.mb[0][l], out.mb[1][l], out.mb[2][l]};
+            BD[cl].mt = out.mt[l];
+          }
+          F = {out.F[0][l], out.F[1][l], out.F[2][l]};
+          TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
+          TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
-      }
-      if (c + kPrefetchB < c1) {
-        const std::uint32_t bp = B[c + kPrefetchB];
-        __builtin_prefetch(X + bp);
-        __builtin_prefetch(V + bp);
-        __builtin_prefetch(W + bp);
-        __builtin_prefetch(R + bp);
-        __builtin_prefetch(f + bp, 1);
-        __builtin_prefetch(t + bp, 1);
-      }
-      if (a != cur) {
-        f[cur] += fa_acc;
-        t[cur] += ta_acc;
-        fa_acc = Vec3{};
-        ta_acc = Vec3{};
-        cur = a;
-      }
-      Vec3 d = X[b] - X[a];
-      if constexpr (Periodic) {
-        std::uint32_t any;  // most contacts lie inside the cell: skip the conversion
-        std::memcpy(&any, S[c].data(), 4);
-        if (any) d += cmul(Vec3{double(S[c][0]), double(S[c][1]), double(S[c][2])}, L);
-      }
-      ContactHist& h = H[c];
-      const double d2 = norm2(d);
-      if constexpr (M != ContactModel::kLinearPBond) {
-        const double reach = R[a] + R[b] + rgap;
-        // Separated and force-free: nothing to do. F_n = 0 implies F_s = 0 (Coulomb limit
-        // μF_n = 0), so the stale n_old is never used to rotate a non-zero vector. Soft bond:
-        // the same for an unbonded contact (never bonded or broken), whose §3.5 moment limits
-        // are proportional to F_n, so M_b = M_t = 0 as well; the result of the full law
-        // would be F = M = 0 with the flags below.
-        if (d2 > reach * reach && h.fn == 0.0 && (M == ContactModel::kLinear || !bonded(BD[c].state))) {
-          if (h.flags & ContactHist::kActive)
-            h.flags &= static_cast<std::uint8_t>(~(ContactHist::kActive | ContactHist::kSlip));
-          continue;
-        }
-      }
-      const double dist = std::sqrt(d2);
-      const double gap = dist - R[a] - R[b];
-      const Vec3 nn = d * (1.0 / dist);
-      Kin k;
-      k.n = nn;
-      k.gap = gap;
-      // Lever arms ℓ_A = s_A n̂ and ℓ_B = −s_B n̂ (contact point mid-overlap, §1.4), so
-      // ω_B × ℓ_B − ω_A × ℓ_A = −(s_A ω_A + s_B ω_B) × n̂ and ℓ_A × (−F) = s_A F × n̂,
-      // ℓ_B × F = s_B F × n̂: one cross product each for the velocity and the torques
-      // (agrees with the two-cross form to rounding, 1e-13 of the per-ball torque sums).
-      const double sa = R[a] + 0.5 * gap, sb = R[b] + 0.5 * gap;
-      Vec3 vr = (V[b] - V[a]) - cross(sa * W[a] + sb * W[b], nn);
-      if constexpr (Periodic) {
-        if (strained) vr += cmul(ed, d);  // affine cell motion (§4.5)
-      }
-      k.du = vr * dt;
-      k.dtheta = (W[b] - W[a]) * dt;
-      k.wmean = 0.5 * (W[a] + W[b]);
-      k.dt = dt;
-      Vec3 Mo;
-      const Vec3 F = contact_law<M>(k, h, BD ? BD + c : nullptr, lc, Mo);
-      fa_acc -= F;
-      f[b] += F;
-      // (F_s × n̂ would drop the rounding noise of the normal part, but reloading h.fs right
-      // after the law's store measured 3 % slower than using F from registers.)
-      const Vec3 fxn = cross(F, nn);
-      if constexpr (M != ContactModel::kLinear) {
-        ta_acc += sa * fxn - Mo;  // ℓ_A × (−F) − M
-        t[b] += sb * fxn + Mo;
-      } else {
-        ta_acc += sa * fxn;
-        t[b] += sb * fxn;
+        sums.at(a);
+        sums.add(b, F, TA, TB);
       }
     }
-    if (c0 < c1) {
-      f[cur] += fa_acc;
-      t[cur] += ta_acc;
-    }
+    if (c0 < c1) sums.flush();
+  };
+  auto run = [&](std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t) {
+    if (kern) body_block(c0, c1, f, t);
+    else body(c0, c1, f, t);
   };
   if (!par) {
     std::fill(pt_.f.begin(), pt_.f.end(), Vec3{});
     std::fill(pt_.t.begin(), pt_.t.end(), Vec3{});
-    body(0, m, pt_.f.data(), pt_.t.data());
+    run(0, m, pt_.f.data(), pt_.t.data());
     return;
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
@@ -1060,7 +1233,7 @@ void World::pair_pass(double dt) {
       row_lo_[ut] = lo;
       row_hi_[ut] = c0 < c1 ? std::size_t{hi} + 1 : 0;
     }
-    body(c0, c1, f, t);
+    run(c0, c1, f, t);
 #pragma omp barrier
     std::size_t rlo = n, rhi = 0;
     for (int k = 1; k < T; ++k) {
@@ -1281,7 +1454,7 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
   const double* __restrict__ Ms = pt_.m.data();
   const double* __restrict__ Is = pt_.inertia.data();
   const std::uint8_t* __restrict__ Fx = pt_.fix.data();
-  for (std::size_t i = i0; i < i1; ++i) {
+  auto row = [&](std::size_t i) __attribute__((always_inline)) {
     const Vec3 F = Fc[i] + Fa[i];
     const Vec3 T = Tc[i] + Ta[i];
     const std::uint8_t fx = Fx[i];
@@ -1305,7 +1478,33 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
     x += dt * v;
     if constexpr (Periodic) x = o + cmul(x - o, sc);
     dmax = std::max(dmax, norm2(x - X0[i]));
+  };
+  std::size_t i = i0;
+  pairblock::Isa isa;
+  if (block_isa(kernel_, isa)) {
+    // Blocks of kLanes rows without fixity through the lane kernel (same operations); the
+    // damping work and the maximum are then reduced here in row and component order.
+    constexpr std::size_t K = pairblock::kLanes;
+    const pairblock::MotionFn mk = pairblock::motion_kernel(isa);
+    const pairblock::MotionCtx ctx{X, V, W, Fc, Tc, Fa, Ta, X0, Ms, Is, alpha, dt, o, sc, Periodic};
+    pairblock::MotionOut out;
+    for (; i + K <= i1; i += K) {
+      std::uint8_t any = 0;
+      for (std::size_t l = 0; l < K; ++l) any |= Fx[i + l];
+      if (any) {
+        for (std::size_t j = i; j < i + K; ++j) row(j);
+        continue;
+      }
+      mk(ctx, i, out);
+      for (std::size_t l = 0; l < K; ++l) {
+        if constexpr (Energy) {
+          for (int q = 0; q < 6; ++q) ed -= out.e[q][l];
+        }
+        dmax = std::max(dmax, out.d2[l]);
+      }
+    }
   }
+  for (; i < i1; ++i) row(i);
 }
 
 void World::integrate(double dt) {

@@ -127,6 +127,13 @@ struct Footing {
   std::uint64_t id = 0;
 };
 
+/// Implementation of the ball–ball force pass and of the law of motion. All give bit-identical
+/// results (checked by tests/dem/simd_kernel_test.cpp). kAuto: vectorised blocks with the best
+/// instruction set of the CPU (pair_block.hpp); kScalar: one contact / row at a time (the
+/// reference); kBlock*: blocks with a given instruction set. The parallel-bond model,
+/// rescale_shear = false and the soft bond's secant unloading always use the scalar pass.
+enum class PairKernel : std::uint8_t { kAuto, kScalar, kBlockBaseline, kBlockAvx2, kBlockAvx512 };
+
 class World;
 
 /// Optional effect with declared phases (style.md §2b(1), habit 2). Lists per phase are
@@ -246,6 +253,16 @@ class World {
   /// Force a neighbour rebuild and a force pass with zero increments (after edits).
   void prepare();
   std::int64_t rebuild_count() const { return rebuilds_; }
+  /// Ball-ball bonds that have left the intact state (to softening or broken) in the contact
+  /// pass since construction: a cumulative event count, O(1) to read (the footing's elastic
+  /// branch ends at its first increase, docs/paper-study.md).
+  std::int64_t bond_failures() const { return bond_failures_; }
+  /// Choose the implementation of the ball–ball pass and the law of motion (throws
+  /// std::invalid_argument if this CPU lacks the instruction set).
+  void set_pair_kernel(PairKernel k);
+  PairKernel pair_kernel() const { return kernel_; }
+  /// True if `k` can run on this CPU.
+  static bool pair_kernel_available(PairKernel k);
   /// Per-phase wall times (see PhaseTimes); reset keeps the effect names, zeroes the times.
   const PhaseTimes& phase_times() const;
   void reset_phase_times();
@@ -335,7 +352,7 @@ class World {
   void run_effects(int phase);
   Effect* gravity_ = nullptr;
   double time_ = 0.0, dt_ = 0.0, skin_ = 0.0;
-  std::int64_t step_ = 0, rebuilds_ = 0, last_dt_step_ = -1;
+  std::int64_t step_ = 0, rebuilds_ = 0, last_dt_step_ = -1, bond_failures_ = 0;
   bool prepared_ = false, dirty_ = true;
   Vec3 edot_{}, cell_strain_{}, cell_len_ref_{};
   std::uint64_t next_id_ = 0, next_wall_id_ = 1;
@@ -347,6 +364,7 @@ class World {
   std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each thread's block
   double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
   PhaseTimes times_;
+  PairKernel kernel_ = PairKernel::kAuto;
 };
 
 /// Gravity as an optional force effect (§1.2).

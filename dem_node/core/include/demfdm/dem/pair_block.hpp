@@ -1,0 +1,100 @@
+// Vectorised ball–ball pass and law of motion (issue 3 item 12): the contact law evaluated
+// for a block of kLanes live contacts at a time, the law of motion for kLanes rows at a time.
+//
+// Stage 1 (World::pair_pass, scalar, contact order): idle test, branch vector d, lane list.
+// Stage 2 (here, one lane loop compiled for the baseline ISA, AVX2 and AVX-512, chosen at run
+// time): kinematics and the law for all lanes with branch-free selects. Every lane performs the
+// operations of the scalar law (contact_kernels.hpp) in the same order; IEEE +, −, ×, ÷ and √
+// are exact per lane and the build forbids FMA contraction (-ffp-contract=off), so each lane is
+// bit-identical to the scalar law. Rare paths (soft bond: peak exceeded, softening step,
+// breakage, shear break; unbonded soft-bond contacts; a plane rotation large enough to need
+// the exact rescale √(m2/k2)) set `scalar` and are redone by the scalar law in stage 3, which
+// starts from the untouched history.
+// Stage 3 (World::pair_pass, scalar, contact order): histories written back, forces and
+// torques added onto the balls in the order of the scalar pass.
+// Measured on bench/dem (results_2core_kvm.csv): see the figures there.
+#pragma once
+
+#include <cstdint>
+
+#include "demfdm/dem/contact_kernels.hpp"
+#include "demfdm/dem/vec3.hpp"
+
+namespace demfdm::dem::pairblock {
+
+constexpr int kLanes = 8;
+
+/// Stage 1 output: the live contacts of one block in contact order. Lanes n..kLanes−1 repeat
+/// lane 0 (valid indices, results ignored).
+struct In {
+  int n = 0;
+  std::int64_t c[kLanes], a[kLanes], b[kLanes];  // contact index, rows of A and B
+  double dx[kLanes], dy[kLanes], dz[kLanes], d2[kLanes];  // branch vector x_B − x_A (image), ‖d‖²
+  std::int64_t hasn[kLanes], incr[kLanes];  // ContactHist::kHasNormal, kIncremental set
+  std::int64_t scalar[kLanes];              // lane known to need the scalar law (stage 1)
+};
+
+/// Stage 2 output per lane: the new history and the contributions to the ball sums.
+struct Out {
+  double F[3][kLanes];   // force on B
+  double TA[3][kLanes];  // torque added to A (ℓ_A × (−F) − M)
+  double TB[3][kLanes];  // torque added to B (ℓ_B × F + M)
+  double n[3][kLanes];   // unit normal (new n_old)
+  double fs[3][kLanes], fn[kLanes], e_slip[kLanes];
+  double mb[3][kLanes], mt[kLanes];  // soft bond
+  std::int64_t active[kLanes], slip[kLanes];  // new kActive / kSlip flags (linear)
+  std::int64_t scalar[kLanes];  // lane must be redone by the scalar law
+};
+
+/// Read-only inputs of stage 2.
+struct Ctx {
+  const Vec3* V;
+  const Vec3* W;
+  const double* R;
+  const ContactHist* H;
+  const BondHist* BD;
+  LawConst lc;
+  double dt;
+  Vec3 ed;        // cell strain rate (used when `strained`)
+  bool strained;  // periodic cell with a non-zero strain rate
+};
+
+using Fn = void (*)(const Ctx&, const In&, Out&);
+
+/// Law of motion with local damping (World::integrate_rows, §1.2–1.3) for kLanes rows
+/// without fixity, lane by lane with the scalar operations. The damping-work terms are
+/// returned per row and component (v.x, ω.x, v.y, ω.y, v.z, ω.z: the order in which the caller
+/// sums them), with ‖x − x_ref‖² for the neighbour check.
+struct MotionCtx {
+  Vec3* X;
+  Vec3* V;
+  Vec3* W;
+  const Vec3* Fc;
+  const Vec3* Tc;
+  const Vec3* Fa;
+  const Vec3* Ta;
+  const Vec3* X0;
+  const double* M;
+  const double* I;
+  double alpha, dt;
+  Vec3 o, sc;     // periodic: x ← o + (x − o) ⊙ sc
+  bool periodic;
+};
+struct MotionOut {
+  double e[6][kLanes];  // damping work f_d · ½(v0 + v) Δt per component
+  double d2[kLanes];
+};
+using MotionFn = void (*)(const MotionCtx&, std::size_t i0, MotionOut&);
+
+/// Instruction sets the lane loop is compiled for.
+enum class Isa { kBaseline, kAvx2, kAvx512 };
+bool isa_available(Isa isa);
+/// The best instruction set of this CPU.
+Isa best_isa();
+/// Stage 2 kernels. Linear: every lane. Soft bond: requires SoftUnload::kElastic and
+/// rescale (World::pair_pass falls back to the scalar pass otherwise).
+Fn linear_kernel(Isa isa);
+Fn softbond_kernel(Isa isa);
+MotionFn motion_kernel(Isa isa);
+
+}  // namespace demfdm::dem::pairblock

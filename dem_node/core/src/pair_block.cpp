@@ -1,0 +1,68 @@
+// Stage 2 of the vectorised ball–ball pass (pair_block.hpp): the lane loops of
+// pair_block_body.inc compiled for the baseline ISA, AVX2 and AVX-512, chosen at run time.
+// No FMA is enabled in any region (and -ffp-contract=off forbids contraction), so the three
+// builds give the same bits; tests/dem/simd_kernel_test.cpp checks this against the scalar pass.
+#include "demfdm/dem/pair_block.hpp"
+
+namespace demfdm::dem::pairblock {
+
+namespace baseline {
+#include "pair_block_body.inc"
+}  // namespace baseline
+
+#pragma GCC push_options
+#pragma GCC target("avx2")
+namespace avx2 {
+#include "pair_block_body.inc"
+}  // namespace avx2
+#pragma GCC pop_options
+
+#pragma GCC push_options
+#pragma GCC target("avx512f,avx512dq,avx512vl")
+namespace avx512 {
+#include "pair_block_body.inc"
+}  // namespace avx512
+#pragma GCC pop_options
+
+bool isa_available(Isa isa) {
+  switch (isa) {
+    case Isa::kBaseline: return true;
+    case Isa::kAvx2: return __builtin_cpu_supports("avx2");
+    case Isa::kAvx512: return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
+                              __builtin_cpu_supports("avx512vl");
+  }
+  return false;
+}
+
+Isa best_isa() {
+  static const Isa best = isa_available(Isa::kAvx512) ? Isa::kAvx512
+                          : isa_available(Isa::kAvx2) ? Isa::kAvx2
+                                                      : Isa::kBaseline;
+  return best;
+}
+
+Fn linear_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::linear_block;
+    case Isa::kAvx512: return &avx512::linear_block;
+    default: return &baseline::linear_block;
+  }
+}
+
+Fn softbond_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::softbond_block;
+    case Isa::kAvx512: return &avx512::softbond_block;
+    default: return &baseline::softbond_block;
+  }
+}
+
+MotionFn motion_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::motion_block;
+    case Isa::kAvx512: return &avx512::motion_block;
+    default: return &baseline::motion_block;
+  }
+}
+
+}  // namespace demfdm::dem::pairblock
