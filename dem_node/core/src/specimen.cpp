@@ -174,12 +174,9 @@ void PeriodicServo::apply(World& w, Phase) {
     const ContactHist& h = pc.h[c];
     const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
     if (!(h.flags & ContactHist::kActive) && !bd) continue;
-    const bool pb = bd && w.params().ball_ball.model == ContactModel::kLinearPBond;
-    // A parallel bond's linear part is stiff only while its contact is active (a bond across a
-    // gap has none); a soft bond's one spring set is h.kn, h.ks in both states (§3.1).
-    const bool lin = (h.flags & ContactHist::kActive) || !pb;
+    const bool lin = linear_spring_acts(h, w.params().ball_ball.model);
     double kn = lin ? h.kn : 0.0, ks = lin ? h.ks : 0.0;
-    if (pb) {
+    if (bd && w.params().ball_ball.model == ContactModel::kLinearPBond) {
       kn += pc.bond[c].kn * pc.bond[c].area();
       ks += pc.bond[c].kn / w.params().ball_ball.pbond.kratio * pc.bond[c].area();
     }

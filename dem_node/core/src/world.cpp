@@ -1550,9 +1550,7 @@ double World::critical_timestep() {
     const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
     const bool bd = b && bonded(b->state);
     if (!(h.flags & ContactHist::kActive) && !bd) continue;
-    // A parallel bond's linear part is stiff only while its contact is active (a bond across a
-    // gap has none); a soft bond's one spring set (h.kn, h.ks) acts in both states (§3.1).
-    const bool lin = (h.flags & ContactHist::kActive) || p_.ball_ball.model != ContactModel::kLinearPBond;
+    const bool lin = linear_spring_acts(h, p_.ball_ball.model);
     double k = lin ? h.kn : 0.0, krot = 0.0;
     if (b) {
       if (p_.ball_ball.model == ContactModel::kLinearPBond) {
@@ -1577,7 +1575,7 @@ double World::critical_timestep() {
       const BondHist* b = wc.bond.empty() ? nullptr : &wc.bond[c];
       const bool bd = b && bonded(b->state);
       if (!(h.flags & ContactHist::kActive) && !bd) continue;
-      const bool lin = (h.flags & ContactHist::kActive) || fam.model != ContactModel::kLinearPBond;
+      const bool lin = linear_spring_acts(h, fam.model);
       double k = lin ? h.kn : 0.0, ks = lin ? h.ks : 0.0, krot = 0.0;
       if (b && fam.model == ContactModel::kLinearPBond && bd) {
         k += b->kn * b->area();

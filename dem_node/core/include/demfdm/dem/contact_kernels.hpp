@@ -51,6 +51,13 @@ struct BondHist {
   double polar() const { return 0.5 * area() * rb * rb; }           // J = 2I
 };
 
+/// Whether the contact's own spring set (h.kn, h.ks) carries load now, for stiffness estimates
+/// (critical step, servo): a parallel bond's linear part only while its contact is active (a
+/// bond across a gap has none, §2.1); the linear and soft-bond springs of any counted contact.
+inline bool linear_spring_acts(const ContactHist& h, ContactModel m) {
+  return (h.flags & ContactHist::kActive) || m != ContactModel::kLinearPBond;
+}
+
 /// Kinematics of one contact over one step (§1.4, §1.5).
 struct Kin {
   Vec3 n{};       // unit normal A→B at the current geometry
