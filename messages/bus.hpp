@@ -1,7 +1,7 @@
 // Typed bus wrapper over lcm::LCM (LCM 1.3.1 as shipped by Debian 12).
 //
-// Design (after Drake's DrakeLcm, see ../shared/style.md habit 9, and the LCM pitfalls measured
-// in ../shared/coupling-anchors.md sections 5, 8, 9):
+// Design (after Drake's DrakeLcm layering, and the LCM pitfalls measured on this machine kind:
+// corrupt datagrams, lost messages, foreign runs on one port):
 //  * raw subscription + guarded decoding: a corrupt length field makes lcm-gen's decode()
 //    throw inside LCM's C callback, so we decode inside try and count the failure instead;
 //  * handler exceptions are stored and re-thrown from pump(), never through LCM's C code;

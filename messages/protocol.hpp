@@ -5,7 +5,7 @@
 // exchange interface data with resends. CoordinatorEndpoint is the coordinator's side:
 // broadcast the scene, check hellos, watch heartbeats, grant steps, collect reports.
 //
-// Reliability rules (coupling-anchors.md section 8): every wait has a deadline; a waiting
+// Reliability rules: every wait has a deadline; a waiting
 // receiver sends a NACK after resend_after_s (doubling up to 0.4 s) and the holder of the
 // message re-publishes its stored copy; commands and reports are idempotent; heartbeats come
 // from a helper thread every heartbeat_s; silence longer than peer_timeout_s is an error that

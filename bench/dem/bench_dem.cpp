@@ -1,4 +1,4 @@
-// bench_dem: time the DEM cycle on the 25,835-sphere periodic packing of anchors.md
+// bench_dem: time the DEM cycle on the 25,835-sphere periodic reference packing (bench/dem/data)
 // (LAMMPS dump: 9 header lines, box bounds on lines 6–8, then "x y z radius", SI).
 // Same physics as the LAMMPS reference: k_n = 2.55e5 N/m for every pair, k_s = k_n/2.4,
 // μ = tan 32°, ρ = 2650 kg/m³, periodic, 2,000 held steps with no neighbour rebuild.
@@ -102,7 +102,7 @@ int run(const std::string& file, const std::string& model, int threads, int step
   p.ball_ball.model = model == "softbond" ? ContactModel::kSoftBond : ContactModel::kLinear;
   double rsum = 0;
   for (double r : pk.r) rsum += r;
-  p.skin = 0.1 * 2.0 * 0.058e-3;  // 0.1 d50 (anchors.md second LAMMPS row uses the same)
+  p.skin = 0.1 * 2.0 * 0.058e-3;  // 0.1 d50 (the second LAMMPS anchor uses the same)
   (void)rsum;
   World w(p);
   std::string kname;
@@ -159,7 +159,7 @@ int run(const std::string& file, const std::string& model, int threads, int step
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string file = argc > 1 ? argv[1] : "/work/shared/data/bench_packing_25835.txt";
+  const std::string file = argc > 1 ? argv[1] : DEMFDM_BENCH_PACKING;
   try {
     if (argc > 2) return run(file, argv[2], argc > 3 ? std::atoi(argv[3]) : 1, argc > 4 ? std::atoi(argv[4]) : 2000);
     // The 2-thread rows run twice: with the default OpenMP wait policy (threads spin briefly

@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """Print the frames, datasets and shapes of a demfdm results file (dem.h5, fdm.h5, history.h5).
 
-Layout: /work/shared/output-recipe.md section 3 (root attributes, /frames/NNNNNN groups with
+Layout: common/io/README.md (root attributes, /frames/NNNNNN groups with
 `time` and `step` attributes, static datasets such as /mesh/*, /history/<name> series).
 
 Usage:

@@ -47,7 +47,7 @@ H5Frames create_dem_file(const std::filesystem::path& dir, const FileInfo& info,
 }
 
 FileInfo with_fdm_attrs(FileInfo info) {
-  // Recipe §3 fdm.h5 root attributes; sign convention of physics.md §0.2 (FLAC3D).
+  // Recipe §3 fdm.h5 root attributes; sign convention of docs/theory.md §0.2 (FLAC3D).
   info.extra.emplace_back("stress_unit", "Pa");
   info.extra.emplace_back("stress_components", "xx yy zz xy yz xz");
   info.extra.emplace_back("stress_sign", "tension positive");

@@ -3,7 +3,7 @@
 // Every array the writers store is row-major [rows, cols]: one row per particle, bond, node
 // or zone, `cols` components per row (3 for a vector, 6 for a symmetric tensor in VTK order
 // xx, yy, zz, xy, yz, xz). A view with cols == 1 is stored as a 1-D dataset [rows], as in
-// the results layout of /work/shared/output-recipe.md §3.
+// the results layout of common/io/README.md.
 #pragma once
 
 #include <cstddef>

@@ -36,7 +36,7 @@ struct LinkFrame {
   ArrayView nodes;                      // [Nb,2] int32, 0-based rows of this frame's particle arrays
   // Per-link arrays [Nb] or [Nb,k]. Bonds: "state" uint8 with the recipe's codes 0 intact,
   // 1 broken in tension, 2 broken in shear (its ParaView category colouring, §6, assumes
-  // them); the DEM maps its enum onto these only for output (physics.md §2.5).
+  // them); the DEM maps its enum onto these only for output (docs/theory.md §2.5).
   std::vector<FieldArray> cell_arrays;
 };
 
@@ -81,7 +81,7 @@ struct MeshFrame {
   // replaces /mesh/node_coords as the frame's geometry (recipe §3, large deformations).
   std::vector<FieldArray> node_arrays;
   // Per-zone arrays [Nz] or [Nz,k]: stress [Nz,6] (Pa, xx yy zz xy yz xz, tension positive,
-  // physics.md §0.2 sign convention), plastic state uint8 [Nz], ...
+  // docs/theory.md §0.2 sign convention), plastic state uint8 [Nz], ...
   std::vector<FieldArray> zone_arrays;
 };
 
