@@ -1,7 +1,7 @@
 // dem_node: the DEM engine (dem_core) as the bus's DEM role.
 //
 // A thin adapter: scene keys -> dem::WorldParams, stage actions -> the staged operations of
-// dem_core (physics.md 4), coupling hooks -> facet walls driven by the continuum's interface
+// dem_core (docs/theory.md 4), coupling hooks -> facet walls driven by the continuum's interface
 // gridpoints (6.2-6.5), footing kinematics from the coordinator's grants (7.1), results ->
 // dem.h5 + particles.xmf + bonds.xmf + dem_history.csv in the run folder.
 //
@@ -135,7 +135,7 @@ class DemParticipant : public node::Participant {
   // step; else dt_safety x critical. The coordinator grants the smallest dt_stable of the nodes.
   double dt_stable() const override {
     if (world_.num_balls() == 0) return 0.0;
-    if (user_dt_ > 0) return interval_ * user_dt_;
+    if (user_dt_ > 0 && !preparing_) return interval_ * user_dt_;
     return interval_ * safe_dt();
   }
   // dt_safety x the critical step of 1.8 [s], computed once per state (O(contacts)).
@@ -158,11 +158,18 @@ class DemParticipant : public node::Participant {
     ratio_valid_ = skeleton_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
-    check_dt_fixed(st);
-    {  // local damping of this stage (physics.md 1.3): the stage's own, else the scene's
+    preparing_ = is_generation(a);
+    {  // Step factor and local damping of this stage (docs/theory.md 1.3, 4.11). Specimen
+       // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
+       // dem.damping and dem.dt_fixed change nothing before the first later stage.
+      auto& wp = world_.mutable_params();
       const double alpha = st.view.real("damping");
-      world_.mutable_params().local_damping = alpha >= 0 ? alpha : s_.real("dem.damping");
+      wp.dt_safety = s_.real(preparing_ ? "dem.specimen.dt_safety" : "dem.dt_safety");
+      wp.local_damping = alpha >= 0 ? alpha : s_.real(preparing_ ? "dem.specimen.damping" : "dem.damping");
+      if (preparing_) wp.dt_fixed = 0.0;
+      safe_dt_key_ = {-1, -1, -1};  // the cached critical step holds the previous factor
     }
+    if (!preparing_) check_dt_fixed(st);
     if (!is_generation(a) && gravity_level_ > 0 && !world_.gravity_on()) {
       auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
       spdlog::info("dem: {}", r.what);
@@ -198,7 +205,8 @@ class DemParticipant : public node::Participant {
     if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
     if (!is_generation(a) && !kick_.empty() && !kicked_) kick();
     world_.prepare();
-    if (user_dt_ > 0 && world_.num_balls() > 0) check_dt_fixed("end of the set-up of stage '" + st.name + "'");
+    if (user_dt_ > 0 && !preparing_ && world_.num_balls() > 0)
+      check_dt_fixed("end of the set-up of stage '" + st.name + "'");
     energy_pending_ = true;  // the stage's energy balance starts at its first step
     return v;
   }
@@ -249,7 +257,7 @@ class DemParticipant : public node::Participant {
     }
     // A user dt_fixed must stay below the critical step as contacts change (O(contacts) per
     // step, only when dem.dt_fixed is set).
-    if (user_dt_ > 0 && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
+    if (user_dt_ > 0 && !preparing_ && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
     // Exactly 'interval' DEM steps per coupling step of length dt.
     if (dt > 0) world_.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
     world_.step(interval_);  // its phases are reported by add_phase_times()
@@ -414,7 +422,7 @@ class DemParticipant : public node::Participant {
     const double safe = world_.params().dt_safety * crit;
     std::ostringstream os;
     os.precision(6);
-    os << "dem.dt_fixed = " << user_dt_ << " s exceeds the critical timestep " << crit << " s (physics.md 1.8) at the "
+    os << "dem.dt_fixed = " << user_dt_ << " s exceeds the critical timestep " << crit << " s (docs/theory.md 1.8) at the "
        << when;
     if (s_.string("dem.dt_above_critical") != "reduce")
       throw std::invalid_argument(os.str() + "; use a smaller dt_fixed, or dem.dt_above_critical = \"reduce\"");
@@ -438,7 +446,7 @@ class DemParticipant : public node::Participant {
     for (auto& [name, sec] : t.effect) effect_s_[name] = sec;
   }
 
-  // Kinetic + strain + dissipated energy of the DEM [J] (physics.md 8.18).
+  // Kinetic + strain + dissipated energy of the DEM [J] (docs/theory.md 8.18).
   double total_energy() const {
     const auto e = world_.energy();
     return e.kinetic + e.strain + e.damping + e.friction + e.softening;
@@ -484,7 +492,7 @@ class DemParticipant : public node::Participant {
                  b.x[top].y, b.x[top].z, kick_[0], kick_[1], kick_[2]);
   }
 
-  // Contact and bond forces scaled with depth below the block top (physics.md 4.9).
+  // Contact and bond forces scaled with depth below the block top (docs/theory.md 4.9).
   void scale_with_depth() {
     auto mode = s_.string("dem.specimen.depth_scaling");
     if (mode == "none") return;
@@ -542,7 +550,7 @@ class DemParticipant : public node::Participant {
     p.initial_scale = s_.real("dem.specimen.initial_scale");
     p.increments = static_cast<int>(s_.integer("dem.specimen.increments"));
     p.ratio_tol = s_.real("dem.specimen.expansion_ratio");
-    p.max_steps_per_increment = s_.integer("dem.specimen.max_steps_per_increment");
+    p.increment_budget = s_.real("dem.specimen.increment_budget");
     auto r = dem::generate_rev(world_, p);
     const double z = s_.real("dem.specimen.bond_coordination");
     if (z > 0) {  // bonds over the gaps that give Table 1's Z (docs/ucs-study.md)
@@ -555,7 +563,7 @@ class DemParticipant : public node::Participant {
     return r;
   }
 
-  // sigma_v at the bottom of the DEM block for the scene's g-level (physics.md 4.5, 7.4).
+  // sigma_v at the bottom of the DEM block for the scene's g-level (docs/theory.md 4.5, 7.4).
   double sigma_v() const {
     double sv = s_.real("dem.specimen.sigma_v");
     if (sv >= 0) return sv;
@@ -575,11 +583,13 @@ class DemParticipant : public node::Participant {
     world_.mutable_params().ball_ball.linear.fric = std::min(mu, s_.real("dem.specimen.servo_fric"));
     world_.refresh_contact_constants();
     auto tol = s_.real("dem.specimen.servo_tol"), ratio = s_.real("dem.specimen.servo_ratio");
-    auto budget = s_.integer("dem.specimen.servo_steps");
-    auto r1 = dem::servo_until(world_, p, tol, ratio, 200, budget);
+    auto budget = s_.real("dem.specimen.servo_budget");
+    // Hold the criterion for 160 critical steps (docs/theory.md 4.11; 200 steps at dt_safety 0.8).
+    auto r1 = dem::servo_until(world_, p, tol, ratio, 160.0, budget);
+    if (!r1.converged) return r1;
     world_.mutable_params().ball_ball.linear.fric = mu;
     world_.refresh_contact_constants();
-    auto r2 = dem::servo_until(world_, p, tol, ratio, 200, budget / 2);
+    auto r2 = dem::servo_until(world_, p, tol, ratio, 160.0, budget / 2);
     r2.steps += r1.steps;
     r2.what = "servo to sigma_v " + std::to_string(sv) + " Pa, sigma_h " + std::to_string(sh) + " Pa: " + r1.what +
               "; at final friction: " + r2.what;
@@ -589,7 +599,6 @@ class DemParticipant : public node::Participant {
   proto::Values report(const dem::StageReport& r) {
     spdlog::info("dem: {} ({} steps, ratio {:.3e}, porosity {:.4f}, count {}, converged {})", r.what, r.steps, r.ratio,
                  r.porosity, r.count, r.converged);
-    if (!r.converged) spdlog::warn("dem: '{}' did not converge within its budget", r.what);
     if (!dir_.empty()) {  // one row per staged operation, for the studies (docs/ucs-study.md)
       const auto path = dir_ / "specimen_stages.csv";
       const bool fresh = !fs::exists(path);
@@ -602,6 +611,10 @@ class DemParticipant : public node::Participant {
         << c.z << ',' << c.z_no_rattlers << ',' << r.stress[0] << ',' << r.stress[4] << ',' << r.stress[8] << ','
         << (r.converged ? 1 : 0) << ",\"" << r.what << "\"\n";
     }
+    // A preparation procedure that misses its criterion stops the run (docs/theory.md 4.11): the
+    // specimen would otherwise depend on the budget, not on the rock.
+    if (!r.converged)
+      throw std::runtime_error("specimen preparation did not reach its criterion within its budget: " + r.what);
     return {{"steps", static_cast<double>(r.steps)}, {"ratio", r.ratio}, {"porosity", r.porosity},
             {"count", static_cast<double>(r.count)}, {"converged", r.converged ? 1.0 : 0.0},
             {"sxx_Pa", r.stress[0]}, {"syy_Pa", r.stress[4]}, {"szz_Pa", r.stress[8]}};
@@ -614,14 +627,19 @@ class DemParticipant : public node::Participant {
     auto c = s_.reals("dem.footing.centre");
     dem::Vec3 axis = block_.centre();
     if (c.size() == 2) axis = {c[0], c[1], 0};
-    // Bottom at the highest ball top under the footprint: penetration counts from first contact.
+    // Bottom at the height of first contact: penetration counts from there. A ball whose axis
+    // distance rho is within the footprint touches the flat bottom at its top, z + r; one
+    // beyond the footprint's edge (r_f < rho < r_f + r) touches the bottom rim at
+    // z + sqrt(r^2 - (rho - r_f)^2), lower than its top (the footing is a cylinder).
     double ztop = block_.z_top();
     const auto& b = world_.balls();
     double r_f = f.diameter / 2;
     double best = -std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < b.size(); ++i) {
-      double dx = b.x[i].x - axis.x, dy = b.x[i].y - axis.y;
-      if (dx * dx + dy * dy <= (r_f + b.r[i]) * (r_f + b.r[i])) best = std::max(best, b.x[i].z + b.r[i]);
+      const double dx = b.x[i].x - axis.x, dy = b.x[i].y - axis.y, rho = std::sqrt(dx * dx + dy * dy);
+      const double out = rho - r_f, r = b.r[i];
+      if (out >= r) continue;
+      best = std::max(best, b.x[i].z + (out <= 0 ? r : std::sqrt(r * r - out * out)));
     }
     if (!std::isfinite(best)) best = ztop;
     f.bottom_centre = {axis.x, axis.y, best};
@@ -812,6 +830,7 @@ class DemParticipant : public node::Participant {
   int wall_ = -1;
   std::size_t n_iface_ = 0;
   bool coupling_setup_pending_ = false, penetrating_ = false, box_done_ = false;
+  bool preparing_ = false;  // a specimen-preparation stage (is_generation): its own step and damping
   double footing_z0_ = 0, target_disp_ = 0;
   double weight_ = -1;
   double ratio_ = 0;           // engine ratio of the current state (ratio())

@@ -73,13 +73,13 @@ void declare_gravity(config::Section& root) {
 void declare_continuum(config::Section& root) {
   auto& c = *root.find("continuum")->section;
   c.choice("mode", {"dynamic", "static"}, std::string("dynamic"),
-           "FDM law of motion: dynamic = real masses and the critical time step (physics.md 6.6 option A); "
+           "FDM law of motion: dynamic = real masses and the critical time step (docs/theory.md 6.6 option A); "
            "static = mass-scaled, dt = 1 (option B, pseudo-static only).");
-  c.real("damping", "-", 0.8, "FDM local damping alpha_F (physics.md 5.6).").min(0.0).max(1.0, true);
-  c.boolean("large_strain", false, "Recompute zone geometry every step with the Jaumann rate (physics.md 5.8).");
+  c.real("damping", "-", 0.8, "FDM local damping alpha_F (docs/theory.md 5.6).").min(0.0).max(1.0, true);
+  c.boolean("large_strain", false, "Recompute zone geometry every step with the Jaumann rate (docs/theory.md 5.8).");
   c.choice("averaging", {"overlay", "zone"}, std::string("overlay"),
            "Mixed-discretisation volumetric averaging over each 5-tetrahedron overlay (default) or all 10 "
-           "tetrahedra of a zone (physics.md 5.3, U15).");
+           "tetrahedra of a zone (docs/theory.md 5.3, U15).");
   c.real("timestep_safety", "-", 0.5, "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).")
       .min(0.0, true).max(1.0);
   c.real("static_mass_factor", "-", 1.0, "Multiplier on the static-mode inertial masses (5.6).").min(1.0);
@@ -97,12 +97,12 @@ void declare_continuum(config::Section& root) {
          "(docs/continuum-solvers.md).")
       .min(0.0).max(1.0);
   c.choice("boundary", {"strongbox", "symmetry", "none"}, std::string("strongbox"),
-           "strongbox: fixed base, rollers on the four sides, free top (physics.md 5.10); symmetry: rollers on "
+           "strongbox: fixed base, rollers on the four sides, free top (docs/theory.md 5.10); symmetry: rollers on "
            "the x = 0, y = 0 and z = 0 planes only (element tests: a quarter of a triaxial specimen); none: all free.");
   c.real("confining", "Pa", 0.0,
          "Confining pressure on the x = L and y = W faces (with boundary = \"symmetry\"), also set as the initial "
          "hydrostatic stress; 0: none.").min(0.0);
-  auto& m = c.section("mesh", "FDM mesh: a box of hexahedra around the DEM pocket (physics.md 5.1).",
+  auto& m = c.section("mesh", "FDM mesh: a box of hexahedra around the DEM pocket (docs/theory.md 5.1).",
                       config::Presence::Optional);
   m.reals("size", "m", std::vector<double>{16e-3, 16e-3, 16e-3}, "Box L x W x H.").length(3).min(0.0, true);
   m.boolean("pocket", true, "Leave the inner box open for the DEM block (its faces are the coupling interface).");
@@ -119,8 +119,8 @@ void declare_continuum(config::Section& root) {
                       "overlap). Absent: one elastic group with the defaults below.",
                       config::Presence::Optional);
   mat.choice("model", {"elastic", "mohr_coulomb"}, std::string("elastic"),
-             "Constitutive model (physics.md 5.4).");
-  mat.real("density", "kg/m^3", 1272.0, "Bulk density rho_b = (1-n) rho_s (physics.md 7.4).").min(0.0, true);
+             "Constitutive model (docs/theory.md 5.4).");
+  mat.real("density", "kg/m^3", 1272.0, "Bulk density rho_b = (1-n) rho_s (docs/theory.md 7.4).").min(0.0, true);
   mat.real("young", "Pa", 2.0e9, "Young's modulus E (calibrate from the DEM UCS test).").min(0.0, true);
   mat.real("poisson", "-", 0.25, "Poisson's ratio.").min(-1.0, true).max(0.5, true);
   mat.real("cohesion", "Pa", 0.0, "Mohr-Coulomb cohesion c.").min(0.0);
@@ -175,7 +175,7 @@ void declare_family(config::Section& dem, const char* name, const FamilyDefaults
   f.real("pb_fa", "deg", 32.0, "Parallel bond friction angle.").min(0.0).max(90.0, true);
   f.boolean("pb_zero_linear", d.zero_linear,
             "Give the linear part zero stiffness when bonding (interface bonds: no repulsion from initial "
-            "overlaps, physics.md 2.6).");
+            "overlaps, docs/theory.md 2.6).");
   f.real("sb_rmul", "-", 1.0, "Soft bond radius multiplier lambda.").min(0.0, true);
   f.real("sb_mcf", "-", 1.0, "Soft bond moment contribution factor beta.").min(0.0).max(1.0);
   f.real("sb_bmul", "-", 1.0, "Soft bond bending-friction multiplier lambda_b.").min(0.0);
@@ -200,7 +200,7 @@ void declare_family(config::Section& dem, const char* name, const FamilyDefaults
 void declare_dem(config::Section& root) {
   auto& d = *root.find("dem")->section;
   d.real("density", "kg/m^3", 2650.0, "Grain density rho_s.").min(0.0, true);
-  d.real("damping", "-", 0.7, "Local (non-viscous) damping alpha (physics.md 1.3).").min(0.0).max(1.0, true);
+  d.real("damping", "-", 0.7, "Local (non-viscous) damping alpha (docs/theory.md 1.3).").min(0.0).max(1.0, true);
   d.real("dt_safety", "-", 0.8, "Time step = safety * critical step (1.8).").min(0.0, true).max(1.0);
   d.integer("dt_interval", "steps", 100, "Recompute the critical step every n steps.").min(1);
   d.real("dt_fixed", "s", 0.0,
@@ -223,9 +223,9 @@ void declare_dem(config::Section& root) {
   declare_family(d, "ball_ball", {"softbond", 0.6248693519093275, false, "Ball-ball contacts."});
   declare_family(d, "ball_wall", {"linear", 0.0, false, "Ball-platen contacts (UCS test, boxes)."});
   declare_family(d, "ball_facet", {"pbond", 0.6248693519093275, true,
-                                   "Ball-interface facet contacts (DEM-continuum coupling, physics.md 6.3)."});
-  declare_family(d, "ball_footing", {"linear", 0.5, false, "Ball-footing contacts (physics.md 0.3: mu = 0.5)."});
-  auto& sp = d.section("specimen", "Specimen generation (physics.md 0.4, 4).", config::Presence::Optional);
+                                   "Ball-interface facet contacts (DEM-continuum coupling, docs/theory.md 6.3)."});
+  declare_family(d, "ball_footing", {"linear", 0.5, false, "Ball-footing contacts (docs/theory.md 0.3: mu = 0.5)."});
+  auto& sp = d.section("specimen", "Specimen generation (docs/theory.md 0.4, 4).", config::Presence::Optional);
   sp.real("d_min", "m", 0.0655e-3, "Smallest particle diameter (before upscaling).").min(0.0, true);
   sp.real("d_max", "m", 0.181e-3, "Largest particle diameter (before upscaling).").min(0.0, true);
   sp.real("d50", "m", 0.116e-3, "d50 quoted by the paper (inertial-number rate rule).").min(0.0, true);
@@ -245,17 +245,37 @@ void declare_dem(config::Section& root) {
   sp.real("initial_scale", "-", 0.6, "Initial radii = d/2 * this (4.3).").min(0.0, true).max(1.0);
   sp.integer("increments", "-", 5, "Radius-expansion increments.").min(1);
   sp.real("expansion_ratio", "-", 1e-3, "Unbalanced ratio to reach after each expansion increment.").min(0.0, true);
-  sp.integer("max_steps_per_increment", "steps", 20000, "Step budget of each expansion increment.").min(1);
+  sp.real("increment_budget", "t_c", 16000.0,
+          "Budget of each expansion increment in critical steps t_c (docs/theory.md 4.11; 20,000 steps at "
+          "dt_safety 0.8). An increment that does not reach expansion_ratio within it stops the run.")
+      .min(0.0, true);
+  sp.real("dt_safety", "-", 0.8,
+          "Time step of specimen preparation (the generate, servo, bond and replicate stages) = this * critical "
+          "step (1.8); dem.dt_safety applies from the first later stage. Preparation counts its rules in critical "
+          "steps t_c, so this factor sets how finely the same procedure is integrated (docs/theory.md 4.11).")
+      .min(0.0, true)
+      .max(1.0);
+  sp.real("damping", "-", 0.7,
+          "Local damping alpha of specimen preparation (a preparation stage's own 'damping' wins); dem.damping "
+          "applies from the first later stage.")
+      .min(0.0)
+      .max(1.0, true);
   sp.real("k0", "-", 0.5, "sigma_h / sigma_v of the REV servo (U7).").min(0.0);
   sp.real("sigma_v", "Pa", -1.0,
           "REV vertical stress; negative: rho_b N g0 H_D, the self-weight stress at the DEM block's bottom "
-          "(physics.md 4.5), with rho_b = (1 - 0.52) rho_s unless bulk_density is set.");
+          "(docs/theory.md 4.5), with rho_b = (1 - 0.52) rho_s unless bulk_density is set.");
   sp.real("bulk_density", "kg/m^3", -1.0, "Bulk density for sigma_v; negative: 0.48 rho_s.");
   sp.real("servo_tol", "-", 0.005, "Servo stress tolerance |s - s*| / s*.").min(0.0, true);
   sp.real("servo_ratio", "-", 1e-4, "Servo unbalanced-ratio criterion.").min(0.0, true);
-  sp.real("servo_gain", "-", 0.3, "Servo under-relaxation alpha_s.").min(0.0, true).max(1.0);
-  sp.integer("servo_steps", "steps", 400000, "Step budget of the servo at low friction (then half of it at the final friction).")
-      .min(1);
+  sp.real("servo_gain", "1/t_c", 0.375,
+          "Servo gain alpha_s: share of the stress error closed per critical step t_c (4.5, 4.11; 0.3 per step at "
+          "dt_safety 0.8).")
+      .min(0.0, true)
+      .max(1.0);
+  sp.real("servo_budget", "t_c", 320000.0,
+          "Budget of the servo at low friction in critical steps t_c (then half of it at the final friction; "
+          "4.11). A servo that does not reach servo_tol and servo_ratio within it stops the run.")
+      .min(0.0, true);
   sp.real("servo_fric", "-", 0.1, "Friction during servo compaction (4.3 step 4: 0 to 0.1).").min(0.0);
   sp.real("bond_gap", "m", -1.0, "Bond contacts with gap <= this; negative: 1e-3 d_min (4.6).");
   sp.integers("replicate", "-", std::vector<std::int64_t>{1, 1, 5}, "Copies alpha x beta x gamma (4.7).")
@@ -324,19 +344,34 @@ void declare_stages(config::Section& root) {
             "the continuum's mesh, ball-facet bonds, depth scaling, facet bond forces; continuum: geostatic "
             "stresses), gravity on, then as equilibrium. penetrate: the footing moves down at the rate of the "
             "inertial number; the stage ends at 'depth'. ucs: unconfined compression between platens.");
-  st.real("ratio", "-", 1e-5, "Equilibrium criterion: unbalanced-force ratio (FLAC3D ratio-average, physics.md 5.11).")
+  st.real("ratio", "-", 1e-5, "Equilibrium criterion: unbalanced-force ratio (FLAC3D ratio-average, docs/theory.md 5.11).")
       .min(0.0, true);
   st.real("k0", "-", -1.0, "K0 for 'geostatic'; negative: nu/(1-nu) of each zone's material.");
   st.boolean("reset_displacements", false, "Set continuum displacements to zero at the stage's start.");
-  st.real("inertial_number", "-", 1e-3, "penetrate: inertial number I of the footing rate (physics.md 7.1).")
+  st.real("inertial_number", "-", 1e-3, "penetrate: inertial number I of the footing rate (docs/theory.md 7.1).")
       .min(0.0, true);
   st.real("plastic_zone_ratio", "-", 3.0, "penetrate: L_p / D_f in v = I L_p / (d50 sqrt(rho_s / P)).").min(0.0, true);
   st.real("mean_stress", "Pa", 1e6, "penetrate: mean stress P at the footing tip in the rate rule (U12).").min(0.0, true);
   st.real("depth_ratio", "-", 0.2, "penetrate: stop when the footing has moved this many D_f (paper: 0.2).")
       .min(0.0, true);
   st.real("speed_factor", "-", 1.0, "penetrate: multiply the rate-rule speed (stability studies).").min(0.0, true);
+  st.real("ramp_depth_ratio", "-", 0.01,
+          "penetrate: the footing speed rises linearly in time from 0 to the rate-rule speed v while the footing "
+          "moves this many D_f (ramp time t_r = 2 ramp_depth_ratio D_f / v), so that it does not hit the block "
+          "at first contact (docs/stages.md); 0: full speed from the first step.")
+      .min(0.0);
+  st.real("quasi_static_limit", "-", 0.1,
+          "penetrate: the largest impedance ratio rho_b c v / sigma_c (c the P-wave speed of the rock, sigma_c "
+          "the ball-ball bond tensile strength) treated as quasi-static; the run summary warns above it "
+          "(docs/stages.md). The default is provisional until the convergence study (docs/convergence.md) sets it.")
+      .min(0.0, true);
+  st.real("rock_young", "Pa", 1.083e9,
+          "penetrate: E of the rock for the wave measures when the scene has no continuum (with nu = 1/3); "
+          "default: E50 of the UCS study, docs/ucs-study.md. With a continuum: the first "
+          "[[continuum.material]]'s young and poisson.")
+      .min(0.0, true);
   st.real("damping", "-", -1.0,
-          "DEM local damping alpha in this stage (physics.md 1.3: the penetration stage may use less than the "
+          "DEM local damping alpha in this stage (docs/theory.md 1.3: the penetration stage may use less than the "
           "0.7 of equilibration); negative: dem.damping.")
       .max(0.99);
   st.real("strain_rate", "1/s", 0.5, "ucs: platen approach rate / specimen height.").min(0.0, true);

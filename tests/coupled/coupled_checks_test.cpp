@@ -10,7 +10,7 @@
 // Elastic initial stiffness k_e: least-squares slope of load against displacement from the first
 // contact (first row with load > 0) to the last row before the first ball-ball bond leaves the
 // intact state (dem.bond_failures rises): the footing's response before any particle-scale
-// failure, where a soft bond and a parallel bond across a gap are the same springs (physics.md
+// failure, where a soft bond and a parallel bond across a gap are the same springs (docs/theory.md
 // 2.2, 3.1). Used for the soft bond against parallel bond check.
 // Initial stiffness k50: least-squares slope of load against displacement over the rising branch,
 // from the first contact (first row with load > 0) to the first row at half the first peak load

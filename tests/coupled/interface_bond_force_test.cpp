@@ -1,4 +1,4 @@
-// Initial force of the DEM-FDM interface bonds (physics.md 4.9, dem::assign_interface_bond_forces
+// Initial force of the DEM-FDM interface bonds (docs/theory.md 4.9, dem::assign_interface_bond_forces
 // with InterfaceBondForce::kTraction), in isolation: fixed balls bonded to the five faces of an
 // open box (the continuum's pocket). The geostatic stress sigma_zz = -gamma (z_top - z),
 // sigma_h = K0 sigma_zz integrates to gamma H A on the bottom and K0 gamma H^2 W / 2 on each side;
@@ -41,7 +41,7 @@ TEST(InterfaceBondForce, TractionConsistentFaceForces) {
   p.local_damping = 0.7;
   p.ball_facet.model = ContactModel::kLinearPBond;
   p.ball_facet.pbond.zero_linear = true;
-  p.ball_facet.pbond.ten = 1e300;  // unbreakable (physics.md 2.6)
+  p.ball_facet.pbond.ten = 1e300;  // unbreakable (docs/theory.md 2.6)
   p.ball_facet.pbond.coh = 1e300;
   const double L = 2e-3, H = 3e-3, R = 1e-4;
   World w(p);

@@ -1,5 +1,5 @@
 // Periodic cell, Love–Weber stress, servo, specimen generation, replication and depth
-// scaling (physics.md §0.4, §4, §8.8, §8.9).
+// scaling (docs/theory.md §0.4, §4, §8.8, §8.9).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -52,10 +52,10 @@ Rev& shared_rev() {
     g.seed = 8;  // seeds 7, 8, 9 give overshoots 0.155, 0.101, 0.040 (all converge)
     g.porosity_target = 0.38;  // frictionless expansion close to jamming (§4.3)
     g.ratio_tol = 1e-2;
-    g.max_steps_per_increment = 3000;
+    g.increment_budget = 2400;  // 3000 steps at dt_safety 0.8
     r.gen = generate_rev(*r.w, g);
     // K0 = 0.5 targets, 20× the paper's 100g REV stress to keep the test short; μ = tan 32°
-    r.servo = servo_until(*r.w, servo_target(), 0.005, 1e-2, 100, 40000, &r.overshoot);
+    r.servo = servo_until(*r.w, servo_target(), 0.005, 1e-2, 80, 32000, &r.overshoot);
     return r;
   }();
   return rev;
@@ -132,7 +132,7 @@ TEST(Specimen, GenerationIsSeeded) {
     RevParams g;
     g.seed = seed;
     g.increments = 1;
-    g.max_steps_per_increment = 200;
+    g.increment_budget = 160;  // 200 steps at dt_safety 0.8
     generate_rev(w, g);
     return w.balls().x;
   };

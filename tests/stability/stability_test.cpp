@@ -170,7 +170,7 @@ INSTANTIATE_TEST_SUITE_P(
 TEST(Stability, UndampedCyclingKeepsTheEnergyBalance) {
   auto s = base_scene();
   replace_once(s, "[dem]\n", "[dem]\ndamping = 0.0\n");
-  replace_once(s, "servo_steps = 20000", "servo_steps = 20000\ndepth_scaling = \"none\"");
+  replace_once(s, "servo_budget = 16000", "servo_budget = 16000\ndepth_scaling = \"none\"");
   auto r = run("undamped", s);
   check_clean_run(r);
   ASSERT_EQ(r.code, 0);
@@ -184,8 +184,9 @@ TEST(Stability, UndampedCyclingKeepsTheEnergyBalance) {
   if (!testing::Test::HasFailure()) r.clean();
 }
 
-// A user dt_fixed: above the critical step it is refused as soon as balls exist (after the
-// set-up of 'generate') with an error naming the key, the value and the critical value (exit 3), or
+// A user dt_fixed: above the critical step it is refused at the begin of the first stage after
+// specimen preparation (preparation runs on its own automatic step, docs/theory.md 4.11) with an
+// error naming the key, the value and the critical value (exit 3), or
 // reduced with a warning when dem.dt_above_critical = "reduce"; at 0.9 x critical it runs
 // stably. The critical step is read from a first run (its smallest value over the run).
 TEST(Stability, DtFixedAboveCriticalIsRefusedOrReducedAndBelowRunsStably) {
@@ -210,7 +211,7 @@ TEST(Stability, DtFixedAboveCriticalIsRefusedOrReducedAndBelowRunsStably) {
   std::smatch m;
   EXPECT_TRUE(std::regex_search(refused.output, m,
                                 std::regex("dem at step [0-9]+: dem.dt_fixed = [0-9.e+-]+ s exceeds the critical "
-                                           "timestep [0-9.e+-]+ s .*stage '(generate|servo)'")))
+                                           "timestep [0-9.e+-]+ s .*begin of stage 'gravity'")))
       << refused.output;
   std::cout << "[ figures  ] dt_fixed " << 3 * crit_max << " s refused; critical " << crit_min << ".." << crit_max << " s\n";
   if (!testing::Test::HasFailure()) refused.clean();

@@ -1,4 +1,4 @@
-// Staged specimen generation (physics.md §4). See specimen.hpp.
+// Staged specimen generation (docs/theory.md §4). See specimen.hpp.
 #include "demfdm/dem/specimen.hpp"
 
 #include <algorithm>
@@ -37,11 +37,11 @@ void quench(World& w) {
 // Cycle until ratio < tol (checked every `every` steps) or budget; returns steps run.
 // With quench_every > 0 the velocities are zeroed every quench_every steps (a multiple of
 // the check interval is used).
-std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, int every = 50,
+std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, std::int64_t every = 50,
                    std::int64_t quench_every = 0) {
   std::int64_t s = 0;
   ok = false;
-  if (quench_every > 0) every = static_cast<int>(std::min<std::int64_t>(every, quench_every));
+  if (quench_every > 0) every = std::min(every, quench_every);
   while (s < budget) {
     const std::int64_t k = std::min<std::int64_t>(every, budget - s);
     w.step(k);
@@ -51,7 +51,22 @@ std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, int ever
   }
   return s;
 }
+
+// Specimen preparation steps on the automatic step f t_c (steps_for converts its rules).
+void require_automatic_step(const World& w, const char* what) {
+  if (w.params().dt_fixed > 0.0) {
+    std::ostringstream s;
+    s << what << ": specimen preparation counts its rules in critical steps and must run on the automatic step "
+      << "(dt_fixed = 0), found dt_fixed = " << w.params().dt_fixed << " s.";
+    throw std::invalid_argument(s.str());
+  }
+}
 }  // namespace
+
+std::int64_t steps_for(const World& w, double tc) {
+  if (!(tc > 0.0)) return 0;
+  return std::max<std::int64_t>(1, std::llround(tc / w.params().dt_safety));
+}
 
 double psd_diameter(const PsdParams& p, double u) {
   const double a = p.d_min * p.scale, b = p.d_max * p.scale;
@@ -92,6 +107,13 @@ StageReport generate_rev(World& w, const RevParams& p) {
       << p.porosity_target << ".";
     throw std::invalid_argument(s.str());
   }
+  if (!(p.increment_budget > 0.0) || !(p.check_every > 0.0) || !(p.quench_every >= 0.0)) {
+    std::ostringstream s;
+    s << "generate_rev: 'increment_budget' and 'check_every' must be > 0 and 'quench_every' >= 0 critical steps, found "
+      << p.increment_budget << ", " << p.check_every << " and " << p.quench_every << ".";
+    throw std::invalid_argument(s.str());
+  }
+  require_automatic_step(w, "generate_rev");
   if (!(p.initial_scale > 0.0 && p.initial_scale <= 1.0) || p.increments < 1) {
     std::ostringstream s;
     s << "generate_rev: 'initial_scale' must be in (0, 1] and 'increments' >= 1, found "
@@ -134,12 +156,17 @@ StageReport generate_rev(World& w, const RevParams& p) {
   const double minc = std::pow(mtot, 1.0 / p.increments);
   StageReport r;
   bool ok_all = true;
+  // §4.11: the intervals and the budget in critical steps (50, 50 and 20,000 steps at f = 0.8).
+  const std::int64_t budget = steps_for(w, p.increment_budget), every = steps_for(w, p.check_every),
+                     quench_steps = steps_for(w, p.quench_every);
+  int failed = -1;
   for (int k = 0; k < p.increments; ++k) {
     for (std::size_t i = 0; i < w.num_balls(); ++i) w.set_radius(i, w.balls().r[i] * minc);
     w.prepare();
     w.refresh_contact_constants();
     bool ok;
-    r.steps += cycle(w, p.ratio_tol, p.max_steps_per_increment, ok, 50, p.quench_every);
+    r.steps += cycle(w, p.ratio_tol, budget, ok, every, quench_steps);
+    if (!ok && failed < 0) failed = k;
     ok_all &= ok;
   }
   quench(w);  // the REV starts at rest
@@ -153,11 +180,16 @@ StageReport generate_rev(World& w, const RevParams& p) {
   s << "generated " << r.count << " balls (seed " << p.seed << ", PSD scale " << p.psd.scale
     << ") and expanded radii from porosity " << n0 << " to " << r.porosity << " in "
     << p.increments << " increments";
+  if (failed >= 0)
+    s << "; increment " << failed + 1 << " of " << p.increments << " did not reach the unbalanced ratio "
+      << p.ratio_tol << " within " << p.increment_budget << " critical steps (" << budget << " steps)";
   r.what = s.str();
   return r;
 }
 
-// §4.5: ε̇ = −α_s K⁻¹(s* − s)/Δt, |ε̇_a| ≤ max_face_step d_min/(L_a Δt).
+// §4.5: ε̇ = −α_s K⁻¹(s* − s)/t_c, |ε̇_a| ≤ max_face_step d_min/(L_a t_c), with t_c = Δt/f the
+// critical step: the gain and the limit are per critical step, so the servo is the same
+// controller in physical time at any step factor f (§4.11).
 // K is the affine stiffness (U15). For an affine strain increment Δε (diagonal), contact c
 // sees Δu = Δε ∘ ℓ, so Δσ_aa = Σ_b K_ab Δε_b with
 //   K_ab = (1/V) Σ_c [ (K_n − K_s) ℓ_a n_a n_b ℓ_b + K_s ℓ_a² δ_ab ],
@@ -191,7 +223,7 @@ void PeriodicServo::apply(World& w, Phase) {
       K[a][a] += ks * l[a] * l[a];
     }
   }
-  const double dt = w.dt() > 0.0 ? w.dt() : 1.0;
+  const double tc = (w.dt() > 0.0 ? w.dt() : 1.0) / w.params().dt_safety;
   double err[3] = {0, 0, 0};
   int idx[3], na = 0;
   for (int a = 0; a < 3; ++a)
@@ -206,7 +238,7 @@ void PeriodicServo::apply(World& w, Phase) {
   for (int i = 0; i < na; ++i) {
     for (int j = 0; j < na; ++j)
       M[i][j] = (p_.coupled || i == j) ? K[idx[i]][idx[j]] / V : 0.0;
-    M[i][3] = -p_.gain * err[idx[i]] / dt;
+    M[i][3] = -p_.gain * err[idx[i]] / tc;
   }
   for (int i = 0; i < na && ok; ++i) {
     int piv = i;
@@ -223,7 +255,7 @@ void PeriodicServo::apply(World& w, Phase) {
   double scale = 1.0;
   for (int i = 0; i < na; ++i) {
     const int a = idx[i];
-    const double emax = p_.max_face_step * d_min_ / (L[a] * dt);
+    const double emax = p_.max_face_step * d_min_ / (L[a] * tc);
     // no contacts yet: compress (or expand) at the limit rate
     ed[a] = ok ? M[i][3] / M[i][i] : (err[a] > 0.0 ? -emax : emax);
     if (std::abs(ed[a]) > emax) scale = std::min(scale, emax / std::abs(ed[a]));
@@ -232,8 +264,12 @@ void PeriodicServo::apply(World& w, Phase) {
 }
 
 StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
-                        std::int64_t hold_steps, std::int64_t budget, double* overshoot) {
+                        double hold, double budget_tc, double* overshoot) {
   if (!w.periodic()) throw std::invalid_argument("servo_until: the world must have a periodic cell.");
+  require_automatic_step(w, "servo_until");
+  // §4.11: the check interval (8 t_c: 10 steps at f = 0.8), the hold and the budget in critical steps.
+  const std::int64_t every = steps_for(w, 8.0), hold_steps = steps_for(w, hold), budget = steps_for(w, budget_tc),
+                     quench_steps = steps_for(w, p.quench_every);
   for (int a = 0; a < 3; ++a)
     if (p.active[a] && !(p.target[a] > 0.0)) {
       std::ostringstream s;
@@ -262,9 +298,9 @@ StageReport servo_until(World& w, const ServoParams& p, double stress_tol, doubl
       over = std::max(over, side[a] * rel);
       in &= std::abs(rel) <= stress_tol;
     }
-    if (p.quench_every > 0 && r.steps % p.quench_every == 0) quench(w);
-    if (r.steps % 10 == 0) {
-      if (in && w.unbalanced_ratio() < ratio_tol) held += 10;
+    if (quench_steps > 0 && r.steps % quench_steps == 0) quench(w);
+    if (r.steps % every == 0) {
+      if (in && w.unbalanced_ratio() < ratio_tol) held += every;
       else held = 0;
       if (held >= hold_steps) { r.converged = true; break; }
     }
@@ -276,6 +312,9 @@ StageReport servo_until(World& w, const ServoParams& p, double stress_tol, doubl
   std::ostringstream o;
   o << "servo to (" << p.target.x << ", " << p.target.y << ", " << p.target.z << ") Pa "
     << (r.converged ? "converged" : "did not converge") << " in " << r.steps << " steps";
+  if (!r.converged)
+    o << " (criterion: |s - s*| <= " << stress_tol << " s* and unbalanced ratio < " << ratio_tol << " for " << hold
+      << " critical steps within " << budget_tc << " critical steps; reached ratio " << w.unbalanced_ratio() << ")";
   r.what = o.str();
   return r;
 }

@@ -1259,7 +1259,7 @@ void World::pair_pass(double dt) {
 
 // One ball against a wall (platen, footing or facet) whose surface point moves at v_wall and
 // spins at w_wall (0 for the rigid walls): contact kinematics at the middle of the overlap
-// (physics.md 1.4-1.5), the family's law, and the per-contact results stored in wc. Returns the
+// (docs/theory.md 1.4-1.5), the family's law, and the per-contact results stored in wc. Returns the
 // force on the wall.
 template <ContactModel M>
 Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const Vec3& n, double dist,

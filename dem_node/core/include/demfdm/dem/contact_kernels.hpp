@@ -1,4 +1,4 @@
-// Contact state and the stateless contact kernels (physics.md §1.4–1.7, §2, §3).
+// Contact state and the stateless contact kernels (docs/theory.md §1.4–1.7, §2, §3).
 //
 // Design (style.md §2b(2), habit 3): every formula lives in one inline function over plain
 // values. The passes in world.cpp are templates on the ContactModel; one switch per pass

@@ -1,4 +1,4 @@
-// Geometric kernels for ball–wall contacts (physics.md §1.4, §6.4).
+// Geometric kernels for ball–wall contacts (docs/theory.md §1.4, §6.4).
 #pragma once
 
 #include <algorithm>

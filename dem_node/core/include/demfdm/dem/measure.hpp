@@ -1,4 +1,4 @@
-// Measurements and snapshot arrays (physics.md §4.3, §4.4, §3.6, §5.11, §8.18).
+// Measurements and snapshot arrays (docs/theory.md §4.3, §4.4, §3.6, §5.11, §8.18).
 // All functions read the state of the last force pass; none of them changes the world.
 #pragma once
 

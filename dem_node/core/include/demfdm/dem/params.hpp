@@ -1,6 +1,6 @@
 // Parameter structs of the DEM engine (no parsing here: the node adapter maps scene keys
-// onto these fields). Every field: [unit] meaning (physics.md section). Defaults are the
-// paper's values where the paper gives them (physics.md §0.3) and the documented proposals
+// onto these fields). Every field: [unit] meaning (docs/theory.md section). Defaults are the
+// paper's values where the paper gives them (docs/theory.md §0.3) and the documented proposals
 // otherwise. Validation (validate_*) throws std::invalid_argument naming field, range, value.
 #pragma once
 
@@ -12,7 +12,7 @@
 
 namespace demfdm::dem {
 
-/// Contact model of a contact family (physics.md §1.7, §2, §3).
+/// Contact model of a contact family (docs/theory.md §1.7, §2, §3).
 enum class ContactModel : std::uint8_t {
   kLinear = 0,       ///< linear, no tension, Coulomb friction (§1.7)
   kLinearPBond = 1,  ///< linear + parallel bond (§2, Potyondy & Cundall 2004)

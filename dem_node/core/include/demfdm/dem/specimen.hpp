@@ -1,4 +1,4 @@
-// Staged specimen generation (physics.md §0.4, §4.3–4.9): each operation is callable on
+// Staged specimen generation (docs/theory.md §0.4, §4.3–4.9): each operation is callable on
 // its own and returns a small report. Randomness comes only from the seeded generator
 // passed in the parameters (deterministic, habit 13).
 #pragma once
@@ -32,6 +32,12 @@ struct PsdParams {
 /// Inverse CDF of density ∝ d⁻³: d = (d_min⁻² − u(d_min⁻² − d_max⁻²))^(−1/2), u ∈ [0,1) (§0.4).
 double psd_diameter(const PsdParams& p, double u);
 
+/// Specimen preparation counts its rules in critical steps t_c (the §1.8 step without the safety
+/// factor), never in steps (docs/theory.md §4.11): an interval of q t_c is round(q / f) steps of
+/// the automatic step f t_c, f = the world's dt_safety, at least one step. Changing f then changes
+/// how finely the same physical procedure is integrated, not the procedure.
+std::int64_t steps_for(const World& w, double tc);
+
 /// Deterministic uniform generator (splitmix64): identical on every platform.
 class Rng {
  public:
@@ -54,14 +60,18 @@ struct RevParams {
   std::size_t n_particles = 0;     // [-] number of balls; 0 → draw until the solid volume is (1 − porosity_final) V
   double porosity_final = 0.5195;  // [-] the specimen's final porosity (Table 1, scale 1), sets N_p
   double porosity_target = -1.0;   // [-] n₁ reached by frictionless radius expansion (§4.3); < 0 → porosity_final
-  std::int64_t quench_every = 50;  // [steps] zero all velocities every n steps while cycling (0: never)
+  double quench_every = 40.0;      // [t_c] zero all velocities every this many critical steps (0: never)
+  double check_every = 40.0;       // [t_c] test the unbalanced ratio every this many critical steps
   double initial_scale = 0.6;      // [-] s₀: initial radii d/2 · s₀
   int increments = 5;              // [-] radius-expansion increments
   double ratio_tol = 1e-3;         // [-] unbalanced ratio after each increment
-  std::int64_t max_steps_per_increment = 20000;  // [steps]
+  double increment_budget = 16000.0;  // [t_c] budget of each increment
   double fric = 0.0;               // [-] μ during generation (§4.3 step 2: μ = 0)
 };
-/// Generate balls in the periodic cell of `w` (which must be empty and periodic).
+/// Generate balls in the periodic cell of `w` (which must be empty and periodic and step on the
+/// automatic step, dt_fixed = 0). The quench interval, the check interval and the budgets are
+/// counted in critical steps (steps_for). `converged` is false when an increment ran out of its
+/// budget; the caller decides (the DEM node stops the run).
 StageReport generate_rev(World& w, const RevParams& p);
 
 /// Servo stiffness estimate (§4.5, U15).
@@ -74,12 +84,13 @@ enum class ServoStiffness : std::uint8_t {
 struct ServoParams {
   Vec3 target{6.25e3, 6.25e3, 12.5e3};  // [Pa] compressive targets (σ_h, σ_h, σ_v)
   std::array<bool, 3> active{true, true, true};  // [-] servo-controlled axes
-  double gain = 0.3;          // [-] α_s, under-relaxation (0.3–0.5)
-  double max_face_step = 1e-4;  // [-] face displacement per step / d_min
+  double gain = 0.375;        // [1/t_c] α_s: share of the stress error closed per critical step
+                              // (0.3 per step at dt_safety 0.8; §4.5 quotes 0.3–0.5 per step)
+  double max_face_step = 1.25e-4;  // [1/t_c] face displacement per critical step / d_min
   ServoStiffness stiffness = ServoStiffness::kAffine;
   bool coupled = true;        // [-] use the full 3×3 affine stiffness (axes coupled)
-  std::int64_t quench_every = 0;  // [steps] servo_until zeroes all velocities every n steps (0: never);
-                                  // removes the free flight that local damping cannot stop (§1.3)
+  double quench_every = 0.0;  // [t_c] servo_until zeroes all velocities every this many critical steps
+                              // (0: never); removes the free flight that local damping cannot stop (§1.3)
 };
 
 /// Effect that sets the cell strain rate each step from the last stress (kPreStep).
@@ -96,12 +107,13 @@ class PeriodicServo final : public Effect {
   Mat3 stress_{};
 };
 
-/// Servo until |s − s*| ≤ stress_tol·s* on active axes and ratio < ratio_tol for
-/// `hold_steps` consecutive checks (every 10 steps), or the budget is spent.
+/// Servo until |s − s*| ≤ stress_tol·s* on active axes and ratio < ratio_tol for `hold` critical
+/// steps in a row (checked every 8 t_c), or `budget` critical steps are spent (steps_for; the world
+/// must step on the automatic step).
 /// `overshoot` (optional) receives the largest excursion past the target, relative to the
 /// target, on the side opposite to the starting stress (0 if the target is never crossed).
 StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
-                        std::int64_t hold_steps, std::int64_t budget, double* overshoot = nullptr);
+                        double hold, double budget, double* overshoot = nullptr);
 
 /// Bond ball–ball contacts with gap in [gap_lo, gap_hi] (§4.6).
 StageReport install_bonds(World& w, double gap_lo, double gap_hi);

@@ -1,6 +1,6 @@
 // DEM world: particle store (SoA), contact families, walls, effects and the PFC cycle.
 //
-// Cycle (physics.md §1.2, PFC order): pre-step effects → timestep → law of motion with
+// Cycle (docs/theory.md §1.2, PFC order): pre-step effects → timestep → law of motion with
 // local damping → wall motion → time advance → neighbour check/rebuild → force–displacement
 // for every contact family → fixed-order sums onto balls (thread buffers, then wall contacts) → force effects (gravity) →
 // end-of-step effects.
