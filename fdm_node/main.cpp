@@ -164,7 +164,7 @@ class FdmParticipant : public node::Participant {
     if (model_.params().gravity_level > 0) v.push_back({"weight_N", weight()});
     if (coupled_) {
       // Largest relative difference so far between the force sum the continuum applied and the
-      // DEM's own total of the same step (action = reaction, physics.md 6.9).
+      // DEM's own total of the same step (action = reaction, docs/theory.md 6.9).
       v.push_back({"iface_imbalance", max_imbalance_});
       v.push_back({"iface_fz_N", iface_fz_});
     }

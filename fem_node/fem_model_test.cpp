@@ -1,5 +1,5 @@
 // fem_core against closed-form answers (no bus): an elastic column with rollers on the sides
-// and a fixed base (the FDM's verification problem, physics.md 8.11).
+// and a fixed base (the FDM's verification problem, docs/theory.md 8.11).
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -205,7 +205,7 @@ TEST(FemModel, CouplingGainMatchesDenseEigenvalue) {
 }
 
 // Interface springs against a model DEM whose contacts answer the interface displacement at once,
-// F_k = F0 - k u_{k-1} (k per point, as the DEM's contact stiffness, physics.md 6.5). The coupled
+// F_k = F0 - k u_{k-1} (k per point, as the DEM's contact stiffness, docs/theory.md 6.5). The coupled
 // static answer solves (K + k) u = F0 + f_body. Unrelaxed (omega = 1, no springs) the iteration
 // diverges when the coupling gain exceeds 1; with springs D = k it reaches the coupled answer; with
 // D >= k it converges to it geometrically; and with fixed loads

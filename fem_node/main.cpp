@@ -227,7 +227,7 @@ class FemParticipant : public node::Participant {
   // The interface update of this step (docs/continuum-solvers.md); returns omega.
   // * continuum.relaxation = omega in (0, 1]: scalar under-relaxation, u_k = u_{k-1} + omega
   //   (u_static - u_{k-1}); 1 is the unrelaxed static continuum. The DEM's contacts answer an
-  //   interface displacement du with dF = -k du within one step (k per point, physics.md 6.5), so
+  //   interface displacement du with dF = -k du within one step (k per point, docs/theory.md 6.5), so
   //   the error modes of this iteration are multiplied by 1 - omega (1 + lambda_i), lambda_i the
   //   eigenvalues of C k (C the interface compliance): contractive iff omega < 2 / (1 + lambda_max).
   //   At the first coupled step with stiffness the node estimates lambda_max (power iteration,

@@ -1,6 +1,6 @@
 """Compare the FDM verification runs of launch/studies/fdm_verify.sh with closed forms.
 
-fdm_column (physics.md 8.11): sigma_zz(z) = -rho N g0 (H - z) at zone centroids, base reaction
+fdm_column (docs/theory.md 8.11): sigma_zz(z) = -rho N g0 (H - z) at zone centroids, base reaction
 = weight, u_top = -rho N g0 H^2 / (2 M). fdm_punch (8.13): K = 2 a E / (1 - nu^2) for a
 half-space (the strongbox is a few per cent stiffer). fdm_wave (8.12): P-wave speed in a
 rollered column within 2 %. fdm_triaxial (8.15): Mohr-Coulomb peak within 1 %. Prints a Markdown table and writes it

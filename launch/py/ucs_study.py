@@ -21,7 +21,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-# Table 1 of the paper (physics.md 0.3): N_p in 4 x 4 x 2 mm; n and Z where the paper gives them.
+# Table 1 of the paper (docs/theory.md 0.3): N_p in 4 x 4 x 2 mm; n and Z where the paper gives them.
 TABLE1 = {1.0: (25835, 0.5195, 6.82), 1.3: (11781, None, None), 1.5: (7664, 0.52042, None)}
 
 
@@ -89,7 +89,7 @@ def main(study):
 
     ref = groups.get(("softbond", 1.0))
     lines = ["# UCS study: specimen (Table 1) and macro response (Fig. 1)", "",
-             "Means over seeds. Paper values from Table 1 (physics.md 0.3); '-' where the paper gives none.",
+             "Means over seeds. Paper values from Table 1 (docs/theory.md 0.3); '-' where the paper gives none.",
              "Z is the coordination number of the servoed periodic REV (bonded pairs, docs/ucs-study.md).", "",
              "| model | scale | seeds | N_p | N_p paper | dN_p | n | n paper | Z | Z paper | servo ratio |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]

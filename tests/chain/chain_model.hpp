@@ -1,5 +1,5 @@
 // 1-D chain of equal masses joined by equal springs, free at both ends, integrated with the
-// PFC centred-difference scheme (physics.md 1.2): v(t+dt/2) = v(t-dt/2) + dt F(x(t))/m,
+// PFC centred-difference scheme (docs/theory.md 1.2): v(t+dt/2) = v(t-dt/2) + dt F(x(t))/m,
 // x(t+dt) = x(t) + dt v(t+dt/2). Mass 0 starts with half-step velocity v0, the others at rest.
 //
 // Used three ways: monolithically (the reference), and split at mass 'split' between a

@@ -16,7 +16,7 @@ using cfg::Presence;
 
 namespace {
 
-// A schema shaped like the real one (physics.md §1.3 damping, §2 contact keys).
+// A schema shaped like the real one (docs/theory.md §1.3 damping, §2 contact keys).
 cfg::Schema make_schema() {
   cfg::Schema s;
   auto& r = s.root();
@@ -24,7 +24,7 @@ cfg::Schema make_schema() {
 
   auto& dem = r.section("dem", "DEM node", Presence::Required);
   dem.real("dt", "s", std::nullopt, "Time step").min(0, true);
-  dem.real("damping", "", 0.7, "Local damping coefficient alpha (physics.md 1.3)")
+  dem.real("damping", "", 0.7, "Local damping coefficient alpha (docs/theory.md 1.3)")
       .min(0)
       .max(1, true);
   dem.reals("gravity", "m/s^2", std::vector<double>{0, 0, -9.81}, "Gravity vector").length(3);

@@ -1,4 +1,4 @@
-// Bond model checks: parallel bond (physics.md §2, §8.4–8.6) and soft bond (§3, §8.7).
+// Bond model checks: parallel bond (docs/theory.md §2, §8.4–8.6) and soft bond (§3, §8.7).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Measurements, snapshots, energy bookkeeping and interface bonds (physics.md §2.6, §4.3,
+// Measurements, snapshots, energy bookkeeping and interface bonds (docs/theory.md §2.6, §4.3,
 // §4.9, §8.18).
 #include <gtest/gtest.h>
 

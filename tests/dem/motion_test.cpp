@@ -1,4 +1,4 @@
-// Physics checks of the law of motion and the linear contact (physics.md §8.1–8.3).
+// Physics checks of the law of motion and the linear contact (docs/theory.md §8.1–8.3).
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -14,7 +14,7 @@
 using namespace demfdm::dem;
 
 namespace {
-// physics.md §1.6 as written before the optimisation: the rescale by √(m2/k2) exactly.
+// docs/theory.md §1.6 as written before the optimisation: the rescale by √(m2/k2) exactly.
 void rotate_reference(Vec3& v, const Vec3& n_old, const Vec3& n_new, const Vec3& wmean, double dt) {
   const double m2 = norm2(v);
   if (m2 == 0.0) return;

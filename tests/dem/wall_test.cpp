@@ -1,4 +1,4 @@
-// Interface facets (physics.md §1.4, §6.2–6.5) and the rigid cylindrical footing.
+// Interface facets (docs/theory.md §1.4, §6.2–6.5) and the rigid cylindrical footing.
 #include <gtest/gtest.h>
 
 #include <cmath>

@@ -1,4 +1,4 @@
-// Constitutive functions (physics.md 5.4) at the stress-point level.
+// Constitutive functions (docs/theory.md 5.4) at the stress-point level.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -162,7 +162,7 @@ TEST(MohrCoulombReturn, HydrostaticTensionToApex) {
   EXPECT_EQ(mohr_coulomb_return(m, s), 0);
 }
 
-// The cut-off is limited to the apex c / tan(phi) (physics.md 5.4).
+// The cut-off is limited to the apex c / tan(phi) (docs/theory.md 5.4).
 TEST(MohrCoulombReturn, TensionLimitedToApex) {
   const auto m = make_constants(mc_material(1e5, 30.0, 0.0, 1e9));
   EXPECT_NEAR(m.tension, 1e5 / std::tan(30.0 * std::numbers::pi / 180.0), 1e-6);

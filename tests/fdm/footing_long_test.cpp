@@ -1,12 +1,12 @@
-// Long FDM checks (label `long`): Boussinesq stresses under a circular load (physics.md 8.14,
-// about 10 s) and the rigid circular footing on the finest affordable mesh (physics.md 8.13):
+// Long FDM checks (label `long`): Boussinesq stresses under a circular load (docs/theory.md 8.14,
+// about 10 s) and the rigid circular footing on the finest affordable mesh (docs/theory.md 8.13):
 // a/8 under the footing, half-width and depth 30 a (27,000 zones, about 6,800 static steps,
 // about 3 minutes on one core). Tolerance 5 % against K = 2aE/(1 - nu^2).
 // Measured (K / K_half-space):   extent 15 a   extent 30 a
 //                        a/4       1.023         0.994
 //                        a/8       1.045         1.017
 // Doubling the extent removes about 2.8 % of stiffness on both meshes: that part is the fixed
-// base and walls of the finite box (physics.md 8.13 expects a few per cent).
+// base and walls of the finite box (docs/theory.md 8.13 expects a few per cent).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -31,7 +31,7 @@ namespace demfdm::fdm {
 namespace {
 
 // sigma_zz of a uniform pressure p on the disc r <= a of a half-space at (r, depth z), from the
-// point-load solution -3 P z^3 / (2 pi R^5) (physics.md 8.14) integrated over the disc
+// point-load solution -3 P z^3 / (2 pi R^5) (docs/theory.md 8.14) integrated over the disc
 // (midpoint rule, 400 x 720); on the axis it gives -p [1 - (1 + (a/z)^2)^(-3/2)].
 double boussinesq_disc_szz(double p, double a, double r, double z) {
   const int nr = 400, nt = 720;
@@ -49,7 +49,7 @@ double boussinesq_disc_szz(double p, double a, double r, double z) {
   return -3.0 * p * z * z * z / (2.0 * std::numbers::pi) * sum * dA;
 }
 
-// Boussinesq (physics.md 8.14): uniform pressure p over the circle r <= a on the same quarter
+// Boussinesq (docs/theory.md 8.14): uniform pressure p over the circle r <= a on the same quarter
 // model (a/4 zones, extent 20 a). In the column of zones next to the axis (centroids at
 // r = 0.18 a), the zone sigma_zz matches the half-space value at the centroid within 5 % for
 // a/z in [0.2, 2] (z up to 5 a, well above the fixed base at 20 a); the quadrature itself is

@@ -1,4 +1,4 @@
-// Rigid circular footing on an elastic layer (physics.md 8.13), quarter model.
+// Rigid circular footing on an elastic layer (docs/theory.md 8.13), quarter model.
 // The footing of radius a sits at the corner x = y = 0 of the top surface; x = 0 and y = 0 are
 // symmetry planes (rollers), the far sides are rollers, the base is fixed. The footing's top
 // gridpoints (r <= a) get a uniform vertical displacement delta (smooth footing: x, y free);

@@ -1,4 +1,4 @@
-// Mesh generation and interface numbering (physics.md 5.1, 6.2).
+// Mesh generation and interface numbering (docs/theory.md 5.1, 6.2).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -59,7 +59,7 @@ double zone_volume(const Mesh& m, std::size_t z) {
 
 // The paper's default: 16 mm box, 4x4x10 mm pocket at the top centre, 0.5 mm near the pocket.
 TEST(PocketMesh, DefaultGeometryVolumeAndInterface) {
-  const MeshParams p;  // defaults (physics.md 0.3, 5.1)
+  const MeshParams p;  // defaults (docs/theory.md 0.3, 5.1)
   const Mesh m = generate_mesh(p);
   EXPECT_TRUE(m.has_pocket);
   EXPECT_NEAR(m.pocket.lo[0], 6e-3, 1e-15);

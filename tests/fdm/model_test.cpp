@@ -1,4 +1,4 @@
-// Discretisation checks (physics.md 5.3, 5.5, 8.10) and the engine API.
+// Discretisation checks (docs/theory.md 5.3, 5.5, 8.10) and the engine API.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -33,7 +33,7 @@ Mesh irregular_mesh() {
 const double kG[3][3] = {{0.3, -0.7, 0.2}, {0.5, 0.1, -0.4}, {-0.6, 0.25, 0.9}};
 
 // Patch test, part 1: v = G x at every gridpoint of an irregular graded mesh gives grad v = G
-// in every tetrahedron to 1e-12 (physics.md 8.10).
+// in every tetrahedron to 1e-12 (docs/theory.md 8.10).
 TEST(PatchTest, UniformVelocityGradientReproducedExactly) {
   Model model(irregular_mesh(), irregular_params());
   const auto x = model.positions();
@@ -51,7 +51,7 @@ TEST(PatchTest, UniformVelocityGradientReproducedExactly) {
 }
 
 // Patch test, part 2: a uniform stress gives zero net zone force at every interior gridpoint,
-// and the nodal forces do the virtual work -V sigma:G for v = G x (physics.md 5.5, 8.10).
+// and the nodal forces do the virtual work -V sigma:G for v = G x (docs/theory.md 5.5, 8.10).
 TEST(PatchTest, UniformStressBalancedInterior) {
   const Mesh mesh = irregular_mesh();
   Model model(mesh, irregular_params());
@@ -141,7 +141,7 @@ TEST(RigidBody, SmallStrainNoStress) {
 
 // Large strain: a pre-stressed block turned rigidly by 30 degrees about z; the Jaumann rate
 // carries the stress with the body, sigma = R sigma0 R^T within 1 % of |sigma0|
-// (physics.md 5.8); positions follow the rotation within 1e-3 of the size.
+// (docs/theory.md 5.8); positions follow the rotation within 1e-3 of the size.
 TEST(RigidBody, LargeStrainRotationCarriesStress) {
   ModelParams p = irregular_params();
   p.large_strain = true;
@@ -189,7 +189,7 @@ TEST(RigidBody, LargeStrainRotationCarriesStress) {
   }
 }
 
-// Critical timestep of physics.md 5.7 example: 0.5 mm cubes, E = 2 GPa, nu = 0.25,
+// Critical timestep of docs/theory.md 5.7 example: 0.5 mm cubes, E = 2 GPa, nu = 0.25,
 // rho = 1272: C_p = 1374 m/s, corner-tetrahedron height 0.289 mm, dt = 1.05e-7 s.
 TEST(Timestep, MatchesPhysicsExampleAndRefusesLargerImposedStep) {
   ModelParams p;
@@ -212,7 +212,7 @@ TEST(Timestep, MatchesPhysicsExampleAndRefusesLargerImposedStep) {
 
 // Large strain, dynamic: compressing a block by 30 % shrinks the zones; an automatic step follows
 // the critical timestep (re-checked every 100 steps), with an imposed one that became too large
-// step() refuses with std::runtime_error (physics.md 5.7, 5.8).
+// step() refuses with std::runtime_error (docs/theory.md 5.7, 5.8).
 TEST(Timestep, LargeStrainFollowsShrinkingZones) {
   auto make = [] {
     ModelParams p;
@@ -233,7 +233,7 @@ TEST(Timestep, LargeStrainFollowsShrinkingZones) {
   EXPECT_THROW(imposed.step(200), std::runtime_error);
 }
 
-// Coupling stiffness in dynamic mode (physics.md 6.5, option A): a stiff interface lowers the
+// Coupling stiffness in dynamic mode (docs/theory.md 6.5, option A): a stiff interface lowers the
 // critical timestep to 0.5 sqrt(m_g / (k + k_zone)) at the interface gridpoints; with an imposed
 // step above that, step() refuses. Static mode: the stiffness joins the inertial mass instead.
 TEST(Timestep, InterfaceStiffnessLimitsDynamicStep) {

@@ -1,4 +1,4 @@
-// Mohr-Coulomb element tests (physics.md 8.15): drained triaxial on 1 zone and 3x3x3 zones,
+// Mohr-Coulomb element tests (docs/theory.md 8.15): drained triaxial on 1 zone and 3x3x3 zones,
 // plastic flow direction for psi = 0 and psi > 0, uniaxial tension cut-off, hydrostatic tension
 // at the apex. Static mode, small strain, stresses tension positive (compression-positive
 // quantities are written with a prime).

@@ -1,4 +1,4 @@
-// Tetrahedron identities (physics.md 5.3, 8.10) and the hexahedron split (5.2).
+// Tetrahedron identities (docs/theory.md 5.3, 8.10) and the hexahedron split (5.2).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -23,7 +23,7 @@ TEST(TetIdentities, AreaVectorsSumToZeroAndGiveMinusThreeVolumeIdentity) {
     double V = tet_volume(p[0], p[1], p[2], p[3]);
     if (std::abs(V) < 1e-3) continue;
     if (V < 0.0) {
-      std::swap(p[2], p[3]);  // orientation rule of physics.md 5.3: swap two nodes
+      std::swap(p[2], p[3]);  // orientation rule of docs/theory.md 5.3: swap two nodes
       V = -V;
     }
     const auto a = tet_area_vectors(p[0], p[1], p[2], p[3]);
@@ -43,7 +43,7 @@ TEST(TetIdentities, AreaVectorsSumToZeroAndGiveMinusThreeVolumeIdentity) {
 }
 
 // Unit cube: central tetrahedra hold 1/3 of the volume, corner ones 1/6; each overlay fills the
-// cube exactly (physics.md 5.2); all 10 are positively oriented with the engine's node order.
+// cube exactly (docs/theory.md 5.2); all 10 are positively oriented with the engine's node order.
 TEST(TetIdentities, CubeSplitVolumes) {
   const Vec3 c[8] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
   double sum[2] = {0.0, 0.0};

@@ -1,4 +1,4 @@
-// Closed-form verification problems (physics.md 8.11, 8.12, 5.11, 6.9).
+// Closed-form verification problems (docs/theory.md 8.11, 8.12, 5.11, 6.9).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -16,7 +16,7 @@ struct ColumnResult {
   std::int64_t steps = 0;
 };
 
-// Elastic column under N g with lateral rollers and a fixed base (physics.md 8.11), static
+// Elastic column under N g with lateral rollers and a fixed base (docs/theory.md 8.11), static
 // mode. 20 zones over H = 10 m. Errors are relative to the closed form.
 ColumnResult run_column(double N) {
   const double E = 1e8, nu = 0.3, rho = 2000.0, H = 10.0;
@@ -102,7 +102,7 @@ TEST(SurfaceLoads, PressureAndPointLoadsOnColumn) {
   EXPECT_NEAR(settle[1], settle[0], 1e-9 * p * H / M);
 }
 
-// 1-D compression wave in a rollered column, dynamic mode, no damping (physics.md 8.12): the
+// 1-D compression wave in a rollered column, dynamic mode, no damping (docs/theory.md 8.12): the
 // half-amplitude front of a smooth base pulse travels between z = 5 m and z = 15 m at
 // C_p = sqrt((K + 4G/3)/rho) within 2 %.
 TEST(WaveSpeed, RolleredColumnCompressionWave) {
@@ -150,7 +150,7 @@ TEST(WaveSpeed, RolleredColumnCompressionWave) {
 }
 
 // Static equilibrium of the graded pocket mesh under gravity from geostatic stresses
-// (physics.md 5.9, 5.11, 6.9): R_avg falls below 1e-5, the kinetic energy has decayed, and the
+// (docs/theory.md 5.9, 5.11, 6.9): R_avg falls below 1e-5, the kinetic energy has decayed, and the
 // base reactions carry the total weight within 0.1 %.
 TEST(StaticEquilibrium, PocketMeshUnderGravity) {
   ModelParams p;
@@ -208,7 +208,7 @@ TEST(InterfaceForces, ReactionsBalanceWhenInterfaceTouchesSupports) {
   EXPECT_NEAR(r[2], 5e3 * n, 1e-3 * 5e3 * n);
 }
 
-// Option A vs option B (physics.md 6.6): the same interface load solved in dynamic mode (real
+// Option A vs option B (docs/theory.md 6.6): the same interface load solved in dynamic mode (real
 // masses, physical dt, local damping 0.8) and in static mode (mass-scaled, dt = 1) reaches the
 // same equilibrium: interface displacements agree within 1e-4 of the largest one.
 TEST(ModeCrossCheck, DynamicAndStaticReachSameEquilibrium) {
@@ -238,7 +238,7 @@ TEST(ModeCrossCheck, DynamicAndStaticReachSameEquilibrium) {
   std::printf("max |u_dyn - u_static| / max |u| = %.2e\n", diff / umax);
 }
 
-// Dead-load check on the paper's geometry (physics.md 6.9, 4.10), FDM side only, 100 g: the
+// Dead-load check on the paper's geometry (docs/theory.md 6.9, 4.10), FDM side only, 100 g: the
 // 16 mm box with the 4 x 4 x 10 mm pocket (1 mm zones next to it), geostatic stresses from the
 // surface z = 16 mm, and the DEM block replaced by the forces it would exert through the
 // interface triangles: rho N g0 depth on the floor, K0 times that on the walls. The model starts
@@ -246,7 +246,7 @@ TEST(ModeCrossCheck, DynamicAndStaticReachSameEquilibrium) {
 // zones plus the DEM block, (rho_b V_DEM + rho V_FDM) N g0, within 0.1 %.
 TEST(DeadLoad, PaperGeometryWithDemWeightOnInterface) {
   const double rho = 1272.0, N = 100.0, nu = 0.25;
-  ModelParams p;  // default mesh geometry (physics.md 0.3, 5.1)
+  ModelParams p;  // default mesh geometry (docs/theory.md 0.3, 5.1)
   p.mesh.size_near = 1e-3;
   p.mesh.size_far = 3e-3;
   p.materials = {MaterialGroup{elastic(2e9, nu, rho), std::nullopt}};
@@ -281,7 +281,7 @@ TEST(DeadLoad, PaperGeometryWithDemWeightOnInterface) {
               model.ratios().average, static_cast<long long>(model.step_count()), model.base_reaction()[2] / weight - 1.0);
 }
 
-// Coupling forces (physics.md 6.4, 6.9): a uniform pressure p applied through the interface
+// Coupling forces (docs/theory.md 6.4, 6.9): a uniform pressure p applied through the interface
 // triangles (area/3 to each vertex, towards the FDM) is carried to the base: the vertical base
 // reaction equals p times the pocket bottom area within 0.1 %, and the pocket floor settles.
 TEST(InterfaceForces, PressureOnPocketReachesBase) {

@@ -1,4 +1,4 @@
-// Constitutive laws (physics.md 5.4).
+// Constitutive laws (docs/theory.md 5.4).
 #include "demfdm/fdm/constitutive.hpp"
 
 #include <algorithm>
@@ -203,7 +203,7 @@ std::uint8_t mohr_coulomb_return(const MaterialConstants& m, double* s) {
   const double h = sig[2] - m.tension + m.alpha_p * (sig[0] - m.sigma_p);
   std::uint8_t state = 0;
   if (fs < 0.0 && h <= 0.0) {
-    // Shear failure, flow rule g^s = sigma1 - sigma3 N_psi (physics.md 5.4).
+    // Shear failure, flow rule g^s = sigma1 - sigma3 N_psi (docs/theory.md 5.4).
     const double A1 = a1 - a2 * m.n_psi, B = a2 * (1.0 - m.n_psi), A3 = a2 - a1 * m.n_psi;
     const double P = A1 - A3 * m.n_phi;
     const double s1 = sig[0], s2 = sig[1], s3 = sig[2];
@@ -235,7 +235,7 @@ std::uint8_t mohr_coulomb_return(const MaterialConstants& m, double* s) {
     }
     state = kShearNow;
   } else if (ft < 0.0 && h > 0.0) {
-    // Tensile failure, flow rule g^t = -sigma3 (physics.md 5.4).
+    // Tensile failure, flow rule g^t = -sigma3 (docs/theory.md 5.4).
     const double t = m.tension;
     const double s1 = sig[0], s2 = sig[1], s3 = sig[2];
     const double l3 = (s3 - t) / a1;

@@ -1,5 +1,5 @@
-// Structured mesh generation with an open pocket (physics.md 5.1) and the coupling interface
-// faces (physics.md 6.2). See mesh.hpp for the numbering rules.
+// Structured mesh generation with an open pocket (docs/theory.md 5.1) and the coupling interface
+// faces (docs/theory.md 6.2). See mesh.hpp for the numbering rules.
 #include "demfdm/fdm/mesh.hpp"
 
 #include <algorithm>

@@ -16,7 +16,7 @@ namespace {
 
 // An imposed dt may exceed the critical one by this relative round-off (a caller dividing a
 // coupling step into n sub-steps lands within a few ulps of it); the safety factor of
-// physics.md 5.7 covers it.
+// docs/theory.md 5.7 covers it.
 constexpr double kDtTolerance = 1.0 + 1e-9;
 
 struct ElasticLaw {
@@ -150,8 +150,8 @@ void Model::compute_geometry(const std::vector<double>& pos) {
 
 void Model::compute_masses() {
   // Gravitational mass: rho V_t / 4 per tetrahedron node, averaged over the 2 overlays
-  // (physics.md 5.5). Static inertial mass: alpha1 max_f |a_f|^2 / (9 V_t) per tetrahedron
-  // node, averaged over the overlays (physics.md 5.6, U10). With |a_f| = 3V|g_f|:
+  // (docs/theory.md 5.5). Static inertial mass: alpha1 max_f |a_f|^2 / (9 V_t) per tetrahedron
+  // node, averaged over the overlays (docs/theory.md 5.6, U10). With |a_f| = 3V|g_f|:
   // alpha1 * V * max_l |g_l|^2.
   gmass_.assign(n_, 0.0);
   std::vector<double> smass(n_, 0.0);
@@ -173,7 +173,7 @@ void Model::compute_masses() {
       }
     }
   }
-  zone_stiffness_ = smass;  // diagonal zone stiffness per gridpoint [N/m] (physics.md 6.5)
+  zone_stiffness_ = smass;  // diagonal zone stiffness per gridpoint [N/m] (docs/theory.md 6.5)
   if (params_.mode == Mode::kStatic) {
     mass_base_.resize(n_);
     for (std::size_t g = 0; g < n_; ++g) mass_base_[g] = params_.static_mass_factor * smass[g];
@@ -191,7 +191,7 @@ void Model::rebuild_external_forces() {
 double Model::critical_timestep() const { return std::min(zone_critical_dt_, interface_critical_dt_); }
 
 void Model::update_interface_critical_timestep() {
-  // Coupling stiffness (dynamic mode, physics.md 6.5 option A): dt <= 0.5 sqrt(m_g / (k_gp +
+  // Coupling stiffness (dynamic mode, docs/theory.md 6.5 option A): dt <= 0.5 sqrt(m_g / (k_gp +
   // k_zone)) at the interface gridpoints that carry contact stiffness. O(n_if).
   interface_critical_dt_ = std::numeric_limits<double>::infinity();
   if (params_.mode != Mode::kDynamic) return;
@@ -204,7 +204,7 @@ void Model::update_interface_critical_timestep() {
 }
 
 double Model::zone_critical_timestep() const {
-  // dt = safety * min_t h_t / C_p, h_t = 3V / max|a| = 1 / max_l |g_l| (physics.md 5.7).
+  // dt = safety * min_t h_t / C_p, h_t = 3V / max|a| = 1 / max_l |g_l| (docs/theory.md 5.7).
   double best = std::numeric_limits<double>::infinity();
   std::vector<double> local;
   const std::vector<double>* geom = &geom_;
@@ -294,7 +294,7 @@ void Model::zone_kernel(std::span<const std::int32_t> zones, bool update_stress)
         tet_gradient(vz, kZoneTets[t], G + 10 * t, L[t]);
         tr[t] = L[t][0] + L[t][4] + L[t][8];
       }
-      // Mixed discretisation: volume-weighted mean volumetric strain rate (physics.md 5.3).
+      // Mixed discretisation: volume-weighted mean volumetric strain rate (docs/theory.md 5.3).
       double avg[2];
       if constexpr (ZoneAvg) {
         double vs = 0.0, ts = 0.0;
@@ -326,7 +326,7 @@ void Model::zone_kernel(std::span<const std::int32_t> zones, bool update_stress)
         de[4] = 0.5 * (l[5] + l[7]) * dt;
         de[5] = 0.5 * (l[2] + l[6]) * dt;
         if constexpr (Large) {
-          // Jaumann correction sigma += (w sigma - sigma w) dt, w = (L - L^T)/2 (physics.md 5.8).
+          // Jaumann correction sigma += (w sigma - sigma w) dt, w = (L - L^T)/2 (docs/theory.md 5.8).
           const double w01 = 0.5 * (l[1] - l[3]) * dt, w02 = 0.5 * (l[2] - l[6]) * dt,
                        w12 = 0.5 * (l[5] - l[7]) * dt;
           const double sxx = s[0], syy = s[1], szz = s[2], sxy = s[3], syz = s[4], sxz = s[5];
@@ -343,7 +343,7 @@ void Model::zone_kernel(std::span<const std::int32_t> zones, bool update_stress)
       plastic[z] = static_cast<std::uint8_t>((plastic[z] & (kShearPast | kTensionPast)) | now | (now << 2));
     }
 
-    // Nodal forces f^l = -V sigma g_l, averaged over the two overlays (physics.md 5.5).
+    // Nodal forces f^l = -V sigma g_l, averaged over the two overlays (docs/theory.md 5.5).
     double f[8][3] = {};
     for (int t = 0; t < kTetsPerZone; ++t) {
       const double* g = G + 10 * t;
@@ -408,7 +408,7 @@ void Model::step() {
   if (dt_imposed_ && dt_ > critical_timestep() * kDtTolerance) {
     std::ostringstream os;
     os << "step: the imposed dt = " << dt_ << " s exceeds the critical timestep " << critical_timestep()
-       << " s (coupling stiffness or large-strain deformation lowered it, physics.md 5.7, 6.5); "
+       << " s (coupling stiffness or large-strain deformation lowered it, docs/theory.md 5.7, 6.5); "
        << "call set_timestep() with a smaller value";
     throw std::runtime_error(os.str());
   }
@@ -422,7 +422,7 @@ void Model::step() {
       for (int d = 0; d < 3; ++d) fzone_[3 * mesh_.interface_points[l] + d] += fcouple_[3 * l + d];
 
   const auto t1 = Clock::now();
-  // Law of motion with local damping (physics.md 5.6).
+  // Law of motion with local damping (docs/theory.md 5.6).
   const double dt = dt_;
   const double alpha = params_.damping;
   const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(n_);
@@ -455,7 +455,7 @@ void Model::step() {
   ++step_;
   time_ += dt_;
   if (params_.large_strain && params_.mode == Mode::kDynamic && step_ % kTimestepCheckInterval == 0) {
-    // Zones deform in large strain: refresh the critical step (physics.md 5.7). An automatic
+    // Zones deform in large strain: refresh the critical step (docs/theory.md 5.7). An automatic
     // step follows it; an imposed one that became too large stops the next step().
     zone_critical_dt_ = zone_critical_timestep();
     if (!dt_imposed_) dt_ = critical_timestep();
@@ -563,12 +563,12 @@ void Model::set_interface_stiffness(std::span<const double> stiffness) {
       throw std::invalid_argument("set_interface_stiffness: expected finite values >= 0 N/m, found " + std::to_string(k));
   std::copy(stiffness.begin(), stiffness.end(), kcouple_.begin());
   if (params_.mode == Mode::kStatic) {
-    // m_I += k dt^2 with dt = 1 (physics.md 6.5, option B).
+    // m_I += k dt^2 with dt = 1 (docs/theory.md 6.5, option B).
     mass_ = mass_base_;
     for (std::size_t l = 0; l < kcouple_.size(); ++l) mass_[mesh_.interface_points[l]] += kcouple_[l];
     return;
   }
-  // Dynamic mode: the stiffer interface may lower the stable step (physics.md 6.5, U15). An
+  // Dynamic mode: the stiffer interface may lower the stable step (docs/theory.md 6.5, U15). An
   // automatic step follows; an imposed one is checked by step().
   update_interface_critical_timestep();
   if (!dt_imposed_) dt_ = critical_timestep();
@@ -599,7 +599,7 @@ void Model::set_geostatic_stress(const GeostaticStress& gs) {
     for (int k = 0; k < 8; ++k) zc += x_[3 * mesh_.zones[8 * z + k] + 2] / 8.0;
     const Material& mat = params_.materials[zone_material_[z]].material;
     const double k0 = std::isnan(gs.k0) ? mat.poisson / (1.0 - mat.poisson) : gs.k0;
-    // sigma_zz = -rho N g0 (z_top - z_c), sigma_h = K0 sigma_zz (physics.md 5.9, tension positive).
+    // sigma_zz = -rho N g0 (z_top - z_c), sigma_h = K0 sigma_zz (docs/theory.md 5.9, tension positive).
     const double szz = -mat.density * gl * (ztop - zc);
     for (int t = 0; t < kTetsPerZone; ++t) {
       double* s = &stress_[60 * z + 6 * t];

@@ -1,4 +1,4 @@
-// Constitutive updates per tetrahedron, small-strain increments (physics.md 5.4).
+// Constitutive updates per tetrahedron, small-strain increments (docs/theory.md 5.4).
 // Stateless inline functions over small constant structs: the zone kernels, the element tests
 // and the unit tests all call these same functions.
 //
@@ -15,7 +15,7 @@
 
 namespace demfdm::fdm {
 
-// Plastic state bits per zone (physics.md 5.4: "shear now / tension now / past").
+// Plastic state bits per zone (docs/theory.md 5.4: "shear now / tension now / past").
 enum PlasticState : std::uint8_t {
   kShearNow = 1,
   kTensionNow = 2,
@@ -23,7 +23,7 @@ enum PlasticState : std::uint8_t {
   kTensionPast = 8,
 };
 
-// Derived constants of one material (physics.md 5.4).
+// Derived constants of one material (docs/theory.md 5.4).
 struct MaterialConstants {
   double bulk = 0.0;       // [Pa] K = E / (3(1-2 nu))
   double shear = 0.0;      // [Pa] G = E / (2(1+nu))
@@ -69,12 +69,12 @@ void symmetric_eigen_fast(const double* s, std::array<double, 3>& val, std::arra
 // Principal values only, ascending (closed form, for the cheap elastic check).
 std::array<double, 3> principal_values(const double* s);
 
-// Mohr-Coulomb with tension cut-off (FLAC3D form, physics.md 5.4): elastic trial, then
+// Mohr-Coulomb with tension cut-off (FLAC3D form, docs/theory.md 5.4): elastic trial, then
 // return in principal space, eigenvectors unchanged. Returns kShearNow / kTensionNow / 0.
-// Shear return: the physics.md 5.4 rule; if it reverses the order of sigma2 and sigma3
+// Shear return: the docs/theory.md 5.4 rule; if it reverses the order of sigma2 and sigma3
 // (triaxial-compression edge) or of sigma1 and sigma2 (triaxial-extension edge), the return is
 // redone with both planes active (same flow rule on each), so edge states end on the surface.
-// Tension return: the physics.md 5.4 rule on sigma3; if sigma2 (then sigma1) still exceeds
+// Tension return: the docs/theory.md 5.4 rule on sigma3; if sigma2 (then sigma1) still exceeds
 // sigma^t after it, the same associated rule is applied jointly to those directions (the
 // corner and apex of the cut-off), so a hydrostatic tension state maps to sigma^t I.
 std::uint8_t mohr_coulomb_return(const MaterialConstants& m, double* s);

@@ -1,12 +1,12 @@
 // Structured hexahedral mesh with an optional open pocket for the DEM block
-// (physics.md 5.1, 6.2).
+// (docs/theory.md 5.1, 6.2).
 //
 // Numbering (stable and deterministic):
 //  * gridpoints: lexicographic in (k, j, i) of the structured grid, skipping grid nodes that no
 //    zone uses (those strictly inside the pocket);
 //  * zones: lexicographic in (k, j, i) over the kept cells; corners in unit-cube order
 //    0:(0,0,0) 1:(1,0,0) 2:(1,1,0) 3:(0,1,0) 4:(0,0,1) 5:(1,0,1) 6:(1,1,1) 7:(0,1,1)
-//    (physics.md 5.2), which is also the VTK_HEXAHEDRON order;
+//    (docs/theory.md 5.2), which is also the VTK_HEXAHEDRON order;
 //  * interface: the zone faces shared with the pocket. Interface gridpoints are listed in
 //    ascending gridpoint id; each quad face gives two triangles (q0,q1,q2), (q0,q2,q3) with the
 //    fixed diagonal q0-q2, wound so that the normal points out of the zone, i.e. into the

@@ -1,7 +1,7 @@
-// Explicit Lagrangian finite-difference continuum, FLAC3D style (physics.md section 5).
+// Explicit Lagrangian finite-difference continuum, FLAC3D style (docs/theory.md section 5).
 //
 // Design notes
-//  * One step (physics.md 5.6, 6.8 steps 3 and 8): law of motion for every gridpoint with the
+//  * One step (docs/theory.md 5.6, 6.8 steps 3 and 8): law of motion for every gridpoint with the
 //    force sum of the previous step (zone forces + gravity + applied loads + coupling forces),
 //    then strain rates -> stresses -> zone nodal forces for the next step.
 //  * Zones are processed by a templated kernel per (constitutive law, strain mode,
@@ -11,9 +11,9 @@
 //    for any OpenMP thread count.
 //  * Small strain (default): tetrahedron geometry (barycentric gradients and volumes) is
 //    computed once from the reference positions; gridpoint positions are still advanced every
-//    step (x = x0 + u) so that the coupling sees the moving interface (physics.md 5.8).
+//    step (x = x0 + u) so that the coupling sees the moving interface (docs/theory.md 5.8).
 //    Large strain recomputes the geometry from the current positions every step and applies
-//    the Jaumann correction (physics.md 5.8).
+//    the Jaumann correction (docs/theory.md 5.8).
 //  * Stresses are stored per tetrahedron (10 per zone), tension positive, as
 //    (xx, yy, zz, xy, yz, xz).
 #pragma once
@@ -33,7 +33,7 @@ namespace demfdm::fdm {
 // Velocity-fixity bits per gridpoint.
 enum Fix : std::uint8_t { kFixX = 1, kFixY = 2, kFixZ = 4, kFixAll = 7 };
 
-// Unbalanced-force ratios (physics.md 5.11), computed over free velocity components.
+// Unbalanced-force ratios (docs/theory.md 5.11), computed over free velocity components.
 struct Ratios {
   double average = 0.0;  // [-] R_avg = sum |F_unb| / sum F_app
   double max = 0.0;      // [-] R_max = max |F_unb| / mean F_app
@@ -74,7 +74,7 @@ class Model {
   [[nodiscard]] double time() const { return time_; }  // [s]; static mode: steps
   [[nodiscard]] double timestep() const { return dt_; }  // [s] in use (1 in static mode)
   // [s] stable timestep (cached, O(1)): the smaller of safety * min_t h_t / C_p over all
-  // tetrahedra (physics.md 5.7) and the coupling-stiffness limit (see set_interface_stiffness).
+  // tetrahedra (docs/theory.md 5.7) and the coupling-stiffness limit (see set_interface_stiffness).
   // The zone part is computed at construction and, in large-strain dynamic runs, refreshed
   // every 100 steps from the deformed geometry.
   [[nodiscard]] double critical_timestep() const;
@@ -91,7 +91,7 @@ class Model {
   void fix_velocity(std::int32_t gp, std::uint8_t mask, const Vec3& velocity = {0.0, 0.0, 0.0});
   void free_velocity(std::int32_t gp, std::uint8_t mask);
   // Fixed base (all components at z = 0) and rollers on x = 0, x = L, y = 0, y = W
-  // (physics.md 5.10). Top free.
+  // (docs/theory.md 5.10). Top free.
   void apply_strongbox_boundary();
   // Gridpoint ids on the plane coordinate[axis] == value of the structured grid (value must
   // be a grid line).
@@ -105,14 +105,14 @@ class Model {
   void add_face_pressure(std::span<const BoundaryFace> faces, double pressure);
   void clear_applied_loads();
 
-  // ---- coupling interface (physics.md 6.2, 6.4, 6.5) ------------------------------------------
+  // ---- coupling interface (docs/theory.md 6.2, 6.4, 6.5) ------------------------------------------
   [[nodiscard]] std::span<const std::int32_t> interface_gridpoints() const { return mesh_.interface_points; }
   // [nt,3] indices into interface_gridpoints(), normal into the pocket.
   [[nodiscard]] std::span<const std::int32_t> interface_triangles() const { return mesh_.interface_triangles; }
   // External forces [N] on the interface gridpoints, [n_if,3]; added to the force sum of every
   // later step until replaced.
   void set_interface_forces(std::span<const double> forces);
-  // Stiffness [N/m] per interface gridpoint [n_if] (physics.md 6.5), O(n_if), may be called
+  // Stiffness [N/m] per interface gridpoint [n_if] (docs/theory.md 6.5), O(n_if), may be called
   // every step. Static mode: added to the inertial mass (m_I += k dt^2, dt = 1). Dynamic mode:
   // critical_timestep() also obeys dt <= 0.5 sqrt(m_g / (k + k_zone)) at those gridpoints; an
   // automatic dt follows it, an imposed dt is checked by step().
@@ -122,7 +122,7 @@ class Model {
   [[nodiscard]] std::vector<double> interface_displacements() const;  // [m] [n_if,3]
 
   // ---- stresses and state -------------------------------------------------------------------
-  void set_geostatic_stress(const GeostaticStress& g);  // physics.md 5.9
+  void set_geostatic_stress(const GeostaticStress& g);  // docs/theory.md 5.9
   void set_uniform_stress(const std::array<double, 6>& sigma);  // every tetrahedron
   void set_zone_stress(std::int32_t zone, const std::array<double, 6>& sigma);
   void reset_displacements();                       // u = 0 (positions unchanged)

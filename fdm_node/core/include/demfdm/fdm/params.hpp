@@ -1,4 +1,4 @@
-// Parameters of the FDM engine (physics.md section 5). Plain structs with documented
+// Parameters of the FDM engine (docs/theory.md section 5). Plain structs with documented
 // defaults and units; the scene reader maps its keys onto these fields. Validation lives in
 // validate() (throws std::invalid_argument naming the field, the range and the value found).
 #pragma once
@@ -11,7 +11,7 @@
 
 namespace demfdm::fdm {
 
-inline constexpr double kStandardGravity = 9.81;  // [m/s^2] g0 (physics.md 0.1)
+inline constexpr double kStandardGravity = 9.81;  // [m/s^2] g0 (docs/theory.md 0.1)
 inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 
 // Axis-aligned box [lo, hi] used for the inner (pocket / refinement) region and for
@@ -25,23 +25,23 @@ struct Box {
   }
 };
 
-// Structured hexahedral mesh of the box [0,L]x[0,W]x[0,H] (physics.md 5.1).
+// Structured hexahedral mesh of the box [0,L]x[0,W]x[0,H] (docs/theory.md 5.1).
 // Grid lines pass through the faces of an inner box; zones have size `size_near` inside and
 // next to it and grow by `growth` per zone up to `size_far` towards the outer boundary.
 // With `pocket` the inner box is left open (the DEM block) and its faces shared with zones
-// form the coupling interface (physics.md 6.2).
+// form the coupling interface (docs/theory.md 6.2).
 struct MeshParams {
-  double length = 16e-3;  // [m] L, extent in x (physics.md 0.3)
-  double width = 16e-3;   // [m] W, extent in y (physics.md 0.3)
-  double height = 16e-3;  // [m] H, extent in z (physics.md 0.3)
-  // [m] L_D, W_D, H_D of the inner box (physics.md 0.3: 4 x 4 x 10 mm). All three zero: no
+  double length = 16e-3;  // [m] L, extent in x (docs/theory.md 0.3)
+  double width = 16e-3;   // [m] W, extent in y (docs/theory.md 0.3)
+  double height = 16e-3;  // [m] H, extent in z (docs/theory.md 0.3)
+  // [m] L_D, W_D, H_D of the inner box (docs/theory.md 0.3: 4 x 4 x 10 mm). All three zero: no
   // inner box, the grid is uniform with spacing <= size_near on every axis.
   std::array<double, 3> inner_size{4e-3, 4e-3, 10e-3};
   // [m] minimum corner of the inner box; NaN components take the default position: centred
-  // in x and y, top face flush with z = H (physics.md 5.1 [RECON]).
+  // in x and y, top face flush with z = H (docs/theory.md 5.1 [RECON]).
   std::array<double, 3> inner_origin{kNaN, kNaN, kNaN};
   bool pocket = true;        // [-] true: inner box left open for the DEM block; false: meshed
-  double size_near = 0.5e-3; // [m] zone size inside and next to the inner box (physics.md 5.1)
+  double size_near = 0.5e-3; // [m] zone size inside and next to the inner box (docs/theory.md 5.1)
   double size_far = 2e-3;    // [m] largest zone size towards the outer boundary
   double growth = 1.2;       // [-] zone-to-zone size ratio outside the inner box, in [1, 2]
 
@@ -60,19 +60,19 @@ struct MeshParams {
   }
 };
 
-// Constitutive model of a zone group (physics.md 5.4).
+// Constitutive model of a zone group (docs/theory.md 5.4).
 enum class Constitutive : std::uint8_t { kElastic = 0, kMohrCoulomb = 1 };
 
 struct Material {
   Constitutive model = Constitutive::kElastic;  // [-] elastic or Mohr-Coulomb with tension cut-off
-  double density = 1272.0;    // [kg/m^3] rho_b = (1-n) rho_s (physics.md 0.3, 7.4)
-  double young = 2.0e9;       // [Pa] E (physics.md 5.7 example; calibrate from the DEM, U9)
+  double density = 1272.0;    // [kg/m^3] rho_b = (1-n) rho_s (docs/theory.md 0.3, 7.4)
+  double young = 2.0e9;       // [Pa] E (docs/theory.md 5.7 example; calibrate from the DEM, U9)
   double poisson = 0.25;      // [-] nu, in (-1, 0.5)
   double cohesion = 0.0;      // [Pa] c (Mohr-Coulomb only)
   double friction_deg = 30.0; // [deg] phi, in [0, 90) (Mohr-Coulomb only)
   double dilation_deg = 0.0;  // [deg] psi, in [0, phi] (Mohr-Coulomb only)
   // [Pa] tension cut-off sigma^t (tension positive); NaN: the apex value c/tan(phi); values
-  // above the apex are limited to it (physics.md 5.4).
+  // above the apex are limited to it (docs/theory.md 5.4).
   double tension = kNaN;
 };
 
@@ -83,15 +83,15 @@ struct MaterialGroup {
   std::optional<Box> region{};  // [m] nullopt: every zone
 };
 
-// Integration mode (physics.md 5.6, 6.6).
+// Integration mode (docs/theory.md 5.6, 6.6).
 enum class Mode : std::uint8_t {
   kDynamic = 0,  // real (gravitational) masses, physical timestep (option A)
   kStatic = 1,   // mass-scaled, dt = 1, velocities are displacement per step (option B)
 };
 
-// Where the mixed-discretisation volumetric strain rate is averaged (physics.md 5.3, U15).
+// Where the mixed-discretisation volumetric strain rate is averaged (docs/theory.md 5.3, U15).
 enum class VolumetricAveraging : std::uint8_t {
-  kPerOverlay = 0,  // over the 5 tetrahedra of each overlay (physics.md 5.3, default)
+  kPerOverlay = 0,  // over the 5 tetrahedra of each overlay (docs/theory.md 5.3, default)
   kPerZone = 1,     // over all 10 tetrahedra of the zone
 };
 
@@ -101,15 +101,15 @@ struct ModelParams {
   // Material defaults everywhere (built in place: avoids a GCC 12 -Wmaybe-uninitialized false
   // positive on copying an initializer_list that holds a std::optional).
   std::vector<MaterialGroup> materials = std::vector<MaterialGroup>(1);
-  Mode mode = Mode::kDynamic;                        // [-] physics.md 5.6
-  double damping = 0.8;         // [-] local damping alpha_F in [0, 1) (physics.md 5.6)
+  Mode mode = Mode::kDynamic;                        // [-] docs/theory.md 5.6
+  double damping = 0.8;         // [-] local damping alpha_F in [0, 1) (docs/theory.md 5.6)
   double gravity_level = 1.0;   // [-] N, gravity (0, 0, -N g0); 0 switches gravity off (0.1)
-  bool large_strain = false;    // [-] recompute geometry each step + Jaumann rate (physics.md 5.8)
-  VolumetricAveraging averaging = VolumetricAveraging::kPerOverlay;  // physics.md 5.3, U15
-  double timestep_safety = 0.5; // [-] dt = safety * min_t h_t / C_p, in (0, 1] (physics.md 5.7)
-  // [-] multiplier on the static-mode inertial mass rule (physics.md 5.6, U10), >= 1 is safe
+  bool large_strain = false;    // [-] recompute geometry each step + Jaumann rate (docs/theory.md 5.8)
+  VolumetricAveraging averaging = VolumetricAveraging::kPerOverlay;  // docs/theory.md 5.3, U15
+  double timestep_safety = 0.5; // [-] dt = safety * min_t h_t / C_p, in (0, 1] (docs/theory.md 5.7)
+  // [-] multiplier on the static-mode inertial mass rule (docs/theory.md 5.6, U10), >= 1 is safe
   double static_mass_factor = 1.0;
-  bool strongbox_boundary = true;  // [-] fixed base, rollers on the 4 sides (physics.md 5.10)
+  bool strongbox_boundary = true;  // [-] fixed base, rollers on the 4 sides (docs/theory.md 5.10)
   int history_every = 0;        // [steps] append a HistoryRecord every n steps; 0: never
   // [-] loops over fewer zones / gridpoints than this run on one thread (a parallel region
   // costs a barrier, more than a small model's step on a busy machine). Results do not depend
@@ -117,7 +117,7 @@ struct ModelParams {
   int parallel_threshold = 4096;
 };
 
-// Geostatic initial stress (physics.md 4.10, 5.9): sigma_zz = -rho N g0 (z_top - z_c),
+// Geostatic initial stress (docs/theory.md 4.10, 5.9): sigma_zz = -rho N g0 (z_top - z_c),
 // sigma_xx = sigma_yy = K0 sigma_zz, no shear (tension positive).
 struct GeostaticStress {
   double z_top = kNaN;  // [m] ground surface; NaN: top of the mesh

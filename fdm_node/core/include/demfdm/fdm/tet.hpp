@@ -1,7 +1,7 @@
-// Tetrahedron geometry for the mixed discretisation (physics.md 5.2, 5.3).
+// Tetrahedron geometry for the mixed discretisation (docs/theory.md 5.2, 5.3).
 //
 // For a positively oriented tetrahedron (p1..p4) with volume V, the barycentric gradients
-// g_l = grad(lambda_l) relate to the outward face area vectors of physics.md 5.3 by
+// g_l = grad(lambda_l) relate to the outward face area vectors of docs/theory.md 5.3 by
 // a^(l) = -3V g_l. So
 //   grad v = -(1/3V) sum_l v^l (x) a^(l) = sum_l v^l (x) g_l = sum_{l=2..4} (v^l - v^1) (x) g_l,
 //   f^l = (1/3) sigma a^(l) = -V sigma g_l,    sum_l g_l = 0.
@@ -14,7 +14,7 @@ namespace demfdm::fdm {
 
 using Vec3 = std::array<double, 3>;
 
-// Hexahedron -> 2 overlays x 5 tetrahedra (physics.md 5.2), local corner ids in unit-cube
+// Hexahedron -> 2 overlays x 5 tetrahedra (docs/theory.md 5.2), local corner ids in unit-cube
 // order, each ordered so that its signed volume is positive on a right-handed hexahedron.
 // Tetrahedra 0..4 form overlay A (central one first), 5..9 overlay B.
 inline constexpr int kTetsPerZone = 10;
@@ -29,7 +29,7 @@ inline Vec3 cross(const Vec3& a, const Vec3& b) {
 }
 inline double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-// Signed volume (1/6)(p2-p1).((p3-p1)x(p4-p1)) (physics.md 5.3).
+// Signed volume (1/6)(p2-p1).((p3-p1)x(p4-p1)) (docs/theory.md 5.3).
 inline double tet_volume(const Vec3& p1, const Vec3& p2, const Vec3& p3, const Vec3& p4) {
   return dot(sub(p2, p1), cross(sub(p3, p1), sub(p4, p1))) / 6.0;
 }
@@ -48,7 +48,7 @@ inline void tet_gradients(const Vec3& p1, const Vec3& p2, const Vec3& p3, const 
   out[9] = six_v / 6.0;
 }
 
-// Outward area vectors a^(1..4) of physics.md 5.3, computed face by face:
+// Outward area vectors a^(1..4) of docs/theory.md 5.3, computed face by face:
 // a^(l) = 1/2 (p_j - p_i) x (p_k - p_i) over the face opposite l, flipped if needed so that
 // a^(l).(p_l - p_i) < 0. Independent of tet_gradients (tests compare the two).
 inline std::array<Vec3, 4> tet_area_vectors(const Vec3& p1, const Vec3& p2, const Vec3& p3, const Vec3& p4) {
