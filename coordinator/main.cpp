@@ -14,9 +14,12 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <optional>
 #include <sstream>
+#include <variant>
 
 #include "common/log/log.hpp"
+#include "coordinator/core/quasi_static.hpp"
 #include "coordinator/core/runner.hpp"
 #include "coordinator/core/summary.hpp"
 #include "messages/node_runtime.hpp"
@@ -121,6 +124,52 @@ coord::RunInfo run_info(const config::Scene& scene, const proto::CoordinatorEndp
   return info;
 }
 
+// The default of a key of one [[continuum.material]] (a scene without that array gets one group
+// with the defaults).
+double material_default(const char* key) {
+  const auto* mat = schema::scene_schema().root().find("continuum")->section->find("material")->section;
+  return std::get<double>(*mat->find(key)->param->def);
+}
+
+// Footing speed of a penetrate stage (docs/theory.md §7.1): v = I L_p / (d50 sqrt(rho_s / P)),
+// L_p = plastic_zone_ratio D_f, with d50 of the upscaled PSD (d50 times the upscaling factor),
+// times speed_factor.
+double stage_speed(const config::Scene& scene, const schema::Stage& st) {
+  const auto& v = st.view;
+  return coord::footing_speed(v.real("inertial_number"), v.real("plastic_zone_ratio"), scene.real("dem.footing.diameter"),
+                              scene.real("dem.specimen.d50"), scene.real("dem.specimen.scale"), scene.real("dem.density"),
+                              v.real("mean_stress"), v.real("speed_factor"));
+}
+
+// Rate and quasi-static measures of a penetrate stage (coordinator/core/quasi_static.hpp).
+// E, nu: the first [[continuum.material]] with a continuum, else the stage's rock_young and 1/3;
+// rho_b: dem.specimen.bulk_density, else 0.48 rho_s (as the DEM's sigma_v); sigma_c: the tensile
+// strength of the ball-ball bond (none for linear contacts or an unbreakable parallel bond).
+coord::RateMeasures stage_rates(const config::Scene& scene, const schema::Stage& st) {
+  const auto& v = st.view;
+  double young = v.real("rock_young"), poisson = 1.0 / 3.0;
+  if (scene.has("continuum")) {
+    if (scene.count("continuum.material") > 0) {
+      auto m = scene.at("continuum.material", 0);
+      young = m.real("young");
+      poisson = m.real("poisson");
+    } else {
+      young = material_default("young");
+      poisson = material_default("poisson");
+    }
+  }
+  double rho_b = scene.real("dem.specimen.bulk_density");
+  if (rho_b < 0) rho_b = 0.48 * scene.real("dem.density");
+  std::optional<double> sigma_c;
+  const auto& model = scene.string("dem.ball_ball.model");
+  if (model == "softbond") sigma_c = scene.real("dem.ball_ball.sb_ten");
+  if (model == "pbond" && scene.real("dem.ball_ball.pb_ten") >= 0) sigma_c = scene.real("dem.ball_ball.pb_ten");
+  double speed = stage_speed(scene, st);
+  return coord::rate_measures(speed, v.real("inertial_number"),
+                              coord::ramp_time(v.real("ramp_depth_ratio"), scene.real("dem.footing.diameter"), speed),
+                              young, poisson, rho_b, sigma_c, v.real("quasi_static_limit"));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -196,21 +245,32 @@ int main(int argc, char** argv) {
     BusDriver driver(*ep);
     coord::Runner runner(schema::stages(scene), driver, dt,
                          scene.has("coupling") ? scene.integer("coupling.window") : 1);
-    // Footing kinematics (physics.md 7.1): v = I L_p / (d50 sqrt(rho_s / P)), L_p = ratio D_f,
-    // with d50 of the upscaled PSD (d50 times the upscaling factor).
-    runner.set_kinematics([&scene](const schema::Stage& st, std::int64_t, double) -> std::vector<double> {
+    // Footing kinematics (docs/theory.md §7.1): the rate-rule speed v (stage_speed), ramped up
+    // from 0 over t_r = 2 ramp_depth_ratio D_f / v at the stage's start, evaluated at the middle
+    // of the grant's steps in the stage's own time (steps are global over the run). The rate
+    // and quasi-static measures are logged at each penetrate stage's first grant.
+    std::map<std::size_t, coord::RateMeasures> rates;
+    {
+      auto sts = schema::stages(scene);
+      for (std::size_t i = 0; i < sts.size(); ++i)
+        if (sts[i].action == "penetrate") rates[i] = stage_rates(scene, sts[i]);
+    }
+    runner.set_kinematics([&runner, &rates, &log](const schema::Stage& st, std::int64_t, double) -> std::vector<double> {
       if (st.action != "penetrate") return {};
-      const auto& v = st.view;
-      double d50 = scene.real("dem.specimen.d50") * scene.real("dem.specimen.scale");
-      double lp = v.real("plastic_zone_ratio") * scene.real("dem.footing.diameter");
-      double speed = v.real("inertial_number") * lp / (d50 * std::sqrt(scene.real("dem.density") / v.real("mean_stress")));
-      return {speed * v.real("speed_factor")};
+      const auto& clock = runner.grant_clock();
+      const auto& m = rates.at(static_cast<std::size_t>(clock.stage_index));
+      if (clock.first_step == clock.stage_first_step) {
+        log->info("stage '{}' footing rate: {}", st.name, coord::describe(m));
+        if (auto w = coord::quasi_static_warning(st.name, m); !w.empty()) log->warn("{}", w);
+      }
+      return {coord::ramped_speed(m.speed, clock.t_mid(), m.ramp_time)};
     });
     History hist(opt.run_dir);
     runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
     auto sum = runner.run();
     ep->shutdown("run finished");
     auto info = run_info(scene, *ep, bus->stats());
+    info.rates = rates;
     auto text = coord::summary_text(info, sum);
     log->info("run finished\n{}", text);
     if (!opt.run_dir.empty()) {

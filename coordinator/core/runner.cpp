@@ -42,6 +42,9 @@ RunSummary Runner::run() {
       ss.compute_s[r] += rep.compute_s;  // set-up procedures (generation, servo) run here
       ss.wait_s[r] += rep.wait_s;
     }
+    clock_ = GrantClock{};
+    clock_.stage_index = idx;
+    clock_.stage_first_step = step;
     std::int64_t end = step + st.steps;  // exclusive
     const std::int64_t window = st.coupled ? window_ : 1;
     std::deque<std::int64_t> outstanding;  // last step of each posted, uncollected grant
@@ -53,7 +56,11 @@ RunSummary Runner::run() {
         std::int64_t last = std::min(end - 1, next + st.steps_per_grant - 1);
         double dt = stage_dt(st);
         std::vector<double> values;
+        clock_.first_step = next;
+        clock_.last_step = last;
+        clock_.dt = dt;
         if (kinematics_) values = kinematics_(st, last, dt);
+        clock_.t_begin += dt * static_cast<double>(last - next + 1);
         driver_.post(Cmd::Grant, st.nodes, last, idx, st.name, dt, values);
         outstanding.push_back(last);
         next = last + 1;

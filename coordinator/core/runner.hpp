@@ -78,6 +78,21 @@ struct StageError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// Where the grant being posted lies in its stage, for kinematics that depend on the stage's
+// time (the footing's speed ramp). Steps are global over the run (see above): a stage's first
+// step is not 0 unless it is the run's first stage.
+struct GrantClock {
+  std::int32_t stage_index = 0;
+  std::int64_t stage_first_step = 0;           // global step of the stage's first step
+  std::int64_t first_step = 0, last_step = 0;  // the grant's steps (global, inclusive)
+  double dt = 0;                               // the grant's coupling step [s]
+  // Time since the start of the stage at the start of the grant [s]: the earlier grants of the
+  // stage summed, each with its own dt (dt follows the nodes' stable steps).
+  double t_begin = 0;
+  // Time since the start of the stage at the middle of the grant's steps [s].
+  double t_mid() const { return t_begin + 0.5 * dt * static_cast<double>(last_step - first_step + 1); }
+};
+
 class Runner {
  public:
   // Called after every grant with the step and every node's report (for histories).
@@ -89,6 +104,8 @@ class Runner {
          std::int64_t window = 1);
   void set_observer(Observer o) { observer_ = std::move(o); }
   void set_kinematics(Kinematics k) { kinematics_ = std::move(k); }
+  // The grant being posted; valid inside the kinematics callback.
+  const GrantClock& grant_clock() const { return clock_; }
   RunSummary run();
 
  private:
@@ -99,6 +116,7 @@ class Runner {
   std::int64_t window_ = 1;
   Observer observer_;
   Kinematics kinematics_;
+  GrantClock clock_;
 };
 
 }  // namespace demfdm::coord

@@ -44,6 +44,21 @@ std::string json_effects(const std::map<std::string, double>& eff, double comput
   return o + "}";
 }
 
+// {"speed_m_s": ..., ..., "quasi_static": false}: the bond measures only when they apply.
+std::string json_rate(const RateMeasures& m) {
+  std::string o = "{\"speed_m_s\": " + json_number(m.speed) + ", \"inertial_number\": " + json_number(m.inertial_number) +
+                  ", \"ramp_time_s\": " + json_number(m.ramp_time) + ", \"wave_speed_m_s\": " + json_number(m.wave_speed) +
+                  ", \"young_Pa\": " + json_number(m.young) + ", \"poisson\": " + json_number(m.poisson) +
+                  ", \"bulk_density_kg_m3\": " + json_number(m.bulk_density) +
+                  ", \"quasi_static_limit\": " + json_number(m.limit);
+  if (m.applicable())
+    o += ", \"bond_strength_Pa\": " + json_number(*m.bond_strength) + ", \"failure_strain\": " +
+         json_number(*m.failure_strain) + ", \"impedance_ratio\": " + json_number(*m.impedance_ratio) +
+         ", \"strain_rate_ratio\": " + json_number(*m.strain_rate_ratio) +
+         ", \"quasi_static\": " + (m.quasi_static() ? "true" : "false");
+  return o + "}";
+}
+
 }  // namespace
 
 std::map<std::string, double> effects_of(const NodeReport& end) {
@@ -95,9 +110,12 @@ std::string summary_text(const RunInfo& info, const RunSummary& sum) {
   for (auto& n : info.nodes)
     os << "  " << n.role << ": " << n.solver << " pid " << n.pid << " on " << n.host << " (" << n.build_id << ")\n";
   os << "stages:\n";
-  for (auto& s : sum.stages) {
+  for (std::size_t i = 0; i < sum.stages.size(); ++i) {
+    auto& s = sum.stages[i];
     os << "  " << s.name << " [" << s.action << "]: steps " << s.first_step << ".." << s.last_step << " ("
        << (s.last_step - s.first_step + 1) << "), wall " << s.wall_s << " s, ended by " << s.ended_by << "\n";
+    if (auto r = info.rates.find(i); r != info.rates.end())
+      os << "    footing rate: " << describe(r->second) << "\n";
     auto eff = stage_effects(s);
     for (auto& [r, c] : s.compute_s) {
       double w = value_or_zero(s.wait_s, r);
@@ -132,6 +150,11 @@ std::string summary_text(const RunInfo& info, const RunSummary& sum) {
     }
   }
   if (!info.bus.empty()) os << "coordinator bus: " << info.bus << "\n";
+  for (auto& [i, m] : info.rates) {
+    if (i >= sum.stages.size()) continue;
+    auto w = quasi_static_warning(sum.stages[i].name, m);
+    if (!w.empty()) os << w << "\n";
+  }
   return os.str();
 }
 
@@ -155,7 +178,9 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum) {
     os << (i ? ",\n    " : "\n    ") << "{\"name\": " << json_string(s.name) << ", \"action\": " << json_string(s.action)
        << ", \"first_step\": " << s.first_step << ", \"last_step\": " << s.last_step
        << ", \"steps\": " << (s.last_step - s.first_step + 1) << ", \"wall_s\": " << json_number(s.wall_s)
-       << ", \"ended_by\": " << json_string(s.ended_by) << ",\n      \"nodes\": {";
+       << ", \"ended_by\": " << json_string(s.ended_by);
+    if (auto r = info.rates.find(i); r != info.rates.end()) os << ",\n      \"footing_rate\": " << json_rate(r->second);
+    os << ",\n      \"nodes\": {";
     bool first = true;
     for (auto& [r, c] : s.compute_s) {
       auto it = eff.find(r);

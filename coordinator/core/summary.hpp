@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "coordinator/core/quasi_static.hpp"
 #include "coordinator/core/runner.hpp"
 
 namespace demfdm::coord {
@@ -27,6 +28,10 @@ struct RunInfo {
   std::uint64_t hash = 0;     // scene hash
   std::vector<NodeInfo> nodes;
   std::string bus;            // one line of the coordinator's bus counters (text summary only)
+  // Footing rate and quasi-static measures of each penetrate stage, by index in
+  // RunSummary::stages (coordinator/core/quasi_static.hpp). The text summary ends with a
+  // "WARNING: not quasi-static:" line for each stage above its limit.
+  std::map<std::size_t, RateMeasures> rates;
 };
 
 // effect name -> seconds, from one node's STAGE_END values.
