@@ -119,7 +119,8 @@ coord::RunInfo run_info(const config::Scene& scene, const proto::CoordinatorEndp
   for (auto& [r, n] : ep.nodes()) info.nodes.push_back({r, n.solver, n.host, n.build_id, static_cast<std::int64_t>(n.pid)});
   std::ostringstream os;
   os << "published " << bs.published << ", accepted " << bs.accepted << ", foreign-run " << bs.foreign_run
-     << ", duplicates " << bs.duplicates << ", decode errors " << bs.decode_errors;
+     << ", duplicates " << bs.duplicates << ", decode errors " << bs.decode_errors << "; own stalls "
+     << ep.heartbeat().stalls() << " (longest " << std::round(ep.heartbeat().longest_stall_s() * 10) / 10 << " s)";
   info.bus = os.str();
   return info;
 }

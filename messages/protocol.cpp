@@ -1,9 +1,13 @@
 #include "messages/protocol.hpp"
 
+#include <signal.h>
 #include <unistd.h>
+
+#include <cerrno>
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <sstream>
 
 #include <spdlog/spdlog.h>
@@ -20,6 +24,17 @@ std::uint64_t fnv1a64(const std::string& s) {
     h *= 1099511628211ull;
   }
   return h;
+}
+
+// The process is gone: no such pid, or a zombie (it exited and its parent has not reaped it yet).
+bool process_gone(std::int32_t pid) {
+  if (pid <= 0) return false;
+  if (::kill(pid, 0) != 0) return errno == ESRCH;
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat;
+  if (!std::getline(f, stat)) return false;
+  const auto close = stat.rfind(')');  // "pid (comm) S ...": the state follows the command name
+  return close != std::string::npos && close + 2 < stat.size() && stat[close + 2] == 'Z';
 }
 
 std::string hostname() {
@@ -57,10 +72,27 @@ std::vector<std::pair<std::size_t, std::size_t>> chunks(std::size_t n, std::size
 }
 
 // ---------------------------------------------------------------------------------------
-Heartbeat::Heartbeat(bus::Bus& bus, double period_s) : bus_(bus) {
-  th_ = std::thread([this, period_s] {
+clock::time_point StallWatch::origin(clock::time_point last_seen, clock::time_point heartbeat_stall_end) {
+  const auto now = clock::now();
+  if (last_check_ != clock::time_point{} && std::chrono::duration<double>(now - last_check_).count() > stall_s_)
+    loop_stall_end_ = now;
+  last_check_ = now;
+  return std::max({last_seen, heartbeat_stall_end, loop_stall_end_});
+}
+
+Heartbeat::Heartbeat(bus::Bus& bus, double period_s, double stall_s) : bus_(bus) {
+  th_ = std::thread([this, period_s, stall_s] {
     std::unique_lock<std::mutex> lk(mu_);
+    auto planned = clock::now();
     while (!stop_) {
+      // Own stall: this wake-up came later than planned by more than stall_s.
+      const auto now = clock::now();
+      const double late = std::chrono::duration<double>(now - planned).count();
+      if (late > stall_s) {
+        stall_end_ = now.time_since_epoch().count();
+        ++stalls_;
+        longest_stall_ns_ = std::max<std::int64_t>(longest_stall_ns_.load(), static_cast<std::int64_t>(late * 1e9));
+      }
       demfdm::heartbeat_t hb;
       hb.header.step = step_;
       hb.state = state_;
@@ -71,6 +103,7 @@ Heartbeat::Heartbeat(bus::Bus& bus, double period_s) : bus_(bus) {
       } catch (...) {
       }
       lk.lock();
+      planned = clock::now() + std::chrono::duration_cast<clock::duration>(std::chrono::duration<double>(period_s));
       cv_.wait_for(lk, std::chrono::duration<double>(period_s), [this] { return stop_.load(); });
     }
   });
@@ -91,7 +124,7 @@ void Heartbeat::set_state(const std::string& s) {
 
 // ---------------------------------------------------------------------------------------
 NodeEndpoint::NodeEndpoint(bus::Bus& bus, std::string role, std::string solver, Timeouts t)
-    : bus_(bus), role_(std::move(role)), solver_(std::move(solver)), t_(t), hb_(bus, t.heartbeat_s) {
+    : bus_(bus), role_(std::move(role)), solver_(std::move(solver)), t_(t), hb_(bus, t.heartbeat_s, t.stall_s) {
   coord_seen_ = clock::now();
   hb_.set_state("waiting-scene");
   bus_.subscribe<demfdm::scene_t>(bus::channel::kScene, [this](const demfdm::scene_t& m) {
@@ -129,7 +162,7 @@ NodeEndpoint::~NodeEndpoint() { hb_.stop(); }
 void NodeEndpoint::on_any_from_coordinator() { coord_seen_ = clock::now(); }
 
 void NodeEndpoint::check_coordinator_alive() {
-  double s = since(coord_seen_);
+  double s = since(watch_.origin(coord_seen_, hb_.stall_end()));
   if (s > t_.peer_timeout_s) {
     std::ostringstream os;
     os << "the coordinator has been silent for " << std::round(s * 10) / 10
@@ -482,7 +515,7 @@ Forces NodeEndpoint::wait_forces(std::int64_t step) {
 
 // ---------------------------------------------------------------------------------------
 CoordinatorEndpoint::CoordinatorEndpoint(bus::Bus& bus, Timeouts t)
-    : bus_(bus), t_(t), hb_(bus, t.heartbeat_s) {
+    : bus_(bus), t_(t), hb_(bus, t.heartbeat_s, t.stall_s) {
   hb_.set_state("starting");
   bus_.subscribe<demfdm::hello_t>(bus::channel::kHello, [this](const demfdm::hello_t& h) {
     hellos_[h.role] = h;
@@ -494,6 +527,7 @@ CoordinatorEndpoint::CoordinatorEndpoint(bus::Bus& bus, Timeouts t)
     n.build_id = h.build_id;
     n.dt_stable = h.dt_stable;
     n.last_seen = clock::now();
+    n.local = h.host == hostname();
   });
   bus_.subscribe<demfdm::heartbeat_t>(bus::channel::kHeartbeat, [this](const demfdm::heartbeat_t& h) {
     auto it = nodes_.find(h.header.sender);
@@ -583,7 +617,16 @@ void CoordinatorEndpoint::check_alive(const std::vector<std::string>& roles) {
   for (auto& r : roles) {
     auto it = nodes_.find(r);
     if (it == nodes_.end()) continue;
-    double s = since(it->second.last_seen);
+    // A node process on this host that no longer exists is dead now (kill -9, a crash).
+    if (it->second.local && process_gone(it->second.pid)) {
+      std::ostringstream os;
+      os << "node '" << r << "' (" << it->second.solver << ", pid " << it->second.pid << " on " << it->second.host
+         << ") is gone: its process has exited (last step " << it->second.last_step << ", state "
+         << it->second.state << ")";
+      throw ProtocolError(os.str());
+    }
+    // Silence counts from the node's last message or the end of this process's own last stall.
+    double s = since(watch_.origin(it->second.last_seen, hb_.stall_end()));
     if (s > t_.peer_timeout_s) {
       std::ostringstream os;
       os << "node '" << r << "' (" << it->second.solver << ", pid " << it->second.pid << " on "

@@ -9,7 +9,11 @@
 // receiver sends a NACK after resend_after_s (doubling up to 0.4 s) and the holder of the
 // message re-publishes its stored copy; commands and reports are idempotent; heartbeats come
 // from a helper thread every heartbeat_s; silence longer than peer_timeout_s is an error that
-// names the silent process.
+// names the silent process. Silence counts only while this process itself was running: the
+// heartbeat thread measures its own wake-ups with the monotonic clock, and a wake-up later than
+// heartbeat_s + stall_s (the process, or the whole host, was stopped: SIGSTOP, a debugger, a VM
+// pause, a suspended laptop) re-arms every peer's timer, so a stalled host is not a dead node.
+// A peer process on this host that is gone (kill(pid, 0) fails with ESRCH) is dead at once.
 #pragma once
 
 #include <array>
@@ -36,6 +40,7 @@ struct Timeouts {
   double peer_timeout_s = 3.0;    // silence after which a peer is declared dead
   double resend_after_s = 0.02;   // first NACK / command resend after this wait
   double startup_s = 20.0;        // scene / hello deadline
+  double stall_s = 0.5;           // a heartbeat wake-up this much later than planned = own stall
 };
 
 // Thrown when the run must stop: a SHUTDOWN command, a silent peer, a protocol violation.
@@ -73,16 +78,41 @@ struct Forces {
 // A named scalar a node reports each step (e.g. "ratio", "footing_fz_N").
 using Values = std::vector<std::pair<std::string, double>>;
 
+// Where a peer's silence starts counting for the thread that watches it: its last message, or
+// the end of this process's own last stall, whichever is later. Two views of a stall: the
+// heartbeat thread's late wake-up, and a gap between two checks of the watching loop longer
+// than stall_s (that loop may run first after a SIGCONT).
+class StallWatch {
+ public:
+  explicit StallWatch(double stall_s) : stall_s_(stall_s) {}
+  std::chrono::steady_clock::time_point origin(std::chrono::steady_clock::time_point last_seen,
+                                               std::chrono::steady_clock::time_point heartbeat_stall_end);
+
+ private:
+  double stall_s_;
+  std::chrono::steady_clock::time_point last_check_{}, loop_stall_end_{};
+};
+
 class Heartbeat {
  public:
-  Heartbeat(bus::Bus& bus, double period_s);
+  // stall_s: a wake-up later than period_s + stall_s records a stall of this process.
+  Heartbeat(bus::Bus& bus, double period_s, double stall_s = 0.5);
   ~Heartbeat();
   void set_state(const std::string& s);
   void set_step(std::int64_t step) { step_ = step; }
   void tick() { ++progress_; }
   void stop();
+  // End of the last stall of this process (steady clock), or the epoch if none was seen. A
+  // peer's silence is counted from max(its last message, this).
+  std::chrono::steady_clock::time_point stall_end() const {
+    return std::chrono::steady_clock::time_point(std::chrono::steady_clock::duration(stall_end_.load()));
+  }
+  // Longest stall seen [s] and the number of stalls (for the logs and the summary).
+  double longest_stall_s() const { return longest_stall_ns_.load() * 1e-9; }
+  std::int64_t stalls() const { return stalls_.load(); }
 
  private:
+  std::atomic<std::int64_t> stall_end_{0}, longest_stall_ns_{0}, stalls_{0};
   bus::Bus& bus_;
   std::atomic<bool> stop_{false};
   std::atomic<std::int64_t> step_{-1}, progress_{0};
@@ -161,6 +191,7 @@ class NodeEndpoint {
   std::string role_, solver_;
   Timeouts t_;
   Heartbeat hb_;
+  StallWatch watch_{0.5};
   // scene assembly
   std::map<std::int32_t, std::string> scene_chunks_;
   std::int32_t scene_n_ = -1;
@@ -191,6 +222,7 @@ struct NodeInfo {
   double dt_stable = 0;
   std::chrono::steady_clock::time_point last_seen;
   std::int64_t last_step = -1;
+  bool local = false;  // the node runs on this host (its pid can be checked)
   std::string state;
 };
 
@@ -206,6 +238,7 @@ class CoordinatorEndpoint {
   void start(const std::string& scene_text, const std::string& origin, std::uint64_t hash,
              const std::vector<std::string>& roles);
   const std::map<std::string, NodeInfo>& nodes() const { return nodes_; }
+  const Heartbeat& heartbeat() const { return hb_; }
 
   // Publishes a command to 'targets' and waits for a report of 'step' from each (resending
   // the command if a report is late). Throws ProtocolError when a node is silent for
@@ -231,6 +264,7 @@ class CoordinatorEndpoint {
   bus::Bus& bus_;
   Timeouts t_;
   Heartbeat hb_;
+  StallWatch watch_{0.5};
   std::map<std::string, NodeInfo> nodes_;
   std::map<std::string, demfdm::hello_t> hellos_;
   std::map<std::pair<std::string, std::int64_t>, demfdm::report_t> reports_;

@@ -32,7 +32,9 @@ void declare_bus(config::Section& root) {
   auto& bus = root.section("bus", "Message bus timing (messages/README.md).", config::Presence::Optional);
   bus.real("heartbeat_s", "s", 0.25, "Heartbeat period of every process.").min(0.01).max(2.0);
   bus.real("peer_timeout_s", "s", 3.0,
-           "Silence after which a process is declared dead or hung (detection within this + one heartbeat).")
+           "Silence after which a process is declared dead or hung (detection within this + one heartbeat). Silence "
+           "counts only while the watching process runs: a stall of its own (SIGSTOP, a debugger, a paused VM or "
+           "host) re-arms the timers; a node process on the same host that is gone is named at once.")
       .min(0.5).max(600.0);
   bus.real("startup_s", "s", 30.0, "Deadline for every node to receive the scene and say hello.").min(1.0).max(3600.0);
   bus.real("resend_after_s", "s", 0.02, "First NACK/resend after waiting this long for a message (doubles up to 0.4 s).")

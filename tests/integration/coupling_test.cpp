@@ -7,6 +7,8 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <regex>
+#include <thread>
 
 #include "messages/bus.hpp"
 #include "tests/chain/chain_model.hpp"
@@ -253,6 +255,60 @@ TEST(Coupling, KilledNodeIsNamedWithinFiveSeconds) {
   EXPECT_NE(r.coordinator_out.find("node 'dem'"), std::string::npos) << r.coordinator_out;
   EXPECT_LT(detect, 5.0);
   EXPECT_EQ(r.continuum_code, 0) << "the surviving node must obey the coordinator's shutdown";
+}
+
+// A stalled host is not a dead node (docs: messages/README.md, liveness): every process of
+// the run is stopped for 10 s (SIGSTOP, as a suspended laptop, a paused VM or a debugger would)
+// in the middle of a coupled stage and then continued; each process sees its own heartbeat
+// thread wake up late, re-arms its peers' timers, and the run ends normally with the exact
+// (monolithic) chain, so nothing was lost or repeated.
+TEST(Coupling, HostStallOfTenSecondsIsSurvivedWithTheSameResults) {
+  REQUIRE_NETWORK();
+  auto r = run_scene("stall", chain_scene("serial", 10000), {}, "", [&](std::map<std::string, Proc>& p) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+    for (auto& [k, q] : p) ::kill(q.pid, SIGSTOP);
+    std::this_thread::sleep_for(std::chrono::seconds(10));
+    for (auto& [k, q] : p) ::kill(q.pid, SIGCONT);
+  }, 90);
+  ASSERT_EQ(r.coordinator_code, 0) << r.coordinator_out;
+  EXPECT_EQ(r.dem_code, 0);
+  EXPECT_EQ(r.continuum_code, 0);
+  EXPECT_GT(r.coordinator_s, 10.0) << "the stall did not happen during the run";
+  auto [err, amp] = chain_error(r.dir, 10000);
+  EXPECT_EQ(err, 0.0);
+  const auto summary = read_file((r.dir / "summary.txt").string());
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(summary, m, std::regex("own stalls ([0-9]+) \\(longest ([0-9.]+) s\\)"))) << summary;
+  std::cout << "[ figures  ] 10 s stop of every process survived; the coordinator saw " << m[1] << " stall(s), longest "
+            << m[2] << " s; run " << r.coordinator_s << " s\n";
+  EXPECT_GE(std::stod(m[1]), 1.0);
+  EXPECT_GT(std::stod(m[2]), 9.0);
+}
+
+// A node that is stopped on its own (the host runs on) is hung: it is named within 5 s.
+TEST(Coupling, StoppedNodeIsNamedWithinFiveSeconds) {
+  REQUIRE_NETWORK();
+  double stop_after = 0;  // [s] from the coordinator's start to the SIGSTOP
+  std::thread resume;
+  auto r = run_scene("stop", chain_scene("serial", 5000000), {}, "", [&](std::map<std::string, Proc>& p) {
+    const auto t0 = std::chrono::steady_clock::now();
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+    const pid_t dem = p["dem"].pid;
+    ::kill(dem, SIGSTOP);
+    stop_after = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // Continue it later, so that it can obey the shutdown and exit.
+    resume = std::thread([dem] {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5500));
+      ::kill(dem, SIGCONT);
+    });
+  });
+  if (resume.joinable()) resume.join();
+  const double detect = r.coordinator_s - stop_after;
+  std::cout << "[ figures  ] kill -STOP of the DEM node named, and the run ended, after " << detect << " s\n";
+  EXPECT_EQ(r.coordinator_code, 3);
+  EXPECT_NE(r.coordinator_out.find("node 'dem'"), std::string::npos) << r.coordinator_out;
+  EXPECT_NE(r.coordinator_out.find("has been silent"), std::string::npos) << r.coordinator_out;
+  EXPECT_LT(detect, 5.0);
 }
 
 TEST(Coupling, NodeThatNeverStartsIsNamed) {
