@@ -1,0 +1,378 @@
+#!/usr/bin/python3
+"""Convergence study of the footing prediction (launch/study converge; docs/convergence.md).
+
+Usage:
+  /usr/bin/python3 launch/py/converge_study.py run STUDY_DIR [--parts rate dt block] [--seeds N]
+                                                [--jobs J] [--rate I] [--damping A] [--quick]
+  /usr/bin/python3 launch/py/converge_study.py table STUDY_DIR [--docs FILE]
+  /usr/bin/python3 launch/py/converge_study.py list [--parts ...]
+
+Every variant is an ensemble over seeds 1..N of scenes/accuracy_footing.toml with some keys set
+(accuracy_study.apply); its runs go to STUDY_DIR/<variant>/seed-<k>/ (launch/run folders, the
+edited scene beside them as seed-<k>.toml). Specimen preparation does not depend on the knobs
+varied here (docs/theory.md 4.11), so seed k is the same bonded block in every variant and
+knobs are compared by paired differences over seeds.
+
+Parts:
+  rate   inertial number I in {1e-2, 3.3e-3, 1e-3, 3.3e-4} (30x below the paper's 1e-2), each with
+         penetration-stage local damping 0.7 and 0.1 (docs/theory.md 7.6)
+  dt     dem.dt_safety 0.8 / 0.4 / 0.2 at the chosen rate (--rate) and damping (--damping)
+  block  the coupled model with DEM blocks of three widths against the DEM-only box of the same
+         outer size (docs/convergence.md)
+
+run: runs the variants' missing seeds (a finished seed folder is kept: an interrupted study
+resumes), up to J runs at once. table: tables, figures and the verdicts (convergence.md in the
+study folder; --docs also writes it to FILE).
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import accuracy_study  # noqa: E402  (scene edits: apply, set_key)
+import ensemble  # noqa: E402  (runs of an ensemble folder, statistics with t-based intervals)
+
+BASE_SCENE = "scenes/accuracy_footing.toml"
+RATES = ["1e-2", "3.3e-3", "1e-3", "3.3e-4"]
+DAMPINGS = ["0.7", "0.1"]
+STEPS = ["0.8", "0.4", "0.2"]
+
+
+def rate_variant(rate, damping):
+    return "rate_I%s_a%s" % (rate, damping)
+
+
+def plan(parts, rate, damping, quick):
+    """[(variant name, part, label, edits)] in the order they run (cheapest first)."""
+    out = []
+    if "rate" in parts:
+        for r in RATES:
+            for a in DAMPINGS:
+                # The budget grows with the stroke time; the stage ends at depth_ratio.
+                steps = int(40000 * 1e-2 / float(r) * 2)
+                out.append((rate_variant(r, a), "rate", "I %s, damping %s" % (r, a),
+                            {"stage:penetrate.inertial_number": r, "stage+:penetrate.damping": a,
+                             "stage:penetrate.steps": str(steps)}))
+    if "dt" in parts:
+        for f in STEPS:
+            steps = int(40000 * 1e-2 / float(rate) * 2 * 0.8 / float(f))
+            edits = {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": damping,
+                     "stage:penetrate.steps": str(steps), "dem.dt_safety": f}
+            name = "dt_%s_I%s_a%s" % (f, rate, damping)
+            if f == "0.8":
+                name = rate_variant(rate, damping)  # the same runs as the rate part's
+                edits.pop("dem.dt_safety")
+            out.append((name, "dt", "dt_safety %s" % f, edits))
+    if quick:
+        out = [(n, p, l, dict(e, **{"stage:penetrate.depth_ratio": "0.05"})) for n, p, l, e in out]
+    seen, uniq = set(), []
+    for v in out:
+        if v[0] not in seen:
+            seen.add(v[0])
+            uniq.append(v)
+    return uniq
+
+
+def finished(run_dir):
+    s = os.path.join(run_dir, "summary.json")
+    if not os.path.isfile(s):
+        return False
+    with open(os.path.join(run_dir, "summary.txt")) as f:
+        return not f.read().startswith("FAILED")
+
+
+def run_one(root, study, variant, edits, seed):
+    vdir = os.path.join(study, variant)
+    os.makedirs(vdir, exist_ok=True)
+    run_dir = os.path.join(vdir, "seed-%d" % seed)
+    if finished(run_dir):
+        return (variant, seed, 0, "kept")
+    if os.path.exists(run_dir):  # an interrupted or failed run: keep it under another name
+        os.rename(run_dir, run_dir + ".failed-%d" % int(time.time()))
+    with open(os.path.join(root, BASE_SCENE)) as f:
+        text = f.read()
+    text = accuracy_study.apply(text, edits)
+    text = accuracy_study.set_key(text, "run.seed", str(seed))
+    scene = os.path.join(vdir, "seed-%d.toml" % seed)
+    with open(scene, "w") as f:
+        f.write(text)
+    t0 = time.time()
+    with open(os.path.join(vdir, "seed-%d.out" % seed), "w") as out:
+        code = subprocess.call(["bash", os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", run_dir],
+                               stdout=out, stderr=subprocess.STDOUT)
+    return (variant, seed, code, "%.0f s" % (time.time() - t0))
+
+
+def cmd_run(a):
+    root = os.environ["DEMFDM_ROOT"]
+    os.makedirs(a.study, exist_ok=True)
+    variants = plan(a.parts, a.rate, a.damping, a.quick)
+    meta = {"base_scene": BASE_SCENE, "seeds": a.seeds, "parts": a.parts, "rate": a.rate, "damping": a.damping,
+            "quick": a.quick, "variants": [{"name": n, "part": p, "label": l, "edits": e} for n, p, l, e in variants]}
+    path = os.path.join(a.study, "plan.json")
+    if os.path.isfile(path):  # extend: keep the variants already planned
+        with open(path) as f:
+            old = json.load(f)
+        names = {v["name"] for v in meta["variants"]}
+        meta["variants"] = [v for v in old["variants"] if v["name"] not in names] + meta["variants"]
+        meta["parts"] = sorted(set(old["parts"]) | set(a.parts))
+    with open(path, "w") as f:
+        json.dump(meta, f, indent=1)
+    jobs = [(n, e, s) for n, _, _, e in variants for s in range(1, a.seeds + 1)]
+    failed = []
+    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
+        for variant, seed, code, how in pool.map(lambda j: run_one(root, a.study, *j), jobs):
+            print("converge study: %s seed %d: %s (exit %d)" % (variant, seed, how, code), file=sys.stderr, flush=True)
+            if code != 0:
+                failed.append("%s seed %d (exit %d, output %s/%s/seed-%d.out)" % (variant, seed, code, a.study, variant, seed))
+    if failed:
+        print("converge study: failed runs:\n  " + "\n  ".join(failed), file=sys.stderr)
+        return 1
+    return 0
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("study")
+    r.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "block"])
+    r.add_argument("--seeds", type=int, default=5)
+    r.add_argument("--jobs", type=int, default=1)
+    r.add_argument("--rate", default="1e-3")
+    r.add_argument("--damping", default="0.7")
+    r.add_argument("--quick", action="store_true")
+    t = sub.add_parser("table")
+    t.add_argument("study")
+    t.add_argument("--docs")
+    ls = sub.add_parser("list")
+    ls.add_argument("--parts", nargs="+", default=["rate", "dt", "block"])
+    a = p.parse_args()
+    if a.cmd == "run":
+        return cmd_run(a)
+    if a.cmd == "list":
+        for n, part, label, e in plan(a.parts, "1e-3", "0.7", False):
+            print("%-28s %-6s %-24s %s" % (n, part, label, e))
+        return 0
+    return cmd_table(a)
+
+
+INTERVALS = 4
+MEASURES = [("mean_load_all", "mean load over the stroke"), ("q1", "mean load, 1st quarter"),
+            ("q2", "mean load, 2nd quarter"), ("q3", "mean load, 3rd quarter"), ("q4", "mean load, 4th quarter"),
+            ("peak", "raw peak")]
+
+
+def dem_stage_values(run, stage):
+    """The values of the DEM's end-of-stage line of `stage` in dem.log (energies, bonds)."""
+    out = {}
+    with open(os.path.join(run, "dem.log")) as f:
+        for line in f:
+            if "'%s' ends after step" % stage in line and "values:" in line:
+                for kv in line.split("values:")[1].split():
+                    k, _, v = kv.partition("=")
+                    try:
+                        out[k] = float(v)
+                    except ValueError:
+                        pass
+    return out
+
+
+def kinetic_share(run, r):
+    """Kinetic energy of the DEM over the work the footing has done, at the end of the stroke and
+    its largest value over the second half (dem_history.csv joined with the stage history)."""
+    path = os.path.join(run, "dem_history.csv")
+    if not os.path.exists(path):
+        return float("nan"), float("nan")
+    h = ensemble.paper_figures.read_csv(path)
+    st = r["hist"]
+    d, f = st["dem.footing_disp_m"], st["dem.footing_fz_N"]
+    work = np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(d))])
+    ke = np.interp(st["step"], h["step_unit"], h["kinetic_J"])
+    half = d >= 0.5 * d[-1]
+    share = np.where(work > 0, ke / np.where(work > 0, work, 1.0), np.nan)
+    return float(share[-1]), float(np.nanmax(share[half])) if half.any() else float("nan")
+
+
+def seed_metrics(variant_dir, edges):
+    """{seed: {measure: value}} of the finished runs of one variant."""
+    out = {}
+    for r in ensemble.load_runs(variant_dir):
+        d, f = r["disp"], r["load"]
+        q = ensemble.interval_means(d, f, edges)
+        m = {"mean_load_all": ensemble.interval_means(d, f, [edges[0], edges[-1]])[0], "peak": float(np.max(f)),
+             "k_e": r["k_e"], "wall_s": r["wall_s"]}
+        for i, v in enumerate(q):
+            m["q%d" % (i + 1)] = v
+        ev = dem_stage_values(r["path"], "penetrate")
+        m["energy_balance_error"] = ev.get("energy_balance_error", float("nan"))
+        m["ke_share_end"], m["ke_share_max"] = kinetic_share(r["path"], r)
+        m["bonds_broken"] = ev.get("bonds_broken_tension", 0) + ev.get("bonds_broken_shear", 0)
+        out[r["seed"]] = (m, r)
+    return out
+
+
+def paired(a, b, key):
+    """Paired difference a - b over the seeds both have: (mean, half-width of its 95 % CI, n,
+    mean of b)."""
+    seeds = sorted(set(a) & set(b))
+    diff = [a[s][0][key] - b[s][0][key] for s in seeds]
+    mean, se, half, n = ensemble.scalar_stats(diff)
+    return mean, half, n, ensemble.scalar_stats([b[s][0][key] for s in seeds])[0]
+
+
+def verdict(mean, half, ref):
+    """'not resolved (+x ± y %)' when the 95 % interval of the paired difference holds 0, else
+    'differs: +x ± y %'."""
+    if not (np.isfinite(mean) and np.isfinite(half)) or ref == 0:
+        return "n/a"
+    rel, h = 100.0 * mean / ref, 100.0 * half / abs(ref)
+    word = "not resolved" if abs(mean) <= half else "differs"
+    return "%s (%+.1f ± %.1f %%)" % (word, rel, h)
+
+
+def fmt(v, spec=".4g"):
+    return "n/a" if v is None or not np.isfinite(v) else format(v, spec)
+
+
+def stat_cell(vals, spec=".4g"):
+    mean, se, half, n = ensemble.scalar_stats(vals)
+    return "%s ± %s" % (fmt(mean, spec), fmt(half, ".2g"))
+
+
+def band_figure(path, title, groups, grid):
+    """One panel per group: [(panel title, [(label, runs)])]: mean curves with 95 % bands."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, len(groups), figsize=(6.2 * len(groups), 4.6), squeeze=False)
+    for ax, (ptitle, series) in zip(axes[0], groups):
+        for label, runs in series:
+            if not runs:
+                continue
+            cs = ensemble.curve_stats(runs, grid)
+            line, = ax.plot(grid * 1e3, cs["mean"], lw=1.6, label="%s (n = %d)" % (label, cs["n"]))
+            ax.fill_between(grid * 1e3, cs["low"], cs["high"], color=line.get_color(), alpha=0.18, lw=0)
+        ax.set_xlabel("footing displacement [mm]")
+        ax.set_ylabel("footing load [N]")
+        ax.set_title(ptitle)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def cmd_table(a):
+    with open(os.path.join(a.study, "plan.json")) as f:
+        meta = json.load(f)
+    variants = {v["name"]: v for v in meta["variants"]}
+    present = {n: os.path.join(a.study, n) for n in variants if os.path.isdir(os.path.join(a.study, n))}
+    # Common stroke: from 0 to the smallest final displacement of every run.
+    starts, ends, runs = [], [], {}
+    for n, d in present.items():
+        runs[n] = ensemble.load_runs(d)
+        starts += [float(r["disp"][0]) for r in runs[n]]
+        ends += [float(r["disp"][-1]) for r in runs[n]]
+    if not ends:
+        raise SystemExit("converge study: no finished run in %s" % a.study)
+    stroke = min(ends)
+    edges = list(np.linspace(max(starts), stroke, INTERVALS + 1))
+    grid = np.linspace(max(starts), stroke, 300)
+    met = {n: seed_metrics(d, edges) for n, d in present.items()}
+    md = ["# Convergence study: tables", "",
+          "Study folder `%s`; base scene `%s`; %d seeds planned. Every variant runs seeds 1..N on the same bonded "
+          "blocks (specimen preparation does not depend on the knobs varied, docs/theory.md 4.11), so knobs are "
+          "compared by the paired difference over seeds: mean ± half-width of its 95 %% confidence interval "
+          "(Student t), relative to the reference's seed mean. \"not resolved\" = the interval holds 0. Loads are "
+          "means over the common stroke 0 to %.4g mm (%d equal intervals), a robust measure beside the raw peak."
+          % (a.study, meta["base_scene"], meta["seeds"], stroke * 1e3, INTERVALS), ""]
+    rows = [["variant", "n", "mean load [N]", "q1 [N]", "q2 [N]", "q3 [N]", "q4 [N]", "raw peak [N]", "k_e [N/m]",
+             "KE/W end", "KE/W max (2nd half)", "energy balance error", "bonds broken", "wall [s]"]]
+    for n in variants:
+        if n not in met or not met[n]:
+            continue
+        m = [v[0] for v in met[n].values()]
+        col = lambda k, spec=".4g": stat_cell([x[k] for x in m], spec)  # noqa: E731
+        rows.append([n, str(len(m)), col("mean_load_all"), col("q1"), col("q2"), col("q3"), col("q4"), col("peak"),
+                     col("k_e", ".3g"), col("ke_share_end", ".2g"), col("ke_share_max", ".2g"),
+                     col("energy_balance_error", ".2g"), col("bonds_broken", ".4g"), col("wall_s", ".3g")])
+    md += ["## Every variant (seed mean ± 95 % CI)", ""] + table_md(rows)
+    csv_rows = [["variant", "seed", "measure", "value"]]
+    for n in met:
+        for seed, (m, _) in sorted(met[n].items()):
+            for k, v in sorted(m.items()):
+                csv_rows.append([n, str(seed), k, repr(v)])
+    with open(os.path.join(a.study, "converge_seeds.csv"), "w") as f:
+        f.write("\n".join(",".join(r) for r in csv_rows) + "\n")
+    figures = []
+    if "rate" in meta["parts"]:
+        md += rate_tables(met, variants)
+        groups = [("penetration damping %s" % dmp, [("I = %s" % r, runs.get(rate_variant(r, dmp), [])) for r in RATES])
+                  for dmp in DAMPINGS]
+        band_figure(os.path.join(a.study, "converge_rate.png"), "Footing load, seed mean and 95 % band, by rate", groups,
+                    grid)
+        figures.append("converge_rate.png")
+    if "dt" in meta["parts"]:
+        md += dt_tables(met, meta)
+        names = [n for n, v in variants.items() if v["part"] == "dt"]
+        band_figure(os.path.join(a.study, "converge_dt.png"), "Footing load, seed mean and 95 % band, by DEM step",
+                    [("I %s, damping %s" % (meta["rate"], meta["damping"]),
+                      [(variants[n]["label"], runs.get(n, [])) for n in names])], grid)
+        figures.append("converge_dt.png")
+    md += ["", "Figures: " + ", ".join("`%s`" % x for x in figures), ""]
+    text = "\n".join(md) + "\n"
+    with open(os.path.join(a.study, "convergence_tables.md"), "w") as f:
+        f.write(text)
+    print(text)
+    return 0
+
+
+def table_md(rows):
+    out = ["| " + " | ".join(rows[0]) + " |", "|" + "---|" * len(rows[0])]
+    out += ["| " + " | ".join(r) + " |" for r in rows[1:]]
+    return out + [""]
+
+
+def rate_tables(met, variants):
+    md = ["## Rate: each rate against the slowest, same damping (paired over seeds)", ""]
+    slow = RATES[-1]
+    rows = [["damping", "I"] + [lab for _, lab in MEASURES]]
+    for dmp in DAMPINGS:
+        ref = met.get(rate_variant(slow, dmp))
+        for r in RATES[:-1]:
+            cur = met.get(rate_variant(r, dmp))
+            if not ref or not cur:
+                continue
+            rows.append([dmp, r] + [verdict(*paired(cur, ref, k)[:2], paired(cur, ref, k)[3]) for k, _ in MEASURES])
+    md += table_md(rows)
+    md += ["## Damping: penetration damping 0.7 against 0.1 at each rate (paired over seeds)", ""]
+    rows = [["I"] + [lab for _, lab in MEASURES]]
+    for r in RATES:
+        hi, lo = met.get(rate_variant(r, DAMPINGS[0])), met.get(rate_variant(r, DAMPINGS[1]))
+        if hi and lo:
+            rows.append([r] + [verdict(*paired(hi, lo, k)[:2], paired(hi, lo, k)[3]) for k, _ in MEASURES])
+    return md + table_md(rows)
+
+
+def dt_tables(met, meta):
+    md = ["## DEM step: dt_safety 0.4 and 0.2 against 0.8 at I %s, damping %s (paired over seeds)"
+          % (meta["rate"], meta["damping"]), ""]
+    ref = met.get(rate_variant(meta["rate"], meta["damping"]))
+    rows = [["dt_safety"] + [lab for _, lab in MEASURES]]
+    for f in STEPS[1:]:
+        cur = met.get("dt_%s_I%s_a%s" % (f, meta["rate"], meta["damping"]))
+        if ref and cur:
+            rows.append([f] + [verdict(*paired(cur, ref, k)[:2], paired(cur, ref, k)[3]) for k, _ in MEASURES])
+    return md + table_md(rows)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# Convergence of the footing prediction (issue 12): rate, damping and DEM step, seed ensembles.
+#
+# Usage: launch/study converge [--parts "rate dt"] [--seeds N] [--jobs J] [--rate I] [--damping A]
+#                              [--quick] [--runs-root DIR | --into STUDY_DIR] [--table STUDY_DIR]
+#   --parts P      rate: I = 1e-2, 3.3e-3, 1e-3, 3.3e-4 at penetration damping 0.7 and 0.1;
+#                  dt: dem.dt_safety 0.8 / 0.4 / 0.2 at --rate and --damping (default "rate dt")
+#   --seeds N      seeds 1..N of every variant (default 5); seed k is the same bonded block in
+#                  every variant, so knobs are compared by paired differences
+#   --jobs J       runs at once (default 1; each run is a DEM and a continuum process)
+#   --rate I       inertial number of the dt part (default 1e-3)
+#   --damping A    penetration damping of the dt part (default 0.7)
+#   --quick        penetration to 0.05 D_f (development)
+#   --into DIR     extend an existing study folder (finished seeds are kept: a study resumes)
+#   --table DIR    run nothing: rebuild the tables and figures of a study folder
+# Writes DIR/studies/<date>-converge/: one folder per variant with seed-<k>/ run folders,
+# convergence_tables.md, converge_seeds.csv, converge_rate.png, converge_dt.png.
+# Cost on this 2-core machine (2026-12-02, base scene scenes/accuracy_footing.toml, 2,856 balls):
+# 10 / 40 / 90 / 270 s per run at I = 1e-2 / 3.3e-3 / 1e-3 / 3.3e-4. Reading: docs/convergence.md.
+set -euo pipefail
+root="${DEMFDM_ROOT:?run through launch/study}"
+runs_root="${DEMFDM_RUNS_ROOT:-$PWD/runs}"
+args=(); study=""; into=""; table=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --parts) read -r -a p <<< "$2"; args+=(--parts "${p[@]}"); shift ;;
+    --seeds|--jobs|--rate|--damping) args+=("$1" "$2"); shift ;;
+    --quick) args+=(--quick) ;;
+    --runs-root) runs_root="$2"; shift ;;
+    --into) into="$2"; shift ;;
+    --table) table="$2"; shift ;;
+    -h|--help) sed -n '3,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) echo "converge study: unknown option '$1' (see launch/study converge --help)" >&2; exit 2 ;;
+  esac
+  shift
+done
+if [ -n "$table" ]; then
+  [ -f "$table/plan.json" ] || { echo "converge study: no study folder $table (plan.json missing)" >&2; exit 2; }
+  exec /usr/bin/python3 "$root/launch/py/converge_study.py" table "$table"
+fi
+study="${into:-$runs_root/studies/$(date +%Y%m%d-%H%M%S)-converge}"
+[ -z "$into" ] || [ -f "$into/plan.json" ] || { echo "converge study: --into $into: not a study folder" >&2; exit 2; }
+echo "converge study: folder $study" >&2
+status=0
+/usr/bin/python3 "$root/launch/py/converge_study.py" run "$study" "${args[@]}" || status=$?
+/usr/bin/python3 "$root/launch/py/converge_study.py" table "$study" > /dev/null
+echo "converge study: tables and figures in $study (convergence_tables.md)" >&2
+exit "$status"
