@@ -4,6 +4,7 @@
 Usage:
   /usr/bin/python3 launch/py/converge_study.py run STUDY_DIR [--parts rate dt block] [--seeds N]
                                                 [--jobs J] [--rate I] [--damping A] [--quick]
+                                                [--only VARIANT ...]
   /usr/bin/python3 launch/py/converge_study.py table STUDY_DIR [--docs FILE]
   /usr/bin/python3 launch/py/converge_study.py list [--parts ...]
 
@@ -93,6 +94,19 @@ def run_one(root, study, variant, edits, seed):
     run_dir = os.path.join(vdir, "seed-%d" % seed)
     if finished(run_dir):
         return (variant, seed, 0, "kept")
+    # One runner per seed folder, also across concurrent study commands on one folder.
+    lock = os.path.join(vdir, "seed-%d.lock" % seed)
+    try:
+        os.close(os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+    except FileExistsError:
+        return (variant, seed, 0, "running elsewhere (%s)" % lock)
+    try:
+        return run_locked(root, study, variant, edits, seed, vdir, run_dir)
+    finally:
+        os.remove(lock)
+
+
+def run_locked(root, study, variant, edits, seed, vdir, run_dir):
     if os.path.exists(run_dir):  # an interrupted or failed run: keep it under another name
         os.rename(run_dir, run_dir + ".failed-%d" % int(time.time()))
     with open(os.path.join(root, BASE_SCENE)) as f:
@@ -124,7 +138,7 @@ def cmd_run(a):
         meta["parts"] = sorted(set(old["parts"]) | set(a.parts))
     with open(path, "w") as f:
         json.dump(meta, f, indent=1)
-    jobs = [(n, e, s) for n, _, _, e in variants for s in range(1, a.seeds + 1)]
+    jobs = [(n, e, s) for n, _, _, e in variants for s in range(1, a.seeds + 1) if not a.only or n in a.only]
     failed = []
     with ThreadPoolExecutor(max_workers=a.jobs) as pool:
         for variant, seed, code, how in pool.map(lambda j: run_one(root, a.study, *j), jobs):
@@ -148,6 +162,7 @@ def main():
     r.add_argument("--rate", default="1e-3")
     r.add_argument("--damping", default="0.7")
     r.add_argument("--quick", action="store_true")
+    r.add_argument("--only", nargs="+", help="run only these variants (names as in 'list')")
     t = sub.add_parser("table")
     t.add_argument("study")
     t.add_argument("--docs")
