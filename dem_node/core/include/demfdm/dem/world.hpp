@@ -319,6 +319,7 @@ class World {
 
  private:
   friend class GravityEffect;
+  friend struct CheckpointAccess;  // state save/load (checkpoint.cpp, docs/checkpoint-format.md)
   void init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondHist* bond,
                     const ContactFamilyParams& fam, bool wall) const;
   void rebuild();

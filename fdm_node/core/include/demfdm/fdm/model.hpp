@@ -164,6 +164,7 @@ class Model {
   [[nodiscard]] std::span<const double> gravitational_masses() const { return gmass_; }  // [n] kg
 
  private:
+  friend struct CheckpointAccess;  // state save/load (checkpoint.cpp, docs/checkpoint-format.md)
   void build();
   void compute_geometry(const std::vector<double>& pos);
   void compute_masses();

@@ -1,0 +1,190 @@
+// State files (checkpoints) of the cores: a small binary container shared by dem_core and
+// fdm_core. Layout, sections and versioning: docs/checkpoint-format.md.
+//
+//   magic "DEMFDMST" | u32 format version | u64 total length | str kind | str code version |
+//   u64 scene hash | u32 section count | sections (str name, u64 length, bytes) |
+//   u64 FNV-1a 64 checksum of every byte before it
+//
+// All numbers are little-endian; doubles are their IEEE-754 bit patterns (bit-exact round
+// trip); strings are u32 length + bytes. Structs are written field by field, never as raw
+// memory (no padding bytes in the file).
+//
+// The reader checks, in this order, and throws StateFileError with the file named: too short
+// for a header, bad magic, other format version, truncated or overlong file, checksum
+// mismatch, other kind, other scene hash (both shown), malformed sections. The caller then asks
+// for sections by name (a missing one throws) and calls finish() (a section never asked for,
+// i.e. unknown to this code version, throws).
+#pragma once
+
+#include <bit>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace demfdm::io {
+
+/// A state file was refused or could not be written; the message starts with the file name.
+class StateFileError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+inline constexpr char kStateMagic[8] = {'D', 'E', 'M', 'F', 'D', 'M', 'S', 'T'};
+inline constexpr std::uint32_t kStateFormatVersion = 1;
+
+/// "demfdm <project version> gcc <compiler version>": the code version written by default
+/// (the same text as the build id the nodes announce on the bus).
+std::string default_code_version();
+
+/// FNV-1a 64 of a byte range (the file checksum).
+std::uint64_t fnv1a64(const void* data, std::size_t n, std::uint64_t h = 14695981039346656037ULL);
+
+/// What the header of a state file says.
+struct StateHeader {
+  std::uint32_t format_version = kStateFormatVersion;
+  std::string kind;          // "dem" or "fdm"
+  std::string code_version;  // text; recorded, not checked
+  std::uint64_t scene_hash = 0;
+};
+
+/// Builds a state file in memory. Sections are written one at a time: begin(name), put...,
+/// end(). bytes() closes the file (checksum) and returns it.
+class StateWriter {
+ public:
+  StateWriter(std::string_view kind, std::string_view code_version, std::uint64_t scene_hash);
+
+  void begin(std::string_view section);
+  void end();
+
+  void u8(std::uint8_t v) { buf_.push_back(static_cast<char>(v)); }
+  void b(bool v) { u8(v ? 1 : 0); }
+  void i8(std::int8_t v) { u8(static_cast<std::uint8_t>(v)); }
+  void u32(std::uint32_t v) { put_le(v); }
+  void i32(std::int32_t v) { put_le(static_cast<std::uint32_t>(v)); }
+  void u64(std::uint64_t v) { put_le(v); }
+  void i64(std::int64_t v) { put_le(static_cast<std::uint64_t>(v)); }
+  void f64(double v) { put_le(std::bit_cast<std::uint64_t>(v)); }
+  void str(std::string_view s);
+  /// Array helpers: u64 count, then the elements.
+  void f64s(std::span<const double> v);
+  void u8s(std::span<const std::uint8_t> v);
+  void i32s(std::span<const std::int32_t> v);
+  void u32s(std::span<const std::uint32_t> v);
+  void u64s(std::span<const std::uint64_t> v);
+
+  /// The complete file (header, sections, checksum). Throws std::logic_error inside a section.
+  std::string bytes() const;
+
+ private:
+  template <class U>
+  void put_le(U v) {
+    if constexpr (std::endian::native == std::endian::big) v = byteswap(v);
+    char tmp[sizeof(U)];
+    std::memcpy(tmp, &v, sizeof(U));
+    buf_.append(tmp, sizeof(U));
+  }
+  template <class U>
+  static U byteswap(U v) {
+    U r = 0;
+    for (std::size_t i = 0; i < sizeof(U); ++i) r = static_cast<U>((r << 8) | ((v >> (8 * i)) & 0xffu));
+    return r;
+  }
+  std::string head_;  // header up to (not including) the section count
+  std::string buf_;   // sections written so far (and the open one)
+  std::uint32_t count_ = 0;
+  std::size_t open_ = std::string::npos;  // offset of the open section's length field
+};
+
+class StateReader;
+
+/// Reads one section; every get checks the remaining length (a short section throws, naming
+/// the file and the section).
+class SectionReader {
+ public:
+  std::uint8_t u8() { return static_cast<std::uint8_t>(*take(1)); }
+  bool b();
+  std::int8_t i8() { return static_cast<std::int8_t>(u8()); }
+  std::uint32_t u32() { return get_le<std::uint32_t>(); }
+  std::int32_t i32() { return static_cast<std::int32_t>(get_le<std::uint32_t>()); }
+  std::uint64_t u64() { return get_le<std::uint64_t>(); }
+  std::int64_t i64() { return static_cast<std::int64_t>(get_le<std::uint64_t>()); }
+  double f64() { return std::bit_cast<double>(get_le<std::uint64_t>()); }
+  std::string str();
+  std::vector<double> f64s();
+  std::vector<std::uint8_t> u8s();
+  std::vector<std::int32_t> i32s();
+  std::vector<std::uint32_t> u32s();
+  std::vector<std::uint64_t> u64s();
+  /// An element count followed by at least `min_bytes_each` bytes per element: refuses counts
+  /// that cannot fit in what is left (a corrupt count must not allocate gigabytes).
+  std::uint64_t count(std::size_t min_bytes_each);
+
+  /// Throws unless every byte of the section was read.
+  void done();
+  /// A malformed section: throws StateFileError "<file>: section '<name>': <what>".
+  [[noreturn]] void fail(const std::string& what) const;
+  std::size_t remaining() const { return end_ - pos_; }
+
+ private:
+  friend class StateReader;
+  SectionReader(const StateReader* r, std::string name, const char* p, std::size_t n)
+      : r_(r), name_(std::move(name)), p_(p), end_(n) {}
+  const char* take(std::size_t n);
+  template <class U>
+  U get_le() {
+    U v;
+    std::memcpy(&v, take(sizeof(U)), sizeof(U));
+    if constexpr (std::endian::native == std::endian::big) {
+      U r = 0;
+      for (std::size_t i = 0; i < sizeof(U); ++i) r = static_cast<U>((r << 8) | ((v >> (8 * i)) & 0xffu));
+      v = r;
+    }
+    return v;
+  }
+  const StateReader* r_;
+  std::string name_;
+  const char* p_;
+  std::size_t pos_ = 0, end_;
+};
+
+/// Parses and verifies a whole state file held in memory. `source` names the file in every
+/// message.
+class StateReader {
+ public:
+  StateReader(std::string bytes, std::string source, std::string_view expected_kind,
+              std::uint64_t expected_scene_hash);
+
+  const StateHeader& header() const { return header_; }
+  const std::string& source() const { return source_; }
+  bool has(std::string_view section) const;
+  /// The named section (each may be read once). Throws if the file has none of that name.
+  SectionReader section(std::string_view name);
+  /// Throws if a section of the file was never asked for (unknown to this code).
+  void finish() const;
+  [[noreturn]] void fail(const std::string& what) const;
+
+ private:
+  struct Entry {
+    std::string name;
+    std::size_t off, len;
+    bool used = false;
+  };
+  std::string bytes_;
+  std::string source_;
+  StateHeader header_;
+  std::vector<Entry> sections_;
+};
+
+/// Write `bytes` to `path` atomically: `<path>.tmp-<pid>` is written and fsync'ed, then renamed
+/// over `path` (and the folder fsync'ed). Throws StateFileError naming the file and the call.
+void write_atomically(const std::filesystem::path& path, std::string_view bytes);
+
+/// The whole file; throws StateFileError naming the file if it cannot be read.
+std::string read_whole_file(const std::filesystem::path& path);
+
+}  // namespace demfdm::io

@@ -1,0 +1,348 @@
+// State-file container: see state_file.hpp and docs/checkpoint-format.md.
+#include "demfdm/io/state_file.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <sstream>
+
+#ifndef DEMFDM_VERSION_STRING
+#define DEMFDM_VERSION_STRING "unknown"
+#endif
+
+namespace demfdm::io {
+
+namespace {
+
+std::string hex(std::uint64_t v) {
+  std::ostringstream s;
+  s << "0x" << std::hex << std::setw(16) << std::setfill('0') << v;
+  return s.str();
+}
+
+// Little-endian integers at a byte offset of the file (the header fields).
+template <class U>
+U le_at(const std::string& b, std::size_t off) {
+  U v = 0;
+  for (std::size_t i = 0; i < sizeof(U); ++i)
+    v |= static_cast<U>(static_cast<U>(static_cast<unsigned char>(b[off + i])) << (8 * i));
+  return v;
+}
+
+template <class U>
+void le_append(std::string& s, U v) {
+  for (std::size_t i = 0; i < sizeof(U); ++i) s.push_back(static_cast<char>((v >> (8 * i)) & 0xffu));
+}
+
+void str_append(std::string& s, std::string_view v) {
+  le_append<std::uint32_t>(s, static_cast<std::uint32_t>(v.size()));
+  s.append(v);
+}
+
+// magic + version + total length: what must be there before anything else can be judged.
+constexpr std::size_t kFixedHead = 8 + 4 + 8;
+
+}  // namespace
+
+std::string default_code_version() { return std::string("demfdm ") + DEMFDM_VERSION_STRING + " gcc " + __VERSION__; }
+
+std::uint64_t fnv1a64(const void* data, std::size_t n, std::uint64_t h) {
+  const auto* p = static_cast<const unsigned char*>(data);
+  for (std::size_t i = 0; i < n; ++i) {
+    h ^= p[i];
+    h *= 1099511628211ULL;
+  }
+  return h;
+}
+
+// ---- writer ------------------------------------------------------------------------------
+
+StateWriter::StateWriter(std::string_view kind, std::string_view code_version, std::uint64_t scene_hash) {
+  str_append(head_, kind);
+  str_append(head_, code_version);
+  le_append<std::uint64_t>(head_, scene_hash);
+}
+
+void StateWriter::begin(std::string_view section) {
+  if (open_ != std::string::npos) throw std::logic_error("StateWriter::begin: a section is already open");
+  str_append(buf_, section);
+  open_ = buf_.size();
+  le_append<std::uint64_t>(buf_, 0);  // patched by end()
+}
+
+void StateWriter::end() {
+  if (open_ == std::string::npos) throw std::logic_error("StateWriter::end: no section is open");
+  const std::uint64_t len = buf_.size() - open_ - 8;
+  for (std::size_t i = 0; i < 8; ++i) buf_[open_ + i] = static_cast<char>((len >> (8 * i)) & 0xffu);
+  open_ = std::string::npos;
+  ++count_;
+}
+
+void StateWriter::str(std::string_view s) {
+  u32(static_cast<std::uint32_t>(s.size()));
+  buf_.append(s);
+}
+
+void StateWriter::f64s(std::span<const double> v) {
+  u64(v.size());
+  for (double x : v) f64(x);
+}
+void StateWriter::u8s(std::span<const std::uint8_t> v) {
+  u64(v.size());
+  buf_.append(reinterpret_cast<const char*>(v.data()), v.size());
+}
+void StateWriter::i32s(std::span<const std::int32_t> v) {
+  u64(v.size());
+  for (auto x : v) i32(x);
+}
+void StateWriter::u32s(std::span<const std::uint32_t> v) {
+  u64(v.size());
+  for (auto x : v) u32(x);
+}
+void StateWriter::u64s(std::span<const std::uint64_t> v) {
+  u64(v.size());
+  for (auto x : v) u64(x);
+}
+
+std::string StateWriter::bytes() const {
+  if (open_ != std::string::npos) throw std::logic_error("StateWriter::bytes: a section is still open");
+  std::string out;
+  const std::uint64_t total = kFixedHead + head_.size() + 4 + buf_.size() + 8;
+  out.reserve(total);
+  out.append(kStateMagic, 8);
+  le_append<std::uint32_t>(out, kStateFormatVersion);
+  le_append<std::uint64_t>(out, total);
+  out.append(head_);
+  le_append<std::uint32_t>(out, count_);
+  out.append(buf_);
+  le_append<std::uint64_t>(out, fnv1a64(out.data(), out.size()));
+  return out;
+}
+
+// ---- section reader ------------------------------------------------------------------------
+
+const char* SectionReader::take(std::size_t n) {
+  if (n > end_ - pos_) {
+    std::ostringstream s;
+    s << "needs " << n << " more bytes at offset " << pos_ << " of " << end_ << " (section too short)";
+    fail(s.str());
+  }
+  const char* q = p_ + pos_;
+  pos_ += n;
+  return q;
+}
+
+bool SectionReader::b() {
+  const std::uint8_t v = u8();
+  if (v > 1) fail("boolean byte " + std::to_string(v) + " (expected 0 or 1)");
+  return v != 0;
+}
+
+std::string SectionReader::str() {
+  const std::uint32_t n = u32();
+  const char* q = take(n);
+  return std::string(q, n);
+}
+
+std::uint64_t SectionReader::count(std::size_t min_bytes_each) {
+  const std::uint64_t n = u64();
+  if (min_bytes_each > 0 && n > remaining() / min_bytes_each) {
+    std::ostringstream s;
+    s << "count " << n << " at offset " << pos_ - 8 << " exceeds what the " << remaining()
+      << " remaining bytes can hold";
+    fail(s.str());
+  }
+  return n;
+}
+
+std::vector<double> SectionReader::f64s() {
+  std::vector<double> v(count(8));
+  for (auto& x : v) x = f64();
+  return v;
+}
+std::vector<std::uint8_t> SectionReader::u8s() {
+  const std::uint64_t n = count(1);
+  const char* q = take(n);
+  return std::vector<std::uint8_t>(reinterpret_cast<const std::uint8_t*>(q), reinterpret_cast<const std::uint8_t*>(q) + n);
+}
+std::vector<std::int32_t> SectionReader::i32s() {
+  std::vector<std::int32_t> v(count(4));
+  for (auto& x : v) x = i32();
+  return v;
+}
+std::vector<std::uint32_t> SectionReader::u32s() {
+  std::vector<std::uint32_t> v(count(4));
+  for (auto& x : v) x = u32();
+  return v;
+}
+std::vector<std::uint64_t> SectionReader::u64s() {
+  std::vector<std::uint64_t> v(count(8));
+  for (auto& x : v) x = u64();
+  return v;
+}
+
+void SectionReader::done() {
+  if (pos_ != end_) {
+    std::ostringstream s;
+    s << (end_ - pos_) << " bytes left unread of " << end_ << " (section longer than this code expects)";
+    fail(s.str());
+  }
+}
+
+void SectionReader::fail(const std::string& what) const { r_->fail("section '" + name_ + "': " + what); }
+
+// ---- file reader ---------------------------------------------------------------------------
+
+void StateReader::fail(const std::string& what) const { throw StateFileError(source_ + ": " + what); }
+
+StateReader::StateReader(std::string bytes, std::string source, std::string_view expected_kind,
+                         std::uint64_t expected_scene_hash)
+    : bytes_(std::move(bytes)), source_(std::move(source)) {
+  const std::string& b = bytes_;
+  if (b.size() >= 8 && std::memcmp(b.data(), kStateMagic, 8) != 0)
+    fail("bad magic: not a demfdm state file (expected the first 8 bytes to be \"DEMFDMST\")");
+  if (b.size() < kFixedHead + 8) {
+    std::ostringstream s;
+    s << "truncated: " << b.size() << " bytes, shorter than the fixed header and checksum (" << kFixedHead + 8 << " bytes)";
+    fail(s.str());
+  }
+  header_.format_version = le_at<std::uint32_t>(b, 8);
+  if (header_.format_version != kStateFormatVersion) {
+    std::ostringstream s;
+    s << "format version " << header_.format_version << ", this code reads version " << kStateFormatVersion;
+    fail(s.str());
+  }
+  const std::uint64_t total = le_at<std::uint64_t>(b, 12);
+  if (b.size() < total) {
+    std::ostringstream s;
+    s << "truncated: " << b.size() << " bytes, the header announces " << total;
+    fail(s.str());
+  }
+  if (b.size() > total) {
+    std::ostringstream s;
+    s << b.size() << " bytes, the header announces " << total << " (trailing bytes)";
+    fail(s.str());
+  }
+  const std::uint64_t stored = le_at<std::uint64_t>(b, b.size() - 8);
+  const std::uint64_t computed = fnv1a64(b.data(), b.size() - 8);
+  if (stored != computed)
+    fail("checksum mismatch: stored " + hex(stored) + ", computed " + hex(computed) + " (file damaged)");
+  // From here the bytes are what the writer produced; the structure is still checked.
+  SectionReader h(this, "header", b.data() + kFixedHead, b.size() - 8 - kFixedHead);
+  header_.kind = h.str();
+  header_.code_version = h.str();
+  header_.scene_hash = h.u64();
+  if (header_.kind != expected_kind)
+    fail("kind '" + header_.kind + "', expected '" + std::string(expected_kind) + "'");
+  if (header_.scene_hash != expected_scene_hash)
+    fail("scene hash " + hex(header_.scene_hash) + " in the file, expected " + hex(expected_scene_hash) +
+         " (a checkpoint of another scene)");
+  const std::uint32_t n = h.u32();
+  for (std::uint32_t k = 0; k < n; ++k) {
+    Entry e;
+    e.name = h.str();
+    const std::uint64_t len = h.u64();
+    if (len > h.remaining()) {
+      std::ostringstream s;
+      s << "section '" << e.name << "' announces " << len << " bytes, " << h.remaining() << " are left";
+      fail(s.str());
+    }
+    e.off = static_cast<std::size_t>(h.take(len) - b.data());
+    e.len = len;
+    for (const Entry& o : sections_)
+      if (o.name == e.name) fail("section '" + e.name + "' appears twice");
+    sections_.push_back(std::move(e));
+  }
+  if (h.remaining() != 0) fail(std::to_string(h.remaining()) + " bytes after the last section");
+}
+
+bool StateReader::has(std::string_view name) const {
+  for (const Entry& e : sections_)
+    if (e.name == name) return true;
+  return false;
+}
+
+SectionReader StateReader::section(std::string_view name) {
+  for (Entry& e : sections_)
+    if (e.name == name) {
+      if (e.used) fail("section '" + e.name + "' read twice");
+      e.used = true;
+      return SectionReader(this, e.name, bytes_.data() + e.off, e.len);
+    }
+  fail("missing section '" + std::string(name) + "' (kind '" + header_.kind + "', code version '" +
+       header_.code_version + "')");
+}
+
+void StateReader::finish() const {
+  std::string unknown;
+  for (const Entry& e : sections_)
+    if (!e.used) unknown += (unknown.empty() ? "'" : ", '") + e.name + "'";
+  if (!unknown.empty()) fail("unknown section(s) " + unknown + " (written by code version '" + header_.code_version + "')");
+}
+
+// ---- files -----------------------------------------------------------------------------------
+
+void write_atomically(const std::filesystem::path& path, std::string_view bytes) {
+  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid());
+  auto error = [&](const char* call, const std::filesystem::path& f) {
+    const int e = errno;
+    throw StateFileError(f.string() + ": " + call + " failed: " + std::strerror(e));
+  };
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) error("open", tmp);
+  std::size_t off = 0;
+  while (off < bytes.size()) {
+    const ssize_t w = ::write(fd, bytes.data() + off, bytes.size() - off);
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      const int e = errno;
+      ::close(fd);
+      ::unlink(tmp.c_str());
+      errno = e;
+      error("write", tmp);
+    }
+    off += static_cast<std::size_t>(w);
+  }
+  if (::fsync(fd) != 0) {
+    const int e = errno;
+    ::close(fd);
+    ::unlink(tmp.c_str());
+    errno = e;
+    error("fsync", tmp);
+  }
+  if (::close(fd) != 0) {
+    const int e = errno;
+    ::unlink(tmp.c_str());
+    errno = e;
+    error("close", tmp);
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const int e = errno;
+    ::unlink(tmp.c_str());
+    errno = e;
+    error("rename", path);
+  }
+  // Make the rename itself durable.
+  std::filesystem::path dir = path.parent_path();
+  if (dir.empty()) dir = ".";
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
+}
+
+std::string read_whole_file(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw StateFileError(path.string() + ": cannot open for reading: " + std::strerror(errno));
+  std::ostringstream s;
+  s << in.rdbuf();
+  if (in.bad()) throw StateFileError(path.string() + ": read failed");
+  return std::move(s).str();
+}
+
+}  // namespace demfdm::io

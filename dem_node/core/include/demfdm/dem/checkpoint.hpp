@@ -1,0 +1,75 @@
+// Bit-exact save and load of a DEM World (issue 13; file layout: docs/checkpoint-format.md).
+//
+// A World loaded from a state saved after step N continues with the same bits as the world
+// that was saved: every array the next steps read is stored as it is, including what
+// prepare() and rebuild() derive (contact lists in their order, image shifts, Verlet
+// reference positions, the wall candidate lists, the cached step and its recompute counter,
+// the last pass's forces), so nothing is rebuilt in another order after a load.
+//
+// Saved (kind "dem", sections in this order):
+//  * params    — WorldParams field by field (also what mutable_params(), set_cell(),
+//                set_gravity() and the cell strain changed: the current cell length);
+//  * counters  — step, time, dt, skin, rebuild count, last dt step, bond-failure count,
+//                prepared/dirty flags, cell strain rate, cell strain, cell length at the last
+//                rebuild, next ball and wall ids, damping energy, largest squared displacement
+//                since the rebuild, energies of dropped contacts;
+//  * effects   — gravity (on/off and its vector): the only effect that can be saved;
+//  * balls     — x, v, w, f, t, fa, ta, x_ref, r, m, inertia, id, fix;
+//  * pairs     — ball–ball list: a, b, image shift, ContactHist and BondHist field by field;
+//  * plane_contacts, facet_contacts, footing_contacts — WallContacts (ball, wall, histories,
+//                current facet, candidate facets, force, moment, ball torque, contact point,
+//                barycentric weights);
+//  * planes    — plane walls incl. servo settings, servo-set velocity, displacement since the
+//                rebuild, reaction and contact stiffness (the servo's input of the next step);
+//  * facet_walls — vertices, velocities, triangles, normals, facet spins, reference vertices,
+//                vertex forces and stiffnesses, total force;
+//  * footing   — parameters, enabled, displacement, reaction, id.
+// Not saved: phase timers, the pair-kernel choice (every kernel gives the same bits), scratch
+// buffers (per-thread force buffers are zero between passes). The World holds no random-number
+// state: the generator of generate_rev() lives only inside that call.
+//
+// Effects: only GravityEffect is saved. save_state() throws std::invalid_argument naming any
+// other effect present (e.g. "periodic_servo", which exists only inside servo_until(), so a
+// checkpoint between steps of a coupled stage never sees it; "measurement_recorder" is an
+// observer whose samples belong to the caller). load_state() replaces the target's gravity
+// effect and keeps its other effects (observers the caller added).
+//
+// Threads: WorldParams::threads is restored too (the ball–ball sums are associated per thread
+// block, so the same count is needed for the same bits; with threads = 0 the OpenMP default
+// of the loading process decides).
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <iosfwd>
+#include <string>
+#include <string_view>
+
+#include "demfdm/dem/world.hpp"
+#include "demfdm/io/state_file.hpp"
+
+namespace demfdm::dem {
+
+/// What is written into the header next to the state.
+struct CheckpointMeta {
+  std::uint64_t scene_hash = 0;                          // the caller's hash of the scene
+  std::string code_version = io::default_code_version();  // recorded, not checked on load
+};
+
+/// The state file of `w` in memory. Throws std::invalid_argument if `w` has an effect that
+/// cannot be saved (named in the message).
+std::string state_bytes(const World& w, const CheckpointMeta& meta);
+/// Writes state_bytes() to `out`.
+void save_state(const World& w, std::ostream& out, const CheckpointMeta& meta = {});
+/// Writes state_bytes() to `path` atomically (io::write_atomically).
+void save_state_file(const World& w, const std::filesystem::path& path, const CheckpointMeta& meta);
+
+/// Replace the state of `w` by the saved one. `w` may be a freshly constructed World (any
+/// parameters: they are replaced). Refuses (io::StateFileError, message starting with
+/// `source`) a file of another kind or scene hash, a damaged, truncated or foreign file, and
+/// unknown or missing sections; the world is left untouched then. Returns the header.
+io::StateHeader load_state(World& w, std::istream& in, std::uint64_t scene_hash, std::string_view source = "<stream>");
+io::StateHeader load_state_bytes(World& w, std::string bytes, std::uint64_t scene_hash, std::string_view source);
+io::StateHeader load_state_file(World& w, const std::filesystem::path& path, std::uint64_t scene_hash);
+
+}  // namespace demfdm::dem

@@ -1,0 +1,723 @@
+// Bit-exact DEM state save/load: see checkpoint.hpp and docs/checkpoint-format.md.
+#include "demfdm/dem/checkpoint.hpp"
+
+#include <istream>
+#include <iterator>
+#include <memory>
+#include <ostream>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+namespace demfdm::dem {
+
+// Tripwires: a new field in a saved struct (or a new World member) changes its size. Then
+// decide whether it influences later steps, save it below and in docs/checkpoint-format.md
+// (raising the section layout: format version or a new section), and update the size here.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(_GLIBCXX_DEBUG)
+static_assert(sizeof(ContactHist) == 96, "ContactHist changed: update the checkpoint (docs/checkpoint-format.md)");
+static_assert(sizeof(BondHist) == 104, "BondHist changed: update the checkpoint (docs/checkpoint-format.md)");
+static_assert(sizeof(LinearParams) == 56, "LinearParams changed: update the checkpoint");
+static_assert(sizeof(ParallelBondParams) == 64, "ParallelBondParams changed: update the checkpoint");
+static_assert(sizeof(SoftBondParams) == 80, "SoftBondParams changed: update the checkpoint");
+static_assert(sizeof(ContactFamilyParams) == 208, "ContactFamilyParams changed: update the checkpoint");
+static_assert(sizeof(WorldParams) == 976, "WorldParams changed: update the checkpoint");
+static_assert(sizeof(PlaneWallParams) == 152, "PlaneWallParams changed: update the checkpoint");
+static_assert(sizeof(PlaneWall) == 240, "PlaneWall changed: update the checkpoint");
+static_assert(sizeof(FacetWall) == 224, "FacetWall changed: update the checkpoint");
+static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
+static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
+static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
+static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
+static_assert(sizeof(World) == 2944, "World changed: is the new member state? update the checkpoint");
+#endif
+
+namespace {
+
+constexpr const char* kKind = "dem";
+
+// ---- writing -------------------------------------------------------------------------------
+
+void put(io::StateWriter& o, const Vec3& v) {
+  o.f64(v.x);
+  o.f64(v.y);
+  o.f64(v.z);
+}
+void put_vecs(io::StateWriter& o, const std::vector<Vec3>& v) {
+  o.u64(v.size());
+  for (const Vec3& x : v) put(o, x);
+}
+
+void put(io::StateWriter& o, const ContactFamilyParams& f) {
+  o.u8(static_cast<std::uint8_t>(f.model));
+  const LinearParams& l = f.linear;
+  o.f64(l.emod);
+  o.f64(l.kratio);
+  o.f64(l.fric);
+  o.u8(static_cast<std::uint8_t>(l.mode));
+  o.f64(l.rgap);
+  o.u8(static_cast<std::uint8_t>(l.wall_length));
+  o.f64(l.kn_fixed);
+  const ParallelBondParams& pb = f.pbond;
+  o.f64(pb.emod);
+  o.f64(pb.kratio);
+  o.f64(pb.rmul);
+  o.f64(pb.mcf);
+  o.f64(pb.ten);
+  o.f64(pb.coh);
+  o.f64(pb.fa_deg);
+  o.b(pb.zero_linear);
+  const SoftBondParams& sb = f.softbond;
+  o.f64(sb.rmul);
+  o.f64(sb.mcf);
+  o.f64(sb.bmul);
+  o.f64(sb.ten);
+  o.f64(sb.coh);
+  o.f64(sb.fa_deg);
+  o.f64(sb.soft);
+  o.f64(sb.cut);
+  o.f64(sb.twist_factor);
+  o.u8(static_cast<std::uint8_t>(sb.ret));
+  o.u8(static_cast<std::uint8_t>(sb.unload));
+  o.u8(static_cast<std::uint8_t>(sb.cohesion));
+  o.b(sb.bending_in_softening);
+  o.u8(static_cast<std::uint8_t>(sb.moments));
+}
+
+void put(io::StateWriter& o, const WorldParams& p) {
+  o.f64(p.density);
+  o.f64(p.local_damping);
+  o.f64(p.g0);
+  o.f64(p.g_level);
+  o.b(p.gravity);
+  o.f64(p.dt_safety);
+  o.i32(p.dt_interval);
+  o.f64(p.dt_fixed);
+  o.f64(p.skin);
+  o.f64(p.skin_factor);
+  o.b(p.rescale_shear);
+  o.b(p.facet_spin);
+  o.b(p.track_energy);
+  o.i32(p.threads);
+  o.b(p.periodic.enabled);
+  put(o, p.periodic.origin);
+  put(o, p.periodic.length);
+  put(o, p.ball_ball);
+  put(o, p.ball_wall);
+  put(o, p.ball_facet);
+  put(o, p.ball_footing);
+}
+
+void put(io::StateWriter& o, const ContactHist& h) {
+  put(o, h.fs);
+  o.f64(h.fn);
+  put(o, h.n_old);
+  o.f64(h.kn);
+  o.f64(h.ks);
+  o.f64(h.mu);
+  o.f64(h.e_slip);
+  o.u8(h.flags);
+}
+constexpr std::size_t kHistBytes = 11 * 8 + 1;
+
+void put(io::StateWriter& o, const BondHist& b) {
+  put(o, b.fsb);
+  o.f64(b.nb);
+  put(o, b.mb);
+  o.f64(b.mt);
+  o.f64(b.rb);
+  o.f64(b.kn);
+  o.f64(b.sigma_t);
+  o.f64(b.e_soft);
+  o.u8(static_cast<std::uint8_t>(b.state));
+  o.u8(b.slip_b);
+  o.u8(b.slip_t);
+}
+constexpr std::size_t kBondBytes = 12 * 8 + 3;
+
+void put_hists(io::StateWriter& o, const std::vector<ContactHist>& h, const std::vector<BondHist>& b) {
+  o.u64(h.size());
+  for (const ContactHist& x : h) put(o, x);
+  o.u64(b.size());
+  for (const BondHist& x : b) put(o, x);
+}
+
+void put(io::StateWriter& o, const WallContacts& wc) {
+  o.u32s(wc.ball);
+  o.u32s(wc.wall);
+  put_hists(o, wc.h, wc.bond);
+  o.i32s(wc.facet);
+  o.u32s(wc.cand_off);
+  o.u32s(wc.cand);
+  put_vecs(o, wc.F);
+  put_vecs(o, wc.M);
+  put_vecs(o, wc.TA);
+  put_vecs(o, wc.xc);
+  put_vecs(o, wc.bary);
+}
+
+void put(io::StateWriter& o, const PlaneWall& w) {
+  const PlaneWallParams& p = w.p;
+  put(o, p.point);
+  put(o, p.normal);
+  put(o, p.axis1);
+  o.f64(p.half1);
+  o.f64(p.half2);
+  put(o, p.velocity);
+  o.b(p.servo);
+  o.f64(p.servo_stress);
+  o.f64(p.servo_area);
+  o.f64(p.servo_gain);
+  o.f64(p.servo_vmax);
+  put(o, w.axis2);
+  put(o, w.disp);
+  put(o, w.reaction);
+  o.f64(w.k_sum);
+  o.u64(w.id);
+}
+
+void put(io::StateWriter& o, const FacetWall& fw) {
+  put_vecs(o, fw.pos);
+  put_vecs(o, fw.vel);
+  o.u64(fw.tri.size());
+  for (const auto& t : fw.tri)
+    for (std::int32_t v : t) o.i32(v);
+  put_vecs(o, fw.tri_normal);
+  put_vecs(o, fw.tri_spin);
+  put_vecs(o, fw.pos_ref);
+  put_vecs(o, fw.vforce);
+  o.f64s(fw.vstiff);
+  put(o, fw.total_force);
+  o.u64(fw.id);
+}
+
+void put(io::StateWriter& o, const Footing& f) {
+  o.f64(f.p.diameter);
+  o.f64(f.p.height);
+  put(o, f.p.bottom_centre);
+  put(o, f.p.velocity);
+  o.b(f.enabled);
+  put(o, f.disp);
+  put(o, f.reaction);
+  o.u64(f.id);
+}
+
+// ---- reading -------------------------------------------------------------------------------
+
+Vec3 get_vec(io::SectionReader& in) {
+  Vec3 v;
+  v.x = in.f64();
+  v.y = in.f64();
+  v.z = in.f64();
+  return v;
+}
+std::vector<Vec3> get_vecs(io::SectionReader& in) {
+  std::vector<Vec3> v(in.count(24));
+  for (Vec3& x : v) x = get_vec(in);
+  return v;
+}
+
+// An enum stored as u8 with values 0..last.
+template <class E>
+E get_enum(io::SectionReader& in, std::uint8_t last, const char* what) {
+  const std::uint8_t v = in.u8();
+  if (v > last) in.fail(std::string(what) + " = " + std::to_string(v) + ", expected 0.." + std::to_string(last));
+  return static_cast<E>(v);
+}
+
+ContactFamilyParams get_family(io::SectionReader& in) {
+  ContactFamilyParams f;
+  f.model = get_enum<ContactModel>(in, 2, "contact model");
+  LinearParams& l = f.linear;
+  l.emod = in.f64();
+  l.kratio = in.f64();
+  l.fric = in.f64();
+  l.mode = get_enum<NormalMode>(in, 1, "linear.mode");
+  l.rgap = in.f64();
+  l.wall_length = get_enum<WallLength>(in, 1, "linear.wall_length");
+  l.kn_fixed = in.f64();
+  ParallelBondParams& pb = f.pbond;
+  pb.emod = in.f64();
+  pb.kratio = in.f64();
+  pb.rmul = in.f64();
+  pb.mcf = in.f64();
+  pb.ten = in.f64();
+  pb.coh = in.f64();
+  pb.fa_deg = in.f64();
+  pb.zero_linear = in.b();
+  SoftBondParams& sb = f.softbond;
+  sb.rmul = in.f64();
+  sb.mcf = in.f64();
+  sb.bmul = in.f64();
+  sb.ten = in.f64();
+  sb.coh = in.f64();
+  sb.fa_deg = in.f64();
+  sb.soft = in.f64();
+  sb.cut = in.f64();
+  sb.twist_factor = in.f64();
+  sb.ret = get_enum<SoftReturn>(in, 1, "softbond.ret");
+  sb.unload = get_enum<SoftUnload>(in, 1, "softbond.unload");
+  sb.cohesion = get_enum<CohesionSoftening>(in, 1, "softbond.cohesion");
+  sb.bending_in_softening = in.b();
+  sb.moments = get_enum<UnbondedMoments>(in, 1, "softbond.moments");
+  return f;
+}
+
+WorldParams get_params(io::SectionReader& in) {
+  WorldParams p;
+  p.density = in.f64();
+  p.local_damping = in.f64();
+  p.g0 = in.f64();
+  p.g_level = in.f64();
+  p.gravity = in.b();
+  p.dt_safety = in.f64();
+  p.dt_interval = in.i32();
+  p.dt_fixed = in.f64();
+  p.skin = in.f64();
+  p.skin_factor = in.f64();
+  p.rescale_shear = in.b();
+  p.facet_spin = in.b();
+  p.track_energy = in.b();
+  p.threads = in.i32();
+  p.periodic.enabled = in.b();
+  p.periodic.origin = get_vec(in);
+  p.periodic.length = get_vec(in);
+  p.ball_ball = get_family(in);
+  p.ball_wall = get_family(in);
+  p.ball_facet = get_family(in);
+  p.ball_footing = get_family(in);
+  return p;
+}
+
+ContactHist get_hist(io::SectionReader& in) {
+  ContactHist h;
+  h.fs = get_vec(in);
+  h.fn = in.f64();
+  h.n_old = get_vec(in);
+  h.kn = in.f64();
+  h.ks = in.f64();
+  h.mu = in.f64();
+  h.e_slip = in.f64();
+  h.flags = in.u8();
+  return h;
+}
+
+BondHist get_bond(io::SectionReader& in) {
+  BondHist b;
+  b.fsb = get_vec(in);
+  b.nb = in.f64();
+  b.mb = get_vec(in);
+  b.mt = in.f64();
+  b.rb = in.f64();
+  b.kn = in.f64();
+  b.sigma_t = in.f64();
+  b.e_soft = in.f64();
+  b.state = get_enum<BondState>(in, 4, "bond state");
+  b.slip_b = in.u8();
+  b.slip_t = in.u8();
+  return b;
+}
+
+void get_hists(io::SectionReader& in, std::vector<ContactHist>& h, std::vector<BondHist>& b) {
+  h.resize(in.count(kHistBytes));
+  for (ContactHist& x : h) x = get_hist(in);
+  b.resize(in.count(kBondBytes));
+  for (BondHist& x : b) x = get_bond(in);
+}
+
+WallContacts get_wall_contacts(io::SectionReader& in) {
+  WallContacts wc;
+  wc.ball = in.u32s();
+  wc.wall = in.u32s();
+  get_hists(in, wc.h, wc.bond);
+  wc.facet = in.i32s();
+  wc.cand_off = in.u32s();
+  wc.cand = in.u32s();
+  wc.F = get_vecs(in);
+  wc.M = get_vecs(in);
+  wc.TA = get_vecs(in);
+  wc.xc = get_vecs(in);
+  wc.bary = get_vecs(in);
+  return wc;
+}
+
+PlaneWall get_plane(io::SectionReader& in) {
+  PlaneWall w;
+  PlaneWallParams& p = w.p;
+  p.point = get_vec(in);
+  p.normal = get_vec(in);
+  p.axis1 = get_vec(in);
+  p.half1 = in.f64();
+  p.half2 = in.f64();
+  p.velocity = get_vec(in);
+  p.servo = in.b();
+  p.servo_stress = in.f64();
+  p.servo_area = in.f64();
+  p.servo_gain = in.f64();
+  p.servo_vmax = in.f64();
+  w.axis2 = get_vec(in);
+  w.disp = get_vec(in);
+  w.reaction = get_vec(in);
+  w.k_sum = in.f64();
+  w.id = in.u64();
+  return w;
+}
+
+FacetWall get_facet_wall(io::SectionReader& in) {
+  FacetWall fw;
+  fw.pos = get_vecs(in);
+  fw.vel = get_vecs(in);
+  fw.tri.resize(in.count(12));
+  for (auto& t : fw.tri)
+    for (std::int32_t& v : t) v = in.i32();
+  fw.tri_normal = get_vecs(in);
+  fw.tri_spin = get_vecs(in);
+  fw.pos_ref = get_vecs(in);
+  fw.vforce = get_vecs(in);
+  fw.vstiff = in.f64s();
+  fw.total_force = get_vec(in);
+  fw.id = in.u64();
+  const std::size_t nv = fw.pos.size(), nt = fw.tri.size();
+  if (fw.vel.size() != nv || fw.pos_ref.size() != nv || fw.vforce.size() != nv || fw.vstiff.size() != nv ||
+      fw.tri_normal.size() != nt || fw.tri_spin.size() != nt)
+    in.fail("facet wall arrays of different lengths");
+  for (const auto& t : fw.tri)
+    for (std::int32_t v : t)
+      if (v < 0 || static_cast<std::size_t>(v) >= nv) in.fail("facet wall triangle vertex " + std::to_string(v) + " out of range");
+  return fw;
+}
+
+Footing get_footing(io::SectionReader& in) {
+  Footing f;
+  f.p.diameter = in.f64();
+  f.p.height = in.f64();
+  f.p.bottom_centre = get_vec(in);
+  f.p.velocity = get_vec(in);
+  f.enabled = in.b();
+  f.disp = get_vec(in);
+  f.reaction = get_vec(in);
+  f.id = in.u64();
+  return f;
+}
+
+// Consistency of a wall-contact list with the balls and walls it names (the file passed its
+// checksum, so this only guards against a writer of another build).
+void check_wall_contacts(io::SectionReader& in, const WallContacts& wc, std::size_t nballs, std::size_t nwalls,
+                         bool can_bond, const std::vector<FacetWall>* fwalls) {
+  const std::size_t m = wc.ball.size();
+  if (wc.wall.size() != m || wc.h.size() != m || wc.facet.size() != m || wc.cand_off.size() != m + 1 ||
+      wc.F.size() != m || wc.M.size() != m || wc.TA.size() != m || wc.xc.size() != m || wc.bary.size() != m)
+    in.fail("contact arrays of different lengths");
+  if (wc.bond.size() != (can_bond ? m : 0))
+    in.fail("bond histories (" + std::to_string(wc.bond.size()) + ") do not match the family's contact model");
+  if (wc.cand_off[0] != 0 || wc.cand_off[m] != wc.cand.size()) in.fail("candidate offsets inconsistent");
+  for (std::size_t c = 0; c < m; ++c) {
+    if (wc.ball[c] >= nballs) in.fail("contact " + std::to_string(c) + " names ball row " + std::to_string(wc.ball[c]));
+    if (wc.wall[c] >= nwalls) in.fail("contact " + std::to_string(c) + " names wall " + std::to_string(wc.wall[c]));
+    if (wc.cand_off[c] > wc.cand_off[c + 1]) in.fail("candidate offsets not ascending");
+    if (fwalls) {
+      const std::size_t nt = (*fwalls)[wc.wall[c]].tri.size();
+      if (wc.facet[c] < 0 || static_cast<std::size_t>(wc.facet[c]) >= nt) in.fail("contact facet out of range");
+      for (std::uint32_t k = wc.cand_off[c]; k < wc.cand_off[c + 1]; ++k)
+        if (wc.cand[k] >= nt) in.fail("candidate facet out of range");
+    }
+  }
+}
+
+}  // namespace
+
+// Private-state access of World for the checkpoint (friend of World).
+struct CheckpointAccess {
+  static void save(const World& w, io::StateWriter& o) {
+    for (const auto& e : w.effects_)
+      if (e.get() != w.gravity_) {
+        throw std::invalid_argument(std::string("save_state: the world has the effect '") + e->name() +
+                                    "', which a checkpoint cannot hold (only gravity is saved; docs/checkpoint-format.md). "
+                                    "Remove it before saving and add it again after loading.");
+      }
+    o.begin("params");
+    put(o, w.p_);
+    o.end();
+
+    o.begin("counters");
+    o.f64(w.time_);
+    o.f64(w.dt_);
+    o.f64(w.skin_);
+    o.i64(w.step_);
+    o.i64(w.rebuilds_);
+    o.i64(w.last_dt_step_);
+    o.i64(w.bond_failures_);
+    o.b(w.prepared_);
+    o.b(w.dirty_);
+    put(o, w.edot_);
+    put(o, w.cell_strain_);
+    put(o, w.cell_len_ref_);
+    o.u64(w.next_id_);
+    o.u64(w.next_wall_id_);
+    o.f64(w.e_damp_);
+    o.f64(w.max_disp2_);
+    o.f64(w.e_slip_dead_);
+    o.f64(w.e_soft_dead_);
+    o.end();
+
+    o.begin("effects");
+    o.b(w.gravity_ != nullptr);
+    put(o, w.gravity());
+    o.end();
+
+    o.begin("balls");
+    const Particles& pt = w.pt_;
+    put_vecs(o, pt.x);
+    put_vecs(o, pt.v);
+    put_vecs(o, pt.w);
+    put_vecs(o, pt.f);
+    put_vecs(o, pt.t);
+    put_vecs(o, pt.fa);
+    put_vecs(o, pt.ta);
+    put_vecs(o, pt.x_ref);
+    o.f64s(pt.r);
+    o.f64s(pt.m);
+    o.f64s(pt.inertia);
+    o.u64s(pt.id);
+    o.u8s(pt.fix);
+    o.end();
+
+    o.begin("pairs");
+    const PairContacts& pc = w.pc_;
+    o.u32s(pc.a);
+    o.u32s(pc.b);
+    o.u64(pc.shift.size());
+    for (const auto& s : pc.shift)
+      for (std::int8_t v : s) o.i8(v);
+    put_hists(o, pc.h, pc.bond);
+    o.end();
+
+    o.begin("plane_contacts");
+    put(o, w.plc_);
+    o.end();
+    o.begin("facet_contacts");
+    put(o, w.fcc_);
+    o.end();
+    o.begin("footing_contacts");
+    put(o, w.ftc_);
+    o.end();
+
+    o.begin("planes");
+    o.u64(w.planes_.size());
+    for (const PlaneWall& p : w.planes_) put(o, p);
+    o.end();
+
+    o.begin("facet_walls");
+    o.u64(w.fwalls_.size());
+    for (const FacetWall& fw : w.fwalls_) put(o, fw);
+    o.end();
+
+    o.begin("footing");
+    put(o, w.footing_);
+    o.end();
+  }
+
+  static void load(World& w, io::StateReader& r) {
+    // Parse and check everything first; the world changes only once all of it is read.
+    WorldParams p;
+    {
+      auto in = r.section("params");
+      p = get_params(in);
+      in.done();
+      try {
+        validate(p);
+      } catch (const std::invalid_argument& e) {
+        in.fail(std::string("invalid parameters: ") + e.what());
+      }
+    }
+    struct Counters {
+      double time, dt, skin;
+      std::int64_t step, rebuilds, last_dt_step, bond_failures;
+      bool prepared, dirty;
+      Vec3 edot, cell_strain, cell_len_ref;
+      std::uint64_t next_id, next_wall_id;
+      double e_damp, max_disp2, e_slip_dead, e_soft_dead;
+    } k;
+    {
+      auto in = r.section("counters");
+      k.time = in.f64();
+      k.dt = in.f64();
+      k.skin = in.f64();
+      k.step = in.i64();
+      k.rebuilds = in.i64();
+      k.last_dt_step = in.i64();
+      k.bond_failures = in.i64();
+      k.prepared = in.b();
+      k.dirty = in.b();
+      k.edot = get_vec(in);
+      k.cell_strain = get_vec(in);
+      k.cell_len_ref = get_vec(in);
+      k.next_id = in.u64();
+      k.next_wall_id = in.u64();
+      k.e_damp = in.f64();
+      k.max_disp2 = in.f64();
+      k.e_slip_dead = in.f64();
+      k.e_soft_dead = in.f64();
+      in.done();
+    }
+    bool gravity_on;
+    Vec3 g;
+    {
+      auto in = r.section("effects");
+      gravity_on = in.b();
+      g = get_vec(in);
+      in.done();
+    }
+    Particles pt;
+    {
+      auto in = r.section("balls");
+      pt.x = get_vecs(in);
+      pt.v = get_vecs(in);
+      pt.w = get_vecs(in);
+      pt.f = get_vecs(in);
+      pt.t = get_vecs(in);
+      pt.fa = get_vecs(in);
+      pt.ta = get_vecs(in);
+      pt.x_ref = get_vecs(in);
+      pt.r = in.f64s();
+      pt.m = in.f64s();
+      pt.inertia = in.f64s();
+      pt.id = in.u64s();
+      pt.fix = in.u8s();
+      in.done();
+      const std::size_t n = pt.x.size();
+      if (pt.v.size() != n || pt.w.size() != n || pt.f.size() != n || pt.t.size() != n || pt.fa.size() != n ||
+          pt.ta.size() != n || pt.x_ref.size() != n || pt.r.size() != n || pt.m.size() != n ||
+          pt.inertia.size() != n || pt.id.size() != n || pt.fix.size() != n)
+        in.fail("ball arrays of different lengths");
+    }
+    const std::size_t n = pt.size();
+    PairContacts pc;
+    {
+      auto in = r.section("pairs");
+      pc.a = in.u32s();
+      pc.b = in.u32s();
+      pc.shift.resize(in.count(4));
+      for (auto& s : pc.shift)
+        for (std::int8_t& v : s) v = in.i8();
+      get_hists(in, pc.h, pc.bond);
+      in.done();
+      const std::size_t m = pc.a.size();
+      if (pc.b.size() != m || pc.shift.size() != m || pc.h.size() != m) in.fail("contact arrays of different lengths");
+      if (pc.bond.size() != (p.ball_ball.model != ContactModel::kLinear ? m : 0))
+        in.fail("bond histories (" + std::to_string(pc.bond.size()) + ") do not match the ball_ball contact model");
+      for (std::size_t c = 0; c < m; ++c)
+        if (pc.a[c] >= n || pc.b[c] >= n) in.fail("contact " + std::to_string(c) + " names a ball row out of range");
+    }
+    std::vector<PlaneWall> planes;
+    {
+      auto in = r.section("planes");
+      planes.resize(in.count(1));
+      for (PlaneWall& pw : planes) pw = get_plane(in);
+      in.done();
+    }
+    std::vector<FacetWall> fwalls;
+    {
+      auto in = r.section("facet_walls");
+      fwalls.resize(in.count(1));
+      for (FacetWall& fw : fwalls) fw = get_facet_wall(in);
+      in.done();
+    }
+    Footing footing;
+    {
+      auto in = r.section("footing");
+      footing = get_footing(in);
+      in.done();
+    }
+    WallContacts plc, fcc, ftc;
+    {
+      auto in = r.section("plane_contacts");
+      plc = get_wall_contacts(in);
+      in.done();
+      check_wall_contacts(in, plc, n, planes.size(), p.ball_wall.model != ContactModel::kLinear, nullptr);
+    }
+    {
+      auto in = r.section("facet_contacts");
+      fcc = get_wall_contacts(in);
+      in.done();
+      check_wall_contacts(in, fcc, n, fwalls.size(), p.ball_facet.model != ContactModel::kLinear, &fwalls);
+    }
+    {
+      auto in = r.section("footing_contacts");
+      ftc = get_wall_contacts(in);
+      in.done();
+      check_wall_contacts(in, ftc, n, 1, p.ball_footing.model != ContactModel::kLinear, nullptr);
+    }
+    r.finish();
+
+    // Commit (nothing below throws except on allocation failure).
+    w.p_ = p;
+    w.time_ = k.time;
+    w.dt_ = k.dt;
+    w.skin_ = k.skin;
+    w.step_ = k.step;
+    w.rebuilds_ = k.rebuilds;
+    w.last_dt_step_ = k.last_dt_step;
+    w.bond_failures_ = k.bond_failures;
+    w.prepared_ = k.prepared;
+    w.dirty_ = k.dirty;
+    w.edot_ = k.edot;
+    w.cell_strain_ = k.cell_strain;
+    w.cell_len_ref_ = k.cell_len_ref;
+    w.next_id_ = k.next_id;
+    w.next_wall_id_ = k.next_wall_id;
+    w.e_damp_ = k.e_damp;
+    w.max_disp2_ = k.max_disp2;
+    w.e_slip_dead_ = k.e_slip_dead;
+    w.e_soft_dead_ = k.e_soft_dead;
+    w.pt_ = std::move(pt);
+    w.pc_ = std::move(pc);
+    w.plc_ = std::move(plc);
+    w.fcc_ = std::move(fcc);
+    w.ftc_ = std::move(ftc);
+    w.planes_ = std::move(planes);
+    w.fwalls_ = std::move(fwalls);
+    w.footing_ = footing;
+    // Scratch: per-thread force buffers are re-created (all zero) by the next pass.
+    w.tbuf_.clear();
+    w.chunk_e_.clear();
+    w.row_lo_.clear();
+    w.row_hi_.clear();
+    if (w.gravity_) w.remove_effect(w.gravity_);
+    if (gravity_on) w.gravity_ = w.add_effect(std::make_unique<GravityEffect>(g));
+  }
+};
+
+std::string state_bytes(const World& w, const CheckpointMeta& meta) {
+  io::StateWriter o(kKind, meta.code_version, meta.scene_hash);
+  CheckpointAccess::save(w, o);
+  return o.bytes();
+}
+
+void save_state(const World& w, std::ostream& out, const CheckpointMeta& meta) {
+  const std::string b = state_bytes(w, meta);
+  out.write(b.data(), static_cast<std::streamsize>(b.size()));
+  if (!out) throw io::StateFileError("save_state: writing " + std::to_string(b.size()) + " bytes to the stream failed");
+}
+
+void save_state_file(const World& w, const std::filesystem::path& path, const CheckpointMeta& meta) {
+  io::write_atomically(path, state_bytes(w, meta));
+}
+
+io::StateHeader load_state_bytes(World& w, std::string bytes, std::uint64_t scene_hash, std::string_view source) {
+  io::StateReader r(std::move(bytes), std::string(source), kKind, scene_hash);
+  CheckpointAccess::load(w, r);
+  return r.header();
+}
+
+io::StateHeader load_state(World& w, std::istream& in, std::uint64_t scene_hash, std::string_view source) {
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw io::StateFileError(std::string(source) + ": read failed");
+  return load_state_bytes(w, std::move(bytes), scene_hash, source);
+}
+
+io::StateHeader load_state_file(World& w, const std::filesystem::path& path, std::uint64_t scene_hash) {
+  return load_state_bytes(w, io::read_whole_file(path), scene_hash, path.string());
+}
+
+}  // namespace demfdm::dem
