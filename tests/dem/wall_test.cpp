@@ -146,3 +146,40 @@ TEST(Footing, ReactionBottomAndSide) {
   EXPECT_NEAR(w.footing_reaction().x / (-kn * 2e-6), 1.0, 1e-6);
   EXPECT_NEAR(w.footing_reaction().z, 0.0, 1e-12);
 }
+
+// docs/theory.md §2.6, §6.3: an interface (ball-facet) parallel bond has no linear part while it
+// is bonded (no repulsion from the initial overlaps), but once it breaks the contact is an
+// ordinary linear contact again, starting from the configuration at the break, so the ball
+// cannot cross the interface. A ball bonded to a facet floor is driven sideways and down: the
+// bond breaks in shear, and the ball is then stopped by the floor (without the restored linear
+// part it fell through the wall).
+TEST(Interface, BrokenInterfaceBondStopsTheBallAtTheWall) {
+  WorldParams p;
+  p.local_damping = 0.0;
+  p.ball_facet.model = ContactModel::kLinearPBond;
+  p.ball_facet.pbond.zero_linear = true;
+  p.ball_facet.pbond.ten = 1e5;
+  p.ball_facet.pbond.coh = 1e5;
+  const double R = 1e-4;
+  World w(p);
+  add_square(w, 2e-3);
+  w.add_ball({0, 0, R}, R);  // touching the floor
+  w.prepare();
+  ASSERT_EQ(w.bond_ball_facet(1e-9), 1u);
+  w.balls().v[0] = {0.5, 0.0, -0.05};  // shear the bond and press into the floor
+  double zmin = R;
+  bool broke = false, stiff_after_break = true;
+  for (int s = 0; s < 5000 && std::abs(w.balls().x[0].x) < 1.5e-3; ++s) {
+    w.step();
+    zmin = std::min(zmin, w.balls().x[0].z);
+    const auto& fc = w.facet_contacts();
+    if (fc.size() == 1 && (fc.bond[0].state == BondState::kBrokenShear || fc.bond[0].state == BondState::kBrokenTension)) {
+      broke = true;
+      stiff_after_break &= fc.h[0].kn > 0.0;
+    }
+  }
+  EXPECT_TRUE(broke) << "the bond did not break: the test does not test anything";
+  EXPECT_TRUE(stiff_after_break) << "the broken interface bond left a contact without stiffness";
+  std::printf("lowest ball centre after the break: %.4g R (floor at 0)\n", zmin / R);
+  EXPECT_GT(zmin, 0.9 * R) << "the ball sank into the interface wall after the break";
+}

@@ -1304,6 +1304,8 @@ void World::facet_pass(double dt) {
   const LawConst lc = law_const(p_.ball_facet);
   WallContacts& wc = fcc_;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
+  const bool restore_linear =
+      p_.ball_facet.model == ContactModel::kLinearPBond && p_.ball_facet.pbond.zero_linear && !wc.bond.empty();
   const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
   for (std::int64_t c = 0; c < m; ++c) {
@@ -1323,6 +1325,12 @@ void World::facet_pass(double dt) {
     const auto& tr = fw.tri[static_cast<std::size_t>(ft)];
     const Vec3 vf = w.x * fw.vel[tr[0]] + w.y * fw.vel[tr[1]] + w.z * fw.vel[tr[2]];
     wall_contact<M>(pt_, wc, c, n, best, vf, fw.tri_spin[static_cast<std::size_t>(ft)], lc, dt);
+    // §2.6, §6.3: a bonded interface contact has no linear part (zero_linear); once its bond
+    // breaks it is an ordinary linear contact again, from the configuration at the break (its
+    // force starts at 0 and grows with further overlap), so the ball cannot cross the wall.
+    if (restore_linear && wc.h[c].kn == 0.0 && (wc.bond[c].state == BondState::kBrokenTension ||
+                                                 wc.bond[c].state == BondState::kBrokenShear))
+      init_contact(i, 0, wc.h[c], &wc.bond[c], p_.ball_facet, true);
   }
   // §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order
   for (auto& fw : fwalls_) {
