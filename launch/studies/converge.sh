@@ -9,7 +9,7 @@
 #                  every variant, so knobs are compared by paired differences
 #   --jobs J       runs at once (default 1; each run is a DEM and a continuum process)
 #   --rate I       inertial number of the dt part (default 1e-3)
-#   --damping A    penetration damping of the dt part (default 0.7)
+#   --damping A    penetration damping of the dt part (default 0.1, the protocol's)
 #   --quick        penetration to 0.05 D_f (development)
 #   --into DIR     extend an existing study folder (finished seeds are kept: a study resumes)
 #   --table DIR    run nothing: rebuild the tables and figures of a study folder
