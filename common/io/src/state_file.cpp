@@ -7,6 +7,9 @@
 #include <cerrno>
 #include <cstdio>
 #include <fstream>
+#include <istream>
+#include <iterator>
+#include <ostream>
 #include <iomanip>
 #include <sstream>
 
@@ -334,6 +337,17 @@ void write_atomically(const std::filesystem::path& path, std::string_view bytes)
     ::fsync(dfd);
     ::close(dfd);
   }
+}
+
+void write_stream(std::ostream& out, std::string_view bytes) {
+  out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  if (!out) throw StateFileError("save_state: writing " + std::to_string(bytes.size()) + " bytes to the stream failed");
+}
+
+std::string read_stream(std::istream& in, std::string_view source) {
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (in.bad()) throw StateFileError(std::string(source) + ": read failed");
+  return bytes;
 }
 
 std::string read_whole_file(const std::filesystem::path& path) {

@@ -688,16 +688,12 @@ struct CheckpointAccess {
   }
 };
 
-std::string state_bytes(const World& w, const CheckpointMeta& meta) {
-  io::StateWriter o(kKind, meta.code_version, meta.scene_hash);
-  CheckpointAccess::save(w, o);
-  return o.bytes();
-}
+using Front = io::StateFront<CheckpointAccess, World>;
+
+std::string state_bytes(const World& w, const CheckpointMeta& meta) { return Front::bytes(w, kKind, meta); }
 
 void save_state(const World& w, std::ostream& out, const CheckpointMeta& meta) {
-  const std::string b = state_bytes(w, meta);
-  out.write(b.data(), static_cast<std::streamsize>(b.size()));
-  if (!out) throw io::StateFileError("save_state: writing " + std::to_string(b.size()) + " bytes to the stream failed");
+  io::write_stream(out, state_bytes(w, meta));
 }
 
 void save_state_file(const World& w, const std::filesystem::path& path, const CheckpointMeta& meta) {
@@ -705,15 +701,11 @@ void save_state_file(const World& w, const std::filesystem::path& path, const Ch
 }
 
 io::StateHeader load_state_bytes(World& w, std::string bytes, std::uint64_t scene_hash, std::string_view source) {
-  io::StateReader r(std::move(bytes), std::string(source), kKind, scene_hash);
-  CheckpointAccess::load(w, r);
-  return r.header();
+  return Front::load(w, std::move(bytes), kKind, scene_hash, source);
 }
 
 io::StateHeader load_state(World& w, std::istream& in, std::uint64_t scene_hash, std::string_view source) {
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw io::StateFileError(std::string(source) + ": read failed");
-  return load_state_bytes(w, std::move(bytes), scene_hash, source);
+  return load_state_bytes(w, io::read_stream(in, source), scene_hash, source);
 }
 
 io::StateHeader load_state_file(World& w, const std::filesystem::path& path, std::uint64_t scene_hash) {

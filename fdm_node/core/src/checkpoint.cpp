@@ -257,16 +257,12 @@ struct CheckpointAccess {
   }
 };
 
-std::string state_bytes(const Model& m, const CheckpointMeta& meta) {
-  io::StateWriter o(kKind, meta.code_version, meta.scene_hash);
-  CheckpointAccess::save(m, o);
-  return o.bytes();
-}
+using Front = io::StateFront<CheckpointAccess, Model>;
+
+std::string state_bytes(const Model& m, const CheckpointMeta& meta) { return Front::bytes(m, kKind, meta); }
 
 void save_state(const Model& m, std::ostream& out, const CheckpointMeta& meta) {
-  const std::string b = state_bytes(m, meta);
-  out.write(b.data(), static_cast<std::streamsize>(b.size()));
-  if (!out) throw io::StateFileError("save_state: writing " + std::to_string(b.size()) + " bytes to the stream failed");
+  io::write_stream(out, state_bytes(m, meta));
 }
 
 void save_state_file(const Model& m, const std::filesystem::path& path, const CheckpointMeta& meta) {
@@ -274,15 +270,11 @@ void save_state_file(const Model& m, const std::filesystem::path& path, const Ch
 }
 
 io::StateHeader load_state_bytes(Model& m, std::string bytes, std::uint64_t scene_hash, std::string_view source) {
-  io::StateReader r(std::move(bytes), std::string(source), kKind, scene_hash);
-  CheckpointAccess::load(m, r);
-  return r.header();
+  return Front::load(m, std::move(bytes), kKind, scene_hash, source);
 }
 
 io::StateHeader load_state(Model& m, std::istream& in, std::uint64_t scene_hash, std::string_view source) {
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) throw io::StateFileError(std::string(source) + ": read failed");
-  return load_state_bytes(m, std::move(bytes), scene_hash, source);
+  return load_state_bytes(m, io::read_stream(in, source), scene_hash, source);
 }
 
 io::StateHeader load_state_file(Model& m, const std::filesystem::path& path, std::uint64_t scene_hash) {

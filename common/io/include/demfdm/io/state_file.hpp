@@ -20,6 +20,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <iosfwd>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -186,5 +187,32 @@ void write_atomically(const std::filesystem::path& path, std::string_view bytes)
 
 /// The whole file; throws StateFileError naming the file if it cannot be read.
 std::string read_whole_file(const std::filesystem::path& path);
+
+/// `bytes` to `out`; the rest of `in` (`source` names it in errors). Throw StateFileError.
+void write_stream(std::ostream& out, std::string_view bytes);
+std::string read_stream(std::istream& in, std::string_view source);
+
+/// What a core writes into the header next to its state.
+struct StateMeta {
+  std::uint64_t scene_hash = 0;                       // the caller's hash of the scene
+  std::string code_version = default_code_version();  // recorded, not checked on load
+};
+
+/// The memory, stream and file front ends every core's checkpoint shares: `Access` has
+/// static save(const Obj&, StateWriter&) and load(Obj&, StateReader&); `kind` names the core.
+template <class Access, class Obj>
+struct StateFront {
+  static std::string bytes(const Obj& o, std::string_view kind, const StateMeta& meta) {
+    StateWriter w(kind, meta.code_version, meta.scene_hash);
+    Access::save(o, w);
+    return w.bytes();
+  }
+  static StateHeader load(Obj& o, std::string b, std::string_view kind, std::uint64_t scene_hash,
+                          std::string_view source) {
+    StateReader r(std::move(b), std::string(source), kind, scene_hash);
+    Access::load(o, r);
+    return r.header();
+  }
+};
 
 }  // namespace demfdm::io

@@ -51,10 +51,7 @@
 namespace demfdm::dem {
 
 /// What is written into the header next to the state.
-struct CheckpointMeta {
-  std::uint64_t scene_hash = 0;                          // the caller's hash of the scene
-  std::string code_version = io::default_code_version();  // recorded, not checked on load
-};
+using CheckpointMeta = io::StateMeta;
 
 /// The state file of `w` in memory. Throws std::invalid_argument if `w` has an effect that
 /// cannot be saved (named in the message).

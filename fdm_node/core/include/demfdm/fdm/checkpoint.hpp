@@ -35,10 +35,7 @@
 
 namespace demfdm::fdm {
 
-struct CheckpointMeta {
-  std::uint64_t scene_hash = 0;
-  std::string code_version = io::default_code_version();
-};
+using CheckpointMeta = io::StateMeta;
 
 std::string state_bytes(const Model& m, const CheckpointMeta& meta);
 void save_state(const Model& m, std::ostream& out, const CheckpointMeta& meta = {});
