@@ -617,8 +617,14 @@ void CoordinatorEndpoint::check_alive(const std::vector<std::string>& roles) {
   for (auto& r : roles) {
     auto it = nodes_.find(r);
     if (it == nodes_.end()) continue;
-    // A node process on this host that no longer exists is dead now (kill -9, a crash).
-    if (it->second.local && process_gone(it->second.pid)) {
+    // A node process on this host that no longer exists is dead now (kill -9, a crash). Looked
+    // up once per heartbeat period, not at every pass of the waiting loop (a /proc read).
+    bool gone = false;
+    if (it->second.local && since(it->second.pid_checked) >= t_.heartbeat_s) {
+      it->second.pid_checked = clock::now();
+      gone = process_gone(it->second.pid);
+    }
+    if (gone) {
       std::ostringstream os;
       os << "node '" << r << "' (" << it->second.solver << ", pid " << it->second.pid << " on " << it->second.host
          << ") is gone: its process has exited (last step " << it->second.last_step << ", state "

@@ -223,6 +223,7 @@ struct NodeInfo {
   std::chrono::steady_clock::time_point last_seen;
   std::int64_t last_step = -1;
   bool local = false;  // the node runs on this host (its pid can be checked)
+  std::chrono::steady_clock::time_point pid_checked{};  // last look at its process
   std::string state;
 };
 
