@@ -233,22 +233,8 @@ def seed_metrics(variant_dir, edges):
 
 
 def paired(a, b, key):
-    """Paired difference a - b over the seeds both have: (mean, half-width of its 95 % CI, n,
-    mean of b)."""
-    seeds = sorted(set(a) & set(b))
-    diff = [a[s][0][key] - b[s][0][key] for s in seeds]
-    mean, se, half, n = ensemble.scalar_stats(diff)
-    return mean, half, n, ensemble.scalar_stats([b[s][0][key] for s in seeds])[0]
-
-
-def verdict(mean, half, ref):
-    """'not resolved (+x ± y %)' when the 95 % interval of the paired difference holds 0, else
-    'differs: +x ± y %'."""
-    if not (np.isfinite(mean) and np.isfinite(half)) or ref == 0:
-        return "n/a"
-    rel, h = 100.0 * mean / ref, 100.0 * half / abs(ref)
-    word = "not resolved" if abs(mean) <= half else "differs"
-    return "%s (%+.1f ± %.1f %%)" % (word, rel, h)
+    """ensemble.paired_verdict of one measure of two variants' seed metrics."""
+    return ensemble.paired_verdict({k: v[0][key] for k, v in a.items()}, {k: v[0][key] for k, v in b.items()})
 
 
 def fmt(v, spec=".4g"):
@@ -365,14 +351,14 @@ def rate_tables(met, variants):
             cur = met.get(rate_variant(r, dmp))
             if not ref or not cur:
                 continue
-            rows.append([dmp, r] + [verdict(*paired(cur, ref, k)[:2], paired(cur, ref, k)[3]) for k, _ in MEASURES])
+            rows.append([dmp, r] + [paired(cur, ref, k) for k, _ in MEASURES])
     md += table_md(rows)
     md += ["## Damping: penetration damping 0.7 against 0.1 at each rate (paired over seeds)", ""]
     rows = [["I"] + [lab for _, lab in MEASURES]]
     for r in RATES:
         hi, lo = met.get(rate_variant(r, DAMPINGS[0])), met.get(rate_variant(r, DAMPINGS[1]))
         if hi and lo:
-            rows.append([r] + [verdict(*paired(hi, lo, k)[:2], paired(hi, lo, k)[3]) for k, _ in MEASURES])
+            rows.append([r] + [paired(hi, lo, k) for k, _ in MEASURES])
     return md + table_md(rows)
 
 
@@ -384,7 +370,7 @@ def dt_tables(met, meta):
     for f in STEPS[1:]:
         cur = met.get("dt_%s_I%s_a%s" % (f, meta["rate"], meta["damping"]))
         if ref and cur:
-            rows.append([f] + [verdict(*paired(cur, ref, k)[:2], paired(cur, ref, k)[3]) for k, _ in MEASURES])
+            rows.append([f] + [paired(cur, ref, k) for k, _ in MEASURES])
     return md + table_md(rows)
 
 

@@ -103,6 +103,24 @@ def scalar_stats(values):
     return mean, se, t975(n - 1) * se, n
 
 
+def paired_verdict(a, b):
+    """Paired comparison of two settings run on the same seeds: a, b = {seed: value}. Returns
+    'not resolved (+x ± y %)' when the 95 % interval of the mean of a_k - b_k over the seeds both
+    have contains 0, else 'differs (+x ± y %)', relative to the mean of b over those seeds; 'n/a'
+    with fewer than two common seeds."""
+    seeds = sorted(set(a) & set(b))
+    mean, _, half, _ = scalar_stats([a[s] - b[s] for s in seeds])
+    return verdict(mean, half, scalar_stats([b[s] for s in seeds])[0])
+
+
+def verdict(diff, half, ref):
+    """The words of a difference `diff` with a 95 % half-width `half` relative to `ref`."""
+    if not (np.isfinite(diff) and np.isfinite(half)) or ref == 0:
+        return "n/a"
+    word = "not resolved" if abs(diff) <= half else "differs"
+    return "%s (%+.1f ± %.1f %%)" % (word, 100 * diff / ref, 100 * half / abs(ref))
+
+
 def interval_means(disp, load, edges):
     """Mean load over each interval [edges[i], edges[i+1]] of displacement: the integral of the
     piecewise-linear load(disp) over the interval divided by its length (trapezoids, the ends

@@ -53,20 +53,6 @@ def unpaired(a, b):
     return ma - mb, ensemble.t975(min(na, nb) - 1) * math.sqrt(sa * sa + sb * sb), na, nb
 
 
-def paired(a, b):
-    """(mean of a_k - b_k over the common seeds, half-width of its 95 % interval, n)."""
-    seeds = sorted(set(a) & set(b))
-    m, _, h, n = ensemble.scalar_stats([a[s] - b[s] for s in seeds])
-    return m, h, n
-
-
-def verdict(diff, half, ref):
-    if not (np.isfinite(diff) and np.isfinite(half)) or ref == 0:
-        return "n/a"
-    word = "not resolved" if abs(diff) <= half else "differs"
-    return "%s (%+.1f ± %.1f %%)" % (word, 100 * diff / ref, 100 * half / abs(ref))
-
-
 def cell(vals):
     m, _, h, n = ensemble.scalar_stats(vals)
     return "n/a" if n == 0 else ("%.4g ± %.2g" % (m, h) if n > 1 else "%.4g" % m)
@@ -107,7 +93,7 @@ def findings(study):
             for k, _ in MEASURES:
                 a, b = [m[k] for m in met[n].values()], [m[k] for m in ref.values()]
                 d, h, _, _ = unpaired(a, b)
-                row.append(verdict(d, h, ensemble.scalar_stats(b)[0]))
+                row.append(ensemble.verdict(d, h, ensemble.scalar_stats(b)[0]))
             md.append("| %d | " % G[n] + " | ".join(row) + " |")
     md += ["", "## SBM against PBM at 100 g (paired: one packing per seed)", "",
            "| " + " | ".join(l for _, l in MEASURES) + " |", "|" + "---|" * len(MEASURES)]
@@ -116,8 +102,7 @@ def findings(study):
         for k, _ in MEASURES:
             a = {s: m[k] for s, m in met["100g_sbm"].items()}
             b = {s: m[k] for s, m in met["100g_pbm"].items()}
-            d, h, _ = paired(a, b)
-            row.append(verdict(d, h, ensemble.scalar_stats(list(b.values()))[0]))
+            row.append(ensemble.paired_verdict(a, b))
         md.append("| " + " | ".join(row) + " |")
     text = "\n".join(md) + "\n"
     open(os.path.join(study, "findings.md"), "w").write(text)
