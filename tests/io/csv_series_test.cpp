@@ -1,4 +1,5 @@
-// CsvSeries: header, exact round trip of values, per-row flush, exclusive creation.
+// CsvSeries: header, exact round trip of values, per-row flush, exclusive creation,
+// resume after a crash.
 #include "demfdm/io/csv_series.hpp"
 
 #include <cmath>
@@ -85,6 +86,80 @@ TEST(CsvSeries, RejectsBadColumnsAndRows) {
   EXPECT_THROW(csv.append({1.0, 2.0}), std::invalid_argument);
   csv.close();
   EXPECT_THROW(csv.append({1.0, 2.0, 3.0}), std::logic_error);
+}
+
+std::vector<double> row_of(int i) { return {0.25 * i, 1.0 / (i + 3), -1e-7 * i * i}; }
+
+TEST(CsvSeries, ResumeAfterACrashGivesTheUninterruptedFile) {
+  ScratchDir dir;
+  const std::vector<std::string> cols{"time_s", "load_N", "displacement_m"};
+  {
+    CsvSeries ref = CsvSeries::create(dir / "ref.csv", cols);
+    EXPECT_EQ(ref.bytes(), std::filesystem::file_size(dir / "ref.csv")) << "the header";
+    for (int i = 0; i < 6; ++i) {
+      ref.append(row_of(i));
+      EXPECT_EQ(ref.bytes(), std::filesystem::file_size(dir / "ref.csv")) << i;
+    }
+  }
+  for (const std::size_t k : {std::size_t{0}, std::size_t{3}}) {
+    const auto file = dir / ("run" + std::to_string(k) + ".csv");
+    std::uint64_t bytes = 0;
+    {
+      CsvSeries crashed = CsvSeries::create(file, cols);
+      for (std::size_t i = 0; i < k; ++i) crashed.append(row_of(static_cast<int>(i)));
+      bytes = crashed.bytes();  // the checkpoint
+      EXPECT_EQ(crashed.rows(), k);
+      crashed.append({9.0, 9.0, 9.0});  // output after the checkpoint, lost with the crash
+      crashed.append({1e300, -0.0, 12345.678});
+    }
+    CsvSeries resumed = CsvSeries::resume(file, cols, bytes, k);
+    EXPECT_EQ(resumed.rows(), k);
+    EXPECT_EQ(resumed.bytes(), bytes);
+    EXPECT_EQ(std::filesystem::file_size(file), bytes) << "the rows after the checkpoint are cut off at once";
+    for (std::size_t i = k; i < 6; ++i) resumed.append(row_of(static_cast<int>(i)));
+    resumed.close();
+    EXPECT_EQ(resumed.rows(), 6u);
+    EXPECT_EQ(test::slurp(file), test::slurp(dir / "ref.csv")) << "resumed at row " << k;
+  }
+}
+
+TEST(CsvSeries, ResumeRefusesFilesThatDoNotMatchTheCheckpoint) {
+  ScratchDir dir;
+  const auto file = dir / "s.csv";
+  const std::vector<std::string> cols{"time_s", "load_N"};
+  std::uint64_t bytes = 0, header = 0;
+  {
+    CsvSeries csv = CsvSeries::create(file, cols);
+    header = csv.bytes();
+    csv.append({1.0, 2.0});
+    csv.append({3.0, 4.0});
+    bytes = csv.bytes();
+  }
+  const std::string before = test::slurp(file);
+  const auto refused = [&](const std::vector<std::string>& c, std::uint64_t b, std::size_t rows,
+                           std::vector<std::string> words) {
+    try {
+      CsvSeries::resume(file, c, b, rows);
+      ADD_FAILURE() << "resume at " << b << " bytes, " << rows << " rows must be refused";
+    } catch (const IoError& e) {
+      const std::string msg = e.what();
+      words.push_back(file.string());
+      for (const auto& w : words) EXPECT_NE(msg.find(w), std::string::npos) << "'" << w << "' not in: " << msg;
+    }
+    EXPECT_EQ(test::slurp(file), before) << "a refused resume leaves the file as found";
+  };
+  refused(cols, bytes + 1, 2, {std::to_string(bytes + 1), std::to_string(bytes), "shorter than the checkpoint"});
+  refused({"time_s", "force_N"}, bytes, 2, {"time_s,force_N", "time_s,load_N"});
+  refused({"time_s"}, bytes, 2, {"header"});
+  refused(cols, bytes, 3, {"holds 2 data line(s)", "says 3 rows"});
+  refused(cols, bytes - 1, 2, {"partial"});
+  refused(cols, header - 1, 0, {std::to_string(header - 1)});
+  EXPECT_THROW(CsvSeries::resume(dir / "missing.csv", cols, header, 0), IoError);
+  EXPECT_THROW(CsvSeries::resume(file, {"time"}, bytes, 2), std::invalid_argument);
+  // The checkpoint may sit at the header alone.
+  CsvSeries csv = CsvSeries::resume(file, cols, header, 0);
+  csv.append({5.0, 6.0});
+  EXPECT_EQ(test::slurp(file), "time_s,load_N\n5,6\n");
 }
 
 }  // namespace

@@ -1,9 +1,11 @@
-// H5Frames: layout, read-back through the HDF5 C API, exclusivity, determinism, histories.
+// H5Frames: layout, read-back through the HDF5 C API, exclusivity, determinism, histories,
+// reopening for a resumed run.
 // All comparisons of written values are exact (tolerance 0): the file stores the bits given.
 #include "demfdm/io/h5_frames.hpp"
 
 #include <array>
 #include <cstring>
+#include <fstream>
 #include <span>
 #include <vector>
 
@@ -340,6 +342,115 @@ TEST(H5Frames, AcceptsVectorsAndSpansOfAnyConstnessAndExtent) {
   EXPECT_EQ(r.dims("/frames/000000/a/mutable"), (std::vector<hsize_t>{3, 2}));
   EXPECT_EQ(r.read_i64("/frames/000000/a/fixed"), (std::vector<std::int64_t>{7, 8, 9, 10}));
   EXPECT_EQ(r.read_f64("/frames/000000/a/const"), x);
+}
+
+// Frame k of a resumable scene, with `np` particles; arrays written in a non-alphabetical
+// order so a reader falling back to HDF5's name order shows.
+void write_resume_frame(H5Frames& h5, int k, int np) {
+  std::vector<double> pos, radius;
+  std::vector<std::int32_t> bonds;
+  for (int i = 0; i < np; ++i) {
+    pos.insert(pos.end(), {0.1 * i + k, 0.2 * i, 1e-3 * k});
+    radius.push_back(0.01 + 1e-4 * (i + k));
+  }
+  for (int b = 0; b + 1 < np; ++b) bonds.insert(bonds.end(), {b, b + 1});
+  h5.begin_frame(100 * k, 0.5 * k);
+  h5.ensure_index("/xdmf/vertex_index", static_cast<std::size_t>(np));
+  h5.write("particles/position", pos, 3);
+  h5.write("particles/radius", radius);
+  h5.write("bonds/nodes", bonds, 2);
+  h5.end_frame();
+  h5.append_history(std::vector<double>{0.5 * k, -1.0 * k * k, 7.0 + k});
+}
+
+constexpr int kResumeParticles[5] = {3, 5, 4, 6, 2};
+
+TEST(H5Frames, ReopenDropsLaterFramesAndContinuesLikeAnUninterruptedWriter) {
+  ScratchDir dir;
+  const std::vector<HistoryColumn> cols{{"time", "s"}, {"load", "N"}, {"displacement", "m"}};
+  {
+    H5Frames ref = H5Frames::create(dir / "ref.h5", dem_info());
+    ref.write_static("/mesh/extra", std::vector<std::int64_t>{1, 2, 3, 4}, 2);
+    ref.declare_history(cols);
+    for (int k = 0; k < 5; ++k) write_resume_frame(ref, k, kResumeParticles[k]);
+    ref.close();
+  }
+  const auto want = test::stored_contents(dir / "ref.h5", {"/frames", "/xdmf", "/mesh", "/history"});
+  {
+    H5Frames crashed = H5Frames::create(dir / "run.h5", dem_info());
+    crashed.write_static("/mesh/extra", std::vector<std::int64_t>{1, 2, 3, 4}, 2);
+    crashed.declare_history(cols);
+    for (int k = 0; k < 2; ++k) write_resume_frame(crashed, k, kResumeParticles[k]);
+    EXPECT_EQ(crashed.history_rows(), 2u);
+    // After the checkpoint (2 frames, 2 history rows): other output, then the crash.
+    write_resume_frame(crashed, 7, 8);
+    write_resume_frame(crashed, 8, 1);
+  }
+  H5Frames h5 = H5Frames::reopen(dir / "run.h5", 2, {}, 2);
+  EXPECT_EQ(h5.frame_count(), 2u);
+  EXPECT_EQ(h5.history_rows(), 2u);
+  ASSERT_EQ(h5.history_columns().size(), 3u);
+  EXPECT_EQ(h5.history_columns()[2].name, "displacement");
+  EXPECT_EQ(h5.history_columns()[2].unit, "m");
+  EXPECT_EQ(h5.ref("particles/radius").path, "/frames/000001/particles/radius") << "the last kept frame";
+  EXPECT_EQ(h5.ref("particles/position").rows, 5u);
+  EXPECT_EQ(h5.ref("/mesh/extra").cols, 2u);
+  EXPECT_EQ(h5.ref("/mesh/extra").dtype, DType::kInt64);
+  EXPECT_EQ(h5.ref("/xdmf/vertex_index").rows, 8u) << "as the crashed run left it";
+  h5.truncate_index("/xdmf/vertex_index", 5);  // the kept frames' largest particle count
+  EXPECT_EQ(h5.ref("/xdmf/vertex_index").rows, 5u);
+  {
+    H5Reader r(dir / "run.h5");
+    EXPECT_FALSE(r.exists("/frames/000002"));
+    EXPECT_EQ(r.dims("/history/load"), (std::vector<hsize_t>{2}));
+    EXPECT_EQ(r.dims("/xdmf/vertex_index"), (std::vector<hsize_t>{5}));
+  }
+  const auto frames = h5.read_frames();
+  ASSERT_EQ(frames.size(), 2u);
+  EXPECT_EQ(frames[1].step, 100);
+  EXPECT_EQ(frames[1].time, 0.5);
+  EXPECT_EQ(frames[1].names, (std::vector<std::string>{"particles/position", "particles/radius", "bonds/nodes"}))
+      << "write order, not name order";
+  EXPECT_EQ(frames[1].datasets[2].path, "/frames/000001/bonds/nodes");
+  EXPECT_EQ(frames[1].datasets[2].cols, 2u);
+  EXPECT_EQ(frames[1].datasets[2].dtype, DType::kInt32);
+  for (int k = 2; k < 5; ++k) write_resume_frame(h5, k, kResumeParticles[k]);
+  h5.close();
+  EXPECT_EQ(test::contents_diff(want, test::stored_contents(dir / "run.h5", {"/frames", "/xdmf", "/mesh", "/history"})),
+            "");
+}
+
+TEST(H5Frames, ReopenRefusesFilesItCannotResume) {
+  ScratchDir dir;
+  const auto file = dir / "dem.h5";
+  {
+    H5Frames h5 = H5Frames::create(file, dem_info());
+    h5.declare_history({{"time", "s"}, {"load", "N"}, {"displacement", "m"}});
+    for (int k = 0; k < 2; ++k) write_resume_frame(h5, k, 3);
+  }
+  const std::string before = test::slurp(file);
+  const auto refused = [&](const std::filesystem::path& f, std::size_t frames, std::size_t rows,
+                           const std::string& word) {
+    try {
+      H5Frames::reopen(f, frames, {}, rows);
+      ADD_FAILURE() << "reopen of " << f << " at " << frames << " frames must be refused";
+    } catch (const IoError& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(f.string()), std::string::npos) << msg;
+      EXPECT_NE(msg.find(word), std::string::npos) << "'" << word << "' not in: " << msg;
+    }
+  };
+  refused(file, 3, 0, "holds 2 of the frames 0..3-1");
+  refused(file, 1, 5, "holds 2 rows, the checkpoint counts 5");
+  EXPECT_EQ(test::slurp(file), before) << "a refused reopen leaves the file as found";
+
+  // An HDF5 file of someone else, and a file that is no HDF5 file at all.
+  const auto foreign = dir / "foreign.h5";
+  H5Fclose(H5Fcreate(foreign.c_str(), H5F_ACC_EXCL, H5P_DEFAULT, H5P_DEFAULT));
+  refused(foreign, 0, 0, "not a demfdm results file");
+  { std::ofstream(dir / "text.h5") << "time_s\n"; }
+  refused(dir / "text.h5", 0, 0, "H5Fopen");
+  refused(dir / "missing.h5", 0, 0, "H5Fopen");
 }
 
 }  // namespace

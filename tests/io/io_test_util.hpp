@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -188,6 +189,92 @@ inline std::string xml_problem(const std::string& x) {
   }
   if (!stack.empty()) return "unclosed <" + stack.back() + ">";
   return "";
+}
+
+/// One dataset or attribute as stored: its file type, shape and raw bytes.
+struct StoredArray {
+  std::string type;  // class, size, sign and byte order of the file type
+  std::vector<hsize_t> dims;
+  std::string bytes;  // the elements in the file type, as read back
+  bool operator==(const StoredArray&) const = default;
+};
+
+inline std::string type_text(hid_t t) {
+  std::string s = std::to_string(static_cast<int>(H5Tget_class(t))) + ":" + std::to_string(H5Tget_size(t));
+  if (H5Tget_class(t) == H5T_INTEGER) s += H5Tget_sign(t) == H5T_SGN_2 ? ":signed" : ":unsigned";
+  if (H5Tget_class(t) == H5T_INTEGER || H5Tget_class(t) == H5T_FLOAT)
+    s += H5Tget_order(t) == H5T_ORDER_LE ? ":LE" : ":BE";
+  return s;
+}
+
+/// Every dataset ("/path") and every attribute ("/path@name") of every object below one
+/// of `roots` (e.g. "/frames"), as stored; for comparing two files content by content
+/// (their bytes may differ: free space, object addresses).
+inline std::map<std::string, StoredArray> stored_contents(const std::filesystem::path& file,
+                                                          const std::vector<std::string>& roots) {
+  H5Reader r(file);
+  std::vector<std::string> names;
+  auto visit = [](hid_t, const char* name, const H5L_info_t*, void* data) -> herr_t {
+    static_cast<std::vector<std::string>*>(data)->push_back(std::string("/") + name);
+    return 0;
+  };
+  if (H5Lvisit(r.id(), H5_INDEX_NAME, H5_ITER_INC, visit, &names) < 0) throw std::runtime_error("test: H5Lvisit");
+  std::map<std::string, StoredArray> out;
+  for (const auto& n : names) {
+    const bool wanted = std::any_of(roots.begin(), roots.end(), [&](const std::string& root) {
+      return n == root || n.rfind(root + "/", 0) == 0;
+    });
+    if (!wanted) continue;
+    hid_t o = H5Oopen(r.id(), n.c_str(), H5P_DEFAULT);
+    if (H5Iget_type(o) == H5I_DATASET) {
+      StoredArray a;
+      hid_t t = H5Dget_type(o), sp = H5Dget_space(o);
+      a.type = type_text(t);
+      a.dims.resize(static_cast<std::size_t>(H5Sget_simple_extent_ndims(sp)));
+      H5Sget_simple_extent_dims(sp, a.dims.data(), nullptr);
+      a.bytes.resize(static_cast<std::size_t>(H5Sget_simple_extent_npoints(sp)) * H5Tget_size(t));
+      if (!a.bytes.empty()) H5Dread(o, t, H5S_ALL, H5S_ALL, H5P_DEFAULT, a.bytes.data());
+      H5Sclose(sp);
+      H5Tclose(t);
+      out[n] = a;
+    }
+    std::vector<std::string> attrs;
+    auto attr_name = [](hid_t, const char* name, const H5A_info_t*, void* data) -> herr_t {
+      static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+      return 0;
+    };
+    H5Aiterate2(o, H5_INDEX_NAME, H5_ITER_INC, nullptr, attr_name, &attrs);
+    for (const auto& an : attrs) {
+      StoredArray a;
+      hid_t at = H5Aopen(o, an.c_str(), H5P_DEFAULT);
+      hid_t t = H5Aget_type(at), sp = H5Aget_space(at);
+      a.type = type_text(t);
+      a.dims.resize(static_cast<std::size_t>(H5Sget_simple_extent_ndims(sp)));
+      H5Sget_simple_extent_dims(sp, a.dims.data(), nullptr);
+      a.bytes.resize(static_cast<std::size_t>(H5Sget_simple_extent_npoints(sp)) * H5Tget_size(t));
+      if (!a.bytes.empty()) H5Aread(at, t, a.bytes.data());
+      H5Sclose(sp);
+      H5Tclose(t);
+      H5Aclose(at);
+      out[n + "@" + an] = a;
+    }
+    H5Oclose(o);
+  }
+  return out;
+}
+
+/// Names of the entries that differ between two stored_contents() maps (empty when equal).
+inline std::string contents_diff(const std::map<std::string, StoredArray>& a,
+                                 const std::map<std::string, StoredArray>& b) {
+  std::string d;
+  for (const auto& [k, v] : a) {
+    auto it = b.find(k);
+    if (it == b.end()) d += " missing:" + k;
+    else if (!(it->second == v)) d += " differs:" + k;
+  }
+  for (const auto& [k, v] : b)
+    if (!a.count(k)) d += " extra:" + k;
+  return d;
 }
 
 inline std::size_t count_substr(const std::string& s, const std::string& what) {

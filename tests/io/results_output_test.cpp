@@ -257,5 +257,171 @@ TEST(MeshOutput, CurrentPositionsBecomeTheGeometry) {
   EXPECT_EQ(check_data_items(dir / "mesh.xmf"), 2u);
 }
 
+// ---------------------------------------------------------------------------------------
+// Resume: an uninterrupted reference against a run that crashed after frame k-1's
+// checkpoint (having written two more frames) and was resumed at frame k.
+
+const std::vector<std::string> kResumeRoots{"/frames", "/mesh", "/xdmf"};
+
+// Particle counts per frame go up and down, so the vertex index grows in some frames only.
+constexpr int kParticles[5] = {3, 5, 4, 6, 2};
+
+// Frame k with np particles; point arrays and bond arrays in a non-alphabetical order.
+void write_particle_frame(ParticleOutput& out, int k, int np) {
+  std::vector<double> x, r, v;
+  std::vector<std::int64_t> id;
+  std::vector<std::int32_t> bonds, contacts;
+  std::vector<std::uint8_t> state;
+  std::vector<double> force, normal;
+  for (int i = 0; i < np; ++i) {
+    x.insert(x.end(), {0.02 * i, 0.001 * k, 0.01 * k});
+    r.push_back(0.01 + 1e-4 * i);
+    v.insert(v.end(), {0.0, 0.1 * i, -0.1 * k});
+    id.push_back(10 * k + i);
+  }
+  for (int b = 0; b + 1 < np; ++b) {
+    bonds.insert(bonds.end(), {b, b + 1});
+    state.push_back(static_cast<std::uint8_t>((b + k) % 3));
+    force.insert(force.end(), {1.0 * b, -1.0 * k, 0.5});
+  }
+  for (int c = 0; c + 2 < np; c += 2) {
+    contacts.insert(contacts.end(), {c, c + 2});
+    normal.push_back(1e3 * (c + k));
+  }
+  ParticleFrame pf;
+  pf.position = ArrayView(x, 3);
+  pf.point_arrays = {{"radius", ArrayView(r)}, {"velocity", ArrayView(v, 3)}, {"id", ArrayView(id)}};
+  pf.links = {LinkFrame{"bonds", ArrayView(bonds, 2), {{"state", ArrayView(state)}, {"force", ArrayView(force, 3)}}},
+              LinkFrame{"contacts", ArrayView(contacts, 2), {{"normal_force", ArrayView(normal)}}}};
+  out.write_frame(100 * k, 1e-3 * (k + 1), pf);
+}
+
+TEST(ParticleOutput, ResumedRunWritesTheFilesOfAnUninterruptedRun) {
+  ScratchDir dir;
+  const std::vector<std::string> links{"bonds", "contacts"};
+  const std::vector<std::string> sidecars{"particles.xmf", "bonds.xmf", "contacts.xmf"};
+  const FileInfo info{"dem_node", "run", "hash", {}};
+  const auto ref_dir = dir / "ref";
+  std::filesystem::create_directories(ref_dir);
+  std::vector<std::vector<std::string>> ref_xmf;  // [frame][sidecar] after each frame
+  {
+    ParticleOutput ref(ref_dir, info, {}, links);
+    for (int k = 0; k < 5; ++k) {
+      write_particle_frame(ref, k, kParticles[k]);
+      ref_xmf.emplace_back();
+      for (const auto& x : sidecars) ref_xmf.back().push_back(test::slurp(ref_dir / x));
+    }
+  }
+  const auto want = test::stored_contents(ref_dir / "dem.h5", kResumeRoots);
+  ASSERT_GT(want.size(), 5u * 9u);
+
+  for (const int k : {0, 2, 4}) {
+    const auto run = dir / ("resumed-at-" + std::to_string(k));
+    std::filesystem::create_directories(run);
+    {
+      ParticleOutput crashed(run, info, {}, links);
+      for (int i = 0; i < k; ++i) write_particle_frame(crashed, i, kParticles[i]);
+      // Written after the checkpoint and lost with the crash: more particles than any
+      // kept frame, so the vertex index grew beyond what the resumed run may keep.
+      write_particle_frame(crashed, k, 9);
+      write_particle_frame(crashed, k + 1, 7);
+    }
+    ParticleOutput out = ParticleOutput::resume(run, {}, links, static_cast<std::size_t>(k));
+    EXPECT_EQ(out.h5().frame_count(), static_cast<std::size_t>(k));
+    for (std::size_t s = 0; s < sidecars.size(); ++s) {
+      if (k == 0) {
+        EXPECT_FALSE(std::filesystem::exists(run / sidecars[s])) << "no sidecar before a first frame";
+      } else {
+        EXPECT_TRUE(test::slurp(run / sidecars[s]) == ref_xmf[k - 1][s]) << sidecars[s] << " rebuilt at frame " << k;
+      }
+    }
+    if (k > 0) {
+      EXPECT_THROW(write_particle_frame(out, k - 1, 3), std::invalid_argument) << "time must still increase";
+    }
+    for (int i = k; i < 5; ++i) {
+      write_particle_frame(out, i, kParticles[i]);
+      for (std::size_t s = 0; s < sidecars.size(); ++s)
+        EXPECT_TRUE(test::slurp(run / sidecars[s]) == ref_xmf[i][s]) << sidecars[s] << " after frame " << i
+                                                                 << ", resumed at " << k;
+    }
+    out.h5().close();
+    EXPECT_EQ(test::contents_diff(want, test::stored_contents(run / "dem.h5", kResumeRoots)), "") << "resumed at " << k;
+  }
+}
+
+TEST(ParticleOutput, ResumeRefusesOtherLinkSetsAndMissingFrames) {
+  ScratchDir dir;
+  {
+    ParticleOutput out(dir.path(), FileInfo{"dem_node", "", "", {}}, {}, {"bonds", "contacts"});
+    for (int k = 0; k < 2; ++k) write_particle_frame(out, k, kParticles[k]);
+  }
+  EXPECT_THROW(ParticleOutput::resume(dir.path(), {}, {"bonds", "contacts"}, 3), IoError);
+  try {
+    ParticleOutput::resume(dir.path(), {}, {"bonds"}, 2);
+    FAIL();
+  } catch (const IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("contacts/nodes"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(ParticleOutput::resume(dir.path(), {}, {"bonds", "bonds"}, 2), std::invalid_argument);
+  EXPECT_THROW(MeshOutput::resume(dir.path(), 1, {}, "dem.h5"), IoError) << "no mesh in a particle file";
+}
+
+// Frame k of the brick: moving node positions written between the other node arrays.
+void write_mesh_frame(MeshOutput& out, const Brick& b, int k, double scale = 1.0) {
+  std::vector<double> vel(12 * 3), pos = b.coords, disp(12 * 3), stress(2 * 6);
+  for (std::size_t i = 0; i < vel.size(); ++i) vel[i] = scale * 0.01 * k * static_cast<double>(i);
+  for (std::size_t i = 0; i < disp.size(); ++i) disp[i] = -scale * 1e-4 * k * static_cast<double>(i % 3 == 2);
+  for (std::size_t i = 0; i < pos.size(); ++i) pos[i] += disp[i];
+  for (std::size_t i = 0; i < stress.size(); ++i) stress[i] = -scale * 1e5 * (k + 1) * static_cast<double>(i + 1);
+  std::vector<std::uint8_t> plastic{static_cast<std::uint8_t>(k % 2), 1};
+  MeshFrame mf;
+  mf.node_arrays = {
+      {"velocity", ArrayView(vel, 3)}, {"position", ArrayView(pos, 3)}, {"displacement", ArrayView(disp, 3)}};
+  mf.zone_arrays = {{"stress", ArrayView(stress, 6)}, {"plastic_state", ArrayView(plastic)}};
+  out.write_frame(10 * k, 0.25 * (k + 1), mf);
+}
+
+TEST(MeshOutput, ResumedRunWritesTheFilesOfAnUninterruptedRun) {
+  ScratchDir dir;
+  const Brick b = brick_vtk();
+  const FileInfo info{"fdm_node", "run", "hash", {}};
+  const auto ref_dir = dir / "ref";
+  std::filesystem::create_directories(ref_dir);
+  std::vector<std::string> ref_xmf;
+  {
+    MeshOutput ref(ref_dir, info, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+    for (int k = 0; k < 4; ++k) {
+      write_mesh_frame(ref, b, k);
+      ref_xmf.push_back(test::slurp(ref_dir / "mesh.xmf"));
+    }
+  }
+  const auto want = test::stored_contents(ref_dir / "fdm.h5", kResumeRoots);
+
+  for (const int k : {0, 1, 3}) {
+    const auto run = dir / ("resumed-at-" + std::to_string(k));
+    std::filesystem::create_directories(run);
+    {
+      MeshOutput crashed(run, info, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+      for (int i = 0; i < k; ++i) write_mesh_frame(crashed, b, i);
+      write_mesh_frame(crashed, b, k, 3.0);  // lost with the crash
+      write_mesh_frame(crashed, b, k + 1, 3.0);
+    }
+    MeshOutput out = MeshOutput::resume(run, static_cast<std::size_t>(k));
+    EXPECT_EQ(out.node_count(), 12u);
+    EXPECT_EQ(out.zone_count(), 2u);
+    if (k == 0) {
+      EXPECT_FALSE(std::filesystem::exists(run / "mesh.xmf"));
+    } else {
+      EXPECT_TRUE(test::slurp(run / "mesh.xmf") == ref_xmf[k - 1]) << "rebuilt at frame " << k;
+    }
+    for (int i = k; i < 4; ++i) {
+      write_mesh_frame(out, b, i);
+      EXPECT_TRUE(test::slurp(run / "mesh.xmf") == ref_xmf[i]) << "after frame " << i << ", resumed at " << k;
+    }
+    out.h5().close();
+    EXPECT_EQ(test::contents_diff(want, test::stored_contents(run / "fdm.h5", kResumeRoots)), "") << "resumed at " << k;
+  }
+}
+
 }  // namespace
 }  // namespace demfdm::io

@@ -1,7 +1,9 @@
 #include "demfdm/io/csv_series.hpp"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cstring>
@@ -35,15 +37,36 @@ void check_column(const std::string& c) {
   if (us == std::string::npos || us == 0 || us + 1 == c.size()) bad("no unit suffix after the last '_'");
 }
 
-}  // namespace
-
-CsvSeries CsvSeries::create(const std::filesystem::path& file, std::vector<std::string> columns, bool fsync_each_row) {
+void check_columns(const std::vector<std::string>& columns) {
   if (columns.empty()) throw std::invalid_argument("CsvSeries: at least one column is needed");
   for (std::size_t i = 0; i < columns.size(); ++i) {
     check_column(columns[i]);
     for (std::size_t j = 0; j < i; ++j)
       if (columns[j] == columns[i]) throw std::invalid_argument("CsvSeries: column '" + columns[i] + "' is given twice");
   }
+}
+
+std::string header_line(const std::vector<std::string>& columns) {
+  std::string header;
+  for (std::size_t i = 0; i < columns.size(); ++i) {
+    if (i) header += ',';
+    header += columns[i];
+  }
+  header += '\n';
+  return header;
+}
+
+// Shows a found header in a message: without its newline, shortened when long.
+std::string shown(std::string s) {
+  if (!s.empty() && s.back() == '\n') s.pop_back();
+  if (s.size() > 200) s = s.substr(0, 200) + "...";
+  return s;
+}
+
+}  // namespace
+
+CsvSeries CsvSeries::create(const std::filesystem::path& file, std::vector<std::string> columns, bool fsync_each_row) {
+  check_columns(columns);
   CsvSeries s;
   s.path_ = std::filesystem::absolute(file).lexically_normal();
   s.columns_ = std::move(columns);
@@ -55,14 +78,83 @@ CsvSeries CsvSeries::create(const std::filesystem::path& file, std::vector<std::
     fail("fopen(\"wx\")", s.path_.string(), err,
          err == EEXIST ? "series are never overwritten, choose a new run folder or remove the old file" : "");
   }
-  std::string header;
-  for (std::size_t i = 0; i < s.columns_.size(); ++i) {
-    if (i) header += ',';
-    header += s.columns_[i];
-  }
-  header += '\n';
+  const std::string header = header_line(s.columns_);
   if (std::fwrite(header.data(), 1, header.size(), s.f_) != header.size()) fail("fwrite", s.path_.string(), errno);
   if (std::fflush(s.f_) != 0) fail("fflush", s.path_.string(), errno);
+  s.bytes_ = header.size();
+  return s;
+}
+
+CsvSeries CsvSeries::resume(const std::filesystem::path& file, std::vector<std::string> columns, std::uint64_t bytes,
+                            std::size_t rows, bool fsync_each_row) {
+  check_columns(columns);
+  CsvSeries s;
+  s.path_ = std::filesystem::absolute(file).lexically_normal();
+  s.columns_ = std::move(columns);
+  s.fsync_ = fsync_each_row;
+  const std::string name = s.path_.string();
+  const std::string header = header_line(s.columns_);
+
+  // Everything is checked before the file is touched: a refused resume leaves it as found.
+  {
+    std::FILE* in = std::fopen(s.path_.c_str(), "rb");
+    if (in == nullptr) fail("fopen(\"rb\")", name, errno, "the series to resume must exist");
+    struct Closer {
+      std::FILE* f;
+      ~Closer() { std::fclose(f); }
+    } closer{in};
+    struct stat st {};
+    if (::fstat(::fileno(in), &st) != 0) fail("fstat", name, errno);
+    const auto size = static_cast<std::uint64_t>(st.st_size);
+
+    // The header: the file's first line, read up to the expected header's length + 1 so
+    // a longer first line shows as different.
+    std::string found(header.size() + 1, '\0');
+    found.resize(std::fread(found.data(), 1, found.size(), in));
+    if (std::ferror(in)) fail("fread", name, errno);
+    const auto nl = found.find('\n');
+    if (nl != std::string::npos) found.resize(nl + 1);
+    if (found != header)
+      throw IoError("CsvSeries::resume: '" + name + "' does not start with the expected header '" + shown(header) +
+                    "', found '" + shown(found) + "'");
+    if (bytes < header.size() || bytes > size)
+      throw IoError("CsvSeries::resume: '" + name + "' cannot be resumed at " + std::to_string(bytes) +
+                    " bytes: the file has " + std::to_string(size) + " bytes and a " + std::to_string(header.size()) +
+                    "-byte header" +
+                    (bytes > size ? " (shorter than the checkpoint says: rows it counts are missing)" : ""));
+
+    // Count the data lines in the kept part [header, bytes): the checkpoint's row count
+    // must match, and the part must end a line (a cut mid-row would glue two rows).
+    if (std::fseek(in, static_cast<long>(header.size()), SEEK_SET) != 0) fail("fseek", name, errno);
+    std::uint64_t left = bytes - header.size(), lines = 0;
+    char last = '\n';
+    char buf[65536];
+    while (left > 0) {
+      const std::size_t want = static_cast<std::size_t>(std::min<std::uint64_t>(left, sizeof buf));
+      const std::size_t got = std::fread(buf, 1, want, in);
+      if (got != want) fail("fread", name, std::ferror(in) ? errno : EIO, "the file changed while it was checked");
+      for (std::size_t i = 0; i < got; ++i) lines += buf[i] == '\n';
+      last = buf[got - 1];
+      left -= got;
+    }
+    if (last != '\n' || lines != rows)
+      throw IoError("CsvSeries::resume: '" + name + "' holds " + std::to_string(lines) + " data line(s)" +
+                    (last != '\n' ? " and a partial one" : "") + " in its first " + std::to_string(bytes) +
+                    " bytes, the checkpoint says " + std::to_string(rows) + " rows");
+  }
+
+  // Drop what the crashed run appended after the checkpoint, then append after the kept part.
+  std::error_code ec;
+  std::filesystem::resize_file(s.path_, bytes, ec);
+  if (ec) fail("truncate", name, ec.value());
+  // "a": every write goes to the end, which is now `bytes`.
+  s.f_ = std::fopen(s.path_.c_str(), "ab");
+  if (s.f_ == nullptr) fail("fopen(\"ab\")", name, errno);
+  // The cut must be durable too, or a machine crash could bring the dropped rows back
+  // below the rows appended from now on.
+  if (s.fsync_ && ::fsync(::fileno(s.f_)) != 0) fail("fsync", name, errno);
+  s.rows_ = rows;
+  s.bytes_ = bytes;
   return s;
 }
 
@@ -72,6 +164,7 @@ CsvSeries::CsvSeries(CsvSeries&& o) noexcept
       f_(std::exchange(o.f_, nullptr)),
       fsync_(o.fsync_),
       rows_(o.rows_),
+      bytes_(o.bytes_),
       line_(std::move(o.line_)) {}
 
 CsvSeries& CsvSeries::operator=(CsvSeries&& o) noexcept {
@@ -82,6 +175,7 @@ CsvSeries& CsvSeries::operator=(CsvSeries&& o) noexcept {
     f_ = std::exchange(o.f_, nullptr);
     fsync_ = o.fsync_;
     rows_ = o.rows_;
+    bytes_ = o.bytes_;
     line_ = std::move(o.line_);
   }
   return *this;
@@ -110,6 +204,7 @@ void CsvSeries::append(std::span<const double> row) {
   if (std::fflush(f_) != 0) fail("fflush", path_.string(), errno);
   if (fsync_ && ::fsync(::fileno(f_)) != 0) fail("fsync", path_.string(), errno);
   ++rows_;
+  bytes_ += line_.size();
 }
 
 void CsvSeries::close() {

@@ -6,6 +6,7 @@
 #include <iostream>
 #include <limits>
 #include <numeric>
+#include <optional>
 #include <stdexcept>
 #include <system_error>
 
@@ -40,6 +41,150 @@ bool is_reserved_root(std::string_view path) {
 
 std::string abs_string(const std::filesystem::path& p) {
   return std::filesystem::absolute(p).lexically_normal().string();
+}
+
+// 1-D attribute of fixed-length, null-padded ASCII strings (the frame dataset order and the
+// history column order); h5py reads it as an array of bytes. Replaces an existing one.
+void write_attr_strings(hid_t obj, const char* name, const std::vector<std::string>& values, const std::string& file,
+                        const std::string& object) {
+  std::size_t len = 1;  // HDF5 refuses a zero-size string type
+  for (const auto& v : values) len = std::max(len, v.size());
+  H5Handle type = check_id(H5Tcopy(H5T_C_S1), H5Tclose, "H5Tcopy", file, object);
+  check(H5Tset_size(type.get(), len), "H5Tset_size", file, object);
+  check(H5Tset_strpad(type.get(), H5T_STR_NULLPAD), "H5Tset_strpad", file, object);
+  check(H5Tset_cset(type.get(), H5T_CSET_ASCII), "H5Tset_cset", file, object);
+  std::string buf(values.size() * len, '\0');
+  for (std::size_t i = 0; i < values.size(); ++i) buf.replace(i * len, values[i].size(), values[i]);
+  const hsize_t n = values.size();
+  H5Handle space = check_id(H5Screate_simple(1, &n, nullptr), H5Sclose, "H5Screate_simple", file, object);
+  const std::string where = object + "@" + name;
+  const htri_t e = H5Aexists(obj, name);
+  if (e < 0) detail::throw_h5("H5Aexists", file, where);
+  if (e > 0) check(H5Adelete(obj, name), "H5Adelete", file, where);
+  H5Handle attr = check_id(H5Acreate2(obj, name, type.get(), space.get(), H5P_DEFAULT, H5P_DEFAULT), H5Aclose,
+                           "H5Acreate2", file, where);
+  check(H5Awrite(attr.get(), type.get(), buf.data()), "H5Awrite", file, where);
+}
+
+// Reads a fixed-length string attribute, scalar or 1-D, as its list of values (trailing
+// NULs removed). No value when the attribute does not exist.
+std::optional<std::vector<std::string>> read_attr_strings(hid_t obj, const char* name, const std::string& file,
+                                                          const std::string& object) {
+  const std::string where = object + "@" + name;
+  const htri_t e = H5Aexists(obj, name);
+  if (e < 0) detail::throw_h5("H5Aexists", file, where);
+  if (e == 0) return std::nullopt;
+  H5Handle attr = check_id(H5Aopen(obj, name, H5P_DEFAULT), H5Aclose, "H5Aopen", file, where);
+  H5Handle ftype = check_id(H5Aget_type(attr.get()), H5Tclose, "H5Aget_type", file, where);
+  if (H5Tget_class(ftype.get()) != H5T_STRING || H5Tis_variable_str(ftype.get()) != 0)
+    throw IoError("attribute '" + where + "' in '" + file + "' is not a fixed-length string");
+  const std::size_t len = H5Tget_size(ftype.get());
+  H5Handle space = check_id(H5Aget_space(attr.get()), H5Sclose, "H5Aget_space", file, where);
+  if (H5Sget_simple_extent_ndims(space.get()) > 1)
+    throw IoError("attribute '" + where + "' in '" + file + "' has more than one dimension");
+  const hssize_t n = H5Sget_simple_extent_npoints(space.get());
+  if (n < 0) detail::throw_h5("H5Sget_simple_extent_npoints", file, where);
+  H5Handle mtype = check_id(H5Tcopy(H5T_C_S1), H5Tclose, "H5Tcopy", file, where);
+  check(H5Tset_size(mtype.get(), len), "H5Tset_size", file, where);
+  check(H5Tset_strpad(mtype.get(), H5T_STR_NULLPAD), "H5Tset_strpad", file, where);
+  std::string buf(static_cast<std::size_t>(n) * len, '\0');
+  if (n > 0) check(H5Aread(attr.get(), mtype.get(), buf.data()), "H5Aread", file, where);
+  std::vector<std::string> out;
+  for (std::size_t i = 0; i < static_cast<std::size_t>(n); ++i) {
+    std::string v = buf.substr(i * len, len);
+    v.resize(std::min(v.find('\0'), v.size()));
+    out.push_back(std::move(v));
+  }
+  return out;
+}
+
+template <class T>
+T read_attr_scalar(hid_t obj, const char* name, hid_t mem_type, const std::string& file, const std::string& object) {
+  const std::string where = object + "@" + name;
+  H5Handle attr = check_id(H5Aopen(obj, name, H5P_DEFAULT), H5Aclose, "H5Aopen", file, where);
+  H5Handle space = check_id(H5Aget_space(attr.get()), H5Sclose, "H5Aget_space", file, where);
+  if (H5Sget_simple_extent_npoints(space.get()) != 1)
+    throw IoError("attribute '" + where + "' in '" + file + "' is not a single value");
+  T v{};
+  check(H5Aread(attr.get(), mem_type, &v), "H5Aread", file, where);
+  return v;
+}
+
+// The DatasetRef of an existing dataset: its dtype from the file type, its shape.
+DatasetRef read_ref(hid_t fid, const std::filesystem::path& file, const std::string& abs_path) {
+  const std::string f = file.string();
+  H5Handle dset = check_id(H5Dopen2(fid, abs_path.c_str(), H5P_DEFAULT), H5Dclose, "H5Dopen2", f, abs_path);
+  H5Handle type = check_id(H5Dget_type(dset.get()), H5Tclose, "H5Dget_type", f, abs_path);
+  const H5T_class_t cls = H5Tget_class(type.get());
+  const std::size_t size = H5Tget_size(type.get());
+  const bool is_signed = cls == H5T_INTEGER && H5Tget_sign(type.get()) == H5T_SGN_2;
+  DatasetRef ref{file, abs_path, DType::kFloat64, 0, 1};
+  if (cls == H5T_FLOAT && size == 8) ref.dtype = DType::kFloat64;
+  else if (cls == H5T_FLOAT && size == 4) ref.dtype = DType::kFloat32;
+  else if (cls == H5T_INTEGER && is_signed && size == 4) ref.dtype = DType::kInt32;
+  else if (cls == H5T_INTEGER && is_signed && size == 8) ref.dtype = DType::kInt64;
+  else if (cls == H5T_INTEGER && !is_signed && size == 1) ref.dtype = DType::kUInt8;
+  else
+    throw IoError("dataset '" + abs_path + "' in '" + f +
+                  "' has an element type H5Frames does not write (float64, float32, int32, int64, uint8)");
+  H5Handle space = check_id(H5Dget_space(dset.get()), H5Sclose, "H5Dget_space", f, abs_path);
+  const int rank = H5Sget_simple_extent_ndims(space.get());
+  if (rank != 1 && rank != 2)
+    throw IoError("dataset '" + abs_path + "' in '" + f + "' has rank " + std::to_string(rank) + ", expected 1 or 2");
+  hsize_t dims[2] = {0, 1};
+  check(H5Sget_simple_extent_dims(space.get(), dims, nullptr), "H5Sget_simple_extent_dims", f, abs_path);
+  ref.rows = static_cast<std::size_t>(dims[0]);
+  ref.cols = static_cast<std::size_t>(dims[1]);
+  return ref;
+}
+
+// Paths (relative to `group`) of every dataset below `group`, in HDF5's name order.
+// `skip(relative path)` prunes names before they are opened.
+template <class Skip>
+std::vector<std::string> list_datasets(hid_t group, const std::string& file, const std::string& object, Skip&& skip) {
+  struct Visit {
+    Skip& skip;
+    std::vector<std::string> names;
+  } visit{skip, {}};
+  auto cb = [](hid_t g, const char* name, const H5L_info_t* info, void* data) -> herr_t {
+    auto& v = *static_cast<Visit*>(data);
+    if (info->type != H5L_TYPE_HARD || v.skip(std::string_view(name))) return 0;
+    const hid_t o = H5Oopen(g, name, H5P_DEFAULT);
+    if (o < 0) return -1;
+    const bool dataset = H5Iget_type(o) == H5I_DATASET;
+    H5Oclose(o);
+    if (dataset) v.names.emplace_back(name);
+    return 0;
+  };
+  check(H5Lvisit(group, H5_INDEX_NAME, H5_ITER_INC, cb, &visit), "H5Lvisit", file, object);
+  return std::move(visit.names);
+}
+
+// Frame `index` of an open file: attributes, and datasets in write order from the
+// "datasets" attribute, checked against the datasets the group really holds.
+FrameRecord read_frame_record(hid_t fid, const std::filesystem::path& file, std::size_t index) {
+  const std::string f = file.string();
+  const std::string gpath = H5Frames::frame_group(index);
+  H5Handle g = check_id(H5Gopen2(fid, gpath.c_str(), H5P_DEFAULT), H5Gclose, "H5Gopen2", f, gpath);
+  FrameRecord r;
+  r.time = read_attr_scalar<double>(g.get(), "time", H5T_NATIVE_DOUBLE, f, gpath);
+  r.step = read_attr_scalar<std::int64_t>(g.get(), "step", H5T_NATIVE_INT64, f, gpath);
+  const std::vector<std::string> present = list_datasets(g.get(), f, gpath, [](std::string_view) { return false; });
+  auto order = read_attr_strings(g.get(), "datasets", f, gpath);
+  if (!order && !present.empty())
+    throw IoError("frame " + gpath + " of '" + f +
+                  "' has no 'datasets' attribute (written before H5Frames recorded the write order), so it cannot be "
+                  "resumed");
+  r.names = order ? std::move(*order) : std::vector<std::string>{};
+  bool same = r.names.size() == present.size();
+  for (std::size_t i = 0; same && i < r.names.size(); ++i)
+    same = std::find(present.begin(), present.end(), r.names[i]) != present.end();
+  if (!same)
+    throw IoError("frame " + gpath + " of '" + f + "': its 'datasets' attribute lists " +
+                  std::to_string(r.names.size()) + " name(s) that differ from the " + std::to_string(present.size()) +
+                  " dataset(s) it holds");
+  for (const auto& n : r.names) r.datasets.push_back(read_ref(fid, file, gpath + "/" + n));
+  return r;
 }
 
 }  // namespace
@@ -119,6 +264,7 @@ H5Frames::H5Frames(H5Frames&& o) noexcept
       frame_count_(o.frame_count_),
       frame_path_(std::move(o.frame_path_)),
       frame_refs_(std::move(o.frame_refs_)),
+      frame_order_(std::move(o.frame_order_)),
       static_refs_(std::move(o.static_refs_)),
       history_(std::move(o.history_)),
       history_rows_on_disk_(o.history_rows_on_disk_),
@@ -189,6 +335,117 @@ H5Frames H5Frames::create(const std::filesystem::path& file, const FileInfo& inf
     for (const auto& [name, value] : info.extra) detail::write_attr_string(root.get(), name, value, path, "/");
   }
   out.close_file();
+  return out;
+}
+
+H5Frames H5Frames::reopen(const std::filesystem::path& file, std::size_t frames, const H5StorageParams& storage,
+                          std::size_t history_rows) {
+  storage.validate();
+  const std::string path = abs_string(file);
+  QuietErrors quiet;
+  H5Frames out(path, storage);
+  OpenScope scope(out);
+  const hid_t fid = scope.fid();
+
+  // Everything is checked before anything is deleted: a refused reopen leaves the file as found.
+  {
+    H5Handle root = check_id(H5Gopen2(fid, "/", H5P_DEFAULT), H5Gclose, "H5Gopen2", path, "/");
+    const auto format = read_attr_strings(root.get(), "format", path, "/");
+    if (!format || format->size() != 1 || format->front() != "demfdm-results")
+      throw IoError("H5Frames::reopen: '" + path + "' is not a demfdm results file (root attribute format is " +
+                    (format && format->size() == 1 ? "'" + format->front() + "'" : std::string("missing")) +
+                    ", expected 'demfdm-results')");
+    if (H5Aexists(root.get(), "format_version") > 0) {
+      const auto version = read_attr_scalar<std::int64_t>(root.get(), "format_version", H5T_NATIVE_INT64, path, "/");
+      if (version != kFormatVersion)
+        throw IoError("H5Frames::reopen: '" + path + "' has format_version " + std::to_string(version) +
+                      ", this writer writes " + std::to_string(kFormatVersion));
+    }
+  }
+
+  // Frame groups by index; anything else under /frames is not this writer's.
+  std::vector<std::pair<std::size_t, std::string>> stored;
+  H5Handle frames_group;
+  if (detail::link_exists(fid, "/frames")) {
+    frames_group = check_id(H5Gopen2(fid, "/frames", H5P_DEFAULT), H5Gclose, "H5Gopen2", path, "/frames");
+    std::vector<std::string> names;
+    auto cb = [](hid_t, const char* name, const H5L_info_t*, void* data) -> herr_t {
+      static_cast<std::vector<std::string>*>(data)->emplace_back(name);
+      return 0;
+    };
+    check(H5Literate(frames_group.get(), H5_INDEX_NAME, H5_ITER_INC, nullptr, cb, &names), "H5Literate", path,
+          "/frames");
+    for (const auto& n : names) {
+      const bool digits = n.size() == 6 && std::all_of(n.begin(), n.end(), [](char c) { return c >= '0' && c <= '9'; });
+      if (!digits)
+        throw IoError("H5Frames::reopen: '" + path + "' holds /frames/" + n +
+                      ", not a frame group NNNNNN of this writer");
+      stored.emplace_back(static_cast<std::size_t>(std::stoul(n)), n);
+    }
+  }
+  const std::size_t kept = static_cast<std::size_t>(
+      std::count_if(stored.begin(), stored.end(), [&](const auto& s) { return s.first < frames; }));
+  if (kept != frames)
+    throw IoError("H5Frames::reopen: '" + path + "' holds " + std::to_string(kept) + " of the frames 0.." +
+                  std::to_string(frames) + "-1 the checkpoint counts (" + std::to_string(stored.size()) +
+                  " frame groups in all); it cannot be resumed at frame " + std::to_string(frames));
+
+  // History columns in declaration order, each long enough for the checkpoint's rows.
+  H5Handle history_group;
+  std::vector<H5Handle> history_sets;
+  if (detail::link_exists(fid, "/history")) {
+    history_group = check_id(H5Gopen2(fid, "/history", H5P_DEFAULT), H5Gclose, "H5Gopen2", path, "/history");
+    const auto columns = read_attr_strings(history_group.get(), "columns", path, "/history");
+    if (!columns)
+      throw IoError("H5Frames::reopen: /history of '" + path +
+                    "' has no 'columns' attribute (written before H5Frames recorded the column order), so it cannot "
+                    "be resumed");
+    for (const auto& name : *columns) {
+      const std::string dpath = "/history/" + name;
+      H5Handle d = check_id(H5Dopen2(history_group.get(), name.c_str(), H5P_DEFAULT), H5Dclose, "H5Dopen2", path,
+                            dpath);
+      const auto unit = read_attr_strings(d.get(), "unit", path, dpath);
+      if (!unit || unit->size() != 1) throw IoError("H5Frames::reopen: " + dpath + " of '" + path + "' has no unit");
+      const DatasetRef r = read_ref(fid, path, dpath);
+      if (r.cols != 1 || r.dtype != DType::kFloat64)
+        throw IoError("H5Frames::reopen: " + dpath + " of '" + path + "' is not a 1-D float64 history");
+      if (r.rows < history_rows)
+        throw IoError("H5Frames::reopen: " + dpath + " of '" + path + "' holds " + std::to_string(r.rows) +
+                      " rows, the checkpoint counts " + std::to_string(history_rows));
+      out.history_.push_back(HistoryColumn{name, unit->front()});
+      history_sets.push_back(std::move(d));
+    }
+  } else if (history_rows > 0) {
+    throw IoError("H5Frames::reopen: '" + path + "' has no /history, the checkpoint counts " +
+                  std::to_string(history_rows) + " history rows");
+  }
+
+  // Drop what the crashed run wrote after the checkpoint.
+  for (const auto& [index, name] : stored)
+    if (index >= frames)
+      check(H5Ldelete(frames_group.get(), name.c_str(), H5P_DEFAULT), "H5Ldelete", path, "/frames/" + name);
+  for (std::size_t c = 0; c < history_sets.size(); ++c) {
+    const hsize_t len = history_rows;
+    check(H5Dset_extent(history_sets[c].get(), &len), "H5Dset_extent", path, "/history/" + out.history_[c].name);
+  }
+  history_sets.clear();
+  history_group.reset();
+  frames_group.reset();
+  out.history_rows_on_disk_ = history_rows;
+
+  // What the object tracks: static datasets, the last kept frame's datasets.
+  const std::vector<std::string> statics = list_datasets(fid, path, "/", [](std::string_view n) {
+    return n == "frames" || n == "history" || n.starts_with("frames/") || n.starts_with("history/");
+  });
+  for (const auto& n : statics) out.static_refs_["/" + n] = read_ref(fid, out.file_, "/" + n);
+  out.frame_count_ = frames;
+  if (frames > 0) {
+    FrameRecord last = read_frame_record(fid, out.file_, frames - 1);
+    out.frame_path_ = frame_group(frames - 1);
+    for (std::size_t i = 0; i < last.names.size(); ++i) out.frame_refs_[last.names[i]] = last.datasets[i];
+    out.frame_order_ = std::move(last.names);
+  }
+  scope.commit();
   return out;
 }
 
@@ -312,6 +569,27 @@ DatasetRef H5Frames::ensure_index(std::string_view abs_path, std::size_t n) {
   return ref;
 }
 
+void H5Frames::truncate_index(std::string_view abs_path, std::size_t n) {
+  if (closed_) throw std::logic_error("H5Frames::truncate_index on closed file '" + file_.string() + "'");
+  const std::string path(abs_path);
+  auto known = static_refs_.find(path);
+  if (known == static_refs_.end() || known->second.rows <= n) return;
+  if (known->second.cols != 1 || known->second.dtype != DType::kInt32)
+    throw std::invalid_argument("H5Frames::truncate_index: '" + path + "' in '" + file_.string() +
+                                "' is not a 1-D int32 index dataset");
+  const std::string file = file_.string();
+  QuietErrors quiet;
+  OpenScope scope(*this);
+  {
+    H5Handle dset = check_id(H5Dopen2(scope.fid(), path.c_str(), H5P_DEFAULT), H5Dclose, "H5Dopen2", file, path);
+    const hsize_t len = n;
+    // Fails for a contiguous (non-extendible) dataset: only ensure_index() datasets qualify.
+    check(H5Dset_extent(dset.get(), &len), "H5Dset_extent", file, path);
+  }
+  scope.commit();
+  known->second.rows = n;
+}
+
 namespace {
 template <class WriteFn>
 void with_object(hid_t fid, std::string_view object_path, const std::string& file, WriteFn&& fn) {
@@ -372,6 +650,7 @@ std::size_t H5Frames::begin_frame(std::int64_t step, double time) {
   frame_open_ = true;
   frame_path_ = group_path;
   frame_refs_.clear();
+  frame_order_.clear();
   return frame_count_++;
 }
 
@@ -384,6 +663,7 @@ void H5Frames::write(std::string_view name, const ArrayView& data) {
   QuietErrors quiet;
   write_dataset(fid_, abs, data, /*allow_compress=*/true);
   frame_refs_[std::string(name)] = DatasetRef{file_, abs, data.dtype, data.rows, data.cols};
+  frame_order_.emplace_back(name);
 }
 
 void H5Frames::end_frame() {
@@ -392,6 +672,11 @@ void H5Frames::end_frame() {
   frame_open_ = false;
   QuietErrors quiet;
   try {
+    if (!frame_order_.empty()) {
+      H5Handle g = check_id(H5Gopen2(fid_, frame_path_.c_str(), H5P_DEFAULT), H5Gclose, "H5Gopen2", file_.string(),
+                            frame_path_);
+      write_attr_strings(g.get(), "datasets", frame_order_, file_.string(), frame_path_);
+    }
     if (!history_buffer_.empty()) flush_history_open(fid_);
   } catch (...) {
     if (fid_ >= 0) H5Fclose(fid_);
@@ -431,6 +716,9 @@ void H5Frames::declare_history(const std::vector<HistoryColumn>& columns) {
     // Also "<name>_unit" on /history: the form the recipe's h5py example reads (§7).
     detail::write_attr_string(group.get(), c.name + "_unit", c.unit, file, "/history");
   }
+  std::vector<std::string> names;
+  for (const auto& c : columns) names.push_back(c.name);
+  write_attr_strings(group.get(), "columns", names, file, "/history");
   group.reset();
   scope.commit();
   history_ = columns;
@@ -478,6 +766,20 @@ void H5Frames::flush_history_open(std::int64_t fid) {
   }
   history_rows_on_disk_ = newlen;
   history_buffer_.clear();
+}
+
+std::vector<FrameRecord> H5Frames::read_frames() {
+  if (closed_) throw std::logic_error("H5Frames::read_frames on closed file '" + file_.string() + "'");
+  if (frame_open_)
+    throw std::logic_error("H5Frames::read_frames: frame " + frame_path_ + " of '" + file_.string() +
+                           "' is still open; call end_frame() first");
+  std::vector<FrameRecord> out;
+  out.reserve(frame_count_);
+  QuietErrors quiet;
+  OpenScope scope(*this);
+  for (std::size_t i = 0; i < frame_count_; ++i) out.push_back(read_frame_record(scope.fid(), file_, i));
+  scope.commit();
+  return out;
 }
 
 void H5Frames::close() {

@@ -2,6 +2,7 @@
 // H5Frames and XdmfSidecar.
 #include "demfdm/io/results_output.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 #include <stdexcept>
@@ -32,16 +33,20 @@ void refuse_existing(const std::vector<std::filesystem::path>& files) {
   }
 }
 
-H5Frames create_dem_file(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
-                         const std::vector<std::string>& link_sets, const std::string& h5_name) {
+void check_link_sets(const std::vector<std::string>& link_sets) {
   std::set<std::string> seen{"particles"};
-  std::vector<std::filesystem::path> targets{dir / h5_name, dir / "particles.xmf"};
   for (const auto& l : link_sets) {
     check_name("link set", l);
     if (!seen.insert(l).second)
       throw std::invalid_argument("ParticleOutput: link set '" + l + "' is given twice or clashes with 'particles'");
-    targets.push_back(dir / (l + ".xmf"));
   }
+}
+
+H5Frames create_dem_file(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
+                         const std::vector<std::string>& link_sets, const std::string& h5_name) {
+  check_link_sets(link_sets);
+  std::vector<std::filesystem::path> targets{dir / h5_name, dir / "particles.xmf"};
+  for (const auto& l : link_sets) targets.push_back(dir / (l + ".xmf"));
   refuse_existing(targets);
   return H5Frames::create(dir / h5_name, info, storage);
 }
@@ -116,16 +121,115 @@ H5Frames create_fdm_file(const std::filesystem::path& dir, const FileInfo& info,
   return H5Frames::create(dir / h5_name, with_fdm_attrs(info), storage);
 }
 
+// Resume with no frame kept: the sidecars go, as they did not exist before a first frame.
+void remove_sidecar(const XdmfSidecar& s) {
+  std::error_code ec;
+  std::filesystem::remove(s.path(), ec);
+  if (ec) throw IoError("remove failed for '" + s.path().string() + "': " + ec.message());
+}
+
+// Appends a rebuilt grid; a grid the sidecar refuses means the file is not what the writer
+// wrote, which is the file's fault rather than the caller's.
+void append_rebuilt(XdmfSidecar& s, XdmfGrid g, const std::string& file) {
+  try {
+    s.append(std::move(g));
+  } catch (const std::invalid_argument& e) {
+    throw IoError("'" + file + "' cannot be resumed: " + e.what());
+  }
+}
+
+bool starts_with_dir(const std::string& name, const std::string& dir) {
+  return name.size() > dir.size() + 1 && name.compare(0, dir.size(), dir) == 0 && name[dir.size()] == '/' &&
+         name.find('/', dir.size() + 1) == std::string::npos;
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
 
 ParticleOutput::ParticleOutput(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
                                std::vector<std::string> link_sets, const std::string& h5_name)
-    : h5_(create_dem_file(dir, info, storage, link_sets, h5_name)),
-      particles_xmf_(dir / "particles.xmf", "particles"),
-      link_sets_(std::move(link_sets)) {
+    : ParticleOutput(create_dem_file(dir, info, storage, link_sets, h5_name), dir, link_sets) {}
+
+ParticleOutput::ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets)
+    : h5_(std::move(h5)), particles_xmf_(dir / "particles.xmf", "particles"), link_sets_(std::move(link_sets)) {
   for (const auto& l : link_sets_) links_xmf_.emplace_back(dir / (l + ".xmf"), l);
+}
+
+ParticleOutput ParticleOutput::resume(const std::filesystem::path& dir, const H5StorageParams& storage,
+                                      std::vector<std::string> link_sets, std::size_t frames,
+                                      const std::string& h5_name) {
+  check_link_sets(link_sets);
+  ParticleOutput out(H5Frames::reopen(dir / h5_name, frames, storage), dir, std::move(link_sets));
+  out.rebuild_sidecars();
+  return out;
+}
+
+void ParticleOutput::rebuild_sidecars() {
+  const std::string file = h5_.file().string();
+  // The grids write_frame() appended, from the kept frames. Each frame's Polyvertex index
+  // reference had the index's length after that frame: the running maximum of Np.
+  std::size_t index_len = 0;
+  for (const FrameRecord& r : h5_.read_frames()) {
+    const std::string where = "frame at step " + std::to_string(r.step) + " of '" + file + "': ";
+    std::size_t k = 0;
+    const auto next_is = [&](const std::string& name) { return k < r.names.size() && r.names[k] == name; };
+    if (!next_is("particles/position"))
+      throw IoError("ParticleOutput::resume: " + where + "particles/position is not its first dataset");
+    XdmfGrid g;
+    g.time = r.time;
+    g.topology = XdmfTopology::kPolyvertex;
+    g.geometry = r.datasets[k++];
+    g.elements = g.geometry.rows;
+    index_len = std::max(index_len, g.elements);
+    g.connectivity = DatasetRef{h5_.file(), kVertexIndex, DType::kInt32, index_len, 1};
+    for (; k < r.names.size() && starts_with_dir(r.names[k], "particles"); ++k)
+      g.attributes.push_back(XdmfAttribute::node(r.names[k].substr(10), r.datasets[k]));
+    std::vector<XdmfGrid> link_grids;
+    for (const auto& l : link_sets_) {
+      if (!next_is(l + "/nodes"))
+        throw IoError("ParticleOutput::resume: " + where + "link set '" + l +
+                      "' is not next in its datasets (the run's link sets differ?)");
+      XdmfGrid lg;
+      lg.time = r.time;
+      lg.topology = XdmfTopology::kPolyline;
+      lg.connectivity = r.datasets[k++];
+      lg.elements = lg.connectivity.rows;
+      lg.geometry = g.geometry;
+      for (; k < r.names.size() && starts_with_dir(r.names[k], l); ++k)
+        lg.attributes.push_back(XdmfAttribute::cell(r.names[k].substr(l.size() + 1), r.datasets[k]));
+      link_grids.push_back(std::move(lg));
+    }
+    if (k != r.names.size())
+      throw IoError("ParticleOutput::resume: " + where + "dataset '" + r.names[k] +
+                    "' belongs to no declared link set (the run's link sets differ?)");
+    append_rebuilt(particles_xmf_, std::move(g), file);
+    for (std::size_t i = 0; i < link_grids.size(); ++i) append_rebuilt(links_xmf_[i], std::move(link_grids[i]), file);
+    has_time_ = true;
+    last_time_ = r.time;
+  }
+  if (index_len > 0) {
+    std::size_t have = 0;
+    try {
+      have = h5_.ref(kVertexIndex).rows;
+    } catch (const std::out_of_range&) {
+    }
+    if (have < index_len)
+      throw IoError("ParticleOutput::resume: " + std::string(kVertexIndex) + " of '" + file + "' holds " +
+                    std::to_string(have) + " entries, fewer than the largest kept frame's " +
+                    std::to_string(index_len) + " particles");
+  }
+  // Entries only the dropped frames needed would otherwise reach the sidecars of the
+  // frames written next (their index Dimensions) and the final index length.
+  h5_.truncate_index(kVertexIndex, index_len);
+
+  if (particles_xmf_.frames() == 0) {
+    remove_sidecar(particles_xmf_);
+    for (const auto& s : links_xmf_) remove_sidecar(s);
+  } else {
+    particles_xmf_.write();
+    for (const auto& s : links_xmf_) s.write();
+  }
 }
 
 std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const ParticleFrame& fr) {
@@ -201,13 +305,66 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
 
 MeshOutput::MeshOutput(const std::filesystem::path& dir, const FileInfo& info, const ArrayView& node_coords,
                        const ArrayView& zone_nodes, const H5StorageParams& storage, const std::string& h5_name)
-    : h5_(create_fdm_file(dir, info, storage, h5_name, node_coords, zone_nodes)),
-      mesh_xmf_(dir / "mesh.xmf", "mesh"),
-      nodes_(node_coords.rows),
-      zones_(zone_nodes.rows) {
+    : MeshOutput(create_fdm_file(dir, info, storage, h5_name, node_coords, zone_nodes), dir, node_coords.rows,
+                 zone_nodes.rows) {
   h5_.write_static("/mesh/node_coords", node_coords);
   h5_.write_static("/mesh/zone_nodes", zone_nodes);
   h5_.set_attribute("/mesh/zone_nodes", "zone_type", "hexahedron8-vtk-order");
+}
+
+MeshOutput::MeshOutput(H5Frames h5, const std::filesystem::path& dir, std::size_t nodes, std::size_t zones)
+    : h5_(std::move(h5)), mesh_xmf_(dir / "mesh.xmf", "mesh"), nodes_(nodes), zones_(zones) {}
+
+MeshOutput MeshOutput::resume(const std::filesystem::path& dir, std::size_t frames, const H5StorageParams& storage,
+                              const std::string& h5_name) {
+  H5Frames h5 = H5Frames::reopen(dir / h5_name, frames, storage);
+  const std::string file = h5.file().string();
+  DatasetRef coords, zones;
+  try {
+    coords = h5.ref("/mesh/node_coords");
+    zones = h5.ref("/mesh/zone_nodes");
+  } catch (const std::out_of_range&) {
+    throw IoError("MeshOutput::resume: '" + file + "' has no /mesh/node_coords and /mesh/zone_nodes");
+  }
+  if (coords.cols != 3 || coords.dtype != DType::kFloat64 || zones.cols != 8 ||
+      !(zones.dtype == DType::kInt64 || zones.dtype == DType::kInt32))
+    throw IoError("MeshOutput::resume: the mesh of '" + file +
+                  "' is not node_coords [Nn,3] float64 and zone_nodes [Nz,8] int64 (or int32)");
+  MeshOutput out(std::move(h5), dir, coords.rows, zones.rows);
+  out.rebuild_sidecar();
+  return out;
+}
+
+void MeshOutput::rebuild_sidecar() {
+  const std::string file = h5_.file().string();
+  for (const FrameRecord& r : h5_.read_frames()) {
+    XdmfGrid g;
+    g.time = r.time;
+    g.topology = XdmfTopology::kHexahedron;
+    g.elements = zones_;
+    g.connectivity = h5_.ref("/mesh/zone_nodes");
+    g.geometry = h5_.ref("/mesh/node_coords");
+    // write_frame() wrote node arrays, then zone arrays, and made attributes in that order.
+    for (std::size_t k = 0; k < r.names.size(); ++k) {
+      const std::string& n = r.names[k];
+      if (n == "nodes/position")
+        g.geometry = r.datasets[k];
+      else if (starts_with_dir(n, "nodes"))
+        g.attributes.push_back(XdmfAttribute::node(n.substr(6), r.datasets[k]));
+      else if (starts_with_dir(n, "zones"))
+        g.attributes.push_back(XdmfAttribute::cell(n.substr(6), r.datasets[k]));
+      else
+        throw IoError("MeshOutput::resume: frame at step " + std::to_string(r.step) + " of '" + file +
+                      "' holds '" + n + "', neither a node nor a zone array");
+    }
+    append_rebuilt(mesh_xmf_, std::move(g), file);
+    has_time_ = true;
+    last_time_ = r.time;
+  }
+  if (mesh_xmf_.frames() == 0)
+    remove_sidecar(mesh_xmf_);
+  else
+    mesh_xmf_.write();
 }
 
 std::size_t MeshOutput::write_frame(std::int64_t step, double time, const MeshFrame& fr) {

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <initializer_list>
@@ -28,6 +29,17 @@ class CsvSeries {
   static CsvSeries create(const std::filesystem::path& file, std::vector<std::string> columns,
                           bool fsync_each_row = false);
 
+  /// Continues the series of a run resumed from a checkpoint that recorded bytes() and
+  /// rows() of this file: rows the crashed run appended after the checkpoint are cut off
+  /// (the file is truncated to `bytes`) and appends continue after them, so the finished
+  /// file is the one an uninterrupted run writes. Refuses (IoError naming the file) when
+  /// the first line is not the header create() writes for `columns`, when `bytes` is
+  /// shorter than that header or longer than the file (rows the checkpoint counts are
+  /// missing), or when the kept part does not end a line or holds other than `rows` data
+  /// lines. Column names are checked as in create().
+  static CsvSeries resume(const std::filesystem::path& file, std::vector<std::string> columns, std::uint64_t bytes,
+                          std::size_t rows, bool fsync_each_row = false);
+
   CsvSeries(CsvSeries&& o) noexcept;
   CsvSeries& operator=(CsvSeries&& o) noexcept;
   CsvSeries(const CsvSeries&) = delete;
@@ -44,6 +56,9 @@ class CsvSeries {
   const std::filesystem::path& path() const noexcept { return path_; }
   const std::vector<std::string>& columns() const noexcept { return columns_; }
   std::size_t rows() const noexcept { return rows_; }
+  /// Bytes in the file so far (header and every appended row): the file size after the
+  /// last append. Recorded with rows() in a checkpoint for resume().
+  std::uint64_t bytes() const noexcept { return bytes_; }
 
  private:
   CsvSeries() = default;
@@ -52,6 +67,7 @@ class CsvSeries {
   std::FILE* f_ = nullptr;
   bool fsync_ = false;
   std::size_t rows_ = 0;
+  std::uint64_t bytes_ = 0;
   std::string line_;  // reused row buffer
 };
 

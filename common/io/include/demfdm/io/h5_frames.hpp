@@ -5,11 +5,19 @@
 //                           run_id, scene_hash, length_unit="m", time_unit="s", FileInfo::extra
 //   /frames/NNNNNN          one group per output frame, NNNNNN = 6-digit output index from 0
 //                           (so name order = chronological order); attrs time (float64, s),
-//                           step (int64)
+//                           step (int64), datasets (1-D fixed-length ASCII strings: the
+//                           frame's dataset names relative to the group, in write order;
+//                           absent when the frame holds no dataset)
 //   /frames/NNNNNN/<a>/<b>  per-frame arrays [rows] or [rows, cols], written once each
 //   /<static path>          datasets written once (e.g. /mesh/node_coords, /xdmf/vertex_index)
 //   /history/<name>         1-D float64 time histories, unlimited, chunked, appended per row;
-//                           attr unit on the dataset and <name>_unit on /history
+//                           attr unit on the dataset and <name>_unit on /history; attr
+//                           columns on /history (1-D fixed-length ASCII strings: the column
+//                           names in declaration order, i.e. the order of a history row)
+//
+// The two order attributes (frame datasets, history columns) exist for reopen(): HDF5 lists
+// links by name unless creation order is tracked, and the sidecars and history rows need
+// the write order back when a crashed run is resumed.
 //
 // File discipline (recipe §3 and §9 pitfalls 2, 13, 19):
 // * created with H5F_ACC_EXCL: an existing file is never overwritten;
@@ -46,6 +54,14 @@ struct DatasetRef {
   std::size_t cols = 1;        // 1 means a 1-D dataset [rows]
 };
 
+/// What one frame of the file holds, as read back by H5Frames::read_frames().
+struct FrameRecord {
+  std::int64_t step = 0;
+  double time = 0.0;                 // [s]
+  std::vector<std::string> names;    // dataset names relative to the frame group, write order
+  std::vector<DatasetRef> datasets;  // datasets[i] is names[i]
+};
+
 /// One column of the /history time series.
 struct HistoryColumn {
   std::string name;  // dataset name under /history, e.g. "load"
@@ -59,6 +75,21 @@ class H5Frames {
   /// std::invalid_argument on bad parameters.
   static H5Frames create(const std::filesystem::path& file, const FileInfo& info,
                          const H5StorageParams& storage = {});
+
+  /// Reopens a results file written by this class for a run resumed from a checkpoint
+  /// that recorded frame_count() == `frames` and history_rows() == `history_rows`. Frame
+  /// groups /frames/NNNNNN with index >= frames (written by the crashed run after the
+  /// checkpoint) are deleted and every /history dataset is cut back to `history_rows` rows,
+  /// so the next begin_frame() creates frame `frames` and later writes give the datasets an
+  /// uninterrupted run writes. What the object tracks is rebuilt from the file: static and
+  /// index datasets (ref(), ensure_index()), the datasets of frame frames-1 (ref() of a
+  /// relative path) and the history columns in declaration order (do not declare them
+  /// again). `storage` should be the one the file was created with: it applies to the
+  /// datasets created from now on. Throws IoError when the file is not a demfdm results
+  /// file (root attribute format), holds fewer than `frames` frames or a history shorter
+  /// than `history_rows`, or cannot be opened; the file is not changed then.
+  static H5Frames reopen(const std::filesystem::path& file, std::size_t frames, const H5StorageParams& storage = {},
+                         std::size_t history_rows = 0);
 
   H5Frames(H5Frames&&) noexcept;
   H5Frames& operator=(H5Frames&&) noexcept;
@@ -85,6 +116,12 @@ class H5Frames {
   /// index whose first N entries give the XDMF3 readers one Polyvertex cell per particle
   /// (recipe §2, pitfall 5). Returns the reference with the current length.
   DatasetRef ensure_index(std::string_view abs_path, std::size_t n);
+
+  /// Cuts the index dataset `abs_path` (written by ensure_index()) back to its first n
+  /// entries when it is longer; does nothing when it is not longer or does not exist. For
+  /// a resumed run: entries only frames after the checkpoint needed are dropped, so the
+  /// index has the length an uninterrupted run had at that frame.
+  void truncate_index(std::string_view abs_path, std::size_t n);
 
   /// String / int64 / float64 attribute on an existing object ("/" for the root).
   /// An existing attribute of the same name is replaced.
@@ -115,6 +152,19 @@ class H5Frames {
   /// written every H5StorageParams::history_flush_rows rows, or by flush_history()/close().
   void append_history(std::span<const double> row);
   void flush_history();
+  /// The declared history columns (empty before declare_history()).
+  const std::vector<HistoryColumn>& history_columns() const noexcept { return history_; }
+  /// History rows appended so far, including rows still buffered: flush_history() before
+  /// recording this in a checkpoint, or a crash loses the buffered rows and reopen()
+  /// refuses the file.
+  std::size_t history_rows() const noexcept {
+    return history_rows_on_disk_ + (history_.empty() ? 0 : history_buffer_.size() / history_.size());
+  }
+
+  /// Reads frames 0 .. frame_count()-1 back from the file: attributes and datasets in write
+  /// order (what a resumed writer rebuilds its sidecars from). Throws std::logic_error while
+  /// a frame is open, IoError when a frame lacks its attributes or its dataset list.
+  std::vector<FrameRecord> read_frames();
 
   /// Flushes history and closes the file if open. Further calls throw std::logic_error.
   void close();
@@ -149,6 +199,7 @@ class H5Frames {
   std::size_t frame_count_ = 0;
   std::string frame_path_;                          // group of the current/last frame
   std::map<std::string, DatasetRef> frame_refs_;    // by name relative to frame_path_
+  std::vector<std::string> frame_order_;            // frame_refs_ names in write order
   std::map<std::string, DatasetRef> static_refs_;   // by absolute path
   std::vector<HistoryColumn> history_;
   std::size_t history_rows_on_disk_ = 0;

@@ -15,7 +15,15 @@
 //
 // Each write_frame() writes one HDF5 frame (file opened and closed around it) and then
 // atomically rewrites the sidecars. Frame times must increase strictly (a temporal
-// collection). Existing files (HDF5 or sidecar) are never overwritten.
+// collection). Existing files (HDF5 or sidecar) are never overwritten, except by resume().
+//
+// resume() continues the files of a run resumed from a checkpoint that recorded
+// h5().frame_count(): frames the crashed run wrote after it are dropped (H5Frames::reopen),
+// the sidecars are rebuilt for the kept frames from the HDF5 file alone (frame attribute
+// time, dataset shapes and dtypes, and the frame's "datasets" attribute, which lists its
+// datasets in write order: position, point arrays, then per link set nodes and cell arrays;
+// node arrays, then zone arrays), and the frames written from then on give the same HDF5
+// datasets and the same sidecar bytes as an uninterrupted run.
 #pragma once
 
 #include <cstdint>
@@ -56,6 +64,16 @@ class ParticleOutput {
   ParticleOutput(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage = {},
                  std::vector<std::string> link_sets = {"bonds"}, const std::string& h5_name = "dem.h5");
 
+  /// Continues <dir>/<h5_name> and the sidecars of a run resumed at output frame `frames`
+  /// (the checkpoint's h5().frame_count()): see the file comment. `storage` and
+  /// `link_sets` must be the ones the run started with. The sidecars are rewritten for
+  /// frames 0..frames-1 (removed when frames is 0, as before a first frame), and the
+  /// vertex index is cut back to the length those frames needed. Throws IoError when the
+  /// file cannot be resumed (H5Frames::reopen) or its frames do not hold `link_sets`.
+  static ParticleOutput resume(const std::filesystem::path& dir, const H5StorageParams& storage,
+                               std::vector<std::string> link_sets, std::size_t frames,
+                               const std::string& h5_name = "dem.h5");
+
   /// Writes one frame and rewrites the sidecars; returns the frame index.
   /// Validates all counts, and that every link node row is in [0, Np), before writing.
   std::size_t write_frame(std::int64_t step, double time, const ParticleFrame& frame);
@@ -66,6 +84,9 @@ class ParticleOutput {
   const XdmfSidecar& link_sidecar(std::size_t i) const { return links_xmf_.at(i); }
 
  private:
+  ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets);
+  void rebuild_sidecars();
+
   H5Frames h5_;
   XdmfSidecar particles_xmf_;
   std::vector<std::string> link_sets_;
@@ -96,6 +117,14 @@ class MeshOutput {
   MeshOutput(const std::filesystem::path& dir, const FileInfo& info, const ArrayView& node_coords,
              const ArrayView& zone_nodes, const H5StorageParams& storage = {}, const std::string& h5_name = "fdm.h5");
 
+  /// Continues <dir>/<h5_name> and mesh.xmf of a run resumed at output frame `frames` (the
+  /// checkpoint's h5().frame_count()): see the file comment. The mesh is taken from the
+  /// file (/mesh/node_coords, /mesh/zone_nodes); `storage` must be the run's. mesh.xmf is
+  /// rewritten for frames 0..frames-1 (removed when frames is 0). Throws IoError when the
+  /// file cannot be resumed (H5Frames::reopen) or is not a mesh results file.
+  static MeshOutput resume(const std::filesystem::path& dir, std::size_t frames, const H5StorageParams& storage = {},
+                           const std::string& h5_name = "fdm.h5");
+
   std::size_t write_frame(std::int64_t step, double time, const MeshFrame& frame);
 
   H5Frames& h5() noexcept { return h5_; }
@@ -104,6 +133,9 @@ class MeshOutput {
   std::size_t zone_count() const noexcept { return zones_; }
 
  private:
+  MeshOutput(H5Frames h5, const std::filesystem::path& dir, std::size_t nodes, std::size_t zones);
+  void rebuild_sidecar();
+
   H5Frames h5_;
   XdmfSidecar mesh_xmf_;
   std::size_t nodes_ = 0;
