@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -93,6 +94,23 @@ struct GrantClock {
   double t_mid() const { return t_begin + 0.5 * dt * static_cast<double>(last_step - first_step + 1); }
 };
 
+// Where a run stands between two steps: what the runner needs to continue it (checkpoints,
+// resume, branch; docs/checkpoint-format.md).
+struct RunnerState {
+  std::size_t stage = 0;            // the stage being run, or the next one to begin
+  bool in_stage = false;            // inside stage 'stage' (its STAGE_BEGIN was answered)
+  std::int64_t step = 0;            // next global coupling step
+  GrantClock clock;                 // inside a stage: its clock after the last grant
+  StageSummary current;             // inside a stage: its summary so far (wall_s so far)
+  std::vector<StageSummary> done;   // the finished stages
+  std::map<std::string, double> dt_stable;  // the nodes' stable steps the next grant uses
+  // Inside a stage: grants posted so far, and the stable steps reported with collected grants
+  // that the next grants do not use yet (by the grant's index in the stage, see Runner::run).
+  std::int64_t grants_posted = 0;
+  std::vector<std::pair<std::int64_t, std::map<std::string, double>>> pending_dt;
+  double wall_s = 0;                // run wall time so far
+};
+
 class Runner {
  public:
   // Called after every grant with the step and every node's report (for histories).
@@ -106,6 +124,19 @@ class Runner {
   void set_kinematics(Kinematics k) { kinematics_ = std::move(k); }
   // The grant being posted; valid inside the kinematics callback.
   const GrantClock& grant_clock() const { return clock_; }
+  // Checkpoints: take(state) is called after every stage end and, inside a stage, whenever
+  // due() says so after a collected grant; the runner first collects every outstanding grant
+  // (without posting more), so the nodes stand at one step. When the window holds grants
+  // posted after the criterion was met, the mid-stage checkpoint is skipped (the stage ends
+  // soon). Where checkpoints fall changes no result: the grants posted and the step at which
+  // a stage ends are those of a run without checkpoints.
+  using Checkpoint = std::function<void(const RunnerState&)>;
+  void set_checkpoints(std::function<bool()> due, Checkpoint take) {
+    due_ = std::move(due);
+    take_ = std::move(take);
+  }
+  // Continue a run from a saved state (the nodes were restored to it) instead of its start.
+  void start_from(RunnerState s) { start_ = std::move(s); }
   RunSummary run();
 
  private:
@@ -117,6 +148,9 @@ class Runner {
   Observer observer_;
   Kinematics kinematics_;
   GrantClock clock_;
+  std::function<bool()> due_;
+  Checkpoint take_;
+  std::optional<RunnerState> start_;
 };
 
 }  // namespace demfdm::coord

@@ -150,6 +150,8 @@ std::string summary_text(const RunInfo& info, const RunSummary& sum) {
     }
   }
   if (!info.bus.empty()) os << "coordinator bus: " << info.bus << "\n";
+  if (!info.checkpoints.empty()) os << "checkpoints: " << info.checkpoints << "\n";
+  if (!info.resumed.empty()) os << info.resumed << "\n";
   for (auto& [i, m] : info.rates) {
     if (i >= sum.stages.size()) continue;
     auto w = quasi_static_warning(sum.stages[i].name, m);

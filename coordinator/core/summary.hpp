@@ -28,6 +28,8 @@ struct RunInfo {
   std::uint64_t hash = 0;     // scene hash
   std::vector<NodeInfo> nodes;
   std::string bus;            // one line of the coordinator's bus counters (text summary only)
+  std::string checkpoints;    // one line: checkpoints written, size, time (text summary only)
+  std::string resumed;        // "resumed from <checkpoint>" / "branched from <checkpoint>", or ""
   // Footing rate and quasi-static measures of each penetrate stage, by index in
   // RunSummary::stages (coordinator/core/quasi_static.hpp). The text summary ends with a
   // "WARNING: not quasi-static:" line for each stage above its limit.
