@@ -4,21 +4,27 @@
 //   coordinator SCENE --print-nodes        "role executable" lines for launch/run
 //   coordinator --help-scene [--markdown]  every scene key with unit, default and doc
 //   coordinator SCENE --run-id=N [--lcm-url=URL] [--run-dir=DIR] [-v]
+//   coordinator SCENE --resume --run-dir=DIR ...   continue the run in DIR from its latest
+//                                                  complete checkpoint (docs/checkpoint-format.md)
+//   coordinator SCENE --from=CHECKPOINT [--check] ...  a new run from a saved stage-end state
 //
 // Exit codes: 0 finished, 2 bad command line or scene, 3 a node failed, died or went silent
 // (named in the message), 130 interrupted.
 #include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
 #include <csignal>
 #include <fstream>
 #include <iomanip>
 #include <iostream>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <variant>
 
 #include "common/log/log.hpp"
+#include "coordinator/core/checkpoint.hpp"
 #include "coordinator/core/quasi_static.hpp"
 #include "coordinator/core/runner.hpp"
 #include "coordinator/core/summary.hpp"
@@ -31,6 +37,7 @@ namespace {
 
 const char* kUsage =
     "usage: coordinator SCENE [--check | --print-nodes] [--run-id=N] [--lcm-url=URL] [--run-dir=DIR] [-v]\n"
+    "                         [--resume | --from=CHECKPOINT_DIR]\n"
     "       coordinator --help-scene [--markdown]\n";
 
 // Adapts the bus endpoint to the stage machine's transport interface.
@@ -72,6 +79,32 @@ class BusDriver : public coord::Driver {
 class History {
  public:
   explicit History(std::string dir) : dir_(std::move(dir)) {}
+  // Position for a checkpoint (every row written so far is flushed).
+  coord::HistoryState state() const {
+    coord::HistoryState h;
+    h.index = index_;
+    h.current = current_;
+    h.file = file_;
+    h.cols = cols_;
+    h.bytes = file_.empty() ? 0 : std::filesystem::file_size(std::filesystem::path(dir_) / file_);
+    return h;
+  }
+  // Resume: the open file is cut back to its size at the checkpoint and continued.
+  void restore(const coord::HistoryState& h) {
+    index_ = h.index;
+    current_ = h.current;
+    file_ = h.file;
+    cols_ = h.cols;
+    if (dir_.empty() || file_.empty()) return;
+    const auto path = std::filesystem::path(dir_) / file_;
+    if (!std::filesystem::exists(path) || std::filesystem::file_size(path) < h.bytes)
+      throw coord::CheckpointError(path.string() + " is missing or shorter than its checkpoint says (" +
+                                   std::to_string(h.bytes) + " bytes)");
+    std::filesystem::resize_file(path, h.bytes);
+    out_.open(path, std::ios::app);
+  }
+  // Branch: a new run folder; the history files are numbered on from the saved run's.
+  void continue_numbering(const coord::HistoryState& h) { index_ = h.index; }
   void record(const schema::Stage& st, std::int64_t step, const std::map<std::string, coord::NodeReport>& reps) {
     if (dir_.empty()) return;
     if (st.name != current_) {
@@ -80,8 +113,8 @@ class History {
       cols_.clear();
       for (auto& [role, r] : reps)
         for (auto& [k, v] : r.values) cols_.push_back({role, k});
-      std::string path = dir_ + "/history_" + std::to_string(index_++) + "_" + st.name + ".csv";
-      out_.open(path);
+      file_ = "history_" + std::to_string(index_++) + "_" + st.name + ".csv";
+      out_.open(dir_ + "/" + file_);
       out_ << "step";
       for (auto& [role, r] : reps) out_ << "," << role << ".time_s";
       for (auto& [role, k] : cols_) out_ << "," << role << "." << k;
@@ -104,7 +137,7 @@ class History {
   }
 
  private:
-  std::string dir_, current_;
+  std::string dir_, current_, file_;
   int index_ = 0;
   std::ofstream out_;
   std::vector<std::pair<std::string, std::string>> cols_;
@@ -171,13 +204,71 @@ coord::RateMeasures stage_rates(const config::Scene& scene, const schema::Stage&
                               young, poisson, rho_b, sigma_c, v.real("quasi_static_limit"));
 }
 
+// The saved state a run starts from (resume or branch).
+struct Start {
+  std::filesystem::path dir;
+  coord::Manifest manifest;
+  coord::CheckpointRecord record;
+  bool branch = false;
+};
+
+// Roles that took part in the stages before `st` (and in `st` itself when inside it).
+std::vector<std::string> participants(const std::vector<schema::Stage>& stages, const coord::RunnerState& st) {
+  std::set<std::string> r;
+  for (std::size_t i = 0; i < stages.size() && (i < st.stage || (st.in_stage && i == st.stage)); ++i)
+    r.insert(stages[i].nodes.begin(), stages[i].nodes.end());
+  return {r.begin(), r.end()};
+}
+
+// Branch: the checkpoint, and the keys of the scene that would make its state inconsistent.
+Start branch_start(const std::string& from, const config::Scene& scene) {
+  Start s;
+  s.dir = std::filesystem::absolute(from).lexically_normal();
+  s.branch = true;
+  s.manifest = coord::verify_checkpoint(s.dir);
+  s.record = coord::load_record(s.dir / "coordinator.state", s.manifest.scene_hash);
+  auto saved = config::Scene::parse(s.record.scene_text, (s.dir / "coordinator.state").string() + " (saved scene)",
+                                    schema::scene_schema());
+  auto conflicts = coord::branch_conflicts(saved, scene, s.record, s.manifest);
+  if (!conflicts.empty()) {
+    std::string msg = "cannot branch from " + s.dir.string() + ":";
+    for (auto& c : conflicts) msg += "\n  " + c;
+    throw config::Error(msg, scene.origin(), 0, 0, "");
+  }
+  return s;
+}
+
+// Resume: the latest complete checkpoint of the run folder that passes its checks (a refused
+// one is named in the log and the previous one is used).
+Start resume_start(const std::string& run_dir, const config::Scene& scene, spdlog::logger& log) {
+  auto l = coord::latest_valid_checkpoint(run_dir, scene.hash(),
+                                          [&](const std::string& why) { log.warn("{}; using the previous checkpoint", why); });
+  Start s;
+  s.dir = l.dir;
+  s.manifest = l.manifest;
+  s.record = std::move(l.record);
+  return s;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::vector<std::string> pos;
   node::Options opt;
+  std::string from;
+  std::vector<char*> args;
+  for (int i = 0; i < argc; ++i) {
+    std::string a = argv[i];
+    if (a.rfind("--from=", 0) == 0)
+      from = a.substr(7);
+    else
+      args.push_back(argv[i]);
+  }
+  argc = static_cast<int>(args.size());
+  argv = args.data();
   try {
-    opt = node::parse_options(argc, argv, &pos, {"--check", "--print-nodes", "--help-scene", "--markdown", "--help", "-h"});
+    opt = node::parse_options(argc, argv, &pos,
+                              {"--check", "--print-nodes", "--help-scene", "--markdown", "--help", "-h", "--resume"});
   } catch (const std::exception& e) {
     std::cerr << "coordinator: " << e.what() << "\n" << kUsage;
     return 2;
@@ -191,7 +282,7 @@ int main(int argc, char** argv) {
     return false;
   };
   bool check = flag("--check"), print_nodes = flag("--print-nodes"), help_scene = flag("--help-scene"),
-       markdown = flag("--markdown"), help = flag("--help") || flag("-h");
+       markdown = flag("--markdown"), help = flag("--help") || flag("-h"), resume = flag("--resume");
   if (help) {
     std::cout << kUsage;
     return 0;
@@ -212,10 +303,34 @@ int main(int argc, char** argv) {
     return 2;
   }
   auto roles = schema::roles(scene);
+  if (resume && !from.empty()) {
+    std::cerr << "coordinator: --resume and --from exclude each other\n" << kUsage;
+    return 2;
+  }
+  if (resume && opt.run_dir.empty()) {
+    std::cerr << "coordinator: --resume needs the run folder (--run-dir=DIR)\n" << kUsage;
+    return 2;
+  }
+  std::optional<Start> start;
+  if (!from.empty()) {
+    try {
+      start = branch_start(from, scene);
+    } catch (const config::Error& e) {
+      std::cerr << e.what() << "\n";
+      return 2;
+    } catch (const std::exception& e) {
+      std::cerr << "coordinator: --from=" << from << ": " << e.what() << "\n";
+      return 2;
+    }
+  }
   if (check) {
     std::cout << pos[0] << ": OK (" << schema::stages(scene).size() << " stages; nodes:";
     for (auto& r : roles) std::cout << " " << r << "=" << schema::executable(scene, r);
-    std::cout << ")\n";
+    std::cout << ")";
+    if (start)
+      std::cout << "; branches from " << start->manifest.tag << " (after stage '" << start->manifest.stage_name << "', step "
+                << start->manifest.step << ")";
+    std::cout << "\n";
     return 0;
   }
   if (print_nodes) {
@@ -226,6 +341,25 @@ int main(int argc, char** argv) {
   auto log = log::setup("coordinator", opt.run_dir, opt.verbose);
   std::signal(SIGINT, on_signal);
   std::signal(SIGTERM, on_signal);
+  if (resume) {
+    // The latest complete checkpoint; the run folder's files written after it are dropped
+    // (the nodes cut their own files back when they restore, this process its history).
+    try {
+      start = resume_start(opt.run_dir, scene, *log);
+      auto dropped = coord::drop_files_after(opt.run_dir, start->record.outputs);
+      log->info("resuming run {} from {} (stage {} '{}', after step {}){}", opt.run_dir, start->dir.string(),
+                start->manifest.stage, start->manifest.stage_name, start->manifest.step,
+                dropped.empty() ? std::string() : "; dropped files written after it: " + [&] {
+                  std::string t;
+                  for (auto& d : dropped) t += (t.empty() ? "" : ", ") + d;
+                  return t;
+                }());
+    } catch (const std::exception& e) {
+      log->error("cannot resume: {}", e.what());
+      std::cerr << "coordinator: cannot resume " << opt.run_dir << ": " << e.what() << "\n";
+      return 2;
+    }
+  }
   std::unique_ptr<bus::Bus> bus;
   std::unique_ptr<proto::CoordinatorEndpoint> ep;
   try {
@@ -243,9 +377,114 @@ int main(int argc, char** argv) {
       dt[r] = n.dt_stable;
       log->info("hello from {}: {} pid {} on {} ({})", r, n.solver, n.pid, n.host, n.build_id);
     }
+    const auto stage_list = schema::stages(scene);
+    History hist(opt.run_dir);
+    if (start) {
+      // Every node that took part in a stage gets its saved state back; the others start
+      // fresh (they have done nothing yet; a branch may even play them with another solver).
+      const auto& m = start->manifest;
+      std::vector<std::string> targets;
+      for (auto& r : start->record.participated)
+        if (std::find(roles.begin(), roles.end(), r) != roles.end()) targets.push_back(r);
+      const std::string text = start->dir.string() + "\n" + std::to_string(m.scene_hash) + "\n" +
+                               (start->branch ? "branch" : "resume");
+      ep->command(static_cast<std::int32_t>(demfdm::command_t::RESTORE), targets, m.step, m.stage, m.stage_name, 0.0, {},
+                  text);
+      log->info("{} from {}: nodes restored: {}", start->branch ? "branched" : "resumed", start->dir.string(),
+                targets.size());
+      if (start->branch)
+        hist.continue_numbering(start->record.history);
+      else
+        hist.restore(start->record.history);
+    }
     BusDriver driver(*ep);
-    coord::Runner runner(schema::stages(scene), driver, dt,
-                         scene.has("coupling") ? scene.integer("coupling.window") : 1);
+    coord::Runner runner(stage_list, driver, dt, scene.has("coupling") ? scene.integer("coupling.window") : 1);
+    if (start) {
+      auto rs = start->record.runner;
+      if (start->branch) {
+        // The branch's summary and clock start at the branch point.
+        rs.done.clear();
+        rs.wall_s = 0;
+      }
+      runner.start_from(rs);
+    }
+    // Checkpoints (docs/checkpoint-format.md): after every stage and every
+    // run.checkpoint_every_s of wall time inside stages, when the run has a folder and every
+    // node can save its state.
+    const bool at_stage_end = scene.boolean("run.checkpoint_stage_end");
+    const double every_s = scene.real("run.checkpoint_every_s");
+    const auto keep = static_cast<std::size_t>(scene.integer("run.checkpoint_keep"));
+    bool checkpoints_on = !opt.run_dir.empty() && (at_stage_end || every_s > 0);
+    auto last_checkpoint = std::chrono::steady_clock::now();
+    int n_checkpoints = 0;
+    double checkpoint_s = 0, checkpoint_mb = 0, last_mb = 0;
+    auto take = [&](const coord::RunnerState& rs) {
+      if (!checkpoints_on || (!rs.in_stage && !at_stage_end)) return;
+      const auto t0 = std::chrono::steady_clock::now();
+      const std::size_t si = rs.in_stage ? rs.stage : rs.stage - 1;
+      const auto& st = stage_list.at(si);
+      const std::int64_t last = rs.step - 1;
+      const std::string tag = st.name + "-" + std::to_string(last) + (rs.in_stage ? "" : "-end");
+      const std::string rel = "checkpoints/" + tag;
+      const std::filesystem::path dir = std::filesystem::path(opt.run_dir) / rel;
+      if (std::filesystem::exists(dir / "manifest.txt")) return;  // a resumed run at its own checkpoint
+      std::filesystem::create_directories(dir);
+      auto reps = ep->command(static_cast<std::int32_t>(demfdm::command_t::CHECKPOINT), roles, last,
+                              static_cast<std::int32_t>(si), st.name, 0.0, {}, rel);
+      for (auto& [role, r] : reps) {
+        bool saved = false;
+        for (int i = 0; i < r.n_values; ++i) saved = saved || (r.names[i] == "state_saved" && r.values[i] == 1.0);
+        if (!saved) {
+          log->warn("checkpoints are off for this run: node '{}' ({}) cannot save its state", role,
+                    ep->nodes().at(role).solver);
+          checkpoints_on = false;
+          std::filesystem::remove_all(dir);
+          return;
+        }
+      }
+      coord::CheckpointRecord rec;
+      rec.runner = rs;
+      rec.history = hist.state();
+      rec.scene_text = scene.text();
+      for (auto& [r, n] : ep->nodes()) rec.nodes.push_back({r, n.solver});
+      rec.participated = participants(stage_list, rs);
+      rec.outputs = coord::run_folder_files(opt.run_dir);
+      rec.run_id = opt.run_id;
+      io::write_atomically(dir / "coordinator.state", coord::record_bytes(rec, scene.hash()));
+      coord::Manifest m;
+      m.code_version = io::default_code_version();
+      m.scene_hash = scene.hash();
+      m.run_id = opt.run_id;
+      m.tag = tag;
+      m.stage = static_cast<std::int32_t>(si);
+      m.stage_name = st.name;
+      m.step = last;
+      m.in_stage = rs.in_stage;
+      m = coord::write_manifest(dir, m);
+      std::uint64_t bytes = 0;
+      for (auto& [f, h] : m.files) bytes += f.size;
+      const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      ++n_checkpoints;
+      checkpoint_s += sec;
+      last_mb = static_cast<double>(bytes) / 1e6;
+      checkpoint_mb += last_mb;
+      log->info("checkpoint {}: {} files, {:.2f} MB, written in {:.3f} s", rel, m.files.size(), last_mb, sec);
+      // Keep the newest run.checkpoint_keep checkpoints inside stages (all stage-end ones).
+      if (rs.in_stage) {
+        std::vector<std::filesystem::path> inside;
+        for (auto& d : coord::checkpoints_latest_first(opt.run_dir))
+          if (d.filename().string().size() < 4 || d.filename().string().substr(d.filename().string().size() - 4) != "-end")
+            inside.push_back(d);
+        for (std::size_t i = keep; i < inside.size(); ++i) std::filesystem::remove_all(inside[i]);
+      }
+      last_checkpoint = std::chrono::steady_clock::now();
+    };
+    runner.set_checkpoints(
+        [&] {
+          return every_s > 0 &&
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - last_checkpoint).count() >= every_s;
+        },
+        take);
     // Footing kinematics (docs/theory.md §7.1): the rate-rule speed v (stage_speed), ramped up
     // from 0 over t_r = 2 ramp_depth_ratio D_f / v at the stage's start, evaluated at the middle
     // of the grant's steps in the stage's own time (steps are global over the run). The rate
@@ -266,12 +505,21 @@ int main(int argc, char** argv) {
       }
       return {coord::ramped_speed(m.speed, clock.t_mid(), m.ramp_time)};
     });
-    History hist(opt.run_dir);
     runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
     auto sum = runner.run();
     ep->shutdown("run finished");
     auto info = run_info(scene, *ep, bus->stats());
     info.rates = rates;
+    if (n_checkpoints > 0) {
+      std::ostringstream cs;
+      cs << std::setprecision(3) << n_checkpoints << " written in " << checkpoint_s << " s ("
+         << 100.0 * checkpoint_s / std::max(sum.wall_s, 1e-9) << " % of the run), " << checkpoint_mb
+         << " MB in all, the last " << last_mb << " MB";
+      info.checkpoints = cs.str();
+    }
+    if (start)
+      info.resumed = std::string(start->branch ? "branched from " : "resumed from ") + start->dir.string() +
+                     " (after step " + std::to_string(start->manifest.step) + ")";
     auto text = coord::summary_text(info, sum);
     log->info("run finished\n{}", text);
     if (!opt.run_dir.empty()) {

@@ -24,6 +24,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/specimen.hpp"
@@ -120,14 +121,100 @@ class DemParticipant : public node::Participant {
     history_every_ = s_.integer("dem.output.history_every");
     gravity_level_ = s_.has("gravity") ? s_.real("gravity.level") : 0.0;
     if (!ctx.options.run_dir.empty()) dir_ = ctx.options.run_dir;
-    // Result files only when the scene has [dem.output] (a scene writes only what it asks for).
-    if (!dir_.empty() && s_.has("dem.output")) {
-      io::FileInfo info{"dem_node", std::to_string(ctx.options.run_id), std::to_string(s_.hash()), {}};
-      out_.emplace(dir_, info, io::H5StorageParams{}, std::vector<std::string>{"bonds"});
-      if (history_every_ > 0)
-        history_.emplace(io::CsvSeries::create(
-            dir_ / "dem_history.csv",
-            {"step_unit", "time_s", "ratio_unit", "kinetic_J", "footing_fz_N", "footing_disp_m", "facet_fz_N"}));
+  }
+
+  // Result files only when the scene has [dem.output] (a scene writes only what it asks for),
+  // created at the first stage; a resumed run reopens them where its checkpoint left them.
+  static std::vector<std::string> history_columns() {
+    return {"step_unit", "time_s", "ratio_unit", "kinetic_J", "footing_fz_N", "footing_disp_m", "facet_fz_N"};
+  }
+  void open_outputs() {
+    if (outputs_open_) return;
+    outputs_open_ = true;
+    if (dir_.empty() || !s_.has("dem.output")) return;
+    io::FileInfo info{"dem_node", std::to_string(ctx_.options.run_id), std::to_string(s_.hash()), {}};
+    out_.emplace(dir_, info, io::H5StorageParams{}, std::vector<std::string>{"bonds"});
+    if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir_ / "dem_history.csv", history_columns()));
+  }
+
+  // Checkpoints (docs/checkpoint-format.md): the World in dem.world.state, this adapter's
+  // fields and its result writers' positions in the node file's section "dem_node".
+  bool can_checkpoint() const override { return true; }
+  void save(const fs::path& dir, io::StateWriter& w, const io::StateMeta& meta) override {
+    dem::save_state_file(world_, dir / "dem.world.state", meta);
+    w.begin("dem_node");
+    for (double v : {block_.origin.x, block_.origin.y, block_.origin.z, block_.cell.x, block_.cell.y, block_.cell.z}) w.f64(v);
+    for (int n : {block_.nx, block_.ny, block_.nz}) w.i32(n);
+    w.b(has_frame_);
+    w.f64(last_frame_time_);
+    w.i32(wall_);
+    w.u64(n_iface_);
+    for (bool b : {coupling_setup_pending_, penetrating_, box_done_, preparing_, kicked_, energy_pending_}) w.b(b);
+    for (double v : {footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_, energy_begin_, mechanical_begin_, work_})
+      w.f64(v);
+    w.u64(x_begin_.size());
+    for (const auto& x : x_begin_) w.f64(x.x), w.f64(x.y), w.f64(x.z);
+    energy_jump_.save(w);
+    // Result writers: frames written, history bytes and rows, specimen_stages.csv bytes.
+    w.b(outputs_open_);
+    w.u64(out_ ? out_->h5().frame_count() : 0);
+    w.u64(history_ ? history_->bytes() : 0);
+    w.u64(history_ ? history_->rows() : 0);
+    const auto stages_csv = dir_ / "specimen_stages.csv";
+    w.u64(!dir_.empty() && fs::exists(stages_csv) ? fs::file_size(stages_csv) : 0);
+    w.end();
+  }
+  void restore(io::StateReader& r, const node::Restore& how) override {
+    dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
+    // The thread count is the scene's (a branch may change it; a resume has the same).
+    world_.mutable_params().threads = static_cast<int>(s_.integer("run.threads"));
+    omp_set_num_threads(world_.params().threads);
+    auto sec = r.section("dem_node");
+    Block saved;
+    saved.origin = {sec.f64(), sec.f64(), sec.f64()};
+    saved.cell = {sec.f64(), sec.f64(), sec.f64()};
+    saved.nx = sec.i32(), saved.ny = sec.i32(), saved.nz = sec.i32();
+    auto same = [](const dem::Vec3& a, const dem::Vec3& b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
+    if (!same(saved.origin, block_.origin) || !same(saved.cell, block_.cell) || saved.nx != block_.nx ||
+        saved.ny != block_.ny || saved.nz != block_.nz)
+      s_.fail("dem.specimen.origin", "the DEM block of the saved state (origin " + fmt::format("({}, {}, {})", saved.origin.x, saved.origin.y, saved.origin.z) +
+                                         " m; it follows dem.specimen.cell, replicate, origin and continuum.mesh.size)",
+              fmt::format("origin ({}, {}, {}) m", block_.origin.x, block_.origin.y, block_.origin.z));
+    has_frame_ = sec.b();
+    last_frame_time_ = sec.f64();
+    wall_ = sec.i32();
+    n_iface_ = sec.u64();
+    for (bool* b : {&coupling_setup_pending_, &penetrating_, &box_done_, &preparing_, &kicked_, &energy_pending_}) *b = sec.b();
+    for (double* v : {&footing_z0_, &target_disp_, &weight_, &stage_ratio_, &user_dt_, &energy_begin_, &mechanical_begin_, &work_})
+      *v = sec.f64();
+    x_begin_.resize(sec.count(24));
+    for (auto& x : x_begin_) x = {sec.f64(), sec.f64(), sec.f64()};
+    energy_jump_.load(sec);
+    const bool was_open = sec.b();
+    const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64(), stages_bytes = sec.u64();
+    sec.done();
+    ratio_valid_ = skeleton_valid_ = false;
+    safe_dt_key_ = {-1, -1, -1};
+    if (how.branch) {
+      // A new run folder: new result files from the branch point on.
+      has_frame_ = false;
+      last_frame_time_ = 0;
+      return;
+    }
+    // Resume: the result writers continue where the checkpoint left them.
+    outputs_open_ = was_open;
+    if (was_open && !dir_.empty() && s_.has("dem.output")) {
+      out_.emplace(io::ParticleOutput::resume(dir_, io::H5StorageParams{}, std::vector<std::string>{"bonds"}, frames));
+      if (history_every_ > 0) history_.emplace(io::CsvSeries::resume(dir_ / "dem_history.csv", history_columns(), bytes, rows));
+    }
+    const auto stages_csv = dir_ / "specimen_stages.csv";
+    if (!dir_.empty() && fs::exists(stages_csv)) {
+      if (stages_bytes == 0)
+        fs::remove(stages_csv);
+      else if (fs::file_size(stages_csv) < stages_bytes)
+        throw std::runtime_error(stages_csv.string() + " is shorter than its checkpoint says (" + std::to_string(stages_bytes) + " bytes)");
+      else
+        fs::resize_file(stages_csv, stages_bytes);
     }
   }
 
@@ -153,6 +240,7 @@ class DemParticipant : public node::Participant {
   double time() const override { return world_.time(); }
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
+    open_outputs();
     const auto& a = st.action;
     stage_ratio_ = st.view.real("ratio");
     ratio_valid_ = skeleton_valid_ = false;
@@ -825,6 +913,7 @@ class DemParticipant : public node::Participant {
   fs::path dir_;
   std::optional<io::ParticleOutput> out_;
   std::optional<io::CsvSeries> history_;
+  bool outputs_open_ = false;
   bool has_frame_ = false;
   double last_frame_time_ = 0;
   int wall_ = -1;

@@ -12,6 +12,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "demfdm/fdm/checkpoint.hpp"
 #include "demfdm/fdm/guard.hpp"
 #include "demfdm/fdm/model.hpp"
 #include "fdm_node/scene_params.hpp"
@@ -77,17 +78,74 @@ class FdmParticipant : public node::Participant {
     spdlog::info("fdm: {} gridpoints, {} zones, {} interface points, {} interface triangles; critical dt {:.3e} s",
                  model_.num_gridpoints(), model_.num_zones(), model_.interface_gridpoints().size(),
                  model_.interface_triangles().size() / 3, model_.critical_timestep());
-    // Result files only when the scene has [continuum.output] (a scene writes only what it asks for).
-    if (!ctx.options.run_dir.empty() && s.has("continuum.output")) {
-      fs::path dir = ctx.options.run_dir;
-      io::FileInfo info{"fdm_node", std::to_string(ctx.options.run_id), std::to_string(s.hash()), {}};
-      std::vector<std::int64_t> conn(model_.connectivity().begin(), model_.connectivity().end());
-      out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8));
-      if (history_every_ > 0)
-        history_.emplace(io::CsvSeries::create(
-            dir / "fdm_history.csv",
-            {"step_unit", "time_s", "ratio_avg_unit", "ratio_max_unit", "kinetic_J", "base_fx_N", "base_fy_N",
-             "base_fz_N", "punch_fz_N", "punch_disp_m"}));
+  }
+
+  // Result files only when the scene has [continuum.output] (a scene writes only what it asks
+  // for), created at the first stage; a resumed run reopens them where its checkpoint left them.
+  static std::vector<std::string> history_columns() {
+    return {"step_unit", "time_s", "ratio_avg_unit", "ratio_max_unit", "kinetic_J", "base_fx_N", "base_fy_N",
+            "base_fz_N", "punch_fz_N", "punch_disp_m"};
+  }
+  bool writes_outputs() const { return !ctx_.options.run_dir.empty() && ctx_.scene.has("continuum.output"); }
+  void open_outputs() {
+    if (outputs_open_) return;
+    outputs_open_ = true;
+    if (!writes_outputs()) return;
+    fs::path dir = ctx_.options.run_dir;
+    io::FileInfo info{"fdm_node", std::to_string(ctx_.options.run_id), std::to_string(ctx_.scene.hash()), {}};
+    std::vector<std::int64_t> conn(model_.connectivity().begin(), model_.connectivity().end());
+    out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8));
+    if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir / "fdm_history.csv", history_columns()));
+  }
+
+  // Checkpoints (docs/checkpoint-format.md): the Model in continuum.model.state, this adapter's
+  // fields and its result writers' positions in the node file's section "fdm_node".
+  bool can_checkpoint() const override { return true; }
+  void save(const fs::path& dir, io::StateWriter& w, const io::StateMeta& meta) override {
+    fdm::save_state_file(model_, dir / "continuum.model.state", meta);
+    w.begin("fdm_node");
+    w.i64(last_step_);
+    w.i64(last_frame_);
+    w.b(has_frame_);
+    w.f64(last_frame_time_);
+    for (double v : {last_ratios_.average, last_ratios_.max, last_ratios_.local, punch_disp_, max_imbalance_, iface_fz_})
+      w.f64(v);
+    w.b(released_);
+    w.b(coupled_);
+    energy_jump_.save(w);
+    w.b(outputs_open_);
+    w.u64(out_ ? out_->h5().frame_count() : 0);
+    w.u64(history_ ? history_->bytes() : 0);
+    w.u64(history_ ? history_->rows() : 0);
+    w.end();
+  }
+  void restore(io::StateReader& r, const node::Restore& how) override {
+    fdm::load_state_file(model_, how.dir / "continuum.model.state", how.saved_scene_hash);
+    omp_set_num_threads(static_cast<int>(ctx_.scene.integer("run.threads")));
+    auto sec = r.section("fdm_node");
+    last_step_ = sec.i64();
+    last_frame_ = sec.i64();
+    has_frame_ = sec.b();
+    last_frame_time_ = sec.f64();
+    for (double* v : {&last_ratios_.average, &last_ratios_.max, &last_ratios_.local, &punch_disp_, &max_imbalance_, &iface_fz_})
+      *v = sec.f64();
+    released_ = sec.b();
+    coupled_ = sec.b();
+    energy_jump_.load(sec);
+    const bool was_open = sec.b();
+    const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64();
+    sec.done();
+    if (how.branch) {  // a new run folder: new result files from the branch point on
+      has_frame_ = false;
+      last_frame_time_ = 0;
+      last_frame_ = -2;
+      return;
+    }
+    outputs_open_ = was_open;
+    if (was_open && writes_outputs()) {
+      fs::path dir = ctx_.options.run_dir;
+      out_.emplace(io::MeshOutput::resume(dir, frames));
+      if (history_every_ > 0) history_.emplace(io::CsvSeries::resume(dir / "fdm_history.csv", history_columns(), bytes, rows));
     }
   }
 
@@ -97,6 +155,7 @@ class FdmParticipant : public node::Participant {
   double time() const override { return model_.time(); }
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
+    open_outputs();
     const auto& a = st.action;
     if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
       throw std::invalid_argument("fdm_node does not support stage action '" + a + "'");
@@ -351,6 +410,7 @@ class FdmParticipant : public node::Participant {
   std::optional<io::MeshOutput> out_;
   std::optional<io::CsvSeries> history_;
   std::int64_t frame_every_ = 0, history_every_ = 1, last_step_ = -1, last_frame_ = -2;
+  bool outputs_open_ = false;
   bool has_frame_ = false;
   double last_frame_time_ = 0;
   fdm::Ratios last_ratios_{};

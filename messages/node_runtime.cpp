@@ -3,6 +3,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -29,6 +30,29 @@ void Participant::set_interface_kinematics(const proto::Kinematics&) {
 }
 proto::Forces Participant::interface_forces() {
   throw std::logic_error("this solver cannot play the DEM side of a coupled stage");
+}
+
+void Participant::save(const std::filesystem::path&, io::StateWriter&, const io::StateMeta&) {
+  throw std::logic_error("this solver cannot save its state");
+}
+void Participant::restore(io::StateReader&, const Restore&) {
+  throw std::logic_error("this solver cannot restore a saved state");
+}
+
+void EnergyJump::save(io::StateWriter& w) const {
+  w.f64s(std::vector<double>(last_.begin(), last_.end()));
+  w.u64(at_.size());
+  for (auto a : at_) w.u64(a);
+  w.u64(n_);
+}
+void EnergyJump::load(io::SectionReader& r) {
+  auto last = r.f64s();
+  auto n_at = r.count(8);
+  if (n_at != last.size()) r.fail("energy-jump window: " + std::to_string(last.size()) + " values, " + std::to_string(n_at) + " indices");
+  last_.assign(last.begin(), last.end());
+  at_.clear();
+  for (std::uint64_t i = 0; i < n_at; ++i) at_.push_back(r.u64());
+  n_ = r.u64();
 }
 
 EnergyJump::EnergyJump(const config::Scene& s)
@@ -164,6 +188,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
     const std::int64_t guard_every = ctx.scene.integer("run.guard_every");
     bool mesh_done = false;
     std::int64_t kin_applied = -2;  // DEM: step of the continuum kinematics last applied
+    bool in_stage = false;          // between a STAGE_BEGIN and its STAGE_END
     ep->hello(part->dt_stable());
 
     for (;;) {
@@ -185,8 +210,87 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
         throw proto::ProtocolError("command names stage " + std::to_string(c.stage_index) + ", the scene has " +
                                    std::to_string(stages.size()));
       const auto& st = stages[static_cast<std::size_t>(c.stage_index)];
+      if (c.command == demfdm::command_t::CHECKPOINT) {
+        // The whole node state after step header.step, in <run dir>/<text>/<role>.state (+ the
+        // engine's files). Answered with state_saved = 0 by a solver that cannot save.
+        proto::Values values{{"state_saved", 0.0}};
+        if (part->can_checkpoint()) {
+          if (opt.run_dir.empty()) throw std::runtime_error("a checkpoint needs a run folder (--run-dir)");
+          // A node idle in the last stages stands at its own last step; none may be ahead.
+          if (step > c.header.step)
+            throw proto::ProtocolError("checkpoint after step " + std::to_string(c.header.step) + ", this node is after step " +
+                                       std::to_string(step));
+          const std::filesystem::path dir = std::filesystem::path(opt.run_dir) / c.text;
+          std::filesystem::create_directories(dir);
+          io::StateMeta meta;
+          meta.scene_hash = ctx.scene.hash();
+          io::StateWriter w("node", meta.code_version, meta.scene_hash);
+          w.begin("runtime");
+          w.str(role);
+          w.str(solver);
+          w.i64(step);
+          w.i32(stage_index);
+          w.b(in_stage);
+          w.b(mesh_done);
+          w.i64(kin_applied);
+          w.end();
+          part->save(dir, w, meta);
+          auto bytes = w.bytes();
+          io::write_atomically(dir / (role + ".state"), bytes);
+          values = {{"state_saved", 1.0}, {"seconds", compute()}};
+          log->info("checkpoint after step {} in {} ({:.3f} s)", step, dir.string(), compute());
+        }
+        double w = ep->take_wait_s();
+        ep->report(c.header.step, demfdm::report_t::OK, c.stage_index, part->time(), part->dt_stable(), compute() - w,
+                   w + cmd_wait, values);
+        continue;
+      }
+      if (c.command == demfdm::command_t::RESTORE) {
+        // text: "<checkpoint folder>\n<saved scene hash, decimal>\n<resume|branch>".
+        std::istringstream ts(c.text);
+        std::string dir_text, hash_text, mode;
+        std::getline(ts, dir_text);
+        std::getline(ts, hash_text);
+        std::getline(ts, mode);
+        Restore how{dir_text, std::stoull(hash_text), mode == "branch"};
+        const auto path = how.dir / (role + ".state");
+        io::StateReader r(io::read_whole_file(path), path.string(), "node", how.saved_scene_hash);
+        auto rt = r.section("runtime");
+        auto saved_role = rt.str(), saved_solver = rt.str();
+        if (saved_role != role || saved_solver != solver)
+          throw std::runtime_error(path.string() + ": saved by " + saved_role + " (" + saved_solver + "), this node is " + role +
+                                   " (" + solver + ")");
+        step = rt.i64();
+        stage_index = rt.i32();
+        in_stage = rt.b();
+        mesh_done = rt.b();
+        kin_applied = rt.i64();
+        rt.done();
+        part->restore(r, how);
+        r.finish();
+        log->info("restored the state after step {} (stage {}, {}) from {}", step, stage_index,
+                  in_stage ? "inside the stage" : "at its end", how.dir.string());
+        // Inside a coupled stage the interface data of the saved step is in flight: the
+        // continuum sends kin(step) again, and in the parallel scheme the DEM force(step).
+        if (in_stage && stages[static_cast<std::size_t>(stage_index)].coupled) {
+          if (role == "continuum") {
+            auto k = part->interface_kinematics();
+            k.step = step;
+            ep->send_kin(k);
+          } else if (parallel) {
+            auto f = part->interface_forces();
+            f.step = step;
+            ep->send_forces(f);
+          }
+        }
+        double w = ep->take_wait_s();
+        ep->report(c.header.step, demfdm::report_t::OK, c.stage_index, part->time(), part->dt_stable(), compute() - w,
+                   w + cmd_wait, {{"step", static_cast<double>(step)}});
+        continue;
+      }
       stage_index = c.stage_index;
       if (c.command == demfdm::command_t::STAGE_BEGIN) {
+        in_stage = true;
         log->info("stage {} '{}' ({}) begins after step {}", c.stage_index, st.name, st.action, c.header.step);
         auto values = part->stage_begin(st, c.header.step + 1);
         step = c.header.step;
@@ -249,6 +353,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
         ep->report(c.header.step, status, c.stage_index, part->time(), part->dt_stable(), compute() - w, w + cmd_wait,
                    block ? last_values : part->step_values(), {}, rows);
       } else if (c.command == demfdm::command_t::STAGE_END) {
+        in_stage = false;
         auto values = part->stage_end(st, c.header.step);
         std::ostringstream vs;
         vs.precision(10);

@@ -16,12 +16,14 @@
 
 #include <chrono>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <optional>
 #include <string>
 
 #include "common/schema/scene_schema.hpp"
+#include "demfdm/io/state_file.hpp"
 #include "messages/protocol.hpp"
 
 namespace demfdm::node {
@@ -50,6 +52,9 @@ class EnergyJump {
   explicit EnergyJump(const config::Scene& s);
   // Returns the cause text on a jump, and records e otherwise.
   std::optional<std::string> check(double e);
+  // The window of previous checks, for checkpoints (a resumed run trips where the original would).
+  void save(io::StateWriter& w) const;
+  void load(io::SectionReader& r);
 
  private:
   double factor_, floor_;
@@ -70,6 +75,13 @@ class Timed {
  private:
   double& total_;
   std::chrono::steady_clock::time_point t0_;
+};
+
+// How a node state is being restored (command RESTORE, docs/checkpoint-format.md).
+struct Restore {
+  std::filesystem::path dir;        // the checkpoint folder
+  std::uint64_t saved_scene_hash;   // hash of the scene the state was saved under
+  bool branch = false;              // a new run from a saved state (the scene's later stages may differ)
 };
 
 // What an engine adapter implements. Called on the node's main thread only.
@@ -94,6 +106,18 @@ class Participant {
   // Blow-up guard, called after the advance of every run.guard_every-th step: the first
   // non-finite value (or energy jump) found, or nothing. A report stops the run at that step.
   virtual std::optional<HealthReport> check_health(std::int64_t /*step*/) { return std::nullopt; }
+
+  // Checkpoints (issue 13; docs/checkpoint-format.md). A participant that can save its state
+  // says so; the runtime then writes <role>.state (its own section "runtime" and the
+  // participant's sections) into the checkpoint folder. save() stores the complete state after
+  // the last step, engine state files into `dir` named after the role, everything else as
+  // sections of `w`, and must not change the state (a run with checkpoints gives the same bits
+  // as one without). restore() replaces the state by the saved one, also the positions of the
+  // result writers (rows and frames written after the checkpoint are dropped, so they are
+  // written once), and checks that the scene still describes the saved state.
+  virtual bool can_checkpoint() const { return false; }
+  virtual void save(const std::filesystem::path& dir, io::StateWriter& w, const io::StateMeta& meta);
+  virtual void restore(io::StateReader& r, const Restore& how);
 
   // Coupling hooks, continuum role.
   virtual proto::InterfaceMesh interface_mesh();

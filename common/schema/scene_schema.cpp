@@ -26,6 +26,18 @@ void declare_run(config::Section& root) {
       .min(0.0);
   run.integer("guard_energy_window", "checks", 100, "Guard: number of previous checks the jump test looks back on.")
       .min(1);
+  run.boolean("checkpoint_stage_end", true,
+              "Checkpoint (docs/checkpoint-format.md) after every stage: every node saves its whole state into "
+              "checkpoints/<stage>-<step>-end/ of the run folder, the state a resume or a branch (launch/run --from) "
+              "starts from.");
+  run.real("checkpoint_every_s", "s", 600.0,
+           "Inside a stage, a checkpoint checkpoints/<stage>-<step>/ at the first step boundary after this much wall "
+           "time since the last one (0: none inside stages). Where checkpoints fall changes no result.")
+      .min(0.0);
+  run.integer("checkpoint_keep", "-", 2,
+              "Checkpoints inside stages kept in the run folder (the older ones are deleted once a newer one is "
+              "complete; stage-end checkpoints are all kept).")
+      .min(1);
 }
 
 void declare_bus(config::Section& root) {
