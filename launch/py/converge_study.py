@@ -22,7 +22,11 @@ Parts:
 docs/convergence.md, "What is not settled yet".)
 
 run: runs the variants' missing seeds (a finished seed folder is kept: an interrupted study
-resumes), up to J runs at once. table: tables and figures (convergence_tables.md,
+resumes), up to J runs at once. Each seed's specimen and gravity equilibrium are computed once
+per group of variants that differ only in their penetration stage: the first run of a group
+goes from scratch, the others branch from its stage-end checkpoint before the penetration
+(launch/run --from, docs/checkpoint-format.md), which gives the same bits as a run from scratch
+and saves the preparation (--no-branch: every run from scratch). table: tables and figures (convergence_tables.md,
 converge_seeds.csv, converge_rate.png, converge_dt.png in the study folder).
 """
 import argparse
@@ -88,7 +92,7 @@ def finished(run_dir):
         return not f.read().startswith("FAILED")
 
 
-def run_one(root, study, variant, edits, seed):
+def run_one(root, study, variant, edits, seed, branch=True):
     vdir = os.path.join(study, variant)
     os.makedirs(vdir, exist_ok=True)
     run_dir = os.path.join(vdir, "seed-%d" % seed)
@@ -101,12 +105,42 @@ def run_one(root, study, variant, edits, seed):
     except FileExistsError:
         return (variant, seed, 0, "running elsewhere (%s)" % lock)
     try:
-        return run_locked(root, study, variant, edits, seed, vdir, run_dir)
+        return run_locked(root, study, variant, edits, seed, vdir, run_dir, branch)
     finally:
         os.remove(lock)
 
 
-def run_locked(root, study, variant, edits, seed, vdir, run_dir):
+def group_of(edits):
+    """Variants with the same edits outside [[stage]] share every stage before the penetration."""
+    return json.dumps({k: v for k, v in edits.items() if not k.startswith("stage")}, sort_keys=True)
+
+
+def branch_source(study, edits, seed):
+    """The stage-end checkpoint before the penetration of a finished run of this seed and group
+    in the study (the latest one whose stage is not the penetration), or None."""
+    try:
+        with open(os.path.join(study, "plan.json")) as f:
+            variants = json.load(f)["variants"]
+    except (OSError, ValueError, KeyError):
+        return None
+    for v in variants:
+        if group_of(v["edits"]) != group_of(edits):
+            continue
+        run = os.path.join(study, v["name"], "seed-%d" % seed)
+        ck = os.path.join(run, "checkpoints")
+        if not finished(run) or not os.path.isdir(ck):
+            continue
+        ends = []
+        for name in os.listdir(ck):
+            if name.endswith("-end") and not name.startswith("penetrate-") and \
+                    os.path.isfile(os.path.join(ck, name, "manifest.txt")):
+                ends.append((int(name[:-4].rsplit("-", 1)[1]), name))
+        if ends:
+            return os.path.join(ck, max(ends)[1])
+    return None
+
+
+def run_locked(root, study, variant, edits, seed, vdir, run_dir, branch=True):
     if os.path.exists(run_dir):  # an interrupted or failed run: keep it under another name
         os.rename(run_dir, run_dir + ".failed-%d" % int(time.time()))
     with open(os.path.join(root, BASE_SCENE)) as f:
@@ -116,11 +150,13 @@ def run_locked(root, study, variant, edits, seed, vdir, run_dir):
     scene = os.path.join(vdir, "seed-%d.toml" % seed)
     with open(scene, "w") as f:
         f.write(text)
+    source = branch_source(study, edits, seed) if branch else None
     t0 = time.time()
     with open(os.path.join(vdir, "seed-%d.out" % seed), "w") as out:
-        code = subprocess.call(["bash", os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", run_dir],
-                               stdout=out, stderr=subprocess.STDOUT)
-    return (variant, seed, code, "%.0f s" % (time.time() - t0))
+        code = subprocess.call(["bash", os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", run_dir] +
+                               (["--from", source] if source else []), stdout=out, stderr=subprocess.STDOUT)
+    how = "%.0f s" % (time.time() - t0) + (", branched from %s" % os.path.relpath(source, study) if source else "")
+    return (variant, seed, code, how)
 
 
 def cmd_run(a):
@@ -141,7 +177,7 @@ def cmd_run(a):
     jobs = [(n, e, s) for n, _, _, e in variants for s in range(1, a.seeds + 1) if not a.only or n in a.only]
     failed = []
     with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        for variant, seed, code, how in pool.map(lambda j: run_one(root, a.study, *j), jobs):
+        for variant, seed, code, how in pool.map(lambda j: run_one(root, a.study, *j, branch=not a.no_branch), jobs):
             print("converge study: %s seed %d: %s (exit %d)" % (variant, seed, how, code), file=sys.stderr, flush=True)
             if code != 0:
                 failed.append("%s seed %d (exit %d, output %s/%s/seed-%d.out)" % (variant, seed, code, a.study, variant, seed))
@@ -163,6 +199,7 @@ def main():
     r.add_argument("--damping", default="0.1")
     r.add_argument("--quick", action="store_true")
     r.add_argument("--only", nargs="+", help="run only these variants (names as in 'list')")
+    r.add_argument("--no-branch", action="store_true", help="run every variant from scratch (no --from)")
     t = sub.add_parser("table")
     t.add_argument("study")
     ls = sub.add_parser("list")

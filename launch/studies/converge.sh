@@ -11,6 +11,8 @@
 #   --rate I       inertial number of the dt part (default 1e-3)
 #   --damping A    penetration damping of the dt part (default 0.1, the protocol's)
 #   --quick        penetration to 0.05 D_f (development)
+#   --no-branch    run every variant from scratch (default: variants that differ only in the
+#                  penetration branch from the first run's checkpoint after gravity)
 #   --into DIR     extend an existing study folder (finished seeds are kept: a study resumes)
 #   --table DIR    run nothing: rebuild the tables and figures of a study folder
 # Writes DIR/studies/<date>-converge/: one folder per variant with seed-<k>/ run folders,
@@ -26,10 +28,11 @@ while [ $# -gt 0 ]; do
     --parts) read -r -a p <<< "$2"; args+=(--parts "${p[@]}"); shift ;;
     --seeds|--jobs|--rate|--damping) args+=("$1" "$2"); shift ;;
     --quick) args+=(--quick) ;;
+    --no-branch) args+=(--no-branch) ;;
     --runs-root) runs_root="$2"; shift ;;
     --into) into="$2"; shift ;;
     --table) table="$2"; shift ;;
-    -h|--help) sed -n '3,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '3,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "converge study: unknown option '$1' (see launch/study converge --help)" >&2; exit 2 ;;
   esac
   shift
