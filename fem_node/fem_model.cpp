@@ -466,3 +466,62 @@ std::array<double, 3> Model::gravity_load() const {
 }
 
 }  // namespace demfdm::fem
+
+namespace demfdm::fem {
+
+void Model::save_state(io::StateWriter& w) const {
+  w.begin("fem_model");
+  w.u64(num_points());
+  w.u64(num_zones());
+  w.i64(nfree_);
+  for (const auto* v : {&u_, &fif_, &fapp_, &f0_, &sigma0_, &unbalanced_, &springs_}) w.f64s(*v);
+  w.f64(residual_);
+  w.f64(gap_);
+  w.i64(refactorisations_);
+  w.end();
+}
+
+void Model::load_state(io::SectionReader& r) {
+  const auto np = r.u64(), nz = r.u64();
+  const auto nf = r.i64();
+  if (np != num_points() || nz != num_zones() || nf != nfree_)
+    r.fail("the model was saved with " + std::to_string(np) + " gridpoints, " + std::to_string(nz) + " zones and " +
+           std::to_string(nf) + " free dofs; this one has " + std::to_string(num_points()) + ", " +
+           std::to_string(num_zones()) + " and " + std::to_string(nfree_) + " (another mesh or boundary)");
+  std::vector<double> u = r.f64s(), fif = r.f64s(), fapp = r.f64s(), f0 = r.f64s(), sigma0 = r.f64s(),
+                      unbalanced = r.f64s(), springs = r.f64s();
+  const double residual = r.f64(), gap = r.f64();
+  const auto refactorisations = r.i64();
+  r.done();
+  auto sized = [&](const std::vector<double>& v, std::size_t n, const char* what) {
+    if (v.size() != n && !(v.empty() && n == 0))
+      r.fail(std::string(what) + ": " + std::to_string(v.size()) + " values, the model has " + std::to_string(n));
+  };
+  sized(u, u_.size(), "displacements");
+  sized(f0, f0_.size(), "geostatic loads");
+  sized(sigma0, sigma0_.size(), "initial stresses");
+  if (!springs.empty()) sized(springs, 3 * mesh_.interface_points.size(), "interface springs");
+  u_ = std::move(u);
+  fif_ = std::move(fif);
+  fapp_ = std::move(fapp);
+  f0_ = std::move(f0);
+  sigma0_ = std::move(sigma0);
+  unbalanced_ = std::move(unbalanced);
+  residual_ = residual;
+  gap_ = gap;
+  // The factorisation of K + D with the saved springs: the matrix set_interface_springs() built.
+  springs_ = std::move(springs);
+  if (!springs_.empty()) {
+    Eigen::SparseMatrix<double> a = kff_;
+    const auto& ip = mesh_.interface_points;
+    for (std::size_t p = 0; p < ip.size(); ++p)
+      for (int d = 0; d < 3; ++d) {
+        const auto j = free_of_[3 * ip[p] + d];
+        if (j >= 0) a.coeffRef(j, j) += springs_[3 * p + d];
+      }
+    factorise(a);
+  }
+  refactorisations_ = refactorisations;
+}
+
+}  // namespace demfdm::fem

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "demfdm/fdm/mesh.hpp"
+#include "demfdm/io/state_file.hpp"
 #include "demfdm/fdm/params.hpp"
 
 namespace demfdm::fem {
@@ -122,6 +123,14 @@ class Model {
   std::vector<double> zone_stress() const;
   // Total gravity load [N].
   std::array<double, 3> gravity_load() const;
+
+  // Checkpoints (docs/checkpoint-format.md, section "fem_model"): the state a model built from
+  // the same Params continues from with the same bits: displacements, loads (interface,
+  // applied, geostatic), Gauss-point initial stresses, the last solve's unbalanced forces,
+  // residual and gap, the interface springs and the refactorisation count. The factorisation is
+  // not stored: load_state() rebuilds K + D from the saved springs, the same matrix as before.
+  void save_state(io::StateWriter& w) const;
+  void load_state(io::SectionReader& r);
 
  private:
   struct Mat {

@@ -83,17 +83,69 @@ class FemParticipant : public node::Participant {
     spdlog::info("fem: {} gridpoints, {} zones, {} free dofs, {} interface points; K factorised in {:.3f} s ({})",
                  model_.num_points(), model_.num_zones(), model_.num_free_dofs(),
                  model_.mesh().interface_points.size(), model_.factorisation_s(), model_.solver_name());
-    // Result files only when the scene has [continuum.output] (a scene writes only what it asks for).
-    if (!ctx.options.run_dir.empty() && s.has("continuum.output")) {
-      fs::path dir = ctx.options.run_dir;
-      io::FileInfo info{"fem_node", std::to_string(ctx.options.run_id), std::to_string(s.hash()), {}};
-      std::vector<std::int64_t> conn(model_.mesh().zones.begin(), model_.mesh().zones.end());
-      out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8), io::H5StorageParams{},
-                   "fem.h5");
-      if (history_every_ > 0)
-        history_.emplace(io::CsvSeries::create(dir / "fem_history.csv",
-                                               {"step_unit", "time_s", "residual_unit", "base_fx_N", "base_fy_N",
-                                                "base_fz_N", "iface_fz_N", "solve_s"}));
+  }
+
+  // Result files only when the scene has [continuum.output] (a scene writes only what it asks
+  // for), created at the first stage; a resumed run reopens them where its checkpoint left them.
+  static std::vector<std::string> history_columns() {
+    return {"step_unit", "time_s", "residual_unit", "base_fx_N", "base_fy_N", "base_fz_N", "iface_fz_N", "solve_s"};
+  }
+  bool writes_outputs() const { return !ctx_.options.run_dir.empty() && ctx_.scene.has("continuum.output"); }
+  void open_outputs() {
+    if (outputs_open_) return;
+    outputs_open_ = true;
+    if (!writes_outputs()) return;
+    fs::path dir = ctx_.options.run_dir;
+    io::FileInfo info{"fem_node", std::to_string(ctx_.options.run_id), std::to_string(ctx_.scene.hash()), {}};
+    std::vector<std::int64_t> conn(model_.mesh().zones.begin(), model_.mesh().zones.end());
+    out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8), io::H5StorageParams{},
+                 "fem.h5");
+    if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir / "fem_history.csv", history_columns()));
+  }
+
+  // Checkpoints (docs/checkpoint-format.md): the model (section "fem_model"; the factorisation
+  // is rebuilt on restore) and this adapter (section "fem_node") in the node file.
+  bool can_checkpoint() const override { return true; }
+  void save(const fs::path&, io::StateWriter& w, const io::StateMeta&) override {
+    model_.save_state(w);
+    w.begin("fem_node");
+    for (const auto* v : {&u_prev_, &u_ref_, &stiffness_, &springs_}) w.f64s(*v);
+    for (double v : {omega_, gain_, time_, dt_, last_solve_s_, total_solve_s_, last_frame_time_, max_imbalance_, iface_fz_})
+      w.f64(v);
+    for (bool b : {gain_checked_, coupled_, solved_, has_frame_}) w.b(b);
+    w.i64(last_frame_);
+    w.i64(solves_);
+    w.b(outputs_open_);
+    w.u64(out_ ? out_->h5().frame_count() : 0);
+    w.u64(history_ ? history_->bytes() : 0);
+    w.u64(history_ ? history_->rows() : 0);
+    w.end();
+  }
+  void restore(io::StateReader& r, const node::Restore& how) override {
+    auto m = r.section("fem_model");
+    model_.load_state(m);
+    auto sec = r.section("fem_node");
+    for (auto* v : {&u_prev_, &u_ref_, &stiffness_, &springs_}) *v = sec.f64s();
+    for (double* v : {&omega_, &gain_, &time_, &dt_, &last_solve_s_, &total_solve_s_, &last_frame_time_, &max_imbalance_,
+                      &iface_fz_})
+      *v = sec.f64();
+    for (bool* b : {&gain_checked_, &coupled_, &solved_, &has_frame_}) *b = sec.b();
+    last_frame_ = sec.i64();
+    solves_ = sec.i64();
+    const bool was_open = sec.b();
+    const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64();
+    sec.done();
+    if (how.branch) {  // a new run folder: new result files from the branch point on
+      has_frame_ = false;
+      last_frame_time_ = 0;
+      last_frame_ = -2;
+      return;
+    }
+    outputs_open_ = was_open;
+    if (was_open && writes_outputs()) {
+      fs::path dir = ctx_.options.run_dir;
+      out_.emplace(io::MeshOutput::resume(dir, frames, io::H5StorageParams{}, "fem.h5"));
+      if (history_every_ > 0) history_.emplace(io::CsvSeries::resume(dir / "fem_history.csv", history_columns(), bytes, rows));
     }
   }
 
@@ -104,6 +156,7 @@ class FemParticipant : public node::Participant {
     const auto& a = st.action;
     if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
       throw std::invalid_argument("fem_node does not support stage action '" + a + "'");
+    open_outputs();
     if (a == "geostatic" || a == "couple") {
       double k0 = st.view.real("k0");
       model_.set_geostatic_stress(k0 < 0 ? fdm::kNaN : k0);
@@ -323,7 +376,7 @@ class FemParticipant : public node::Participant {
   bool gain_checked_ = false;
   double time_ = 0, dt_ = 0, last_solve_s_ = 0, total_solve_s_ = 0, last_frame_time_ = 0;
   double max_imbalance_ = 0, iface_fz_ = 0;
-  bool coupled_ = false, solved_ = false, has_frame_ = false;
+  bool coupled_ = false, solved_ = false, has_frame_ = false, outputs_open_ = false;
   std::map<std::string, double> effect_s_;  // [s] wall time of each effect in the current stage
 };
 
