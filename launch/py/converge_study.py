@@ -18,8 +18,11 @@ Parts:
   rate   inertial number I in {1e-2, 3.3e-3, 1e-3, 3.3e-4} (30x below the paper's 1e-2), each with
          penetration-stage local damping 0.7 and 0.1 (docs/theory.md 7.6)
   dt     dem.dt_safety 0.8 / 0.4 / 0.2 at the chosen rate (--rate, 1e-3) and damping (--damping, 0.1)
-(The coupled model against a full-DEM box of the same outer size is not part of it yet:
-docs/convergence.md, "What is not settled yet".)
+  box    the coupled model against DEM everywhere, at the chosen rate and damping, at upscaling 2
+         in a 4 x 4 x 4 mm outer box: the DEM-only box (replication 2 x 2 x 4 of the 2 x 2 x 1 mm
+         REV, box of walls), and a DEM block of 2 x 2 x 2 mm and of 2 x 2 x 3 mm in the FDM
+         continuum. Seed k is the same REV in every arm (replicated differently), so the arms are
+         compared by paired differences against the DEM box.
 
 run: runs the variants' missing seeds (a finished seed folder is kept: an interrupted study
 resumes), up to J runs at once. Each seed's specimen and gravity equilibrium are computed once
@@ -53,6 +56,10 @@ def rate_variant(rate, damping):
     return "rate_I%s_a%s" % (rate, damping)
 
 
+def box_variant(arm, rate, damping):
+    return "box_%s_I%s_a%s" % (arm, rate, damping)
+
+
 def plan(parts, rate, damping, quick):
     """[(variant name, part, label, edits)] in the order they run (cheapest first)."""
     out = []
@@ -74,6 +81,19 @@ def plan(parts, rate, damping, quick):
                 name = rate_variant(rate, damping)  # the same runs as the rate part's
                 edits.pop("dem.dt_safety")
             out.append((name, "dt", "dt_safety %s" % f, edits))
+    if "box" in parts:
+        steps = int(40000 * 1e-2 / float(rate) * 2)
+        pen = {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": damping,
+               "stage:penetrate.steps": str(steps)}
+        small = {"dem.specimen.scale": "2", "continuum.mesh.size": "[4e-3, 4e-3, 4e-3]"}
+        # The transform (drop the continuum, walls around the block) comes after every key edit.
+        out.append((box_variant("dem", rate, damping), "box", "DEM everywhere (4 x 4 x 4 mm box)",
+                    dict(small, **pen, **{"dem.specimen.replicate": "[2, 2, 4]", "transform": "dem_only_box"})))
+        for h in (2, 3):
+            out.append((box_variant("coupled%d" % h, rate, damping), "box",
+                        "DEM block 2 x 2 x %d mm in FDM" % h,
+                        dict(small, **pen, **{"dem.specimen.replicate": "[1, 1, %d]" % h,
+                                              "continuum.mesh.inner_size": "[2e-3, 2e-3, %de-3]" % h})))
     if quick:
         out = [(n, p, l, dict(e, **{"stage:penetrate.depth_ratio": "0.05"})) for n, p, l, e in out]
     seen, uniq = set(), []
@@ -192,7 +212,7 @@ def main():
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
     r.add_argument("study")
-    r.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt"])
+    r.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box"])
     r.add_argument("--seeds", type=int, default=5)
     r.add_argument("--jobs", type=int, default=1)
     r.add_argument("--rate", default="1e-3")
@@ -203,7 +223,7 @@ def main():
     t = sub.add_parser("table")
     t.add_argument("study")
     ls = sub.add_parser("list")
-    ls.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt"])
+    ls.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box"])
     a = p.parse_args()
     if a.cmd == "run":
         return cmd_run(a)
@@ -364,6 +384,14 @@ def cmd_table(a):
                     [("I %s, damping %s" % (meta["rate"], meta["damping"]),
                       [(variants[n]["label"], runs.get(n, [])) for n in names])], grid)
         figures.append("converge_dt.png")
+    if "box" in meta["parts"]:
+        md += box_tables(met, meta)
+        names = [n for n, v in variants.items() if v["part"] == "box"]
+        band_figure(os.path.join(a.study, "converge_box.png"),
+                    "Footing load, seed mean and 95 % band: coupled against DEM everywhere",
+                    [("I %s, damping %s, 4 mm outer box" % (meta["rate"], meta["damping"]),
+                      [(variants[n]["label"], runs.get(n, [])) for n in names])], grid)
+        figures.append("converge_box.png")
     md += ["", "Figures: " + ", ".join("`%s`" % x for x in figures), ""]
     text = "\n".join(md) + "\n"
     with open(os.path.join(a.study, "convergence_tables.md"), "w") as f:
@@ -408,6 +436,18 @@ def dt_tables(met, meta):
         cur = met.get("dt_%s_I%s_a%s" % (f, meta["rate"], meta["damping"]))
         if ref and cur:
             rows.append([f] + [paired(cur, ref, k) for k, _ in MEASURES])
+    return md + table_md(rows)
+
+
+def box_tables(met, meta):
+    md = ["## Coupled against DEM everywhere: each coupled arm against the DEM box, I %s, damping %s "
+          "(paired over seeds)" % (meta["rate"], meta["damping"]), ""]
+    ref = met.get(box_variant("dem", meta["rate"], meta["damping"]))
+    rows = [["arm"] + [lab for _, lab in MEASURES]]
+    for h in (2, 3):
+        cur = met.get(box_variant("coupled%d" % h, meta["rate"], meta["damping"]))
+        if ref and cur:
+            rows.append(["DEM block 2 x 2 x %d mm" % h] + [paired(cur, ref, k) for k, _ in MEASURES])
     return md + table_md(rows)
 
 
