@@ -37,6 +37,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import compare_curves  # noqa: E402  (the normalised curve difference)
 import paper_figures  # noqa: E402  (initial-stiffness rule and the footing curve of a run folder)
+import branching  # noqa: E402  (which saved state a run may start from)
 
 FOOTING_SCENE = "scenes/accuracy_footing.toml"
 UCS_SCENE = "scenes/ucs_sbm_s1.5.toml"
@@ -235,7 +236,7 @@ def plan(root, quick, only, existing=None, seeds=1):
     return {h: r for h, r in runs.items() if r["text"] is not None}, entries
 
 
-def run_all(root, study, runs):
+def run_all(root, study, runs, branch=True):
     # Footing runs first, then the UCS runs from the coarsest to the finest (scale 1, the longest, last).
     order = list(runs.values())
     order = [r for r in order if not r["name"].startswith("ucs_")] + \
@@ -250,13 +251,19 @@ def run_all(root, study, runs):
             continue
         scene = os.path.join(study, r["name"] + ".toml")
         open(scene, "w").write(r["text"])
+        # A run that shares its first stages with a finished one starts from its saved state
+        # (launch/py/branching.py; the same bits as from scratch).
+        others = [os.path.join(study, o["name"]) for o in order if o is not r]
+        source = branching.branch_source(branching.coordinator_command(), scene, others) if branch else None
         t0 = time.time()
         with open(os.path.join(study, r["name"] + ".log"), "w") as log:
-            rc = subprocess.call([os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", d],
-                                 stdout=log, stderr=subprocess.STDOUT)
-        print("accuracy study: [%d/%d] %s %s in %.0f s" % (i + 1, len(order), r["name"],
-                                                           "done" if rc == 0 else "FAILED (rc %d)" % rc,
-                                                           time.time() - t0), file=sys.stderr, flush=True)
+            rc = subprocess.call([os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", d] +
+                                 (["--from", source] if source else []), stdout=log, stderr=subprocess.STDOUT)
+        print("accuracy study: [%d/%d] %s %s in %.0f s%s" % (i + 1, len(order), r["name"],
+                                                             "done" if rc == 0 else "FAILED (rc %d)" % rc,
+                                                             time.time() - t0,
+                                                             ", branched from " + os.path.relpath(source, study)
+                                                             if source else ""), file=sys.stderr, flush=True)
 
 
 def run_wall(d):
@@ -434,6 +441,7 @@ def main():
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", nargs="+", default=[])
     ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--no-branch", action="store_true", help="run every scene from scratch (no launch/run --from)")
     a = ap.parse_args()
     root = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     if a.command == "list":
@@ -458,7 +466,7 @@ def main():
             entries = [e for e in old["entries"] if (e["knob"], e["setting"]) not in have] + entries
         json.dump({"quick": a.quick, "seeds": a.seeds, "d_f": d_f, "entries": entries}, open(plan_path, "w"), indent=1)
         print("accuracy study: %d settings, %d distinct runs in %s" % (len(entries), len(runs), a.study), file=sys.stderr)
-        run_all(root, a.study, runs)
+        run_all(root, a.study, runs, branch=not a.no_branch)
     table(a.study)
 
 

@@ -18,7 +18,7 @@ Parts:
   rate   inertial number I in {1e-2, 3.3e-3, 1e-3, 3.3e-4} (30x below the paper's 1e-2), each with
          penetration-stage local damping 0.7 and 0.1 (docs/theory.md 7.6)
   dt     dem.dt_safety 0.8 / 0.4 / 0.2 at the chosen rate (--rate, 1e-3) and damping (--damping, 0.1)
-  box    the coupled model against DEM everywhere, at the chosen rate and damping, at upscaling 2
+  box    the coupled model against DEM everywhere, at the chosen rate and damping, at upscaling 1.5
          in a 4 x 4 x 4 mm outer box: the DEM-only box (replication 2 x 2 x 4 of the 2 x 2 x 1 mm
          REV, box of walls), and a DEM block of 2 x 2 x 2 mm and of 2 x 2 x 3 mm in the FDM
          continuum. Seed k is the same REV in every arm (replicated differently), so the arms are
@@ -27,9 +27,10 @@ Parts:
 run: runs the variants' missing seeds (a finished seed folder is kept: an interrupted study
 resumes), up to J runs at once. Each seed's specimen and gravity equilibrium are computed once
 per group of variants that differ only in their penetration stage: the first run of a group
-goes from scratch, the others branch from its stage-end checkpoint before the penetration
-(launch/run --from, docs/checkpoint-format.md), which gives the same bits as a run from scratch
-and saves the preparation (--no-branch: every run from scratch). table: tables and figures (convergence_tables.md,
+goes from scratch, the others branch from its latest stage-end checkpoint they may start from
+(launch/run --from, docs/checkpoint-format.md; the coordinator's --check decides), which gives
+the same bits as a run from scratch and saves the preparation (--no-branch: every run from
+scratch). table: tables and figures (convergence_tables.md,
 converge_seeds.csv, converge_rate.png, converge_dt.png in the study folder).
 """
 import argparse
@@ -44,6 +45,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import accuracy_study  # noqa: E402  (scene edits: apply, set_key)
+import branching  # noqa: E402  (which saved state a run may start from)
 import ensemble  # noqa: E402  (runs of an ensemble folder, statistics with t-based intervals)
 
 BASE_SCENE = "scenes/accuracy_footing.toml"
@@ -85,7 +87,7 @@ def plan(parts, rate, damping, quick):
         steps = int(40000 * 1e-2 / float(rate) * 2)
         pen = {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": damping,
                "stage:penetrate.steps": str(steps)}
-        small = {"dem.specimen.scale": "2", "continuum.mesh.size": "[4e-3, 4e-3, 4e-3]"}
+        small = {"continuum.mesh.size": "[4e-3, 4e-3, 4e-3]"}
         # The transform (drop the continuum, walls around the block) comes after every key edit.
         out.append((box_variant("dem", rate, damping), "box", "DEM everywhere (4 x 4 x 4 mm box)",
                     dict(small, **pen, **{"dem.specimen.replicate": "[2, 2, 4]", "transform": "dem_only_box"})))
@@ -104,12 +106,7 @@ def plan(parts, rate, damping, quick):
     return uniq
 
 
-def finished(run_dir):
-    s = os.path.join(run_dir, "summary.json")
-    if not os.path.isfile(s):
-        return False
-    with open(os.path.join(run_dir, "summary.txt")) as f:
-        return not f.read().startswith("FAILED")
+finished = branching.finished
 
 
 def run_one(root, study, variant, edits, seed, branch=True):
@@ -130,34 +127,16 @@ def run_one(root, study, variant, edits, seed, branch=True):
         os.remove(lock)
 
 
-def group_of(edits):
-    """Variants with the same edits outside [[stage]] share every stage before the penetration."""
-    return json.dumps({k: v for k, v in edits.items() if not k.startswith("stage")}, sort_keys=True)
-
-
-def branch_source(study, edits, seed):
-    """The stage-end checkpoint before the penetration of a finished run of this seed and group
-    in the study (the latest one whose stage is not the penetration), or None."""
+def branch_source(study, scene, seed):
+    """The stage-end checkpoint of a finished run of this seed in the study that the variant's
+    scene may start from (launch/py/branching.py: the coordinator decides), or None."""
     try:
         with open(os.path.join(study, "plan.json")) as f:
             variants = json.load(f)["variants"]
     except (OSError, ValueError, KeyError):
         return None
-    for v in variants:
-        if group_of(v["edits"]) != group_of(edits):
-            continue
-        run = os.path.join(study, v["name"], "seed-%d" % seed)
-        ck = os.path.join(run, "checkpoints")
-        if not finished(run) or not os.path.isdir(ck):
-            continue
-        ends = []
-        for name in os.listdir(ck):
-            if name.endswith("-end") and not name.startswith("penetrate-") and \
-                    os.path.isfile(os.path.join(ck, name, "manifest.txt")):
-                ends.append((int(name[:-4].rsplit("-", 1)[1]), name))
-        if ends:
-            return os.path.join(ck, max(ends)[1])
-    return None
+    runs = [os.path.join(study, v["name"], "seed-%d" % seed) for v in variants]
+    return branching.branch_source(branching.coordinator_command(), scene, runs)
 
 
 def run_locked(root, study, variant, edits, seed, vdir, run_dir, branch=True):
@@ -170,7 +149,7 @@ def run_locked(root, study, variant, edits, seed, vdir, run_dir, branch=True):
     scene = os.path.join(vdir, "seed-%d.toml" % seed)
     with open(scene, "w") as f:
         f.write(text)
-    source = branch_source(study, edits, seed) if branch else None
+    source = branch_source(study, scene, seed) if branch else None
     t0 = time.time()
     with open(os.path.join(vdir, "seed-%d.out" % seed), "w") as out:
         code = subprocess.call(["bash", os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", run_dir] +

@@ -13,6 +13,8 @@
 #   --into DIR       extend an existing study folder: run only the scenes it does not have yet
 #   --table DIR      run nothing: rebuild the table and figure of an existing study folder
 #   --list           print the knobs and their settings
+#   --no-branch      run every scene from scratch (default: a scene that shares its first stages
+#                    with a finished one starts from its saved state, launch/run --from)
 # Writes DIR/studies/<date>-accuracy/ with one run folder per distinct scene (variants of
 # scenes/accuracy_footing.toml and scenes/ucs_sbm_s1.5.toml), accuracy_table.csv,
 # accuracy_table.md and accuracy_pareto.png. Full study with 3 seeds: about 20 min on this 2-core
@@ -32,8 +34,9 @@ while [ $# -gt 0 ]; do
     --runs-root) runs_root="$2"; shift ;;
     --table) study="$2"; shift ;;
     --into) into="$2"; shift ;;
+    --no-branch) args+=(--no-branch) ;;
     --list) exec /usr/bin/python3 "$root/launch/py/accuracy_study.py" list ;;
-    -h|--help) sed -n '3,20p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '3,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "accuracy study: unknown option '$1' (see launch/study accuracy --help)" >&2; exit 2 ;;
   esac
   shift

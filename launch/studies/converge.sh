@@ -6,7 +6,7 @@
 #   --parts P      rate: I = 1e-2, 3.3e-3, 1e-3, 3.3e-4 at penetration damping 0.7 and 0.1;
 #                  dt: dem.dt_safety 0.8 / 0.4 / 0.2 at --rate and --damping (default "rate dt");
 #                  box: the coupled model (DEM block 2 x 2 x 2 and 2 x 2 x 3 mm) against DEM
-#                  everywhere in the same 4 x 4 x 4 mm box, upscaling 2, at --rate and --damping
+#                  everywhere in the same 4 x 4 x 4 mm box, upscaling 1.5, at --rate and --damping
 #   --seeds N      seeds 1..N of every variant (default 5); seed k is the same bonded block in
 #                  every variant, so knobs are compared by paired differences
 #   --jobs J       runs at once (default 1; each run is a DEM and a continuum process)
