@@ -24,8 +24,12 @@
 #include <variant>
 
 #include "common/log/log.hpp"
+#include "git_commit.hpp"
+#include "coordinator/core/centrifuge.hpp"
 #include "coordinator/core/checkpoint.hpp"
+#include "coordinator/core/progress.hpp"
 #include "coordinator/core/quasi_static.hpp"
+#include "coordinator/core/results.hpp"
 #include "coordinator/core/runner.hpp"
 #include "coordinator/core/summary.hpp"
 #include "messages/node_runtime.hpp"
@@ -505,8 +509,34 @@ int main(int argc, char** argv) {
       }
       return {coord::ramped_speed(m.speed, clock.t_mid(), m.ramp_time)};
     });
-    runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) { hist.record(st, step, reps); });
+    // Progress (coordinator/core/progress.hpp): on a terminal one rewritten line twice a second,
+    // else a plain line every 5 s; coordinator.log gets a line every 10 s.
+    const bool tty = ::isatty(2) != 0;
+    coord::Progress progress(tty ? 0.5 : 5.0), progress_log(10.0);
+    const double d_f = scene.has("dem.footing") ? scene.real("dem.footing.diameter") : 0.0;
+    progress.set_footing_diameter(d_f);
+    progress_log.set_footing_diameter(d_f);
+    bool line_open = false;
+    auto end_line = [&] {
+      if (line_open) std::cerr << "\n" << std::flush;
+      line_open = false;
+    };
+    runner.set_observer([&](const schema::Stage& st, std::int64_t step, const auto& reps) {
+      hist.record(st, step, reps);
+      const auto now = std::chrono::steady_clock::now();
+      const auto first = runner.grant_clock().stage_first_step;
+      if (auto l = progress.observe(st, first, step, reps, now)) {
+        if (tty) {
+          std::cerr << "\r" << *l << "\x1b[K" << std::flush;
+          line_open = true;
+        } else {
+          std::cerr << "progress: " << *l << "\n";
+        }
+      }
+      if (auto l = progress_log.observe(st, first, step, reps, now)) log->info("progress: {}", *l);
+    });
     auto sum = runner.run();
+    end_line();
     ep->shutdown("run finished");
     auto info = run_info(scene, *ep, bus->stats());
     info.rates = rates;
@@ -520,7 +550,77 @@ int main(int argc, char** argv) {
     if (start)
       info.resumed = std::string(start->branch ? "branched from " : "resumed from ") + start->dir.string() +
                      " (after step " + std::to_string(start->manifest.step) + ")";
-    auto text = coord::summary_text(info, sum);
+    // The run's identity and, for a footing run, its result (coordinator/core/results.hpp), read
+    // back from the penetration history: printed last, after the cost summary.
+    {
+      std::ostringstream id;
+      id << "{\"scene\": " << coord::json_string(scene.origin()) << ", \"seed\": " << scene.integer("run.seed")
+         << ", \"g_level\": " << (scene.has("gravity") ? scene.real("gravity.level") : 1.0)
+         << ", \"footing_diameter_m\": " << (d_f > 0 ? fmt::format("{:.17g}", d_f) : std::string("null"))
+         << ", \"threads\": " << scene.integer("run.threads") << ", \"git_commit\": " << coord::json_string(DEMFDM_GIT_COMMIT)
+         << ", \"build_id\": " << coord::json_string(io::default_code_version()) << "}";
+      info.extra_json.push_back({"run", id.str()});
+    }
+    std::string result;
+    for (std::size_t i = stage_list.size(); i-- > 0;) {
+      const auto& st = stage_list[i];
+      if (st.action != "penetrate" || opt.run_dir.empty() || d_f <= 0) continue;
+      const auto path = opt.run_dir + "/history_" + std::to_string(i) + "_" + st.name + ".csv";
+      if (!std::filesystem::exists(path)) break;
+      try {
+        auto r = coord::footing_result(path, st.name, d_f, st.view.real("depth_ratio") * d_f);
+        for (auto& ss : sum.stages)
+          if (ss.name == st.name)
+            if (auto it = ss.end.find("dem"); it != ss.end.end()) {
+              auto v = it->second.values;
+              if (v.count("bonds_broken_tension")) r.bonds_broken_tension = v["bonds_broken_tension"];
+              if (v.count("bonds_broken_shear")) r.bonds_broken_shear = v["bonds_broken_shear"];
+            }
+        result = coord::result_text(r);
+        info.extra_json.push_back({"result", coord::result_json(r)});
+        // The centrifuge planning report (coordinator/core/centrifuge.hpp): centrifuge.md and
+        // summary.json "centrifuge".
+        coord::CentrifugeInput c;
+        c.g_level = scene.has("gravity") ? scene.real("gravity.level") : 1.0;
+        if (scene.has("gravity")) c.g0_m_s2 = scene.real("gravity.g0");
+        c.footing_diameter_m = d_f;
+        const auto& m = rates.at(i);
+        c.footing_speed_m_s = m.speed;
+        c.settlement_m = r.settlement_m;
+        c.load_N = r.load_N;
+        c.target_settlement_m = r.target_m;
+        if (scene.has("continuum")) {
+          auto box = scene.reals("continuum.mesh.size");
+          for (int k = 0; k < 3; ++k) c.block_size_m[k] = box[static_cast<std::size_t>(k)];
+        } else {
+          auto cell = scene.reals("dem.specimen.cell");
+          auto rep = scene.integers("dem.specimen.replicate");
+          for (int k = 0; k < 3; ++k)
+            c.block_size_m[k] = cell[static_cast<std::size_t>(k)] * static_cast<double>(rep[static_cast<std::size_t>(k)]);
+        }
+        c.rock_density_kg_m3 = m.bulk_density;
+        c.young_Pa = m.young;
+        if (m.bond_strength) c.sigma_c_Pa = *m.bond_strength;
+        c.ramp_travel_m = st.view.real("ramp_depth_ratio") * d_f;
+        if (m.impedance_ratio) c.impedance_ratio = *m.impedance_ratio;
+        c.quasi_static_limit = m.limit;
+        c.scene = scene.origin();
+        c.stage = st.name;
+        auto rep = coord::centrifuge_report(c);
+        info.extra_json.push_back({"centrifuge", rep.json});
+        if (!opt.run_dir.empty()) {
+          std::ofstream(opt.run_dir + "/centrifuge.md") << rep.markdown;
+          result += "  centrifuge report   " + opt.run_dir + "/centrifuge.md (prototype footing " +
+                    fmt::format("{:.4g}", rep.diameter_proto_m * 1e3) + " mm, peak " +
+                    fmt::format("{:.4g}", rep.peak_proto_N) + " N; load cell " +
+                    fmt::format("{:g}", rep.load_cell_range_model_N) + " N at model scale)\n";
+        }
+      } catch (const std::exception& e) {
+        log->warn("no footing result: {}", e.what());
+      }
+      break;
+    }
+    auto text = coord::summary_text(info, sum) + result;
     log->info("run finished\n{}", text);
     if (!opt.run_dir.empty()) {
       std::ofstream(opt.run_dir + "/summary.txt") << text;
@@ -529,6 +629,7 @@ int main(int argc, char** argv) {
     std::cout << text;
     return 0;
   } catch (const proto::ShutdownRequested& e) {
+    std::cerr << "\n";
     log->error("{}", e.what());
     if (ep) ep->shutdown(e.what());
     return 130;

@@ -205,8 +205,9 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum) {
        << "}";
     first = false;
   }
-  os << (tot.compute_s.empty() ? "}}\n" : "\n  }}\n");
-  os << "}\n";
+  os << (tot.compute_s.empty() ? "}}" : "\n  }}");
+  for (auto& [key, value] : info.extra_json) os << ",\n  " << json_string(key) << ": " << value;
+  os << "\n}\n";
   return os.str();
 }
 

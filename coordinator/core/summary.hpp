@@ -30,6 +30,9 @@ struct RunInfo {
   std::string bus;            // one line of the coordinator's bus counters (text summary only)
   std::string checkpoints;    // one line: checkpoints written, size, time (text summary only)
   std::string resumed;        // "resumed from <checkpoint>" / "branched from <checkpoint>", or ""
+  // Further top-level members of summary.json, in order: name -> JSON value text (the run's
+  // identity, its result, the centrifuge report).
+  std::vector<std::pair<std::string, std::string>> extra_json;
   // Footing rate and quasi-static measures of each penetrate stage, by index in
   // RunSummary::stages (coordinator/core/quasi_static.hpp). The text summary ends with a
   // "WARNING: not quasi-static:" line for each stage above its limit.
