@@ -119,18 +119,39 @@ void Bus::open_tee() {
 
 // Called with pub_mu_ held, before the message goes to LCM. Flushed per message so that a
 // process that is killed loses nothing it has sent.
+// Size guard: the coordinator repeats the scene text (up to many MB) every 250 ms until every
+// node has said hello. Each (scene hash, chunk) is recorded once per log; a repeat is recorded
+// on DEMFDM_SCENE_REPEAT as the same scene_t without its text (header, hash and chunk kept, so
+// the log still shows every publication and its seq).
 void Bus::tee(const std::string& ch, const std::vector<std::uint8_t>& buf) {
   auto it = tee_->match.find(ch);
   if (it == tee_->match.end())
     it = tee_->match.emplace(ch, !tee_->channels || std::regex_match(ch, *tee_->channels)).first;
   if (!it->second) return;
+  static const std::string kSceneRepeat = "DEMFDM_SCENE_REPEAT";
+  const std::string* rec_ch = &ch;
+  const std::vector<std::uint8_t>* rec = &buf;
+  std::vector<std::uint8_t> stub;
+  demfdm::scene_t s;
+  if (ch == channel::kScene && s.decode(buf.data(), 0, static_cast<int>(buf.size())) >= 0) {
+    // The chunks already recorded are kept in the channel cache under keys that no channel
+    // name can take (they hold a newline).
+    auto key = ch + "\n" + std::to_string(s.scene_hash) + "/" + std::to_string(s.chunk_index);
+    if (!tee_->match.emplace(std::move(key), true).second) {
+      s.text.clear();
+      stub.resize(static_cast<std::size_t>(s.getEncodedSize()));
+      s.encode(stub.data(), 0, static_cast<int>(stub.size()));
+      rec_ch = &kSceneRepeat;
+      rec = &stub;
+    }
+  }
   lcm_eventlog_event_t ev{};
   ev.eventnum = tee_->eventnum++;
   ev.timestamp = now_us();
-  ev.channellen = static_cast<std::int32_t>(ch.size());
-  ev.datalen = static_cast<std::int32_t>(buf.size());
-  ev.channel = const_cast<char*>(ch.c_str());
-  ev.data = const_cast<std::uint8_t*>(buf.data());
+  ev.channellen = static_cast<std::int32_t>(rec_ch->size());
+  ev.datalen = static_cast<std::int32_t>(rec->size());
+  ev.channel = const_cast<char*>(rec_ch->c_str());
+  ev.data = const_cast<std::uint8_t*>(rec->data());
   if (lcm_eventlog_write_event(tee_->log, &ev) != 0 || std::fflush(tee_->log->f) != 0)
     throw BusError("cannot write the traffic log '" + tee_->path + "' (disk full?)");
 }

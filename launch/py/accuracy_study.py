@@ -67,6 +67,17 @@ def set_key(text, dotted, value):
     raise KeyError("table [%s] of the scene has no key '%s'" % (table, key))
 
 
+def quiet_traffic(text):
+    """Study and ensemble runs record no traffic log unless the scene says traffic_log itself: a
+    coupled run's log holds every interface message (about 1 GB for the default scene), which a
+    study of load curves does not need. [output] traffic_log = false is added."""
+    if re.search(r"(?m)^\s*traffic_log\s*=", text):
+        return text
+    if re.search(r"(?m)^\s*\[output\]\s*$", text):
+        return re.sub(r"(?m)^(\s*\[output\]\s*)$", r"\1\ntraffic_log = false", text, count=1)
+    return text.rstrip("\n") + "\n\n[output]\ntraffic_log = false\n"
+
+
 def set_stage_key(text, stage, key, value, add=False):
     """Sets `key = value` in the [[stage]] named `stage`; fails when the stage is absent, and when
     the key is absent unless add (then the line is appended to the stage)."""
@@ -176,11 +187,11 @@ def knobs(quick):
 
 def base_text(root, problem, quick):
     if problem == "footing":
-        text = open(os.path.join(root, FOOTING_SCENE)).read()
+        text = quiet_traffic(open(os.path.join(root, FOOTING_SCENE)).read())
         if quick:  # development: larger balls, shallower penetration
             text = apply(text, {"dem.specimen.scale": 2, "stage:penetrate.depth_ratio": 0.05})
         return text
-    text = open(os.path.join(root, UCS_SCENE)).read()
+    text = quiet_traffic(open(os.path.join(root, UCS_SCENE)).read())
     if quick:
         text = apply(text, {"stage:ucs.max_strain": 0.002})
     return text

@@ -145,7 +145,7 @@ def run_locked(root, study, variant, edits, seed, vdir, run_dir, branch=True):
     with open(os.path.join(root, BASE_SCENE)) as f:
         text = f.read()
     text = accuracy_study.apply(text, edits)
-    text = accuracy_study.set_key(text, "run.seed", str(seed))
+    text = accuracy_study.quiet_traffic(accuracy_study.set_key(text, "run.seed", str(seed)))
     scene = os.path.join(vdir, "seed-%d.toml" % seed)
     with open(scene, "w") as f:
         f.write(text)

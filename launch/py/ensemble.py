@@ -10,7 +10,8 @@ Usage:
 
 run: SPEC is N (seeds 1..N), A-B (seeds A..B) or a comma list of seeds and ranges (1,4,7-9).
 For every seed k the scene text gets `run.seed = k` (the key is added to [run] when the scene
-does not set it) and the --set / --stage-set edits (accuracy_study.set_key / set_stage_key; a
+does not set it), `[output] traffic_log = false` unless the scene sets traffic_log itself (a
+traffic log per seed would take about 1 GB for the default scene) and the --set / --stage-set edits (accuracy_study.set_key / set_stage_key; a
 --stage-set key absent from the stage is added), is kept as ENSEMBLE_DIR/seed-<k>.toml and runs
 through launch/run --no-build --run-dir ENSEMBLE_DIR/seed-<k> (output in seed-<k>.log), at most J
 runs at once (default 1). Every edited scene is validated before anything starts. A seed whose
@@ -417,7 +418,7 @@ def seed_scene(text, seed, sets=(), stage_sets=()):
         if not eq or not dot:
             raise KeyError("--stage-set %s: expected stage.key=value" % e)
         text = accuracy_study.set_stage_key(text, stage, key, v.strip(), add=True)
-    return text
+    return accuracy_study.quiet_traffic(text)
 
 
 def tail(path, n=15):

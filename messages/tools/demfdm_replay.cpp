@@ -11,9 +11,16 @@
 // STEPS.csv with --out) and a summary line:
 //   replay: N steps compared, I bit-identical, max |dx| = ..., max |dv| = ...
 // Run it inside a private network namespace (launch/replay does) or give --lcm-url.
+// The whole log is read and checked before the solver starts (traffic_log.hpp: event framing,
+// every payload decoded, the checksums of demfdm_log merge): an empty, truncated or corrupt log
+// is reported as such ("demfdm_replay: FILE: corrupt log: event 7 at byte 2345 ...; nothing was
+// replayed", exit 2) and nothing of it reaches the solver. A log without checksums (a wire
+// capture, a log merged before they existed) is replayed with a warning: a damaged number in
+// it cannot be told from a solver difference.
 // Exit codes: 0 replayed (1 with --expect-identical when any answer differs), 2 bad command
-// line / log without a scene, 3 the solver failed or the protocol broke, 4 the log lacks the
-// DEM forces of a step (the steps before it are still compared and reported).
+// line / empty, truncated or corrupt log / log without a scene, 3 the solver failed or the
+// protocol broke, 4 the log lacks the DEM forces of a step (the steps before it are still
+// compared and reported).
 #include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -129,10 +136,17 @@ int main(int argc, char** argv) {
     log = traffic::read_log(log_path);
     if (log.scene_text.empty()) return usage(log_path + ": the log holds no complete scene broadcast (DEMFDM_SCENE)");
     scene = config::Scene::parse(log.scene_text, log.scene_origin, schema::scene_schema());
+  } catch (const traffic::LogError& e) {
+    std::cerr << "demfdm_replay: " << e.what() << "; nothing was replayed\n";
+    return 2;
   } catch (const std::exception& e) {
     std::cerr << "demfdm_replay: " << e.what() << "\n";
     return 2;
   }
+  if (!log.checksummed)
+    std::cerr << "demfdm_replay: warning: " << log_path
+              << " has no checksums (not written by demfdm_log merge): a damaged number in it cannot be told "
+                 "from a solver difference\n";
   auto stages = schema::stages(scene);
   bool parallel = scene.has("coupling") && scene.string("coupling.scheme") == "parallel";
 

@@ -3,11 +3,16 @@
 // publications, DEMFDM_TRAFFIC_DIR, merged into one lossless log): a 12-step scripted coupled
 // run of fdm_node driven by the conformance harness (in-process coordinator and DEM), with
 // faults injected into the solver (one duplicated kin, the first hello dropped); and a
-// 200-step run next to CPU hogs, recorded on the wire by lcm-logger as well.
+// 200-step run next to CPU hogs, recorded on the wire by lcm-logger as well. Damaged copies of
+// the first log (truncated, bit-flipped, empty, garbage) must be refused by every tool with one
+// message naming the file, byte and event, and never reach a solver.
 #include <hdf5.h>
 #include <lcm/eventlog.h>
 
+#include <algorithm>
 #include <csignal>
+#include <map>
+#include <set>
 #include <fstream>
 #include <regex>
 #include <sstream>
@@ -157,6 +162,190 @@ TEST_F(TrafficLog, ReplayIsBitIdenticalForTheSameSolverAndReportsADifferenceForA
   EXPECT_EQ(code3, 1) << out3;
 }
 
+// The events of a log as framed in the file (LCM event log: sync, eventnum, timestamp, channel
+// length, data length, channel, data; big-endian).
+struct Framed {
+  std::size_t offset = 0, data_at = 0, data_len = 0;
+  std::string channel;
+};
+std::vector<Framed> frames(const std::string& b) {
+  auto u32 = [&](std::size_t at) {
+    return (std::uint32_t(std::uint8_t(b[at])) << 24) | (std::uint32_t(std::uint8_t(b[at + 1])) << 16) |
+           (std::uint32_t(std::uint8_t(b[at + 2])) << 8) | std::uint32_t(std::uint8_t(b[at + 3]));
+  };
+  std::vector<Framed> out;
+  for (std::size_t o = 0; o + 28 <= b.size();) {
+    Framed f;
+    f.offset = o;
+    std::size_t cl = u32(o + 20), dl = u32(o + 24);
+    f.channel = b.substr(o + 28, cl);
+    f.data_at = o + 28 + cl;
+    f.data_len = dl;
+    out.push_back(f);
+    o = f.data_at + dl;
+  }
+  return out;
+}
+void write_bytes(const fs::path& p, const std::string& b) { std::ofstream(p, std::ios::binary) << b; }
+int lines(const std::string& s) { return static_cast<int>(std::count(s.begin(), s.end(), '\n')); }
+
+// Damaged copies of the fixture's log: every tool refuses them (exit 2) with one line naming
+// the file, the kind of damage, the byte and the event; replay never starts the solver.
+TEST_F(TrafficLog, DamagedLogsAreRefusedByEveryTool) {
+  const std::string good = demfdm::testing::read_file(log_);
+  auto ev = frames(good);
+  ASSERT_GT(ev.size(), 50u);
+  ASSERT_EQ(ev.front().channel, "DEMFDM_LOG_CHECK");
+  ASSERT_EQ(ev.back().channel, "DEMFDM_LOG_CHECK");
+  const Framed* force = nullptr;  // an interface force event in the middle of the log
+  for (std::size_t i = ev.size() / 2; i < ev.size() && !force; ++i)
+    if (ev[i].channel == "DEMFDM_IFACE_FORCE") force = &ev[i];
+  ASSERT_NE(force, nullptr);
+  const std::size_t force_index = static_cast<std::size_t>(force - ev.data());
+
+  struct Case {
+    std::string name, bytes, expect;
+  };
+  std::vector<Case> cases;
+  // Cut inside an event, and cut after a whole event (the end block is missing).
+  cases.push_back({"truncated", good.substr(0, force->data_at + force->data_len / 2),
+                   ": truncated log: event " + std::to_string(force_index) + " at byte " +
+                       std::to_string(force->offset) + " (channel DEMFDM_IFACE_FORCE) announces"});
+  cases.push_back({"cut", good.substr(0, force->data_at + force->data_len),
+                   ": truncated log: the file ends at byte " + std::to_string(force->data_at + force->data_len) +
+                       " after event " + std::to_string(force_index) + " without the closing checksum block"});
+  // One bit of one force value: the payload still decodes, only the checksum tells.
+  std::string flipped = good;
+  flipped[force->data_at + force->data_len - 20] ^= 0x04;
+  cases.push_back({"flipped", flipped,
+                   ": corrupt log: event " + std::to_string(force_index) + " at byte " + std::to_string(force->offset) +
+                       " (channel DEMFDM_IFACE_FORCE, " + std::to_string(force->data_len) +
+                       " bytes) does not match its checksum"});
+  cases.push_back({"empty", "", ": empty log: the file is empty (0 bytes)"});
+  std::string garbage(4096, '\0');
+  std::mt19937 rng(7);
+  for (auto& c : garbage) c = static_cast<char>(rng());
+  garbage[0] = 'x';
+  cases.push_back({"garbage", garbage, ": not an LCM event log: the file starts with 0x78"});
+
+  const std::string traffic = std::string(DEMFDM_SOURCE_DIR) + "/launch/traffic";
+  const std::string replay = std::string(DEMFDM_SOURCE_DIR) + "/launch/replay";
+  setenv("DEMFDM_BUILD", fs::path(kBin).parent_path().c_str(), 1);
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.name);
+    fs::path run = dir_ / ("damaged-" + c.name);
+    fs::create_directories(run);
+    const std::string file = (run / "traffic.lcmlog").string();
+    write_bytes(file, c.bytes);
+    const std::string want = file + c.expect;
+    auto check = [&](const std::string& tool, std::pair<int, std::string> r) {
+      EXPECT_EQ(r.first, 2) << tool << ": " << r.second;
+      EXPECT_NE(r.second.find(want), std::string::npos) << tool << " should say\n  " << want << "\nbut said\n" << r.second;
+      EXPECT_EQ(lines(r.second), 1) << tool << ": one line\n" << r.second;
+    };
+    check("summary", run_cmd({kBin + "/demfdm_log", "summary", file}, (run / "summary.txt").string()));
+    check("verify", run_cmd({kBin + "/demfdm_log", "verify", file}, (run / "verify.txt").string()));
+    check("export", run_cmd({kBin + "/demfdm_log", "export", file, "--steps", "1:2", "--out", (run / "x.csv").string()},
+                            (run / "export.txt").string()));
+    check("launch/traffic", run_cmd({"/bin/bash", traffic, run.string()}, (run / "traffic.txt").string()));
+    auto r = run_cmd({kBin + "/demfdm_replay", file, "--solver", kBin + "/fdm_node"}, (run / "replay.txt").string());
+    check("demfdm_replay", r);
+    EXPECT_NE(r.second.find("; nothing was replayed"), std::string::npos) << r.second;
+    EXPECT_EQ(r.second.find("replays"), std::string::npos) << "the solver must not be started\n" << r.second;
+    check("launch/replay", run_cmd({"/bin/bash", replay, run.string(), "--solver", kBin + "/fdm_node"},
+                                   (run / "launch_replay.txt").string()));
+  }
+}
+
+// The good log is still read as before, and says it was verified; one process's part (no
+// checksums) is still read; a part whose last event was cut short (a killed process) is merged
+// without that event, with a warning.
+TEST_F(TrafficLog, GoodLogsAndPartsStillRead) {
+  auto [cv, ov] = run_cmd({kBin + "/demfdm_log", "verify", log_}, (dir_ / "verify.txt").string());
+  EXPECT_EQ(cv, 0) << ov;
+  EXPECT_NE(ov.find(": ok: "), std::string::npos) << ov;
+  EXPECT_NE(ov.find("every event verified against the checksums"), std::string::npos) << ov;
+  std::string part;
+  for (const auto& de : fs::directory_iterator(dir_ / "parts"))
+    if (de.path().filename().string().rfind("continuum", 0) == 0) part = de.path().string();
+  ASSERT_FALSE(part.empty());
+  auto [cs, os] = run_cmd({kBin + "/demfdm_log", "summary", part}, (dir_ / "part.txt").string());
+  EXPECT_EQ(cs, 0) << os;
+  EXPECT_NE(os.find("no checksums (not written by demfdm_log merge)"), std::string::npos) << os;
+  EXPECT_NE(os.find("DEMFDM_IFACE_KIN"), std::string::npos) << os;
+  fs::create_directories(dir_ / "cut-parts");
+  const std::string bytes = demfdm::testing::read_file(part);
+  auto ev = frames(bytes);
+  ASSERT_GT(ev.size(), 3u);
+  write_bytes(dir_ / "cut-parts" / "a.lcmlog", bytes.substr(0, bytes.size() - 3));
+  auto [cm, om] = run_cmd({kBin + "/demfdm_log", "merge", (dir_ / "cut.lcmlog").string(), (dir_ / "cut-parts").string()},
+                          (dir_ / "cut-merge.txt").string());
+  EXPECT_EQ(cm, 0) << om;
+  EXPECT_NE(om.find("merged " + std::to_string(ev.size() - 1) + " messages from 1 logs"), std::string::npos) << om;
+  EXPECT_NE(om.find("warning: " + (dir_ / "cut-parts" / "a.lcmlog").string() + ": truncated log: event " +
+                    std::to_string(ev.size() - 1) + " at byte " + std::to_string(ev.back().offset)),
+            std::string::npos)
+      << om;
+  auto [c2, o2] = run_cmd({kBin + "/demfdm_log", "verify", (dir_ / "cut.lcmlog").string()}, (dir_ / "cut-verify.txt").string());
+  EXPECT_EQ(c2, 0) << o2;
+}
+
+// The size guard: the coordinator repeats the scene every 250 ms until every node has said
+// hello; each process records each (scene hash, chunk) once, and a repeat as a text-less stub.
+// A scene of two chunks (> 48 KiB), the continuum starting 1.5 s late.
+TEST(LaunchRunTraffic, SceneChunksRecordedOncePerProcess) {
+  if (!g_skip.empty()) GTEST_SKIP() << g_skip;
+  fs::path dir = fs::temp_directory_path() / ("demfdm-scene-once-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::string scene = demfdm::testing::read_file(std::string(DEMFDM_SOURCE_DIR) + "/scenes/chain_serial.toml");
+  ASSERT_FALSE(scene.empty());
+  for (int i = 0; i < 1400; ++i) scene += "# padding line " + std::to_string(i) + ": the size guard of the traffic log\n";
+  ASSERT_GT(scene.size(), 49152u);
+  std::ofstream(dir / "big.toml") << scene;
+  std::ofstream(dir / "slow.sh") << "#!/bin/sh\nsleep 1.5\nexec " << kBin << "/chain_continuum \"$@\"\n";
+  fs::permissions(dir / "slow.sh", fs::perms::owner_all);
+  setenv("DEMFDM_BUILD", fs::path(kBin).parent_path().c_str(), 1);
+  auto [c, o] = run_cmd({"/bin/bash", std::string(DEMFDM_SOURCE_DIR) + "/launch/run", (dir / "big.toml").string(),
+                         "--no-build", "--run-dir", (dir / "run").string(), "--set-executable",
+                         "continuum=" + (dir / "slow.sh").string()},
+                        (dir / "run.out").string());
+  ASSERT_EQ(c, 0) << o;
+  const std::string log = (dir / "run" / "traffic.lcmlog").string();
+  lcm::LogFile f(log, "r");
+  ASSERT_TRUE(f.good());
+  std::map<std::pair<std::string, std::int32_t>, int> full;  // (sender, chunk) -> events with the text
+  int stubs = 0;
+  std::size_t scene_bytes = 0;
+  while (const lcm::LogEvent* e = f.readNextEvent()) {
+    if (e->channel != "DEMFDM_SCENE" && e->channel != "DEMFDM_SCENE_REPEAT") continue;
+    scene_bytes += static_cast<std::size_t>(e->datalen);
+    demfdm::scene_t m;
+    ASSERT_GE(m.decode(e->data, 0, e->datalen), 0);
+    EXPECT_EQ(m.n_chunks, 2);
+    if (e->channel == "DEMFDM_SCENE") {
+      ++full[{m.header.sender, m.chunk_index}];
+      EXPECT_FALSE(m.text.empty());
+    } else {
+      ++stubs;
+      EXPECT_TRUE(m.text.empty());
+    }
+  }
+  EXPECT_EQ(full, (std::map<std::pair<std::string, std::int32_t>, int>{{{"coordinator", 0}, 1}, {{"coordinator", 1}, 1}}));
+  EXPECT_GE(stubs, 2 * 4) << "the continuum said hello 1.5 s late: at least 4 repeats of both chunks";
+  // The log holds the text once, not once per broadcast (stubs: about 150 bytes).
+  EXPECT_LT(scene_bytes, scene.size() + 200u * static_cast<std::size_t>(stubs + 2));
+  // Every publication is still in the log: no seq gap for the coordinator.
+  auto [cs, os] = run_cmd({kBin + "/demfdm_log", "summary", log}, (dir / "summary.txt").string());
+  ASSERT_EQ(cs, 0) << os;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(os, m, std::regex(R"(\ncoordinator\s+(\d+)\s+\d+-\d+\s+(\d+)\s+(\d+))"))) << os;
+  EXPECT_EQ(std::stoi(m[2]), 0) << os;
+  EXPECT_NE(os.find("DEMFDM_SCENE_REPEAT"), std::string::npos) << os;
+  std::error_code ec;
+  fs::remove_all(dir, ec);
+}
+
 // launch/run honours [output]: traffic_channels limits the recorded channels, traffic_log =
 // false records nothing, and a failed run's parts are merged too (chain protocol scene:
 // about a second per run).
@@ -240,12 +429,17 @@ TEST(TrafficMerge, OrdersByTimeWithDeterministicTies) {
   ASSERT_TRUE(f.good());
   std::vector<int> payload;
   std::vector<std::int64_t> num;
+  std::vector<std::string> check;  // checksum blocks: the first and the last event
   while (const lcm::LogEvent* e = f.readNextEvent()) {
-    payload.push_back(*static_cast<const std::uint8_t*>(e->data));
     num.push_back(e->eventnum);
+    if (e->channel == "DEMFDM_LOG_CHECK")
+      check.push_back(std::to_string(e->eventnum));
+    else
+      payload.push_back(*static_cast<const std::uint8_t*>(e->data));
   }
   EXPECT_EQ(payload, (std::vector<int>{5, 1, 6, 2, 3, 7, 4}));
-  EXPECT_EQ(num, (std::vector<std::int64_t>{0, 1, 2, 3, 4, 5, 6}));
+  EXPECT_EQ(num, (std::vector<std::int64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8}));
+  EXPECT_EQ(check, (std::vector<std::string>{"0", "8"}));
   auto [c2, o2] = run_cmd({kBin + "/demfdm_log", "merge", again, (dir / "parts" / "b.lcmlog").string(),
                            (dir / "parts" / "a.lcmlog").string()}, (dir / "o2").string());
   ASSERT_EQ(c2, 0) << o2;

@@ -168,11 +168,16 @@ def test_scene_edits():
     t = ensemble.seed_scene(SCENE, 7, ["dem.footing.diameter=0.5e-3"], ["penetrate.depth_ratio=0.05"])
     check("seed = 7\n" in t and "seed = 3" not in t, "run.seed set")
     check("diameter = 0.5e-3" in t, "--set applied")
-    check(t.rstrip().endswith("depth_ratio = 0.05"), "--stage-set added to the penetrate stage")
+    check(t.rstrip().endswith("depth_ratio = 0.05\n\n[output]\ntraffic_log = false"),
+          "--stage-set added to the penetrate stage, then no traffic log")
     t = ensemble.seed_scene(SCENE.replace("seed = 3\n", ""), 4)
     check("[run]\nseed = 4\n" in t, "run.seed added to [run] when absent")
     t = ensemble.seed_scene("[dem]\nx = 1\n", 5)
-    check(t.endswith("[run]\nseed = 5\n"), "a [run] table appended when absent")
+    check(t.endswith("[run]\nseed = 5\n\n[output]\ntraffic_log = false\n"), "a [run] table appended when absent")
+    check("traffic_log = false" not in ensemble.seed_scene("[output]\ntraffic_log = true\n", 5),
+          "a scene that says traffic_log keeps it")
+    check("[output]\ntraffic_log = false\nx = 1" in ensemble.seed_scene("[output]\nx = 1\n", 5),
+          "traffic_log = false added to an existing [output]")
     for sets, stages in ((["dem.nope=1"], []), (["nodot=1"], []), ([], ["nostage.steps=1"])):
         try:
             ensemble.seed_scene(SCENE, 1, sets, stages)

@@ -1,7 +1,11 @@
 // Unit tests of the typed bus and the protocol endpoints on memq:// (one process, no network).
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
+#include <map>
 #include <set>
 
 #include "messages/bus.hpp"
@@ -306,4 +310,77 @@ TEST(Handshake, MismatchesAreRefusedNamingWhatDiffers) {
     h.n_types -= 1;
   });
   EXPECT_NE(missing.find("does not know message type iface_force_t"), std::string::npos) << missing;
+}
+
+// The tee's size guard: the coordinator repeats the scene (here two chunks) every 250 ms until
+// the node says hello (here at the 4th broadcast); its traffic log holds each chunk's text once,
+// every repeat as a text-less stub on DEMFDM_SCENE_REPEAT (same header, hash and chunk).
+TEST(Tee, SceneChunksAreRecordedOncePerProcess) {
+  namespace fs = std::filesystem;
+  fs::path dir = fs::temp_directory_path() / ("demfdm-tee-scene-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  auto l = memq();
+  setenv("DEMFDM_TRAFFIC_DIR", dir.c_str(), 1);
+  auto cb = std::make_unique<bus::Bus>(l, 5, "coordinator");
+  unsetenv("DEMFDM_TRAFFIC_DIR");
+  bus::Bus nb(l, 5, "dem");
+  proto::Timeouts t;
+  t.startup_s = 5.0;
+  std::string text = "[dem]\n";
+  while (text.size() < 60000) text += "# a long scene: the size guard of the traffic log\n";
+  std::uint64_t h = 14695981039346656037ull;
+  for (unsigned char c : text) h = (h ^ c) * 1099511628211ull;
+  int broadcasts = 0;
+  nb.subscribe<demfdm::scene_t>(bus::channel::kScene, [&](const demfdm::scene_t& s) {
+    if (s.chunk_index == 0 && ++broadcasts == 4) {
+      auto hello = fake_hello(h);
+      nb.publish(bus::channel::kHello, hello);
+    }
+  });
+  {
+    proto::CoordinatorEndpoint coord(*cb, t);
+    coord.start(text, "long.toml", h, {"dem"});
+  }
+  // Another scene is recorded whole once, then as a stub.
+  demfdm::scene_t other{};
+  other.scene_hash = 42;
+  other.n_chunks = 1;
+  other.text = "[run]\n";
+  cb->publish(bus::channel::kScene, other);
+  cb->publish(bus::channel::kScene, other);
+  cb.reset();
+
+  std::vector<fs::path> parts;
+  for (const auto& de : fs::directory_iterator(dir)) parts.push_back(de.path());
+  ASSERT_EQ(parts.size(), 1u);
+  lcm::LogFile f(parts[0].string(), "r");
+  ASSERT_TRUE(f.good());
+  std::map<std::pair<std::int64_t, std::int32_t>, int> whole, stubs;
+  std::set<std::int64_t> seqs;
+  std::string joined;
+  while (const lcm::LogEvent* e = f.readNextEvent()) {
+    if (e->channel != bus::channel::kScene && e->channel != "DEMFDM_SCENE_REPEAT") continue;
+    demfdm::scene_t s;
+    ASSERT_GE(s.decode(e->data, 0, e->datalen), 0);
+    EXPECT_TRUE(seqs.insert(s.header.seq).second) << "every publication recorded once";
+    if (e->channel == bus::channel::kScene) {
+      ++whole[{s.scene_hash, s.chunk_index}];
+      if (s.scene_hash == static_cast<std::int64_t>(h)) joined += s.text;
+    } else {
+      ++stubs[{s.scene_hash, s.chunk_index}];
+      EXPECT_TRUE(s.text.empty());
+      EXPECT_EQ(s.origin, s.scene_hash == 42 ? "" : "long.toml");
+    }
+  }
+  const auto sh = static_cast<std::int64_t>(h);
+  EXPECT_EQ(whole, (std::map<std::pair<std::int64_t, std::int32_t>, int>{{{sh, 0}, 1}, {{sh, 1}, 1}, {{42, 0}, 1}}));
+  EXPECT_EQ(joined, text);
+  ASSERT_EQ(stubs.size(), 3u);
+  const int repeats0 = stubs[{sh, 0}], repeats1 = stubs[{sh, 1}];
+  EXPECT_GE(repeats0, 3);
+  EXPECT_EQ(repeats0, repeats1);
+  const int repeats42 = stubs[{42, 0}];
+  EXPECT_EQ(repeats42, 1);
+  EXPECT_LT(fs::file_size(parts[0]), text.size() + 20000) << "the text is in the log once";
+  fs::remove_all(dir);
 }
