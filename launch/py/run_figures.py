@@ -61,7 +61,7 @@ def penetration_history(run):
 def bond_strength(scene):
     """The ball-ball bond's tensile strength [Pa] and its key, or (None, None)."""
     bb = scene.get("dem", {}).get("ball_ball", {})
-    model = bb.get("model", "linear")
+    model = bb.get("model", "softbond")  # the scene schema's default (docs/scene-reference.md)
     if model == "softbond":
         return float(bb.get("sb_ten", 4.5e5)), "dem.ball_ball.sb_ten"
     if model == "pbond" and float(bb.get("pb_ten", -1)) >= 0:
