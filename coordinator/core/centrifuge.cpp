@@ -1,5 +1,7 @@
 #include "coordinator/core/centrifuge.hpp"
 
+#include "coordinator/core/summary.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -21,33 +23,8 @@ std::string fmt(const char* f, double v) {
 }
 std::string g4(double v) { return fmt("%.4g", v); }
 
-std::string jnum(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
-std::string jstr(const std::string& s) {
-  std::string o = "\"";
-  for (char ch : s) {
-    auto c = static_cast<unsigned char>(ch);
-    if (c == '"' || c == '\\') {
-      o += '\\';
-      o += ch;
-    } else if (c == '\n') {
-      o += "\\n";
-    } else if (c == '\t') {
-      o += "\\t";
-    } else if (c < 0x20) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", c);
-      o += buf;
-    } else {
-      o += ch;
-    }
-  }
-  return o + "\"";
-}
+std::string jnum(double v) { return json_number(v); }
+std::string jstr(const std::string& s) { return json_string(s); }
 template <class F>
 std::string jarr(const std::vector<CurvePoint>& pts, F get) {
   std::string o = "[";

@@ -1,5 +1,7 @@
 #include "coordinator/core/results.hpp"
 
+#include "coordinator/core/summary.hpp"
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -19,12 +21,7 @@ std::string num(const char* fmt, double v) {
   std::snprintf(b, sizeof b, fmt, v);
   return b;
 }
-std::string jnum(double v) {
-  if (!std::isfinite(v)) return "null";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
-}
+std::string jnum(double v) { return json_number(v); }
 
 }  // namespace
 

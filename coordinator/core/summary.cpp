@@ -25,12 +25,16 @@ std::map<std::string, std::map<std::string, double>> stage_effects(const StageSu
   return out;
 }
 
+}  // namespace
+
 std::string json_number(double v) {
   if (!std::isfinite(v)) return "null";
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.10g", v);
   return buf;
 }
+
+namespace {
 
 // {"gravity": {"s": 1.2, "share": 0.05}, ...}: share of the node's compute time (fraction).
 std::string json_effects(const std::map<std::string, double>& eff, double compute) {

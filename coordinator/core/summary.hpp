@@ -54,5 +54,7 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum);
 
 // JSON string literal (quotes, backslashes and control characters escaped).
 std::string json_string(const std::string& s);
+// JSON number with 10 significant digits; null when not finite (JSON has no NaN).
+std::string json_number(double v);
 
 }  // namespace demfdm::coord
