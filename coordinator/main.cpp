@@ -7,6 +7,9 @@
 //   coordinator SCENE --resume --run-dir=DIR ...   continue the run in DIR from its latest
 //                                                  complete checkpoint (docs/checkpoint-format.md)
 //   coordinator SCENE --from=CHECKPOINT [--check] ...  a new run from a saved stage-end state
+//   coordinator SCENE --set table.key=value ... [--check | --print-effective | ...]
+//                                          override scene keys (config::Scene::parse overrides);
+//                                          --print-effective writes the scene in effect (TOML)
 //
 // Exit codes: 0 finished, 2 bad command line or scene, 3 a node failed, died or went silent
 // (named in the message), 130 interrupted.
@@ -40,8 +43,8 @@ using namespace demfdm;
 namespace {
 
 const char* kUsage =
-    "usage: coordinator SCENE [--check | --print-nodes] [--run-id=N] [--lcm-url=URL] [--run-dir=DIR] [-v]\n"
-    "                         [--resume | --from=CHECKPOINT_DIR]\n"
+    "usage: coordinator SCENE [--check | --print-nodes | --print-effective] [--run-id=N] [--lcm-url=URL]\n"
+    "                         [--run-dir=DIR] [-v] [--resume | --from=CHECKPOINT_DIR] [--set table.key=value ...]\n"
     "       coordinator --help-scene [--markdown]\n";
 
 // Adapts the bus endpoint to the stage machine's transport interface.
@@ -260,13 +263,24 @@ int main(int argc, char** argv) {
   std::vector<std::string> pos;
   node::Options opt;
   std::string from;
+  std::vector<std::string> sets;  // --set table.key=value (or --set=table.key=value), in order
+  bool print_effective = false;
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
     std::string a = argv[i];
-    if (a.rfind("--from=", 0) == 0)
+    if (a.rfind("--from=", 0) == 0) {
       from = a.substr(7);
-    else
+    } else if (a == "--set" || a.rfind("--set=", 0) == 0) {
+      if (a == "--set" && (i + 1 >= argc || std::string(argv[i + 1]).rfind("--", 0) == 0)) {
+        std::cerr << "coordinator: --set needs a value (--set table.key=value)\n" << kUsage;
+        return 2;
+      }
+      sets.push_back(a == "--set" ? argv[++i] : a.substr(6));
+    } else if (a == "--print-effective") {
+      print_effective = true;
+    } else {
       args.push_back(argv[i]);
+    }
   }
   argc = static_cast<int>(args.size());
   argv = args.data();
@@ -299,9 +313,14 @@ int main(int argc, char** argv) {
     std::cerr << "coordinator: expected one scene file, found " << pos.size() << " arguments\n" << kUsage;
     return 2;
   }
+  if (resume && !sets.empty()) {
+    std::cerr << "coordinator: --resume continues a run with its own scene; --set is not available (a new run: "
+                 "--from=CHECKPOINT with --set)\n";
+    return 2;
+  }
   config::Scene scene;
   try {
-    scene = config::Scene::load(pos[0], schema::scene_schema());
+    scene = config::Scene::load(pos[0], schema::scene_schema(), sets);
   } catch (const config::Error& e) {
     std::cerr << e.what() << "\n";
     return 2;
@@ -327,8 +346,14 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  if (print_effective) {  // the scene in effect (overrides applied), for launch/run's run folder
+    std::cout << scene.effective_toml();
+    return 0;
+  }
   if (check) {
-    std::cout << pos[0] << ": OK (" << schema::stages(scene).size() << " stages; nodes:";
+    std::cout << pos[0];
+    for (auto& s : sets) std::cout << " --set " << s;
+    std::cout << ": OK (" << schema::stages(scene).size() << " stages; nodes:";
     for (auto& r : roles) std::cout << " " << r << "=" << schema::executable(scene, r);
     std::cout << ")";
     if (start)

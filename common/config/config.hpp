@@ -206,14 +206,27 @@ class Scene {
  public:
   Scene();  // empty scene (no keys); useful as a placeholder member
   // Throws Error (also: file missing/unreadable, TOML syntax error with its position).
-  static Scene load(const std::string& path, const Schema&);
+  // overrides: "table.key=value" texts (launch/run --set), see parse().
+  static Scene load(const std::string& path, const Schema&,
+                    const std::vector<std::string>& overrides = {});
   // origin is used as the file name in messages; base_dir resolves relative Paths.
+  // overrides: each "path=value" sets one declared key after the text is read and before it is
+  // validated, so it passes exactly the checks a key in the file passes; a later one wins. The
+  // path is dotted ("dem.damping", "dem.specimen.replicate"); an element of an array of tables
+  // is named by its `name` key ("stage.penetrate.inertial_number") or indexed ("stage[4].steps");
+  // a missing optional section is created. The value is TOML ("0.1", "[2, 2, 4]", ""x""); a
+  // value that is not TOML and does not start with [ { " ' is taken as a string ("x").
+  // Errors name the override: "--set dem.damping=abc: expected a number in [0, 1), found
+  // string 'abc'" (a problem of an override is reported before those of the file).
   static Scene parse(std::string_view text, std::string origin, const Schema&,
-                     std::string base_dir = ".");
+                     std::string base_dir = ".", const std::vector<std::string>& overrides = {});
 
-  const std::string& text() const;  // the exact source text (sent over the bus to nodes)
+  // The exact source text, or with overrides effective_toml() (the values in effect, which a
+  // node that gets the text over the bus parses to the same scene).
+  const std::string& text() const;
   std::uint64_t hash() const;       // FNV-1a 64 of text()
   const std::string& origin() const;
+  std::vector<std::string> overrides() const;  // as given to parse()
   // Section present in the file? Array non-empty? Key given in the file (not defaulted)?
   bool has(std::string_view path) const;
   bool explicitly_set(std::string_view path) const;  // key (or section) given in the file
@@ -227,14 +240,17 @@ class Scene {
   std::vector<std::string> strings(std::string_view path) const;
   std::size_t count(std::string_view array_path) const;  // number of [[stage]] elements
   Scene at(std::string_view array_path, std::size_t i) const;  // one element (paths relative)
-  // "file:line:col" of a key (or of its section if defaulted).
+  // "file:line:col" of a key (or of its section if defaulted); "--set path=value" for a key
+  // an override set.
   std::string where(std::string_view path) const;
   // Throws Error "file:line:col: full.key.path: expected <expected>, found <found>".
   [[noreturn]] void fail(std::string_view path, std::string_view expected,
                          std::string_view found) const;
   // The whole scene (not just this view) as TOML with every value in effect: defaults
-  // filled, paths absolute, absent optional sections omitted. Written to the run folder
-  // so a run records exactly what it used; parsing it again gives the same values.
+  // filled, paths absolute, absent optional sections omitted, overrides applied (the comment
+  // header names the source file, the FNV-1a 64 of its text and each override). Written to
+  // the run folder so a run records exactly what it used; parsing it again gives the same
+  // values.
   std::string effective_toml() const;
   // Full dotted path of this view's table ("" for the root, "stage[1]" for an element).
   const std::string& prefix() const { return prefix_; }

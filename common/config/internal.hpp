@@ -14,6 +14,13 @@ namespace demfdm::config::detail {
 
 struct Pos {
   int line = 0, col = 0;  // 1-based; 0 = unknown
+  int set = 0;            // 1-based index of the override (--set) the value came from; 0: the file
+};
+
+// One override "table.key=value" (Scene::parse overrides): the text as given and the key path it
+// resolved to ("stage.penetrate.steps=9" -> "stage[5].steps").
+struct SetInfo {
+  std::string text, path;
 };
 
 // One parameter after validation. Holds no pointer into the Schema, so a Scene
@@ -45,7 +52,9 @@ struct Node {
 
 struct Data {
   std::string text, origin;
-  std::uint64_t hash = 0;
+  std::uint64_t hash = 0;         // of text
+  std::uint64_t source_hash = 0;  // of the file's text (== hash without overrides)
+  std::vector<SetInfo> sets;      // overrides, in the order given
   Node root;
 };
 

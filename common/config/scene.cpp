@@ -28,21 +28,52 @@ using detail::format_number;
 using detail::join_path;
 using detail::Node;
 using detail::Pos;
+using detail::SetInfo;
 
 namespace {
 
+// The source name given to toml++ when it parses the value of override i (1-based): a node
+// moved from there into the scene's table keeps it, so every position derived from it (an
+// entry, a list element, a table an override created) is known to be that override's.
+const std::string kSetSource = "\x1f" "demfdm --set #";
+
 Pos pos_of(const toml::source_region& r) {
+  if (r.path && r.path->size() > kSetSource.size() && r.path->compare(0, kSetSource.size(), kSetSource) == 0)
+    return Pos{0, 0, std::stoi(r.path->substr(kSetSource.size()))};
   return Pos{static_cast<int>(r.begin.line), static_cast<int>(r.begin.column)};
 }
 
-std::string quote(std::string_view s) { return "'" + std::string(s) + "'"; }
+std::string quote(std::string_view s) {
+  std::string q;  // (built by appending: "'" + s + "'" trips a false -Wrestrict in GCC 12)
+  q.reserve(s.size() + 2);
+  q += '\'';
+  q.append(s);
+  q += '\'';
+  return q;
+}
 
-std::string message(const std::string& origin, Pos p, const std::string& key,
-                    const std::string& tail) {
+// "file:line:col" for a position in the file, "--set table.key=value" for an override's.
+std::string source_of(const std::string& origin, const std::vector<SetInfo>& sets, Pos p) {
+  if (p.set > 0 && static_cast<std::size_t>(p.set) <= sets.size())
+    return "--set " + sets[static_cast<std::size_t>(p.set - 1)].text;
   std::string m = origin;
   if (p.line > 0) m += ":" + std::to_string(p.line) + ":" + std::to_string(p.col);
-  m += ": ";
-  if (!key.empty()) m += key + ": ";
+  return m;
+}
+
+// Error::file: the file, or "--set table.key=value" for an override's position.
+std::string file_of(const std::string& origin, const std::vector<SetInfo>& sets, Pos p) {
+  return p.set > 0 ? source_of(origin, sets, p) : origin;
+}
+
+// "file:line:col: key: tail"; for an override "--set table.key=value: tail", naming the key
+// only when it is not the override's own (an element of a list, a key of a created table).
+std::string message(const std::string& origin, const std::vector<SetInfo>& sets, Pos p,
+                    const std::string& key, const std::string& tail) {
+  std::string m = source_of(origin, sets, p) + ": ";
+  const bool own = p.set > 0 && static_cast<std::size_t>(p.set) <= sets.size() &&
+                   sets[static_cast<std::size_t>(p.set - 1)].path == key;
+  if (!key.empty() && !own) m += key + ": ";
   return m + tail;
 }
 
@@ -86,8 +117,8 @@ struct Issue {
 
 class Loader {
  public:
-  Loader(std::string origin, std::string base_dir)
-      : origin_(std::move(origin)), base_dir_(std::move(base_dir)) {}
+  Loader(std::string origin, std::string base_dir, const std::vector<SetInfo>& sets)
+      : origin_(std::move(origin)), base_dir_(std::move(base_dir)), sets_(sets) {}
 
   // Fill `node` (already carrying path, section_path, parent-inherited pos) from the
   // schema section `sec` and the TOML table `tbl` (nullptr: section absent).
@@ -112,7 +143,7 @@ class Loader {
 
  private:
   void issue(Pos p, const std::string& key, const std::string& tail, bool missing = false) {
-    issues_.push_back(Issue{p, missing, key, message(origin_, p, key, tail)});
+    issues_.push_back(Issue{p, missing, key, message(origin_, sets_, p, key, tail)});
   }
 
   void report_unknown(const Section& sec, const toml::table& tbl, const Node& node) {
@@ -325,6 +356,7 @@ class Loader {
   }
 
   std::string origin_, base_dir_;
+  const std::vector<SetInfo>& sets_;
   std::vector<Issue> issues_;
 };
 
@@ -372,6 +404,153 @@ std::shared_ptr<const Data> empty_data() {
   throw std::logic_error("config: " + what);
 }
 
+// ---------------------------------------------------------------------------
+// Overrides ("table.key=value", launch/run --set): applied to the parsed file's table before
+// validation, so an override goes through exactly the checks a key in the file does.
+// ---------------------------------------------------------------------------
+[[noreturn]] void set_error(const std::string& text, const std::string& tail) {
+  throw Error("--set " + text + ": " + tail, "--set " + text, 0, 0, "");
+}
+
+// A TOML node parsed from `value_text` under the source name of override `index` (1-based):
+// the value, or (with `as_table`) an empty table for a section the override creates. A value
+// that is not TOML and does not look like an attempt at an array, table or quoted string is
+// taken as a string, so that `run.name=x` works after the shell removed the quotes.
+toml::table parse_set_node(const std::string& text, std::size_t index, const std::string& value_text,
+                           bool as_table) {
+  const std::string source = kSetSource + std::to_string(index);
+  auto attempt = [&](const std::string& v) { return toml::parse("v = " + v + "\n", source); };
+  if (as_table) return attempt("{}");
+  try {
+    toml::table doc = attempt(value_text);
+    if (doc.size() != 1) set_error(text, "expected one TOML value after '=', found more");
+    return doc;
+  } catch (const toml::parse_error& e) {
+    const char c = value_text.front();
+    if (c == '[' || c == '{' || c == '"' || c == '\'' || value_text.find('\n') != std::string::npos) {
+      std::string desc(e.description());
+      std::replace(desc.begin(), desc.end(), '\n', ' ');
+      set_error(text, "the value is not TOML: " + desc);
+    }
+    return attempt(format_value(Value(value_text)));  // a TOML basic string
+  }
+}
+
+// Applies one override to `root` (the file's table) and returns the key path it resolved to.
+std::string apply_override(toml::table& root, const Schema& schema, const std::string& text,
+                           std::size_t index) {
+  const auto eq = text.find('=');
+  if (eq == std::string::npos)
+    set_error(text, "expected table.key=value (stage keys: stage.NAME.key=value or stage[i].key=value), found no '='");
+  auto trim = [](std::string s) {
+    const auto a = s.find_first_not_of(" \t"), b = s.find_last_not_of(" \t");
+    return a == std::string::npos ? std::string() : s.substr(a, b - a + 1);
+  };
+  const std::string key = trim(text.substr(0, eq)), value = trim(text.substr(eq + 1));
+  if (key.empty()) set_error(text, "expected table.key=value, found no key before '='");
+  if (value.empty()) set_error(text, "expected a TOML value after '=' (an empty string is \"\")");
+
+  std::vector<std::string> segs;
+  for (std::size_t a = 0;;) {
+    const auto dot = key.find('.', a);
+    segs.push_back(key.substr(a, dot == std::string::npos ? std::string::npos : dot - a));
+    if (dot == std::string::npos) break;
+    a = dot + 1;
+  }
+  const Section* sec = &schema.root();
+  toml::table* tbl = &root;
+  std::string path;  // resolved, with indices
+  for (std::size_t i = 0; i < segs.size(); ++i) {
+    std::string seg = segs[i];
+    std::optional<std::size_t> idx;
+    if (const auto lb = seg.find('['); lb != std::string::npos) {
+      const std::string num = seg.size() > lb + 2 && seg.back() == ']' ? seg.substr(lb + 1, seg.size() - lb - 2) : "";
+      if (num.empty() || num.find_first_not_of("0123456789") != std::string::npos || num.size() > 9)
+        set_error(text, "bad index in '" + seg + "'; expected name[i] with i = 0, 1, ...");
+      idx = static_cast<std::size_t>(std::stoul(num));
+      seg = seg.substr(0, lb);
+    }
+    if (seg.empty()) set_error(text, "empty name in key '" + key + "'");
+    const std::string here = join_path(path, seg);
+    const bool last = i + 1 == segs.size();
+    const Section::Member* m = sec->find(seg);
+    if (!m) {
+      std::vector<std::string> names;
+      for (const auto& mm : sec->members()) names.push_back(mm.param ? mm.param->name : mm.section->name());
+      std::string tail = std::string(path.empty() ? "unknown section " : "unknown key ") + quote(here);
+      std::string best = detail::suggest(seg, names);
+      if (!best.empty()) tail += "; did you mean " + quote(join_path(path, best)) + "?";
+      set_error(text, tail);
+    }
+    if (idx && !(m->section && m->section->is_array()))
+      set_error(text, quote(here) + " is not an array of tables; only [[...]] elements are indexed");
+    if (m->param) {
+      if (!last) set_error(text, quote(here) + " is a key, not a table");
+      toml::table doc = parse_set_node(text, index, value, false);
+      tbl->insert_or_assign(seg, std::move(*doc.get("v")));
+      return here;
+    }
+    if (last)
+      set_error(text, quote(here) + (m->section->is_array()
+                                         ? " is an array of tables; set a key of one element: " + here +
+                                               ".NAME.key=value or " + here + "[i].key=value"
+                                         : " is a section; set one of its keys: " + here + ".key=value"));
+    toml::node* child = tbl->get(seg);
+    if (!m->section->is_array()) {
+      if (!child) {  // a section the file does not have: the override creates it
+        toml::table doc = parse_set_node(text, index, "", true);
+        tbl->insert_or_assign(seg, std::move(*doc.get("v")));
+        child = tbl->get(seg);
+      }
+      if (!child->is_table()) set_error(text, quote(here) + " is not a table in the scene");
+      tbl = child->as_table();
+      sec = m->section;
+      path = here;
+      continue;
+    }
+    // An element of an array of tables, by index or by its `name` key.
+    toml::array* arr = child ? child->as_array() : nullptr;
+    const std::size_t n = arr ? arr->size() : 0;
+    const std::string header = "[[" + m->section->path() + "]]";
+    std::size_t k = 0;
+    if (idx) {
+      if (*idx >= n)
+        set_error(text, "no element " + here + "[" + std::to_string(*idx) + "]: the scene has " + std::to_string(n) +
+                            " " + header + " table" + (n == 1 ? "" : "s"));
+      k = *idx;
+    } else {
+      const std::string name = segs[++i];
+      if (i + 1 == segs.size())
+        set_error(text, "expected a key after the element name: " + here + "." + name + ".key=value");
+      const Section::Member* nm = m->section->find("name");
+      if (!nm || !nm->param)
+        set_error(text, header + " elements have no name; index them: " + here + "[i].key=value");
+      std::vector<std::size_t> hits;
+      std::string names;
+      for (std::size_t j = 0; j < n; ++j) {
+        const toml::table* e = (*arr)[j].as_table();
+        const toml::node* nv = e ? e->get("name") : nullptr;
+        if (!nv || !nv->is_string()) continue;
+        const std::string& s = nv->as_string()->get();
+        names += (names.empty() ? "" : ", ") + s;
+        if (s == name) hits.push_back(j);
+      }
+      if (hits.empty())
+        set_error(text, "no " + header + " named " + quote(name) + (names.empty() ? "" : " (the scene's: " + names + ")"));
+      if (hits.size() > 1)
+        set_error(text, std::to_string(hits.size()) + " " + header + " tables are named " + quote(name) +
+                            "; index one: " + here + "[" + std::to_string(hits[0]) + "].key=value");
+      k = hits[0];
+    }
+    if (!(*arr)[k].is_table()) set_error(text, here + "[" + std::to_string(k) + "] is not a table in the scene");
+    tbl = (*arr)[k].as_table();
+    sec = m->section;
+    path = here + "[" + std::to_string(k) + "]";
+  }
+  set_error(text, "expected table.key=value");  // not reached: the loop returns at the key
+}
+
+
 }  // namespace
 
 // ---------------------------------------------------------------------------
@@ -379,14 +558,19 @@ std::shared_ptr<const Data> empty_data() {
 // ---------------------------------------------------------------------------
 Scene::Scene() : data_(empty_data()), node_(&data_->root) {}
 
-Scene Scene::load(const std::string& path, const Schema& schema) {
+Scene Scene::load(const std::string& path, const Schema& schema,
+                  const std::vector<std::string>& overrides) {
   std::string text = read_file(path);
   fs::path dir = fs::path(path).parent_path();
-  return parse(text, path, schema, dir.empty() ? "." : dir.string());
+  return parse(text, path, schema, dir.empty() ? "." : dir.string(), overrides);
+}
+
+namespace {
+std::string effective_text(const Data& d);
 }
 
 Scene Scene::parse(std::string_view text, std::string origin, const Schema& schema,
-                   std::string base_dir) {
+                   std::string base_dir, const std::vector<std::string>& overrides) {
   toml::table tbl;
   try {
     tbl = toml::parse(text, std::string_view(origin));
@@ -394,30 +578,44 @@ Scene Scene::parse(std::string_view text, std::string origin, const Schema& sche
     Pos p = pos_of(e.source());
     std::string desc(e.description());
     std::replace(desc.begin(), desc.end(), '\n', ' ');  // keep the message on one line
-    throw Error(message(origin, p, "", "TOML syntax error: " + desc),
+    throw Error(message(origin, {}, p, "", "TOML syntax error: " + desc),
                 origin, p.line, p.col, "");
   }
 
   auto data = std::make_shared<Data>();
   data->text = std::string(text);
   data->origin = origin;
-  data->hash = fnv1a64(text);
+  data->hash = data->source_hash = fnv1a64(text);
   data->root.pos = Pos{1, 1};  // missing top-level keys/sections are reported at 1:1
+  for (std::size_t i = 0; i < overrides.size(); ++i) {
+    data->sets.push_back(SetInfo{overrides[i], ""});
+    data->sets.back().path = apply_override(tbl, schema, overrides[i], i + 1);
+  }
 
-  Loader loader(origin, std::move(base_dir));
+  Loader loader(origin, std::move(base_dir), data->sets);
   loader.fill(schema.root(), &tbl, data->root);
   data->root.pos = Pos{1, 1};
 
   const auto& issues = loader.issues();
   if (!issues.empty()) {
-    // The first problem in file order (ties keep discovery order). Missing keys and
-    // sections come last: they are reported at their table's header, and a misspelled
-    // name ("unknown section; did you mean 'contact'?") is the more useful message.
+    // The first problem in file order (ties keep discovery order), after those of the
+    // overrides (in the order given). Missing keys and sections come last: they are reported
+    // at their table's header, and a misspelled name ("unknown section; did you mean
+    // 'contact'?") is the more useful message.
     auto first = std::min_element(issues.begin(), issues.end(), [](const Issue& a, const Issue& b) {
       if (a.missing != b.missing) return !a.missing;
+      if ((a.pos.set > 0) != (b.pos.set > 0)) return a.pos.set > 0;
+      if (a.pos.set != b.pos.set) return a.pos.set < b.pos.set;
       return a.pos.line != b.pos.line ? a.pos.line < b.pos.line : a.pos.col < b.pos.col;
     });
-    throw Error(first->text, origin, first->pos.line, first->pos.col, first->key);
+    throw Error(first->text, file_of(origin, data->sets, first->pos), first->pos.line, first->pos.col,
+                first->key);
+  }
+  // With overrides, the text is the effective scene (what the bus carries to the nodes): a
+  // receiver parsing it gets the overridden values.
+  if (!data->sets.empty()) {
+    data->text = effective_text(*data);
+    data->hash = fnv1a64(data->text);
   }
 
   Scene scene;
@@ -425,7 +623,18 @@ Scene Scene::parse(std::string_view text, std::string origin, const Schema& sche
   scene.node_ = &scene.data_->root;
   scene.prefix_.clear();
   CheckContext ctx(scene);
-  for (const auto& check : schema.checks()) check(scene, ctx);
+  for (const auto& check : schema.checks()) {
+    try {
+      check(scene, ctx);
+    } catch (const Error& e) {
+      // A cross-field check that blames a key of the file may fail because of an override
+      // (a larger replicate against the file's mesh size): the message names the overrides.
+      if (scene.data_->sets.empty() || e.line == 0) throw;
+      std::string with;
+      for (const auto& s : scene.data_->sets) with += (with.empty() ? "--set " : ", --set ") + s.text;
+      throw Error(std::string(e.what()) + " (with " + with + ")", e.file, e.line, e.col, e.key);
+    }
+  }
   return scene;
 }
 
@@ -539,6 +748,11 @@ const Value& Scene::value_of(std::string_view path, Kind kind, const char* acces
 }
 
 const std::string& Scene::text() const { return data_->text; }
+std::vector<std::string> Scene::overrides() const {
+  std::vector<std::string> out;
+  for (const auto& s : data_->sets) out.push_back(s.text);
+  return out;
+}
 std::uint64_t Scene::hash() const { return data_->hash; }
 const std::string& Scene::origin() const { return data_->origin; }
 
@@ -603,6 +817,7 @@ Pos Scene::Target::pos() const {
 
 std::string Scene::where(std::string_view path) const {
   Pos p = resolve(path).pos();
+  if (p.set > 0) return source_of(data_->origin, data_->sets, p);
   return data_->origin + ":" + std::to_string(p.line) + ":" + std::to_string(p.col);
 }
 
@@ -611,7 +826,8 @@ void Scene::fail(std::string_view path, std::string_view expected,
   Target t = resolve(path);
   Pos p = t.pos();
   std::string tail = "expected " + std::string(expected) + ", found " + std::string(found);
-  throw Error(message(data_->origin, p, t.full, tail), data_->origin, p.line, p.col, t.full);
+  throw Error(message(data_->origin, data_->sets, p, t.full, tail), file_of(data_->origin, data_->sets, p),
+              p.line, p.col, t.full);
 }
 
 namespace {
@@ -653,15 +869,23 @@ void emit(const Node& n, std::ostringstream& os) {
   }
 }
 
-}  // namespace
-
-std::string Scene::effective_toml() const {
+// The header names the source file, the hash of its text and the overrides (one line each).
+std::string effective_text(const Data& d) {
   std::ostringstream os;
-  os << "# Effective scene: " << data_->origin << " (FNV-1a 64 of the source text: "
-     << std::hex << data_->hash << std::dec << "), defaults filled\n";
-  emit(data_->root, os);
+  os << "# Effective scene: " << d.origin << " (FNV-1a 64 of the source text: " << std::hex
+     << d.source_hash << std::dec << "), defaults filled\n";
+  for (const auto& s : d.sets) {
+    std::string t = s.text;
+    std::replace(t.begin(), t.end(), '\n', ' ');
+    os << "#   --set " << t << "\n";
+  }
+  emit(d.root, os);
   return os.str();
 }
+
+}  // namespace
+
+std::string Scene::effective_toml() const { return effective_text(*data_); }
 
 void CheckContext::fail(std::string_view key_path, std::string_view expected,
                         std::string_view found) const {
