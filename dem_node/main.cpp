@@ -3,7 +3,8 @@
 // A thin adapter: scene keys -> dem::WorldParams, stage actions -> the staged operations of
 // dem_core (docs/theory.md 4), coupling hooks -> facet walls driven by the continuum's interface
 // gridpoints (6.2-6.5), footing kinematics from the coordinator's grants (7.1), results ->
-// dem.h5 + particles.xmf + bonds.xmf + dem_history.csv in the run folder.
+// dem.h5 + particles.xmf + bonds.xmf (+ footing.xmf when a stage places the footing) +
+// dem_history.csv in the run folder, frame times in the model time of docs/output.md.
 //
 // Procedures that converge by themselves (REV generation, servo, UCS test) run inside the
 // stage's STAGE_BEGIN with their own budgets from the scene; the stage's grants then only
@@ -30,6 +31,7 @@
 #include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
 #include "demfdm/io/csv_series.hpp"
+#include "demfdm/io/model_time.hpp"
 #include "demfdm/io/results_output.hpp"
 #include "messages/node_runtime.hpp"
 
@@ -121,6 +123,17 @@ class DemParticipant : public node::Participant {
     history_every_ = s_.integer("dem.output.history_every");
     gravity_level_ = s_.has("gravity") ? s_.real("gravity.level") : 0.0;
     if (!ctx.options.run_dir.empty()) dir_ = ctx.options.run_dir;
+    // Frame times (docs/output.md "Time"): the model time of io::ModelClock, 0 at the
+    // beginning of the first stage that is not specimen preparation. The footing's surface
+    // (footing.xmf) is written when a stage places a footing.
+    const auto stages = schema::stages(s_);
+    std::vector<std::string_view> actions;
+    for (const auto& st : stages) {
+      actions.push_back(st.action);
+      stage_prefixes_.push_back(st.view.prefix());
+      footing_output_ = footing_output_ || st.action == "penetrate";
+    }
+    clock_ = io::ModelClock(actions);
   }
 
   // Result files only when the scene has [dem.output] (a scene writes only what it asks for),
@@ -133,8 +146,26 @@ class DemParticipant : public node::Participant {
     outputs_open_ = true;
     if (dir_.empty() || !s_.has("dem.output")) return;
     io::FileInfo info{"dem_node", std::to_string(ctx_.options.run_id), std::to_string(s_.hash()), {}};
-    out_.emplace(dir_, info, io::H5StorageParams{}, std::vector<std::string>{"bonds"});
+    out_.emplace(dir_, info, io::H5StorageParams{}, std::vector<std::string>{"bonds"}, "dem.h5", surface_sets());
+    if (clock_.known()) out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
     if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir_ / "dem_history.csv", history_columns()));
+  }
+  std::vector<std::string> surface_sets() const {
+    return footing_output_ ? std::vector<std::string>{"footing"} : std::vector<std::string>{};
+  }
+  // At the top of every stage_begin, before any step: the model-time origin at the first
+  // stage that is not preparation; the frames written before it get their model times.
+  void begin_model_time(const schema::Stage& st) {
+    const auto at = std::find(stage_prefixes_.begin(), stage_prefixes_.end(), st.view.prefix());
+    const auto index = static_cast<std::size_t>(at - stage_prefixes_.begin());
+    if (!clock_.stage_begins(index, world_.time())) return;
+    const auto times = clock_.take_pending_times();
+    spdlog::info("dem: model time 0 at stage '{}' (DEM time {} s); {} earlier frames get their model times (<= 0)", st.name,
+                 clock_.origin(), times.size());
+    if (!out_) return;
+    node::Timed t(effect_s_["output.h5"]);
+    out_->retime_frames(times);
+    out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
   }
 
   // Checkpoints (docs/checkpoint-format.md): the World in dem.world.state, this adapter's
@@ -162,6 +193,11 @@ class DemParticipant : public node::Participant {
     w.u64(history_ ? history_->rows() : 0);
     const auto stages_csv = dir_ / "specimen_stages.csv";
     w.u64(!dir_.empty() && fs::exists(stages_csv) ? fs::file_size(stages_csv) : 0);
+    // Model time of the frames (io::ModelClock).
+    const auto c = clock_.state();
+    w.b(c.known);
+    for (double v : {c.origin, c.model, c.node_ref}) w.f64(v);
+    w.f64s(c.pending);
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
@@ -192,19 +228,26 @@ class DemParticipant : public node::Participant {
     energy_jump_.load(sec);
     const bool was_open = sec.b();
     const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64(), stages_bytes = sec.u64();
+    io::ModelClock::State c;
+    c.known = sec.b();
+    for (double* v : {&c.origin, &c.model, &c.node_ref}) *v = sec.f64();
+    c.pending = sec.f64s();
     sec.done();
+    clock_.set_state(c);
     ratio_valid_ = skeleton_valid_ = false;
     safe_dt_key_ = {-1, -1, -1};
     if (how.branch) {
       // A new run folder: new result files from the branch point on.
       has_frame_ = false;
       last_frame_time_ = 0;
+      clock_.forget_pending();
       return;
     }
     // Resume: the result writers continue where the checkpoint left them.
     outputs_open_ = was_open;
     if (was_open && !dir_.empty() && s_.has("dem.output")) {
-      out_.emplace(io::ParticleOutput::resume(dir_, io::H5StorageParams{}, std::vector<std::string>{"bonds"}, frames));
+      out_.emplace(io::ParticleOutput::resume(dir_, io::H5StorageParams{}, std::vector<std::string>{"bonds"}, frames,
+                                              "dem.h5", surface_sets()));
       if (history_every_ > 0) history_.emplace(io::CsvSeries::resume(dir_ / "dem_history.csv", history_columns(), bytes, rows));
     }
     const auto stages_csv = dir_ / "specimen_stages.csv";
@@ -241,6 +284,7 @@ class DemParticipant : public node::Participant {
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     open_outputs();
+    begin_model_time(st);
     const auto& a = st.action;
     stage_ratio_ = st.view.real("ratio");
     ratio_valid_ = skeleton_valid_ = false;
@@ -348,7 +392,9 @@ class DemParticipant : public node::Participant {
     if (user_dt_ > 0 && !preparing_ && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
     // Exactly 'interval' DEM steps per coupling step of length dt.
     if (dt > 0) world_.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
+    const double node_before = world_.time();
     world_.step(interval_);  // its phases are reported by add_phase_times()
+    clock_.advanced(node_before, dt, world_.time());
     work_ += boundary_power() * world_.dt() * static_cast<double>(interval_);
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
       node::Timed t(effect_s_["output.history"]);
@@ -899,7 +945,18 @@ class DemParticipant : public node::Participant {
     bonds.cell_arrays.push_back({"state", io::ArrayView(snap.state)});
     bonds.cell_arrays.push_back({"force", io::ArrayView(snap.force, 3)});
     f.links.push_back(bonds);
-    out_->write_frame(step, world_.time(), f);
+    // The footing's surface, where it is in this frame (none before a stage places it).
+    io::TriangleSurface footing;
+    if (footing_output_) {
+      if (world_.has_footing()) {
+        const auto& p = world_.footing().p;
+        footing = io::cylinder_surface({p.bottom_centre.x, p.bottom_centre.y, p.bottom_centre.z}, p.diameter, p.height);
+      }
+      f.surfaces.push_back({"footing", io::ArrayView(footing.vertices, 3), io::ArrayView(footing.triangles, 3)});
+    }
+    // Model time (docs/output.md "Time"): negative for frames of the specimen preparation,
+    // which get their times once the first later stage begins (begin_model_time).
+    out_->write_frame(step, clock_.frame_time(world_.time()), f);
     has_frame_ = true;
     last_frame_time_ = world_.time();
   }
@@ -915,7 +972,10 @@ class DemParticipant : public node::Participant {
   std::optional<io::CsvSeries> history_;
   bool outputs_open_ = false;
   bool has_frame_ = false;
-  double last_frame_time_ = 0;
+  double last_frame_time_ = 0;           // DEM (node) time of the last frame
+  io::ModelClock clock_;                 // the frames' model time
+  std::vector<std::string> stage_prefixes_;  // "stage[i]" of every stage: its scene index
+  bool footing_output_ = false;          // a stage places a footing: footing.xmf
   int wall_ = -1;
   std::size_t n_iface_ = 0;
   bool coupling_setup_pending_ = false, penetrating_ = false, box_done_ = false;

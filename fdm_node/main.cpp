@@ -1,9 +1,11 @@
 // fdm_node: the FLAC3D-style continuum (fdm_core) as the bus's continuum role.
 //
 // A thin adapter: scene keys -> fdm::ModelParams, stage actions -> model calls, coupling hooks
-// -> interface arrays, results -> fdm.h5 + mesh.xmf + fdm_history.csv in the run folder.
+// -> interface arrays, results -> fdm.h5 + mesh.xmf + fdm_history.csv in the run folder (frame
+// times: the model time of docs/output.md, io::ModelClock).
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -17,6 +19,7 @@
 #include "demfdm/fdm/model.hpp"
 #include "fdm_node/scene_params.hpp"
 #include "demfdm/io/csv_series.hpp"
+#include "demfdm/io/model_time.hpp"
 #include "demfdm/io/results_output.hpp"
 #include "messages/node_runtime.hpp"
 
@@ -73,6 +76,15 @@ class FdmParticipant : public node::Participant {
     omp_set_num_threads(static_cast<int>(s.integer("run.threads")));
     frame_every_ = s.integer("continuum.output.frame_every");
     history_every_ = s.integer("continuum.output.history_every");
+    // Frame times: the model time, 0 at the beginning of the first stage that is not specimen
+    // preparation (docs/output.md "Time").
+    const auto stages = schema::stages(s);
+    std::vector<std::string_view> actions;
+    for (const auto& st : stages) {
+      actions.push_back(st.action);
+      stage_prefixes_.push_back(st.view.prefix());
+    }
+    clock_ = io::ModelClock(actions);
     if (s.string("continuum.boundary") == "symmetry") setup_symmetry(s);
     if (s.has("continuum.punch")) setup_punch(s);
     spdlog::info("fdm: {} gridpoints, {} zones, {} interface points, {} interface triangles; critical dt {:.3e} s",
@@ -95,7 +107,21 @@ class FdmParticipant : public node::Participant {
     io::FileInfo info{"fdm_node", std::to_string(ctx_.options.run_id), std::to_string(ctx_.scene.hash()), {}};
     std::vector<std::int64_t> conn(model_.connectivity().begin(), model_.connectivity().end());
     out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8));
+    if (clock_.known()) out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
     if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir / "fdm_history.csv", history_columns()));
+  }
+
+  // At the top of every stage_begin, before any step: the model-time origin at the first stage
+  // that is not preparation (io::ModelClock); frames written before it get their model times.
+  void begin_model_time(const schema::Stage& st) {
+    const auto at = std::find(stage_prefixes_.begin(), stage_prefixes_.end(), st.view.prefix());
+    if (!clock_.stage_begins(static_cast<std::size_t>(at - stage_prefixes_.begin()), model_.time())) return;
+    const auto times = clock_.take_pending_times();
+    spdlog::info("fdm: model time 0 at stage '{}' (continuum time {} s)", st.name, clock_.origin());
+    if (!out_) return;
+    node::Timed t(effect_s_["output.h5"]);
+    out_->retime_frames(times);
+    out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
   }
 
   // Checkpoints (docs/checkpoint-format.md): the Model in continuum.model.state, this adapter's
@@ -117,6 +143,10 @@ class FdmParticipant : public node::Participant {
     w.u64(out_ ? out_->h5().frame_count() : 0);
     w.u64(history_ ? history_->bytes() : 0);
     w.u64(history_ ? history_->rows() : 0);
+    const auto c = clock_.state();  // model time of the frames
+    w.b(c.known);
+    for (double v : {c.origin, c.model, c.node_ref}) w.f64(v);
+    w.f64s(c.pending);
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
@@ -134,11 +164,17 @@ class FdmParticipant : public node::Participant {
     energy_jump_.load(sec);
     const bool was_open = sec.b();
     const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64();
+    io::ModelClock::State c;
+    c.known = sec.b();
+    for (double* v : {&c.origin, &c.model, &c.node_ref}) *v = sec.f64();
+    c.pending = sec.f64s();
     sec.done();
+    clock_.set_state(c);
     if (how.branch) {  // a new run folder: new result files from the branch point on
       has_frame_ = false;
       last_frame_time_ = 0;
       last_frame_ = -2;
+      clock_.forget_pending();
       return;
     }
     outputs_open_ = was_open;
@@ -156,6 +192,7 @@ class FdmParticipant : public node::Participant {
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     open_outputs();
+    begin_model_time(st);
     const auto& a = st.action;
     if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
       throw std::invalid_argument("fdm_node does not support stage action '" + a + "'");
@@ -178,6 +215,7 @@ class FdmParticipant : public node::Participant {
   }
 
   void advance(const schema::Stage&, std::int64_t step, double dt, const std::vector<double>&) override {
+    const double node_before = model_.time();
     if (model_.params().mode == fdm::Mode::kDynamic) {
       // Sub-cycle when the coupling step is longer than this model's stable step.
       double crit = model_.critical_timestep();
@@ -202,6 +240,7 @@ class FdmParticipant : public node::Participant {
       model_.step();
       if (!punch_.empty()) punch_disp_ += punch_velocity_;
     }
+    clock_.advanced(node_before, dt, model_.time());
     last_ratios_ = model_.ratios();
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
       node::Timed t(effect_s_["output.history"]);
@@ -399,7 +438,7 @@ class FdmParticipant : public node::Participant {
     f.zone_arrays.push_back({"plastic", io::ArrayView(model_.plastic_state())});
     // Frame times must increase strictly: a repeated time (two frames of one step) is skipped.
     if (has_frame_ && model_.time() <= last_frame_time_) return;
-    out_->write_frame(step, model_.time(), f);
+    out_->write_frame(step, clock_.frame_time(model_.time()), f);  // model time (docs/output.md)
     has_frame_ = true;
     last_frame_time_ = model_.time();
     last_frame_ = step;
@@ -412,7 +451,9 @@ class FdmParticipant : public node::Participant {
   std::int64_t frame_every_ = 0, history_every_ = 1, last_step_ = -1, last_frame_ = -2;
   bool outputs_open_ = false;
   bool has_frame_ = false;
-  double last_frame_time_ = 0;
+  double last_frame_time_ = 0;                // continuum (node) time of the last frame
+  io::ModelClock clock_;                      // the frames' model time
+  std::vector<std::string> stage_prefixes_;   // "stage[i]" of every stage: its scene index
   fdm::Ratios last_ratios_{};
   std::vector<std::int32_t> punch_;
   double punch_velocity_ = 0, punch_disp_ = 0, release_after_ = 0;

@@ -15,7 +15,8 @@
 // stage criterion (equilibrium / geostatic / couple) is the out-of-balance ratio
 // |K u_k - f| / |f| below the stage's ratio (met after every unrelaxed solve); penetrate has
 // its consent. Outputs: fem.h5 + mesh.xmf (displacement, velocity, zone stress) and
-// fem_history.csv in the run folder.
+// fem_history.csv in the run folder; frame times are the model time of docs/output.md
+// (io::ModelClock).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -27,6 +28,7 @@
 #include <spdlog/spdlog.h>
 
 #include "demfdm/io/csv_series.hpp"
+#include "demfdm/io/model_time.hpp"
 #include "demfdm/io/results_output.hpp"
 #include "fem_model.hpp"
 #include "fdm_node/scene_params.hpp"
@@ -79,6 +81,15 @@ class FemParticipant : public node::Participant {
     frame_every_ = s.integer("continuum.output.frame_every");
     history_every_ = s.integer("continuum.output.history_every");
     relaxation_ = s.real("continuum.relaxation");
+    // Frame times: the model time, 0 at the beginning of the first stage that is not specimen
+    // preparation (docs/output.md "Time").
+    const auto stages = schema::stages(s);
+    std::vector<std::string_view> actions;
+    for (const auto& st : stages) {
+      actions.push_back(st.action);
+      stage_prefixes_.push_back(st.view.prefix());
+    }
+    clock_ = io::ModelClock(actions);
     u_prev_ = model_.interface_displacements();
     spdlog::info("fem: {} gridpoints, {} zones, {} free dofs, {} interface points; K factorised in {:.3f} s ({})",
                  model_.num_points(), model_.num_zones(), model_.num_free_dofs(),
@@ -100,7 +111,20 @@ class FemParticipant : public node::Participant {
     std::vector<std::int64_t> conn(model_.mesh().zones.begin(), model_.mesh().zones.end());
     out_.emplace(dir, info, io::ArrayView(model_.mesh().points, 3), io::ArrayView(conn, 8), io::H5StorageParams{},
                  "fem.h5");
+    if (clock_.known()) out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
     if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir / "fem_history.csv", history_columns()));
+  }
+
+  // At the top of every stage_begin, before any solve: the model-time origin at the first stage
+  // that is not preparation (io::ModelClock); frames written before it get their model times.
+  void begin_model_time(const schema::Stage& st) {
+    const auto at = std::find(stage_prefixes_.begin(), stage_prefixes_.end(), st.view.prefix());
+    if (!clock_.stage_begins(static_cast<std::size_t>(at - stage_prefixes_.begin()), time_)) return;
+    const auto times = clock_.take_pending_times();
+    if (!out_) return;
+    node::Timed t(effect_s_["output.h5"]);
+    out_->retime_frames(times);
+    out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
   }
 
   // Checkpoints (docs/checkpoint-format.md): the model (section "fem_model"; the factorisation
@@ -119,6 +143,10 @@ class FemParticipant : public node::Participant {
     w.u64(out_ ? out_->h5().frame_count() : 0);
     w.u64(history_ ? history_->bytes() : 0);
     w.u64(history_ ? history_->rows() : 0);
+    const auto c = clock_.state();  // model time of the frames
+    w.b(c.known);
+    for (double v : {c.origin, c.model, c.node_ref}) w.f64(v);
+    w.f64s(c.pending);
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
@@ -134,11 +162,17 @@ class FemParticipant : public node::Participant {
     solves_ = sec.i64();
     const bool was_open = sec.b();
     const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64();
+    io::ModelClock::State c;
+    c.known = sec.b();
+    for (double* v : {&c.origin, &c.model, &c.node_ref}) *v = sec.f64();
+    c.pending = sec.f64s();
     sec.done();
+    clock_.set_state(c);
     if (how.branch) {  // a new run folder: new result files from the branch point on
       has_frame_ = false;
       last_frame_time_ = 0;
       last_frame_ = -2;
+      clock_.forget_pending();
       return;
     }
     outputs_open_ = was_open;
@@ -157,6 +191,7 @@ class FemParticipant : public node::Participant {
     if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
       throw std::invalid_argument("fem_node does not support stage action '" + a + "'");
     open_outputs();
+    begin_model_time(st);
     if (a == "geostatic" || a == "couple") {
       double k0 = st.view.real("k0");
       model_.set_geostatic_stress(k0 < 0 ? fdm::kNaN : k0);
@@ -178,7 +213,9 @@ class FemParticipant : public node::Participant {
     total_solve_s_ += last_solve_s_;
     ++solves_;
     dt_ = dt;
+    const double node_before = time_;
     time_ += dt > 0 ? dt : 1.0;
+    clock_.advanced(node_before, dt, time_);
     solved_ = true;
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
       node::Timed t(effect_s_["output.history"]);
@@ -359,7 +396,7 @@ class FemParticipant : public node::Participant {
     io::MeshFrame f;
     f.node_arrays.push_back({"displacement", io::ArrayView(disp, 3)});
     f.zone_arrays.push_back({"stress", io::ArrayView(stress, 6)});
-    out_->write_frame(step, time_, f);
+    out_->write_frame(step, clock_.frame_time(time_), f);  // model time (docs/output.md)
     has_frame_ = true;
     last_frame_time_ = time_;
     last_frame_ = step;
@@ -377,6 +414,8 @@ class FemParticipant : public node::Participant {
   double time_ = 0, dt_ = 0, last_solve_s_ = 0, total_solve_s_ = 0, last_frame_time_ = 0;
   double max_imbalance_ = 0, iface_fz_ = 0;
   bool coupled_ = false, solved_ = false, has_frame_ = false, outputs_open_ = false;
+  io::ModelClock clock_;                     // the frames' model time
+  std::vector<std::string> stage_prefixes_;  // "stage[i]" of every stage: its scene index
   std::map<std::string, double> effect_s_;  // [s] wall time of each effect in the current stage
 };
 

@@ -21,7 +21,13 @@ std::string num(const char* fmt, double v) {
   std::snprintf(b, sizeof b, fmt, v);
   return b;
 }
-std::string jnum(double v) { return json_number(v); }
+// Every digit: a reader compares the result with the history it was read from.
+std::string jnum(double v) {
+  if (!std::isfinite(v)) return "null";
+  char b[40];
+  std::snprintf(b, sizeof b, "%.17g", v);
+  return b;
+}
 
 }  // namespace
 

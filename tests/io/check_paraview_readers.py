@@ -3,10 +3,11 @@
 Opens the sidecars written by io_sample_writer with all three XDMF readers of ParaView
 (Xdmf3ReaderT, Xdmf3ReaderS, XDMFReader), by absolute path (output-recipe.md pitfall 3), and
 checks for every time step: the time values equal the frames' `time` attributes; the point and
-cell counts; the cell type (VTK_POLY_VERTEX 2 for particles, VTK_POLY_LINE 4 for bonds,
-VTK_HEXAHEDRON 12 for the mesh); every array's name, component count and values (exactly)
-against the HDF5 datasets read with h5py; the points against the positions / node
-coordinates. No rendering, so no display is needed.
+cell counts; the cell type (VTK_POLY_VERTEX 2 for particles, VTK_POLY_LINE 4 for bonds, VTK_TRIANGLE 5 for
+the footing surface, VTK_HEXAHEDRON 12 for the mesh); every array's name, component count and
+values (exactly) against the HDF5 datasets read with h5py; the points against the positions /
+vertices / node coordinates. A frame without the footing is an empty grid. No rendering, so no
+display is needed.
 Usage: pvbatch check_paraview_readers.py RUN_FOLDER
 """
 import os
@@ -22,10 +23,11 @@ run = os.path.abspath(sys.argv[1])
 failures = []
 
 # xmf -> (h5 file, frame subgroup of point arrays, of cell arrays, cell type,
-#         (group, dataset) giving the cell count, static geometry or None)
+#         (group, dataset) giving the cell count, geometry: static path or frame dataset)
 ENTITIES = {
-    "particles.xmf": ("dem.h5", "particles", None, 2, ("particles", "position"), None),
-    "bonds.xmf": ("dem.h5", None, "bonds", 4, ("bonds", "nodes"), None),
+    "particles.xmf": ("dem.h5", "particles", None, 2, ("particles", "position"), "particles/position"),
+    "bonds.xmf": ("dem.h5", None, "bonds", 4, ("bonds", "nodes"), "particles/position"),
+    "footing.xmf": ("dem.h5", None, None, 5, ("footing", "triangles"), "footing/vertices"),
     "mesh.xmf": ("fdm.h5", "nodes", "zones", 12, None, "/mesh/node_coords"),
 }
 SKIP = {"position", "nodes"}  # geometry / connectivity, not attributes
@@ -66,15 +68,16 @@ for reader in ("Xdmf3ReaderT", "Xdmf3ReaderS", "XDMFReader"):
                 d = sm.Fetch(r)
                 if d.IsA("vtkMultiBlockDataSet"):
                     d = d.GetBlock(0)
-                geom = f[static_geom][()] if static_geom else fr["particles/position"][()]
+                geom = f[static_geom][()] if static_geom.startswith("/") else fr[static_geom][()]
                 ncells = fr[count_ds[0]][count_ds[1]].shape[0] if count_ds else f["/mesh/zone_nodes"].shape[0]
                 check(d.GetNumberOfPoints() == geom.shape[0], "%s: %d points, expected %d"
                       % (tag, d.GetNumberOfPoints(), geom.shape[0]))
                 check(d.GetNumberOfCells() == ncells, "%s: %d cells, expected %d" % (tag, d.GetNumberOfCells(), ncells))
                 types = {d.GetCellType(i) for i in range(d.GetNumberOfCells())}
-                check(types == {ctype}, "%s: cell types %s, expected {%d}" % (tag, types, ctype))
-                pts = vtk_to_numpy(d.GetPoints().GetData())
-                check(np.array_equal(pts, geom), "%s: points differ from the HDF5 geometry" % tag)
+                check(types == ({ctype} if ncells else set()), "%s: cell types %s, expected {%d}" % (tag, types, ctype))
+                if geom.shape[0] > 0:
+                    pts = vtk_to_numpy(d.GetPoints().GetData())
+                    check(np.array_equal(pts, geom), "%s: points differ from the HDF5 geometry" % tag)
                 if pgroup:
                     compare_group(tag + " point data", arrays(d.GetPointData()), fr[pgroup])
                 if cgroup:

@@ -123,7 +123,7 @@ def check_xmf(run, xmf_name):
         else:
             conn, _, cpath = resolve(topo.find("DataItem"))
             n_items += 1
-            per = {"Polyline": 2, "Hexahedron": 8}[ttype]
+            per = {"Polyline": 2, "Triangle": 3, "Hexahedron": 8}[ttype]
             check(conn is not None and conn.shape == (nelem, per), "%s: %s shape" % (xmf_name, cpath))
             if conn is not None and conn.shape[0] > 0:
                 c = conn[()]
@@ -151,8 +151,8 @@ def check_xmf(run, xmf_name):
 def main():
     run, tools = sys.argv[1], sys.argv[2]
     check_shapes(run, tools)
-    counts = {x: check_xmf(run, x) for x in ("particles.xmf", "bonds.xmf", "mesh.xmf")}
-    check(counts == {"particles.xmf": 3, "bonds.xmf": 3, "mesh.xmf": 2}, "grid counts %s" % counts)
+    counts = {x: check_xmf(run, x) for x in ("particles.xmf", "bonds.xmf", "footing.xmf", "mesh.xmf")}
+    check(counts == {"particles.xmf": 3, "bonds.xmf": 3, "footing.xmf": 3, "mesh.xmf": 2}, "grid counts %s" % counts)
     check(not [f for f in os.listdir(run) if f.endswith(".tmp")], "temporary sidecar files left behind")
     if FAILURES:
         print("FAILED:\n  " + "\n  ".join(FAILURES))

@@ -1,6 +1,8 @@
 // Writes a small but complete run folder with the output library, for the Python checks
 // (check_sample_run.py, check_plot_png.py):
 //   dem.h5 + particles.xmf + bonds.xmf   3 frames, 6/5/4 particles, 5/4/3 bonds
+//     + footing.xmf                      the footing's surface: none in frame 0, then an
+//                                        8-segment cylinder (18 vertices, 32 triangles) moving down
 //   fdm.h5 + mesh.xmf                    2 frames on a 3 x 2 x 2 hexahedron brick
 //   history.h5                           50 rows of time / displacement / load
 //   load_displacement_a.csv, _b.csv      two "runs" of a load-displacement curve
@@ -52,7 +54,7 @@ struct Expect {
 std::string frame(int k) { return H5Frames::frame_group(static_cast<std::size_t>(k)); }
 
 void write_dem(const std::filesystem::path& dir, Expect& ex) {
-  ParticleOutput out(dir, FileInfo{"dem_node", "sample", "feedbeef", {}});
+  ParticleOutput out(dir, FileInfo{"dem_node", "sample", "feedbeef", {}}, {}, {"bonds"}, "dem.h5", {"footing"});
   for (int k = 0; k < 3; ++k) {
     const std::size_t np = 6 - k;
     std::vector<double> x, r;
@@ -76,6 +78,9 @@ void write_dem(const std::filesystem::path& dir, Expect& ex) {
     pf.position = ArrayView(x, 3);
     pf.point_arrays = {{"radius", ArrayView(r)}, {"velocity", ArrayView(v, 3)}, {"id", ArrayView(id)}};
     pf.links = {LinkFrame{"bonds", ArrayView(bonds, 2), {{"state", ArrayView(state)}, {"force", ArrayView(force, 3)}}}};
+    const TriangleSurface footing =
+        k == 0 ? TriangleSurface{} : cylinder_surface({0.05, 0.0, 0.01 - 0.001 * k}, 0.02, 0.01, 8);
+    pf.surfaces = {SurfaceFrame{"footing", ArrayView(footing.vertices, 3), ArrayView(footing.triangles, 3)}};
     out.write_frame(100 * k, 0.001 * k, pf);
     const std::string g = frame(k);
     ex.add("dem.h5", g + "/particles/position", {np, 3}, "float64");
@@ -85,6 +90,8 @@ void write_dem(const std::filesystem::path& dir, Expect& ex) {
     ex.add("dem.h5", g + "/bonds/nodes", {np - 1, 2}, "int32");
     ex.add("dem.h5", g + "/bonds/state", {np - 1}, "uint8");
     ex.add("dem.h5", g + "/bonds/force", {np - 1, 3}, "float64");
+    ex.add("dem.h5", g + "/footing/vertices", {footing.vertices.size() / 3, 3}, "float64");
+    ex.add("dem.h5", g + "/footing/triangles", {footing.triangles.size() / 3, 3}, "int32");
   }
   ex.add("dem.h5", "/xdmf/vertex_index", {6}, "int32");
 }

@@ -3,7 +3,9 @@
 // HDF5 files (path, rank, sizes and element width must agree).
 #include "demfdm/io/results_output.hpp"
 
+#include <cmath>
 #include <fstream>
+#include <map>
 #include <regex>
 
 #include <gtest/gtest.h>
@@ -421,6 +423,190 @@ TEST(MeshOutput, ResumedRunWritesTheFilesOfAnUninterruptedRun) {
     out.h5().close();
     EXPECT_EQ(test::contents_diff(want, test::stored_contents(run / "fdm.h5", kResumeRoots)), "") << "resumed at " << k;
   }
+}
+
+// ---------------------------------------------------------------------------------------
+// Surfaces (the footing) and frames whose times are set afterwards (docs/output.md "Time").
+
+// Frame k of a run with the footing: 4 particles; frame 0 has no footing yet (empty surface),
+// later frames a cylinder that moves down by 1e-4 per frame.
+void write_footing_frame(ParticleOutput& out, int k, double time) {
+  std::vector<double> x, r;
+  std::vector<std::int32_t> bonds{0, 1, 2, 3};
+  std::vector<std::uint8_t> state{0, static_cast<std::uint8_t>(k % 3)};
+  for (int i = 0; i < 4; ++i) {
+    x.insert(x.end(), {1e-3 * i, 0.0, -1e-3});
+    r.push_back(5e-4);
+  }
+  const TriangleSurface footing =
+      k == 0 ? TriangleSurface{} : cylinder_surface({1.5e-3, 0.0, -1e-4 * k}, 1e-3, 5e-4, 8);
+  ParticleFrame pf;
+  pf.position = ArrayView(x, 3);
+  pf.point_arrays = {{"radius", ArrayView(r)}};
+  pf.links = {LinkFrame{"bonds", ArrayView(bonds, 2), {{"state", ArrayView(state)}}}};
+  pf.surfaces = {SurfaceFrame{"footing", ArrayView(footing.vertices, 3), ArrayView(footing.triangles, 3)}};
+  out.write_frame(10 * k, time, pf);
+}
+
+TEST(ParticleOutput, FootingSurfaceFramesReadBackSidecarResolvesAndResumes) {
+  ScratchDir dir;
+  const FileInfo info{"dem_node", "run", "hash", {}};
+  const std::vector<std::string> links{"bonds"}, surfaces{"footing"};
+  std::vector<std::string> ref_xmf;
+  {
+    ParticleOutput out(dir.path(), info, {}, links, "dem.h5", surfaces);
+    for (int k = 0; k < 3; ++k) {
+      write_footing_frame(out, k, 1e-3 * k);
+      ref_xmf.push_back(test::slurp(dir / "footing.xmf"));
+    }
+    EXPECT_EQ(out.surface_sidecar(0).frames(), 3u);
+  }
+  {
+    H5Reader r(dir / "dem.h5");
+    EXPECT_EQ(r.dims("/frames/000000/footing/vertices"), (std::vector<hsize_t>{0, 3}));
+    EXPECT_EQ(r.dims("/frames/000000/footing/triangles"), (std::vector<hsize_t>{0, 3}));
+    const TriangleSurface c2 = cylinder_surface({1.5e-3, 0.0, -2e-4}, 1e-3, 5e-4, 8);
+    EXPECT_EQ(r.read_f64("/frames/000002/footing/vertices"), c2.vertices);
+    EXPECT_EQ(r.read_i32("/frames/000002/footing/triangles"), c2.triangles);
+  }
+
+  const std::string fx = ref_xmf.back();
+  EXPECT_EQ(test::count_substr(fx, R"(GridType="Uniform")"), 3u);
+  EXPECT_EQ(test::count_substr(fx, R"(<Topology TopologyType="Triangle" NumberOfElements="0">)"), 1u);
+  EXPECT_EQ(test::count_substr(fx, R"(<Topology TopologyType="Triangle" NumberOfElements="32">)"), 2u);
+  // Connectivity + geometry per frame.
+  EXPECT_EQ(check_data_items(dir / "footing.xmf"), 6u);
+
+  // A resumed run rebuilds footing.xmf from the file alone, and refuses other surface sets.
+  {
+    ParticleOutput out = ParticleOutput::resume(dir.path(), {}, links, 2, "dem.h5", surfaces);
+    EXPECT_TRUE(test::slurp(dir / "footing.xmf") == ref_xmf[1]);
+    write_footing_frame(out, 2, 2e-3);
+    EXPECT_TRUE(test::slurp(dir / "footing.xmf") == ref_xmf[2]);
+  }
+  EXPECT_THROW(ParticleOutput::resume(dir.path(), {}, links, 3), IoError) << "footing datasets of no declared set";
+  EXPECT_THROW(ParticleOutput::resume(dir.path(), {}, links, 3, "dem.h5", {"lid"}), IoError);
+  EXPECT_THROW(ParticleOutput::resume(dir.path(), {}, links, 3, "dem.h5", {"bonds"}), std::invalid_argument);
+}
+
+TEST(ParticleOutput, BadSurfacesAreRejectedBeforeAnythingIsWritten) {
+  ScratchDir dir;
+  ParticleOutput out(dir.path(), FileInfo{"dem_node", "", "", {}}, {}, {"bonds"}, "dem.h5", {"footing"});
+  std::vector<double> x{0, 0, 0, 1, 0, 0}, v{0, 0, 0, 1, 0, 0, 0, 1, 0};
+  std::vector<std::int32_t> b{0, 1}, tri{0, 1, 3};
+  ParticleFrame pf;
+  pf.position = ArrayView(x, 3);
+  pf.links = {LinkFrame{"bonds", ArrayView(b, 2), {}}};
+  EXPECT_THROW(out.write_frame(0, 0.0, pf), std::invalid_argument) << "the declared surface is missing";
+  pf.surfaces = {SurfaceFrame{"lid", ArrayView(v, 3), ArrayView(tri, 3)}};
+  EXPECT_THROW(out.write_frame(0, 0.0, pf), std::invalid_argument) << "another name";
+  pf.surfaces = {SurfaceFrame{"footing", ArrayView(v, 3), ArrayView(tri, 3)}};
+  EXPECT_THROW(out.write_frame(0, 0.0, pf), std::invalid_argument) << "vertex row 3 of 3";
+  EXPECT_EQ(out.h5().frame_count(), 0u);
+  EXPECT_FALSE(std::filesystem::exists(dir / "footing.xmf"));
+  tri[2] = 2;
+  EXPECT_EQ(out.write_frame(0, 0.0, pf), 0u);
+  EXPECT_TRUE(std::filesystem::exists(dir / "footing.xmf"));
+}
+
+TEST(ParticleOutput, RetimedFramesEqualFramesWrittenWithThoseTimes) {
+  ScratchDir dir;
+  const FileInfo info{"dem_node", "run", "hash", {}};
+  const std::vector<std::string> links{"bonds"}, surfaces{"footing"};
+  const std::vector<std::string> sidecars{"particles.xmf", "bonds.xmf", "footing.xmf"};
+  // Model times: the preparation frames before the origin are negative, the origin frame 0.
+  const std::vector<double> node{0.75, 0.8125, 1.0}, model{-0.25, -0.1875, 0.0};
+  const auto direct = dir / "direct", retimed = dir / "retimed";
+  std::filesystem::create_directories(direct);
+  std::filesystem::create_directories(retimed);
+  {
+    ParticleOutput out(direct, info, {}, links, "dem.h5", surfaces);
+    for (int k = 0; k < 3; ++k) write_footing_frame(out, k, model[k]);
+    write_footing_frame(out, 3, 0.5);
+  }
+  {
+    ParticleOutput out(retimed, info, {}, links, "dem.h5", surfaces);
+    for (int k = 0; k < 3; ++k) write_footing_frame(out, k, node[k]);
+    EXPECT_THROW(out.retime_frames(std::vector<double>{-1.0, 0.0}), std::invalid_argument) << "one time per frame";
+    EXPECT_THROW(out.retime_frames(std::vector<double>{-1.0, -1.0, 0.0}), std::invalid_argument) << "increasing";
+    out.retime_frames(model);
+    EXPECT_THROW(write_footing_frame(out, 3, 0.0), std::invalid_argument) << "after the last retimed time";
+    write_footing_frame(out, 3, 0.5);
+  }
+  H5Reader r(retimed / "dem.h5");
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(r.attr_f64("/frames/00000" + std::to_string(k), "time"), model[k]);
+  EXPECT_EQ(test::contents_diff(test::stored_contents(direct / "dem.h5", kResumeRoots),
+                                test::stored_contents(retimed / "dem.h5", kResumeRoots)),
+            "");
+  for (const auto& x : sidecars) EXPECT_TRUE(test::slurp(direct / x) == test::slurp(retimed / x)) << x;
+  EXPECT_NE(test::slurp(retimed / "particles.xmf").find(R"(<Time Value="-0.1875"/>)"), std::string::npos);
+}
+
+TEST(MeshOutput, RetimedFramesEqualFramesWrittenWithThoseTimes) {
+  ScratchDir dir;
+  const Brick b = brick_vtk();
+  const FileInfo info{"fdm_node", "run", "hash", {}};
+  const auto direct = dir / "direct", retimed = dir / "retimed";
+  std::filesystem::create_directories(direct);
+  std::filesystem::create_directories(retimed);
+  // write_mesh_frame(k) writes time 0.25 (k + 1); the retimed run moves frames 0 and 1 there.
+  {
+    MeshOutput out(direct, info, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+    for (int k = 0; k < 3; ++k) write_mesh_frame(out, b, k);
+  }
+  {
+    MeshOutput out(retimed, info, ArrayView(b.coords, 3), ArrayView(b.zones, 8));
+    out.retime_frames({});  // nothing written yet: nothing to do
+    EXPECT_FALSE(std::filesystem::exists(retimed / "mesh.xmf"));
+    for (int k = 0; k < 2; ++k) write_mesh_frame(out, b, k);
+    out.retime_frames(std::vector<double>{0.0625, 0.125});
+    EXPECT_NE(test::slurp(retimed / "mesh.xmf").find(R"(<Time Value="0.0625"/>)"), std::string::npos);
+    out.retime_frames(std::vector<double>{0.25, 0.5});
+    write_mesh_frame(out, b, 2);
+  }
+  EXPECT_EQ(test::contents_diff(test::stored_contents(direct / "fdm.h5", kResumeRoots),
+                                test::stored_contents(retimed / "fdm.h5", kResumeRoots)),
+            "");
+  EXPECT_TRUE(test::slurp(direct / "mesh.xmf") == test::slurp(retimed / "mesh.xmf"));
+}
+
+TEST(CylinderSurface, ClosedOutwardOrientedAndOfTheGivenSize) {
+  const int n = 12;
+  const double d = 0.4e-3, h = 0.2e-3;
+  const std::array<double, 3> c{1e-3, 2e-3, 6.8e-3};
+  const TriangleSurface s = cylinder_surface(c, d, h, n);
+  ASSERT_EQ(s.vertices.size(), 3u * (2 * n + 2));
+  ASSERT_EQ(s.triangles.size(), 3u * 4 * n);
+  // Every directed edge once, and its reverse once: a closed, consistently oriented surface.
+  std::map<std::pair<int, int>, int> edges;
+  for (std::size_t t = 0; t < s.triangles.size(); t += 3)
+    for (int e = 0; e < 3; ++e) ++edges[{s.triangles[t + e], s.triangles[t + (e + 1) % 3]}];
+  for (const auto& [e, count] : edges) {
+    EXPECT_EQ(count, 1) << e.first << "->" << e.second;
+    EXPECT_EQ(edges.count({e.second, e.first}), 1u) << e.first << "->" << e.second;
+  }
+  // Enclosed volume (divergence theorem) = the n-gon prism's, positive for outward normals.
+  auto v = [&](int i, int k) { return s.vertices[3 * i + k] - c[k]; };
+  double vol = 0;
+  for (std::size_t t = 0; t < s.triangles.size(); t += 3) {
+    const int a = s.triangles[t], b = s.triangles[t + 1], q = s.triangles[t + 2];
+    vol += (v(a, 0) * (v(b, 1) * v(q, 2) - v(b, 2) * v(q, 1)) - v(a, 1) * (v(b, 0) * v(q, 2) - v(b, 2) * v(q, 0)) +
+            v(a, 2) * (v(b, 0) * v(q, 1) - v(b, 1) * v(q, 0))) /
+           6;
+  }
+  const double pi = std::acos(-1.0);
+  EXPECT_NEAR(vol, n / 2.0 * (d / 2) * (d / 2) * std::sin(2 * pi / n) * h, 1e-24);
+  double zmin = 1e9, zmax = -1e9, rmax = 0;
+  for (int i = 0; i < 2 * n + 2; ++i) {
+    zmin = std::min(zmin, s.vertices[3 * i + 2]);
+    zmax = std::max(zmax, s.vertices[3 * i + 2]);
+    rmax = std::max(rmax, std::hypot(v(i, 0), v(i, 1)));
+  }
+  EXPECT_EQ(zmin, c[2]);
+  EXPECT_DOUBLE_EQ(zmax, c[2] + h);
+  EXPECT_DOUBLE_EQ(rmax, d / 2);
+  EXPECT_THROW(cylinder_surface(c, 0.0, h), std::invalid_argument);
+  EXPECT_THROW(cylinder_surface(c, d, h, 2), std::invalid_argument);
 }
 
 }  // namespace

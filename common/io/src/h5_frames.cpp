@@ -2,6 +2,7 @@
 #include "demfdm/io/h5_frames.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <limits>
@@ -626,6 +627,26 @@ void H5Frames::set_attribute(std::string_view object_path, std::string_view name
   const std::string file = file_.string();
   with_object(scope.fid(), object_path, file,
               [&](hid_t o, const std::string& obj) { detail::write_attr_f64(o, name, value, file, obj); });
+  scope.commit();
+}
+
+void H5Frames::set_frame_times(std::span<const double> times) {
+  if (closed_) throw std::logic_error("H5Frames::set_frame_times on closed file '" + file_.string() + "'");
+  if (frame_open_)
+    throw std::logic_error("H5Frames::set_frame_times: frame " + frame_path_ + " of '" + file_.string() +
+                           "' is open");
+  if (times.size() > frame_count_)
+    throw std::invalid_argument("H5Frames::set_frame_times: " + std::to_string(times.size()) + " times for " +
+                                std::to_string(frame_count_) + " frames of '" + file_.string() + "'");
+  for (double t : times)
+    if (!std::isfinite(t)) throw std::invalid_argument("H5Frames::set_frame_times: times must be finite");
+  if (times.empty()) return;
+  QuietErrors quiet;
+  OpenScope scope(*this);
+  const std::string file = file_.string();
+  for (std::size_t i = 0; i < times.size(); ++i)
+    with_object(scope.fid(), frame_group(i), file,
+                [&](hid_t o, const std::string& obj) { detail::write_attr_f64(o, "time", times[i], file, obj); });
   scope.commit();
 }
 

@@ -1,4 +1,4 @@
-// ParticleOutput and MeshOutput: the recipe layout (output-recipe.md §3-§4) on top of
+// ParticleOutput and MeshOutput: the results layout of common/io/README.md on top of
 // H5Frames and XdmfSidecar.
 #include "demfdm/io/results_output.hpp"
 
@@ -33,22 +33,45 @@ void refuse_existing(const std::vector<std::filesystem::path>& files) {
   }
 }
 
-void check_link_sets(const std::vector<std::string>& link_sets) {
+// Link and surface sets name the frame's groups and the sidecars: distinct, not "particles".
+void check_sets(const std::vector<std::string>& link_sets, const std::vector<std::string>& surface_sets) {
   std::set<std::string> seen{"particles"};
   for (const auto& l : link_sets) {
     check_name("link set", l);
     if (!seen.insert(l).second)
       throw std::invalid_argument("ParticleOutput: link set '" + l + "' is given twice or clashes with 'particles'");
   }
+  for (const auto& l : surface_sets) {
+    check_name("surface set", l);
+    if (!seen.insert(l).second)
+      throw std::invalid_argument("ParticleOutput: surface set '" + l +
+                                  "' is given twice or clashes with 'particles' or a link set");
+  }
 }
 
 H5Frames create_dem_file(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
-                         const std::vector<std::string>& link_sets, const std::string& h5_name) {
-  check_link_sets(link_sets);
+                         const std::vector<std::string>& link_sets, const std::string& h5_name,
+                         const std::vector<std::string>& surface_sets) {
+  check_sets(link_sets, surface_sets);
   std::vector<std::filesystem::path> targets{dir / h5_name, dir / "particles.xmf"};
   for (const auto& l : link_sets) targets.push_back(dir / (l + ".xmf"));
+  for (const auto& l : surface_sets) targets.push_back(dir / (l + ".xmf"));
   refuse_existing(targets);
   return H5Frames::create(dir / h5_name, info, storage);
+}
+
+// New frame times: one per frame written, finite, strictly increasing.
+void check_new_times(const std::string& who, std::span<const double> times, std::size_t frames) {
+  if (times.size() != frames)
+    throw std::invalid_argument(who + "::retime_frames: " + std::to_string(times.size()) + " times for " +
+                                std::to_string(frames) + " frames (one per frame written)");
+  for (std::size_t i = 0; i < times.size(); ++i) {
+    if (!std::isfinite(times[i])) throw std::invalid_argument(who + "::retime_frames: times must be finite");
+    if (i > 0 && !(times[i] > times[i - 1]))
+      throw std::invalid_argument(who + "::retime_frames: times must increase strictly; frame " + std::to_string(i) +
+                                  " gets " + std::to_string(times[i]) + " s after " + std::to_string(times[i - 1]) +
+                                  " s");
+  }
 }
 
 FileInfo with_fdm_attrs(FileInfo info) {
@@ -148,21 +171,43 @@ bool starts_with_dir(const std::string& name, const std::string& dir) {
 // ---------------------------------------------------------------------------------------
 
 ParticleOutput::ParticleOutput(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage,
-                               std::vector<std::string> link_sets, const std::string& h5_name)
-    : ParticleOutput(create_dem_file(dir, info, storage, link_sets, h5_name), dir, link_sets) {}
+                               std::vector<std::string> link_sets, const std::string& h5_name,
+                               std::vector<std::string> surface_sets)
+    : ParticleOutput(create_dem_file(dir, info, storage, link_sets, h5_name, surface_sets), dir, link_sets,
+                     surface_sets) {}
 
-ParticleOutput::ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets)
-    : h5_(std::move(h5)), particles_xmf_(dir / "particles.xmf", "particles"), link_sets_(std::move(link_sets)) {
+ParticleOutput::ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets,
+                               std::vector<std::string> surface_sets)
+    : h5_(std::move(h5)),
+      dir_(dir),
+      particles_xmf_(dir / "particles.xmf", "particles"),
+      link_sets_(std::move(link_sets)),
+      surface_sets_(std::move(surface_sets)) {
   for (const auto& l : link_sets_) links_xmf_.emplace_back(dir / (l + ".xmf"), l);
+  for (const auto& l : surface_sets_) surfaces_xmf_.emplace_back(dir / (l + ".xmf"), l);
 }
 
 ParticleOutput ParticleOutput::resume(const std::filesystem::path& dir, const H5StorageParams& storage,
                                       std::vector<std::string> link_sets, std::size_t frames,
-                                      const std::string& h5_name) {
-  check_link_sets(link_sets);
-  ParticleOutput out(H5Frames::reopen(dir / h5_name, frames, storage), dir, std::move(link_sets));
+                                      const std::string& h5_name, std::vector<std::string> surface_sets) {
+  check_sets(link_sets, surface_sets);
+  ParticleOutput out(H5Frames::reopen(dir / h5_name, frames, storage), dir, std::move(link_sets),
+                     std::move(surface_sets));
   out.rebuild_sidecars();
   return out;
+}
+
+void ParticleOutput::retime_frames(std::span<const double> times) {
+  check_new_times("ParticleOutput", times, h5_.frame_count());
+  if (times.empty()) return;
+  h5_.set_frame_times(times);
+  // The sidecars again from the file, as a resume builds them (the same bytes as frames
+  // written with these times from the start).
+  particles_xmf_ = XdmfSidecar(dir_ / "particles.xmf", "particles");
+  for (std::size_t i = 0; i < link_sets_.size(); ++i) links_xmf_[i] = XdmfSidecar(dir_ / (link_sets_[i] + ".xmf"), link_sets_[i]);
+  for (std::size_t i = 0; i < surface_sets_.size(); ++i)
+    surfaces_xmf_[i] = XdmfSidecar(dir_ / (surface_sets_[i] + ".xmf"), surface_sets_[i]);
+  rebuild_sidecars();
 }
 
 void ParticleOutput::rebuild_sidecars() {
@@ -200,11 +245,26 @@ void ParticleOutput::rebuild_sidecars() {
         lg.attributes.push_back(XdmfAttribute::cell(r.names[k].substr(l.size() + 1), r.datasets[k]));
       link_grids.push_back(std::move(lg));
     }
+    std::vector<XdmfGrid> surface_grids;
+    for (const auto& l : surface_sets_) {
+      if (!next_is(l + "/vertices") || !(k + 1 < r.names.size() && r.names[k + 1] == l + "/triangles"))
+        throw IoError("ParticleOutput::resume: " + where + "surface set '" + l +
+                      "' is not next in its datasets (the run's surface sets differ?)");
+      XdmfGrid sg;
+      sg.time = r.time;
+      sg.topology = XdmfTopology::kTriangle;
+      sg.geometry = r.datasets[k++];
+      sg.connectivity = r.datasets[k++];
+      sg.elements = sg.connectivity.rows;
+      surface_grids.push_back(std::move(sg));
+    }
     if (k != r.names.size())
       throw IoError("ParticleOutput::resume: " + where + "dataset '" + r.names[k] +
-                    "' belongs to no declared link set (the run's link sets differ?)");
+                    "' belongs to no declared link or surface set (the run's sets differ?)");
     append_rebuilt(particles_xmf_, std::move(g), file);
     for (std::size_t i = 0; i < link_grids.size(); ++i) append_rebuilt(links_xmf_[i], std::move(link_grids[i]), file);
+    for (std::size_t i = 0; i < surface_grids.size(); ++i)
+      append_rebuilt(surfaces_xmf_[i], std::move(surface_grids[i]), file);
     has_time_ = true;
     last_time_ = r.time;
   }
@@ -226,9 +286,11 @@ void ParticleOutput::rebuild_sidecars() {
   if (particles_xmf_.frames() == 0) {
     remove_sidecar(particles_xmf_);
     for (const auto& s : links_xmf_) remove_sidecar(s);
+    for (const auto& s : surfaces_xmf_) remove_sidecar(s);
   } else {
     particles_xmf_.write();
     for (const auto& s : links_xmf_) s.write();
+    for (const auto& s : surfaces_xmf_) s.write();
   }
 }
 
@@ -262,6 +324,23 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
     check_index_range(where + l.name + "/nodes", static_cast<const std::int32_t*>(l.nodes.data), l.nodes.size(), np);
     check_fields(where + l.name + " cell array", l.cell_arrays, l.nodes.rows, {"nodes"});
   }
+  if (fr.surfaces.size() != surface_sets_.size())
+    throw std::invalid_argument(where + std::to_string(fr.surfaces.size()) + " surfaces given, " +
+                                std::to_string(surface_sets_.size()) + " declared at construction");
+  for (std::size_t i = 0; i < fr.surfaces.size(); ++i) {
+    const SurfaceFrame& sf = fr.surfaces[i];
+    if (sf.name != surface_sets_[i])
+      throw std::invalid_argument(where + "surface " + std::to_string(i) + " is '" + sf.name + "', expected '" +
+                                  surface_sets_[i] + "' (declaration order)");
+    if (sf.vertices.cols != 3 || sf.vertices.dtype != DType::kFloat64)
+      throw std::invalid_argument(where + sf.name + "/vertices must be [Nv,3] float64");
+    if (sf.triangles.cols != 3 || sf.triangles.dtype != DType::kInt32)
+      throw std::invalid_argument(where + sf.name + "/triangles must be [Nt,3] int32");
+    check_rows(where + sf.name + "/vertices", sf.vertices, sf.vertices.rows);
+    check_rows(where + sf.name + "/triangles", sf.triangles, sf.triangles.rows);
+    check_index_range(where + sf.name + "/triangles", static_cast<const std::int32_t*>(sf.triangles.data),
+                      sf.triangles.size(), sf.vertices.rows);
+  }
 
   const std::size_t index = h5_.begin_frame(step, time);
   const DatasetRef vertex_index = h5_.ensure_index(kVertexIndex, np);
@@ -270,6 +349,10 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
   for (const auto& l : fr.links) {
     h5_.write(l.name + "/nodes", l.nodes);
     for (const auto& f : l.cell_arrays) h5_.write(l.name + "/" + f.name, f.data);
+  }
+  for (const auto& sf : fr.surfaces) {
+    h5_.write(sf.name + "/vertices", sf.vertices);
+    h5_.write(sf.name + "/triangles", sf.triangles);
   }
   h5_.end_frame();
 
@@ -293,8 +376,19 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
       lg.attributes.push_back(XdmfAttribute::cell(f.name, h5_.ref(l.name + "/" + f.name)));
     links_xmf_[i].append(std::move(lg));
   }
+  for (std::size_t i = 0; i < fr.surfaces.size(); ++i) {
+    const SurfaceFrame& sf = fr.surfaces[i];
+    XdmfGrid sg;
+    sg.time = time;
+    sg.topology = XdmfTopology::kTriangle;
+    sg.elements = sf.triangles.rows;
+    sg.connectivity = h5_.ref(sf.name + "/triangles");
+    sg.geometry = h5_.ref(sf.name + "/vertices");
+    surfaces_xmf_[i].append(std::move(sg));
+  }
   particles_xmf_.write();
   for (const auto& s : links_xmf_) s.write();
+  for (const auto& s : surfaces_xmf_) s.write();
   has_time_ = true;
   last_time_ = time;
   return index;
@@ -313,7 +407,15 @@ MeshOutput::MeshOutput(const std::filesystem::path& dir, const FileInfo& info, c
 }
 
 MeshOutput::MeshOutput(H5Frames h5, const std::filesystem::path& dir, std::size_t nodes, std::size_t zones)
-    : h5_(std::move(h5)), mesh_xmf_(dir / "mesh.xmf", "mesh"), nodes_(nodes), zones_(zones) {}
+    : h5_(std::move(h5)), dir_(dir), mesh_xmf_(dir / "mesh.xmf", "mesh"), nodes_(nodes), zones_(zones) {}
+
+void MeshOutput::retime_frames(std::span<const double> times) {
+  check_new_times("MeshOutput", times, h5_.frame_count());
+  if (times.empty()) return;
+  h5_.set_frame_times(times);
+  mesh_xmf_ = XdmfSidecar(dir_ / "mesh.xmf", "mesh");
+  rebuild_sidecar();
+}
 
 MeshOutput MeshOutput::resume(const std::filesystem::path& dir, std::size_t frames, const H5StorageParams& storage,
                               const std::string& h5_name) {
@@ -402,6 +504,38 @@ std::size_t MeshOutput::write_frame(std::int64_t step, double time, const MeshFr
   has_time_ = true;
   last_time_ = time;
   return index;
+}
+
+// ---------------------------------------------------------------------------------------
+
+TriangleSurface cylinder_surface(const std::array<double, 3>& c, double diameter, double height, int segments) {
+  if (!(diameter > 0) || !(height > 0) || !std::isfinite(diameter) || !std::isfinite(height))
+    throw std::invalid_argument("cylinder_surface: diameter and height must be finite and > 0, found " +
+                                std::to_string(diameter) + " and " + std::to_string(height));
+  if (segments < 3) throw std::invalid_argument("cylinder_surface: segments must be >= 3, found " + std::to_string(segments));
+  for (double v : c)
+    if (!std::isfinite(v)) throw std::invalid_argument("cylinder_surface: the bottom centre must be finite");
+  TriangleSurface s;
+  const int n = segments;
+  const double r = diameter / 2, pi = std::acos(-1.0);
+  auto vertex = [&](double x, double y, double z) { s.vertices.insert(s.vertices.end(), {x, y, z}); };
+  vertex(c[0], c[1], c[2]);           // 0: bottom centre
+  vertex(c[0], c[1], c[2] + height);  // 1: top centre
+  for (int level = 0; level < 2; ++level)
+    for (int k = 0; k < n; ++k) {
+      const double a = 2 * pi * k / n;
+      vertex(c[0] + r * std::cos(a), c[1] + r * std::sin(a), c[2] + level * height);
+    }
+  auto tri = [&](int a, int b, int d) { s.triangles.insert(s.triangles.end(), {a, b, d}); };
+  for (int k = 0; k < n; ++k) {
+    const int k1 = (k + 1) % n;
+    const int b0 = 2 + k, b1 = 2 + k1, t0 = 2 + n + k, t1 = 2 + n + k1;
+    tri(0, b1, b0);   // bottom cap, normal -z
+    tri(1, t0, t1);   // top cap, normal +z
+    tri(b0, b1, t1);  // side, normal outwards
+    tri(b0, t1, t0);
+  }
+  return s;
 }
 
 }  // namespace demfdm::io

@@ -61,6 +61,7 @@ const char* topology_name(XdmfTopology t) {
   switch (t) {
     case XdmfTopology::kPolyvertex: return "Polyvertex";
     case XdmfTopology::kPolyline: return "Polyline";
+    case XdmfTopology::kTriangle: return "Triangle";
     case XdmfTopology::kHexahedron: return "Hexahedron";
   }
   return "?";
@@ -125,6 +126,11 @@ void XdmfSidecar::append(XdmfGrid g) {
     case XdmfTopology::kPolyline:
       if (c.cols != 2 || c.rows != g.elements)
         fail("Polyline connectivity '" + c.path + "' must be [" + std::to_string(g.elements) + ", 2], found " +
+             dims_text(c.rows, c.cols));
+      break;
+    case XdmfTopology::kTriangle:
+      if (c.cols != 3 || c.rows != g.elements)
+        fail("Triangle connectivity '" + c.path + "' must be [" + std::to_string(g.elements) + ", 3], found " +
              dims_text(c.rows, c.cols));
       break;
     case XdmfTopology::kHexahedron:

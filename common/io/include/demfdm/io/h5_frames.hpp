@@ -129,6 +129,13 @@ class H5Frames {
   void set_attribute(std::string_view object_path, std::string_view name, std::int64_t value);
   void set_attribute(std::string_view object_path, std::string_view name, double value);
 
+  /// Replaces the attribute time of frames 0 .. times.size()-1 (in one open of the file),
+  /// e.g. when the origin of the model time becomes known after those frames were written
+  /// (docs/output.md). `times` must be finite; the caller keeps them increasing. Throws
+  /// std::invalid_argument when more times than frames are given, std::logic_error while a
+  /// frame is open.
+  void set_frame_times(std::span<const double> times);
+
   /// Opens the file and creates /frames/NNNNNN (NNNNNN = frame_count()) with attributes
   /// time [s] and step. Returns the frame index. Throws std::logic_error when a frame is open.
   std::size_t begin_frame(std::int64_t step, double time);

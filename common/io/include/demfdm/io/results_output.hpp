@@ -1,12 +1,15 @@
 // Per-process results writers: the HDF5 file of one producer plus its XDMF sidecars,
-// in the layout of output-recipe.md §3-§4.
+// in the layout of common/io/README.md (docs/output.md for what a run folder holds).
 //
-//   ParticleOutput (dem_node): <dir>/dem.h5, <dir>/particles.xmf, <dir>/<link set>.xmf
+//   ParticleOutput (dem_node): <dir>/dem.h5, <dir>/particles.xmf, <dir>/<link set>.xmf,
+//                              <dir>/<surface set>.xmf
 //     /xdmf/vertex_index                 int32 0..Nmax-1 (Polyvertex connectivity)
 //     /frames/NNNNNN/particles/position  [Np,3] float64 m
 //     /frames/NNNNNN/particles/<array>   [Np] or [Np,k] (radius, velocity, id, ...)
 //     /frames/NNNNNN/<links>/nodes       [Nb,2] int32, rows into this frame's particles
 //     /frames/NNNNNN/<links>/<array>     [Nb] or [Nb,k] (state uint8, force, ...)
+//     /frames/NNNNNN/<surface>/vertices  [Nv,3] float64 m, a rigid body's surface (footing)
+//     /frames/NNNNNN/<surface>/triangles [Nt,3] int32, rows into this frame's vertices
 //   MeshOutput (fdm_node): <dir>/fdm.h5, <dir>/mesh.xmf
 //     /mesh/node_coords                  [Nn,3] float64 m, reference coordinates
 //     /mesh/zone_nodes                   [Nz,8] int64, VTK hexahedron order
@@ -15,7 +18,11 @@
 //
 // Each write_frame() writes one HDF5 frame (file opened and closed around it) and then
 // atomically rewrites the sidecars. Frame times must increase strictly (a temporal
-// collection). Existing files (HDF5 or sidecar) are never overwritten, except by resume().
+// collection). The nodes write the model time of docs/output.md ("Time": 0 at the beginning
+// of the run's first stage that is not specimen preparation, io::ModelClock), so that frames
+// of the same moment carry the same time in every file; frames written before that moment is
+// known get their times afterwards through retime_frames(). Existing files (HDF5 or
+// sidecar) are never overwritten, except by resume().
 //
 // resume() continues the files of a run resumed from a checkpoint that recorded
 // h5().frame_count(): frames the crashed run wrote after it are dropped (H5Frames::reopen),
@@ -26,8 +33,10 @@
 // datasets and the same sidecar bytes as an uninterrupted run.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -42,55 +51,88 @@ namespace demfdm::io {
 struct LinkFrame {
   std::string name;                     // link set, declared at construction: "bonds", "contacts"
   ArrayView nodes;                      // [Nb,2] int32, 0-based rows of this frame's particle arrays
-  // Per-link arrays [Nb] or [Nb,k]. Bonds: "state" uint8 with the recipe's codes 0 intact,
-  // 1 broken in tension, 2 broken in shear (its ParaView category colouring, §6, assumes
-  // them); the DEM maps its enum onto these only for output (docs/theory.md §2.5).
+  // Per-link arrays [Nb] or [Nb,k]. Bonds: "state" uint8; dem_node writes its BondState
+  // codes (0 never bonded, 1 intact, 2 softening, 3 broken in tension, 4 broken in shear;
+  // docs/output.md), which launch/paraview/open_run.py colours as categories.
   std::vector<FieldArray> cell_arrays;
 };
 
-/// One DEM output frame. Array names become dataset and ParaView array names; recipe
-/// names: radius [Np] (m), velocity [Np,3] (m/s), id [Np] int64 (persistent particle id).
+/// A triangulated surface of one frame (the footing): drawn as Triangle cells in its own
+/// sidecar <name>.xmf. A frame in which the body does not exist (yet) gives 0 vertices and 0
+/// triangles: an empty grid at that time.
+struct SurfaceFrame {
+  std::string name;    // surface set, declared at construction: "footing"
+  ArrayView vertices;  // [Nv,3] float64 [m]
+  ArrayView triangles; // [Nt,3] int32, 0-based rows of `vertices`, counter-clockwise seen from outside
+};
+
+/// One DEM output frame. Array names become dataset and ParaView array names; the names the
+/// tools expect: radius [Np] (m), velocity [Np,3] (m/s), id [Np] int64 (persistent particle id).
 struct ParticleFrame {
   ArrayView position;                    // [Np,3] float64 [m] particle centres
   std::vector<FieldArray> point_arrays;  // per-particle arrays, rows = Np
   std::vector<LinkFrame> links;          // exactly the link sets declared at construction
+  std::vector<SurfaceFrame> surfaces;    // exactly the surface sets declared at construction
 };
+
+/// Closed triangulated surface of an upright cylinder (axis along z): `segments` vertices on
+/// each rim, one centre vertex per cap; 4 x segments triangles with outward normals. Vertices:
+/// bottom centre, top centre, bottom rim (angle 2 pi k / segments from +x), top rim.
+struct TriangleSurface {
+  std::vector<double> vertices;         // [Nv,3] flat, m
+  std::vector<std::int32_t> triangles;  // [Nt,3] flat
+};
+TriangleSurface cylinder_surface(const std::array<double, 3>& bottom_centre, double diameter, double height,
+                                 int segments = 48);
 
 class ParticleOutput {
  public:
   /// Creates <dir>/<h5_name> (exclusive) with root attribute producer=info.producer.
   /// `link_sets` are the names of the link sets every frame carries; each gets <name>.xmf.
+  /// `surface_sets` likewise for the triangulated surfaces (e.g. {"footing"}).
   /// Throws IoError when a target file already exists, std::invalid_argument on bad names.
   ParticleOutput(const std::filesystem::path& dir, const FileInfo& info, const H5StorageParams& storage = {},
-                 std::vector<std::string> link_sets = {"bonds"}, const std::string& h5_name = "dem.h5");
+                 std::vector<std::string> link_sets = {"bonds"}, const std::string& h5_name = "dem.h5",
+                 std::vector<std::string> surface_sets = {});
 
   /// Continues <dir>/<h5_name> and the sidecars of a run resumed at output frame `frames`
-  /// (the checkpoint's h5().frame_count()): see the file comment. `storage` and
-  /// `link_sets` must be the ones the run started with. The sidecars are rewritten for
-  /// frames 0..frames-1 (removed when frames is 0, as before a first frame), and the
+  /// (the checkpoint's h5().frame_count()): see the file comment. `storage`, `link_sets`
+  /// and `surface_sets` must be the ones the run started with. The sidecars are rewritten
+  /// for frames 0..frames-1 (removed when frames is 0, as before a first frame), and the
   /// vertex index is cut back to the length those frames needed. Throws IoError when the
-  /// file cannot be resumed (H5Frames::reopen) or its frames do not hold `link_sets`.
+  /// file cannot be resumed (H5Frames::reopen) or its frames do not hold exactly those sets.
   static ParticleOutput resume(const std::filesystem::path& dir, const H5StorageParams& storage,
                                std::vector<std::string> link_sets, std::size_t frames,
-                               const std::string& h5_name = "dem.h5");
+                               const std::string& h5_name = "dem.h5", std::vector<std::string> surface_sets = {});
 
   /// Writes one frame and rewrites the sidecars; returns the frame index.
-  /// Validates all counts, and that every link node row is in [0, Np), before writing.
+  /// Validates all counts, and that every link node and triangle row is in range, before writing.
   std::size_t write_frame(std::int64_t step, double time, const ParticleFrame& frame);
+
+  /// Gives frames 0..times.size()-1 new times (attribute time of each frame group) and
+  /// rewrites the sidecars; `times` holds one time per frame written so far, finite and
+  /// strictly increasing. For a node whose model-time origin became known after it wrote
+  /// these frames (docs/output.md "Time"). Throws std::invalid_argument otherwise.
+  void retime_frames(std::span<const double> times);
 
   /// The results file, e.g. to add histories or attributes between frames.
   H5Frames& h5() noexcept { return h5_; }
   const XdmfSidecar& particles_sidecar() const noexcept { return particles_xmf_; }
   const XdmfSidecar& link_sidecar(std::size_t i) const { return links_xmf_.at(i); }
+  const XdmfSidecar& surface_sidecar(std::size_t i) const { return surfaces_xmf_.at(i); }
 
  private:
-  ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets);
+  ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets,
+                 std::vector<std::string> surface_sets);
   void rebuild_sidecars();
 
   H5Frames h5_;
+  std::filesystem::path dir_;
   XdmfSidecar particles_xmf_;
   std::vector<std::string> link_sets_;
   std::vector<XdmfSidecar> links_xmf_;
+  std::vector<std::string> surface_sets_;
+  std::vector<XdmfSidecar> surfaces_xmf_;
   bool has_time_ = false;
   double last_time_ = 0.0;
 };
@@ -127,6 +169,9 @@ class MeshOutput {
 
   std::size_t write_frame(std::int64_t step, double time, const MeshFrame& frame);
 
+  /// As ParticleOutput::retime_frames.
+  void retime_frames(std::span<const double> times);
+
   H5Frames& h5() noexcept { return h5_; }
   const XdmfSidecar& mesh_sidecar() const noexcept { return mesh_xmf_; }
   std::size_t node_count() const noexcept { return nodes_; }
@@ -137,6 +182,7 @@ class MeshOutput {
   void rebuild_sidecar();
 
   H5Frames h5_;
+  std::filesystem::path dir_;
   XdmfSidecar mesh_xmf_;
   std::size_t nodes_ = 0;
   std::size_t zones_ = 0;

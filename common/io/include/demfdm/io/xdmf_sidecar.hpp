@@ -7,7 +7,8 @@
 //   of a static int32 index dataset 0..Nmax-1. Without it the XDMF3 readers make no cells
 //   (recipe pitfall 5). The inner DataItem's Dimensions is the index's *current* length,
 //   i.e. the largest length referenced by any frame (it only grows), for every frame.
-// * Polyline [Nb,2] and Hexahedron [Nz,8] (VTK node order) use the dataset directly.
+// * Polyline [Nb,2], Triangle [Nt,3] (surfaces such as the footing) and Hexahedron [Nz,8]
+//   (VTK node order) use the dataset directly.
 // * Attributes with 1 column are Scalar, 3 Vector, anything else Matrix; a 6-column stress
 //   in VTK order xx, yy, zz, xy, yz, xz is therefore a Matrix, never Tensor6 (the two reader
 //   families expand Tensor6 differently, pitfall 4).
@@ -29,7 +30,7 @@
 
 namespace demfdm::io {
 
-enum class XdmfTopology { kPolyvertex, kPolyline, kHexahedron };
+enum class XdmfTopology { kPolyvertex, kPolyline, kTriangle, kHexahedron };
 enum class XdmfCenter { kNode, kCell };
 enum class XdmfAttributeType { kScalar, kVector, kMatrix };
 
@@ -52,7 +53,8 @@ struct XdmfGrid {
   XdmfTopology topology = XdmfTopology::kPolyvertex;
   std::size_t elements = 0;  // number of cells
   // Polyvertex: the int32 index dataset (rows >= elements; its first `elements` entries are used).
-  // Polyline: [elements, 2] int32/int64. Hexahedron: [elements, 8] int32/int64.
+  // Polyline: [elements, 2] int32/int64. Triangle: [elements, 3] int32/int64 (counter-
+  // clockwise seen from outside). Hexahedron: [elements, 8] int32/int64.
   DatasetRef connectivity;
   DatasetRef geometry;  // [points, 3] float64/float32
   std::vector<XdmfAttribute> attributes;
