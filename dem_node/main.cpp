@@ -186,18 +186,12 @@ class DemParticipant : public node::Participant {
     w.u64(x_begin_.size());
     for (const auto& x : x_begin_) w.f64(x.x), w.f64(x.y), w.f64(x.z);
     energy_jump_.save(w);
-    // Result writers: frames written, history bytes and rows, specimen_stages.csv bytes.
-    w.b(outputs_open_);
-    w.u64(out_ ? out_->h5().frame_count() : 0);
-    w.u64(history_ ? history_->bytes() : 0);
-    w.u64(history_ ? history_->rows() : 0);
+    // specimen_stages.csv bytes, then the result writers and the frames' model time.
     const auto stages_csv = dir_ / "specimen_stages.csv";
     w.u64(!dir_.empty() && fs::exists(stages_csv) ? fs::file_size(stages_csv) : 0);
-    // Model time of the frames (io::ModelClock).
-    const auto c = clock_.state();
-    w.b(c.known);
-    for (double v : {c.origin, c.model, c.node_ref}) w.f64(v);
-    w.f64s(c.pending);
+    node::OutputCheckpoint{outputs_open_, out_ ? out_->h5().frame_count() : 0, history_ ? history_->bytes() : 0,
+                           history_ ? history_->rows() : 0}
+        .save(w, clock_.state());
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
@@ -226,12 +220,11 @@ class DemParticipant : public node::Participant {
     x_begin_.resize(sec.count(24));
     for (auto& x : x_begin_) x = {sec.f64(), sec.f64(), sec.f64()};
     energy_jump_.load(sec);
-    const bool was_open = sec.b();
-    const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64(), stages_bytes = sec.u64();
+    const auto stages_bytes = sec.u64();
     io::ModelClock::State c;
-    c.known = sec.b();
-    for (double* v : {&c.origin, &c.model, &c.node_ref}) *v = sec.f64();
-    c.pending = sec.f64s();
+    const auto o = node::OutputCheckpoint::load(sec, c);
+    const bool was_open = o.open;
+    const auto frames = o.frames, bytes = o.bytes, rows = o.rows;
     sec.done();
     clock_.set_state(c);
     ratio_valid_ = skeleton_valid_ = false;

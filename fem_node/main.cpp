@@ -139,14 +139,9 @@ class FemParticipant : public node::Participant {
     for (bool b : {gain_checked_, coupled_, solved_, has_frame_}) w.b(b);
     w.i64(last_frame_);
     w.i64(solves_);
-    w.b(outputs_open_);
-    w.u64(out_ ? out_->h5().frame_count() : 0);
-    w.u64(history_ ? history_->bytes() : 0);
-    w.u64(history_ ? history_->rows() : 0);
-    const auto c = clock_.state();  // model time of the frames
-    w.b(c.known);
-    for (double v : {c.origin, c.model, c.node_ref}) w.f64(v);
-    w.f64s(c.pending);
+    node::OutputCheckpoint{outputs_open_, out_ ? out_->h5().frame_count() : 0, history_ ? history_->bytes() : 0,
+                           history_ ? history_->rows() : 0}
+        .save(w, clock_.state());
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
@@ -160,12 +155,10 @@ class FemParticipant : public node::Participant {
     for (bool* b : {&gain_checked_, &coupled_, &solved_, &has_frame_}) *b = sec.b();
     last_frame_ = sec.i64();
     solves_ = sec.i64();
-    const bool was_open = sec.b();
-    const auto frames = sec.u64(), bytes = sec.u64(), rows = sec.u64();
     io::ModelClock::State c;
-    c.known = sec.b();
-    for (double* v : {&c.origin, &c.model, &c.node_ref}) *v = sec.f64();
-    c.pending = sec.f64s();
+    const auto o = node::OutputCheckpoint::load(sec, c);
+    const bool was_open = o.open;
+    const auto frames = o.frames, bytes = o.bytes, rows = o.rows;
     sec.done();
     clock_.set_state(c);
     if (how.branch) {  // a new run folder: new result files from the branch point on

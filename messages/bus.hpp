@@ -111,7 +111,7 @@ class Bus {
   // an instance); whichever pumps dispatches to all of them.
   Bus(std::shared_ptr<lcm::LCM> shared, std::int64_t run_id, std::string sender);
   ~Bus();
-  Bus(const Bus&) = delete;  // lcm::LCM copies segfault at exit (coupling-anchors 0.4)
+  Bus(const Bus&) = delete;  // lcm::LCM copies segfault at exit (messages/README.md "Transport")
   Bus& operator=(const Bus&) = delete;
 
   std::int64_t run_id() const { return run_id_; }

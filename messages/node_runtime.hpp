@@ -77,6 +77,36 @@ class Timed {
   std::chrono::steady_clock::time_point t0_;
 };
 
+// What every adapter's checkpoint section ends with (docs/checkpoint-format.md): whether its
+// result writers were created, how far they got (HDF5 frames, history CSV bytes and rows), and
+// the frames' model clock (io::ModelClock::State: known, origin, model, node_ref, pending).
+struct OutputCheckpoint {
+  bool open = false;
+  std::uint64_t frames = 0, bytes = 0, rows = 0;
+  template <class ClockState>
+  void save(io::StateWriter& w, const ClockState& c) const {
+    w.b(open);
+    w.u64(frames);
+    w.u64(bytes);
+    w.u64(rows);
+    w.b(c.known);
+    for (double v : {c.origin, c.model, c.node_ref}) w.f64(v);
+    w.f64s(c.pending);
+  }
+  template <class ClockState>
+  static OutputCheckpoint load(io::SectionReader& r, ClockState& c) {
+    OutputCheckpoint o;
+    o.open = r.b();
+    o.frames = r.u64();
+    o.bytes = r.u64();
+    o.rows = r.u64();
+    c.known = r.b();
+    for (double* v : {&c.origin, &c.model, &c.node_ref}) *v = r.f64();
+    c.pending = r.f64s();
+    return o;
+  }
+};
+
 // How a node state is being restored (command RESTORE, docs/checkpoint-format.md).
 struct Restore {
   std::filesystem::path dir;        // the checkpoint folder

@@ -3,12 +3,12 @@
 // Every parameter is declared once in code (Schema -> Section -> Param) with its
 // type, unit, default, range and doc string. That single declaration drives parsing,
 // validation, default filling, `--help` text and the Markdown reference table
-// (style.md habit 8: preCICE makeXMLAttribute().setDocumentation(), YADE
+// (as preCICE documents each attribute where it is declared, makeXMLAttribute().setDocumentation(), and YADE
 // YADE_CLASS_BASE_DOC_ATTRS). Bad input gives one error line in the form
 //
 //   file:line:col: key.path: expected <what>, found <what>
 //
-// (style.md habit 7: Drake YamlReadArchive::ReportError, preCICE "Did you mean").
+// (the style of Drake's YamlReadArchive::ReportError and preCICE's "Did you mean").
 // Unknown keys are errors, never warnings (Kratos ValidateAndAssignDefaults).
 //
 // Usage:

@@ -64,7 +64,7 @@ cfg::Schema make_schema() {
   stage.real("duration", "s", std::nullopt, "Stage duration").min(0, true);
   stage.real("velocity", "m/s", 0.0, "Platen velocity");
 
-  // Bonds need a bonded contact model: name both parties (style.md habit 6).
+  // Bonds need a bonded contact model: the error names both parties.
   s.check([](const cfg::Scene& sc, cfg::CheckContext& ctx) {
     if (sc.has("dem.bonds") && sc.string("dem.contact.model") == "linear")
       ctx.fail("dem.contact.model", "'softbond' or 'pbond' when [dem.bonds] is present",

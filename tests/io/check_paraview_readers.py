@@ -1,7 +1,7 @@
 """ctest io_paraview_readers (registered only when ParaView's pvbatch is installed).
 
 Opens the sidecars written by io_sample_writer with all three XDMF readers of ParaView
-(Xdmf3ReaderT, Xdmf3ReaderS, XDMFReader), by absolute path (output-recipe.md pitfall 3), and
+(Xdmf3ReaderT, Xdmf3ReaderS, XDMFReader), by absolute path (docs/output.md O28), and
 checks for every time step: the time values equal the frames' `time` attributes; the point and
 cell counts; the cell type (VTK_POLY_VERTEX 2 for particles, VTK_POLY_LINE 4 for bonds, VTK_TRIANGLE 5 for
 the footing surface, VTK_HEXAHEDRON 12 for the mesh); every array's name, component count and

@@ -192,7 +192,7 @@ TEST(H5Frames, FileIsClosedBetweenFramesSoReadersCanOpenIt) {
   h5.end_frame();
   {
     // Opening read-only with HDF5's default file locking fails while a writer holds the
-    // file (recipe pitfall 2); it must succeed here.
+    // file (docs/output.md O12); it must succeed here.
     H5Reader r(file);
     EXPECT_EQ(r.read_f64("/frames/000000/particles/position"), x);
   }

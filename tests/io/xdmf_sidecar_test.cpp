@@ -1,4 +1,4 @@
-// XdmfSidecar: the emitted XML against the verified skeletons of output-recipe.md §4.
+// XdmfSidecar: the emitted XML against the skeletons verified in ParaView 5.11 (docs/output.md O18-O26).
 #include "demfdm/io/xdmf_sidecar.hpp"
 
 #include <gtest/gtest.h>
@@ -15,9 +15,8 @@ DatasetRef ref(const std::filesystem::path& file, std::string path, DType t, std
   return DatasetRef{file, std::move(path), t, rows, cols};
 }
 
-// Recipe §4 particles.xmf, frame 1 (t = 0.001 s, 285 of 288 particles), without the
-// explanatory comment.
-const char* const kRecipeParticles = R"(<?xml version="1.0" ?>
+// The verified particles.xmf (docs/output.md O19), frame 1 (t = 0.001 s, 285 of 288 particles).
+const char* const kVerifiedParticles = R"(<?xml version="1.0" ?>
 <Xdmf Version="3.0">
   <Domain>
     <Grid Name="particles" GridType="Collection" CollectionType="Temporal">
@@ -47,7 +46,7 @@ const char* const kRecipeParticles = R"(<?xml version="1.0" ?>
 </Xdmf>
 )";
 
-TEST(XdmfSidecar, ParticlesMatchRecipeSkeletonExactly) {
+TEST(XdmfSidecar, ParticlesMatchVerifiedSkeletonExactly) {
   ScratchDir dir;
   const auto h5 = dir / "dem.h5";
   XdmfSidecar s(dir / "particles.xmf", "particles");
@@ -62,13 +61,13 @@ TEST(XdmfSidecar, ParticlesMatchRecipeSkeletonExactly) {
       XdmfAttribute::node("velocity", ref(h5, "/frames/000001/particles/velocity", DType::kFloat32, 285, 3)));
   g.attributes.push_back(XdmfAttribute::node("id", ref(h5, "/frames/000001/particles/id", DType::kInt64, 285)));
   s.append(g);
-  EXPECT_EQ(s.xml(), kRecipeParticles);
+  EXPECT_EQ(s.xml(), kVerifiedParticles);
   s.write();
-  EXPECT_EQ(test::slurp(dir / "particles.xmf"), kRecipeParticles);
+  EXPECT_EQ(test::slurp(dir / "particles.xmf"), kVerifiedParticles);
   EXPECT_FALSE(std::filesystem::exists(dir / "particles.xmf.tmp")) << "the temporary must be renamed away";
 }
 
-TEST(XdmfSidecar, BondsAndMeshMatchRecipeSkeletons) {
+TEST(XdmfSidecar, BondsAndMeshMatchVerifiedSkeletons) {
   ScratchDir dir;
   const auto dem = dir / "dem.h5", fdm = dir / "fdm.h5";
   XdmfSidecar bonds(dir / "bonds.xmf", "bonds");
@@ -108,7 +107,7 @@ TEST(XdmfSidecar, BondsAndMeshMatchRecipeSkeletons) {
            R"(<Attribute Name="stress" AttributeType="Matrix" Center="Cell">)",
            R"(<DataItem Dimensions="288 6" NumberType="Float" Precision="8" Format="HDF">fdm.h5:/frames/000001/zones/stress</DataItem>)"})
     EXPECT_NE(mx.find(line), std::string::npos) << "missing: " << line << "\nin:\n" << mx;
-  EXPECT_EQ(mx.find("Tensor6"), std::string::npos) << "recipe pitfall 4: never Tensor6";
+  EXPECT_EQ(mx.find("Tensor6"), std::string::npos) << "docs/output.md O21: never Tensor6";
   EXPECT_EQ(test::xml_problem(bx), "");
   EXPECT_EQ(test::xml_problem(mx), "");
 }

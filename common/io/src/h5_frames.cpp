@@ -1,4 +1,4 @@
-// H5Frames: see the header for the layout; output-recipe.md §3 and §5 for why.
+// H5Frames: see the header for the layout; docs/output.md O1-O17 for why.
 #include "demfdm/io/h5_frames.hpp"
 
 #include <algorithm>
@@ -24,7 +24,7 @@ using detail::QuietErrors;
 namespace {
 
 constexpr std::int64_t kFormatVersion = 1;
-constexpr hsize_t kIndexChunkRows = 65536;  // recipe §3: /xdmf/vertex_index chunk length
+constexpr hsize_t kIndexChunkRows = 65536;  // docs/output.md O17: /xdmf/vertex_index chunk length
 
 void require_relative_name(std::string_view name) {
   if (name.empty() || name.front() == '/' || name.back() == '/')
@@ -313,7 +313,7 @@ H5Frames H5Frames::create(const std::filesystem::path& file, const FileInfo& inf
   const std::string path = abs_string(file);
   QuietErrors quiet;
   H5Handle fapl = detail::make_fapl(path);
-  // H5F_ACC_EXCL: an earlier run's results are never overwritten (recipe §3).
+  // H5F_ACC_EXCL: an earlier run's results are never overwritten (docs/output.md O9).
   const hid_t fid = H5Fcreate(path.c_str(), H5F_ACC_EXCL, H5P_DEFAULT, fapl.get());
   if (fid < 0) {
     std::error_code ec;
@@ -477,7 +477,7 @@ void H5Frames::write_dataset(std::int64_t fid, const std::string& abs_path, cons
   H5Handle space = check_id(H5Screate_simple(rank, dims, nullptr), H5Sclose, "H5Screate_simple", file, abs_path);
   H5Handle dcpl = detail::make_dcpl(file);
   // Chunk only when compressing: chunks without a filter store partial edge chunks in full
-  // (+25 % in the recipe's benchmark, §8). A zero-row dataset stays contiguous (chunk
+  // (+25 % in the benchmark, docs/output.md O16). A zero-row dataset stays contiguous (chunk
   // dimensions must be positive and there is nothing to compress).
   if (allow_compress && storage_.compress && data.rows > 0) {
     const hsize_t chunk[2] = {std::min<hsize_t>(data.rows, storage_.chunk_rows), dims[1]};
@@ -532,7 +532,7 @@ DatasetRef H5Frames::ensure_index(std::string_view abs_path, std::size_t n) {
     const hsize_t zero = 0, unlimited = H5S_UNLIMITED, chunk = kIndexChunkRows;
     H5Handle space = check_id(H5Screate_simple(1, &zero, &unlimited), H5Sclose, "H5Screate_simple", file, path);
     H5Handle dcpl = detail::make_dcpl(file);
-    // Recipe §3: chunked 65536, shuffle + gzip 1 (the index compresses to almost nothing).
+    // docs/output.md O17: chunked 65536, shuffle + gzip 1 (the index compresses to almost nothing).
     check(H5Pset_chunk(dcpl.get(), 1, &chunk), "H5Pset_chunk", file, path);
     check(H5Pset_shuffle(dcpl.get()), "H5Pset_shuffle", file, path);
     check(H5Pset_deflate(dcpl.get(), 1), "H5Pset_deflate", file, path);
@@ -734,7 +734,7 @@ void H5Frames::declare_history(const std::vector<HistoryColumn>& columns) {
                                         dcpl.get(), H5P_DEFAULT),
                              H5Dclose, "H5Dcreate2", file, path);
     detail::write_attr_string(dset.get(), "unit", c.unit, file, path);
-    // Also "<name>_unit" on /history: the form the recipe's h5py example reads (§7).
+    // Also "<name>_unit" on /history: the form a plain h5py script reads (docs/output.md O8).
     detail::write_attr_string(group.get(), c.name + "_unit", c.unit, file, "/history");
   }
   std::vector<std::string> names;

@@ -106,7 +106,7 @@ H5Handle make_fapl(const std::string& file) {
   check(H5Pset_libver_bounds(fapl.get(), H5F_LIBVER_EARLIEST, H5F_LIBVER_V18), "H5Pset_libver_bounds",
         file, "");
   // Strong close: H5Fclose really closes the file even if an identifier leaked, so the
-  // lock is released between frames whatever happened (recipe pitfall 2).
+  // lock is released between frames whatever happened (docs/output.md O12).
   check(H5Pset_fclose_degree(fapl.get(), H5F_CLOSE_STRONG), "H5Pset_fclose_degree", file, "");
   return fapl;
 }
@@ -188,7 +188,7 @@ void write_scalar_attr(hid_t obj, std::string_view name, hid_t ftype, hid_t mtyp
 
 void write_attr_string(hid_t obj, std::string_view name, std::string_view value, const std::string& file,
                        std::string_view object) {
-  // Fixed-length ASCII, null-padded (recipe §3); h5py returns it as bytes. HDF5 refuses a
+  // Fixed-length ASCII, null-padded (docs/output.md O5); h5py returns it as bytes. HDF5 refuses a
   // zero-size string type, so an empty value is stored as one NUL byte.
   H5Handle type = check_id(H5Tcopy(H5T_C_S1), H5Tclose, "H5Tcopy", file, object);
   const std::size_t len = value.empty() ? 1 : value.size();

@@ -41,7 +41,7 @@ class H5Handle {
   Closer closer_ = nullptr;
 };
 
-/// Switches HDF5's automatic error-stack printing off for its lifetime (recipe pitfall 19):
+/// Switches HDF5's automatic error-stack printing off for its lifetime (docs/output.md O13):
 /// we report one clear IoError instead of HDF5's multi-line dump on stderr.
 class QuietErrors {
  public:
@@ -78,7 +78,7 @@ H5Handle make_dcpl(const std::string& file);
 
 /// Opens the group at absolute `path` (e.g. "/frames/000001/particles"), creating each
 /// missing component with the quiet gcpl. (H5Pset_create_intermediate_group would create
-/// the parents with default, time-stamped plists; recipe §5.)
+/// the parents with default, time-stamped plists; docs/output.md O11.)
 H5Handle require_group(hid_t fid, std::string_view path, const std::string& file);
 
 /// True when a link `path` exists (all parents must exist or the answer is false).

@@ -75,7 +75,7 @@ void check_new_times(const std::string& who, std::span<const double> times, std:
 }
 
 FileInfo with_fdm_attrs(FileInfo info) {
-  // Recipe §3 fdm.h5 root attributes; sign convention of docs/theory.md §0.2 (FLAC3D).
+  // fdm.h5 root attributes of docs/output.md O6; sign convention of docs/theory.md §0.2 (FLAC3D).
   info.extra.emplace_back("stress_unit", "Pa");
   info.extra.emplace_back("stress_components", "xx yy zz xy yz xz");
   info.extra.emplace_back("stress_sign", "tension positive");
@@ -320,7 +320,7 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
     if (l.nodes.cols != 2 || l.nodes.dtype != DType::kInt32)
       throw std::invalid_argument(where + l.name + "/nodes must be [Nb,2] int32");
     check_rows(where + l.name + "/nodes", l.nodes, l.nodes.rows);
-    // Recipe pitfall 6: link nodes are rows of this frame's particle arrays, not ids.
+    // docs/output.md O4: link nodes are rows of this frame's particle arrays, not ids.
     check_index_range(where + l.name + "/nodes", static_cast<const std::int32_t*>(l.nodes.data), l.nodes.size(), np);
     check_fields(where + l.name + " cell array", l.cell_arrays, l.nodes.rows, {"nodes"});
   }

@@ -1,4 +1,4 @@
-// XdmfSidecar: emits the skeletons of output-recipe.md §4.
+// XdmfSidecar: emits the sidecars of docs/output.md O18-O26.
 #include "demfdm/io/xdmf_sidecar.hpp"
 
 #include <cerrno>

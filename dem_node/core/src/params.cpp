@@ -1,4 +1,4 @@
-// Parameter validation (style.md habit 6/7: name the field, the expected range, the value).
+// Parameter validation: every error names the field, the expected range and the value.
 #include "demfdm/dem/params.hpp"
 
 #include <sstream>

@@ -702,7 +702,7 @@ void World::rebuild() {
   std::sort(np.begin(), np.end(), [](const NewPair& x, const NewPair& y) {
     return (std::uint64_t(x.a) << 32 | x.b) < (std::uint64_t(y.a) << 32 | y.b);
   });
-  // merge the history keyed by (id_A, id_B) (style.md habit 5)
+  // merge the history keyed by (id_A, id_B): a contact's history follows the pair
   const bool has_bond = p_.ball_ball.model != ContactModel::kLinear;
   std::vector<Key> keys(pc_.size());
   for (std::size_t c = 0; c < pc_.size(); ++c) {
@@ -966,7 +966,7 @@ void World::rebuild_walls() {
 // measurements, and adds −F/+F and the torques into a force buffer: the particle arrays for
 // thread 0 and a private buffer for every other thread; the buffers are then summed in
 // thread order. The static partition makes the result bit-identical from run to run for a
-// given thread count (style.md habit 13).
+// given thread count (determinism: same scene, seed and thread count, same bits).
 template <ContactModel M, bool Periodic>
 void World::pair_pass(double dt) {
   const std::int64_t m = static_cast<std::int64_t>(pc_.size());
@@ -1374,7 +1374,7 @@ void World::footing_pass(double dt) {
 }
 
 void World::force_pass(double dt) {
-  // One switch per pass selects the template instantiation (style.md §2b(2)).
+  // One switch per pass selects the template instantiation (no virtual call per contact).
   const bool per = p_.periodic.enabled;
   Lap lap;
   times_.pair_model = to_string(p_.ball_ball.model);

@@ -1,6 +1,6 @@
 // One HDF5 results file per producing process, written frame by frame.
 //
-// Layout (output-recipe.md §3, verified with ParaView 5.11 and h5py 3.7):
+// Layout (docs/output.md O1-O8 and O17, verified with ParaView 5.11 and h5py 3.7):
 //   /                       attrs format="demfdm-results", format_version=1 (int64), producer,
 //                           run_id, scene_hash, length_unit="m", time_unit="s", FileInfo::extra
 //   /frames/NNNNNN          one group per output frame, NNNNNN = 6-digit output index from 0
@@ -19,7 +19,7 @@
 // links by name unless creation order is tracked, and the sidecars and history rows need
 // the write order back when a crashed run is resumed.
 //
-// File discipline (recipe §3 and §9 pitfalls 2, 13, 19):
+// File discipline (docs/output.md O9-O13):
 // * created with H5F_ACC_EXCL: an existing file is never overwritten;
 // * libver bounds EARLIEST..V18, so any HDF5 >= 1.8 reads the file;
 // * object-time tracking off in every group/dataset creation plist: two identical runs give
@@ -114,7 +114,7 @@ class H5Frames {
   /// Makes the int32 dataset `abs_path` (unlimited, chunked 65536, shuffle+gzip 1) hold at
   /// least 0, 1, ..., n-1, growing it when n exceeds its length. This is the static vertex
   /// index whose first N entries give the XDMF3 readers one Polyvertex cell per particle
-  /// (recipe §2, pitfall 5). Returns the reference with the current length.
+  /// (docs/output.md O17, O19). Returns the reference with the current length.
   DatasetRef ensure_index(std::string_view abs_path, std::size_t n);
 
   /// Cuts the index dataset `abs_path` (written by ensure_index()) back to its first n

@@ -9,19 +9,19 @@
 
 namespace demfdm::io {
 
-/// How results datasets are stored (output-recipe.md §8 "Advice").
+/// How results datasets are stored (docs/output.md O14-O16, O8).
 struct H5StorageParams {
-  // [-] false: contiguous, no filter (the recipe's default: ~5 ms per 100k-particle frame,
+  // [-] false: contiguous, no filter (docs/output.md O14: ~5 ms per 100k-particle frame,
   //     fastest ParaView stepping). true: chunked + shuffle + deflate (about 40 % smaller
   //     with bonds, roughly 0.1-0.15 s per 100k-particle frame on one core).
   bool compress = false;
-  // [-] gzip level when compress is on, 1..9. Level 1 is the recipe's choice: levels 4-6
+  // [-] gzip level when compress is on, 1..9. Level 1 per docs/output.md O15: levels 4-6
   //     gained under 1 % for 1.2-2x the time.
   int deflate_level = 1;
   // [rows] chunk length of compressed per-frame datasets (chunk = min(rows, chunk_rows)),
   //        >= 1. 65536 rows is 64 KB of uint8 state up to 1.5 MB of float64 positions.
   std::size_t chunk_rows = 65536;
-  // [rows] chunk length of the extendible /history/<name> datasets, >= 1 (recipe: 1024).
+  // [rows] chunk length of the extendible /history/<name> datasets, >= 1 (docs/output.md O8: 1024).
   std::size_t history_chunk_rows = 1024;
   // [rows] history rows buffered in memory before one open-append-close of the file, >= 1.
   //        1 puts every sample on disk at once (a crash loses nothing); larger values

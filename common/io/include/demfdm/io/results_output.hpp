@@ -141,7 +141,7 @@ class ParticleOutput {
 struct MeshFrame {
   // Per-node arrays [Nn] or [Nn,k]: displacement [Nn,3] (m; ParaView "Warp By Vector"),
   // velocity [Nn,3] (m/s). A float64 [Nn,3] array named "position" (current coordinates)
-  // replaces /mesh/node_coords as the frame's geometry (recipe §3, large deformations).
+  // replaces /mesh/node_coords as the frame's geometry (docs/output.md O7, large deformations).
   std::vector<FieldArray> node_arrays;
   // Per-zone arrays [Nz] or [Nz,k]: stress [Nz,6] (Pa, xx yy zz xy yz xz, tension positive,
   // docs/theory.md §0.2 sign convention), plastic state uint8 [Nz], ...

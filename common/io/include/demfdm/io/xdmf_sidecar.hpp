@@ -1,24 +1,24 @@
 // XDMF3 sidecars: one .xmf per entity (particles, bonds, mesh, ...) next to the HDF5 files,
 // holding a temporal collection with one uniform grid per output frame.
 //
-// The emitted XML is the skeleton of output-recipe.md §4, verified with ParaView 5.11's
+// The emitted XML follows docs/output.md O18-O26, verified with ParaView 5.11's
 // three XDMF readers:
 // * Polyvertex particles carry explicit connectivity: a HyperSlab (start 0, stride 1, count N)
 //   of a static int32 index dataset 0..Nmax-1. Without it the XDMF3 readers make no cells
-//   (recipe pitfall 5). The inner DataItem's Dimensions is the index's *current* length,
+//   (docs/output.md O19). The inner DataItem's Dimensions is the index's *current* length,
 //   i.e. the largest length referenced by any frame (it only grows), for every frame.
 // * Polyline [Nb,2], Triangle [Nt,3] (surfaces such as the footing) and Hexahedron [Nz,8]
 //   (VTK node order) use the dataset directly.
 // * Attributes with 1 column are Scalar, 3 Vector, anything else Matrix; a 6-column stress
 //   in VTK order xx, yy, zz, xy, yz, xz is therefore a Matrix, never Tensor6 (the two reader
-//   families expand Tensor6 differently, pitfall 4).
+//   families expand Tensor6 differently, docs/output.md O21).
 // * Dimensions have the rank and sizes of the HDF5 dataset; NumberType/Precision follow its
 //   dtype (Float 8 / Float 4 / Int 8 / Int 4 / UChar 1); Time Value has 17 significant digits.
 // * HDF5 file names are written relative to the xmf's folder (the readers resolve them
 //   there), or absolute when no relative path exists.
 // * write() rewrites the whole file as <name>.xmf.tmp and rename()s it over <name>.xmf, so a
 //   viewer never parses a half-written file. Rewriting is quadratic in the number of frames;
-//   the recipe measured a 2000-frame sidecar at 2.6 MB, opened in < 0.5 s.
+//   a 2000-frame sidecar was measured at 2.6 MB, opened in < 0.5 s (docs/output.md O24).
 #pragma once
 
 #include <cstddef>
@@ -34,7 +34,7 @@ enum class XdmfTopology { kPolyvertex, kPolyline, kTriangle, kHexahedron };
 enum class XdmfCenter { kNode, kCell };
 enum class XdmfAttributeType { kScalar, kVector, kMatrix };
 
-/// Scalar for 1 column, Vector for 3, Matrix otherwise (6-column stress: recipe pitfall 4).
+/// Scalar for 1 column, Vector for 3, Matrix otherwise (6-column stress: docs/output.md O21).
 XdmfAttributeType attribute_type_for(std::size_t cols) noexcept;
 
 struct XdmfAttribute {

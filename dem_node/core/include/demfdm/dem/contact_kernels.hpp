@@ -1,6 +1,6 @@
 // Contact state and the stateless contact kernels (docs/theory.md §1.4–1.7, §2, §3).
 //
-// Design (style.md §2b(2), habit 3): every formula lives in one inline function over plain
+// Design (as LAMMPS's granular sub-model kernels): every formula lives in one inline function over plain
 // values. The passes in world.cpp are templates on the ContactModel; one switch per pass
 // picks the instantiation, so there is no branch on the model type inside a contact loop.
 // The same functions are called by the unit tests, so tests and hot loops cannot drift.

@@ -5,13 +5,13 @@
 // for every contact family → fixed-order sums onto balls (thread buffers, then wall contacts) → force effects (gravity) →
 // end-of-step effects.
 //
-// Determinism (style.md habit 13): the ball–ball pass splits the sorted contact list into
+// Determinism (same scene, seed and thread count give the same bits): the ball–ball pass splits the sorted contact list into
 // one static block per thread; each thread adds into its own force buffer and the buffers
 // are summed in thread order. Results are bit-identical from run to run for a given thread
 // count (sums are associated differently for different thread counts).
 //
 // Contact history is keyed by the stable particle / wall ids and carried across rebuilds
-// (style.md habit 5). Bonded contacts are never dropped by a rebuild.
+// (contact histories follow the pair, not the list slot). Bonded contacts are never dropped by a rebuild.
 #pragma once
 
 #include <array>
@@ -136,7 +136,7 @@ enum class PairKernel : std::uint8_t { kAuto, kScalar, kBlockBaseline, kBlockAvx
 
 class World;
 
-/// Optional effect with declared phases (style.md §2b(1), habit 2). Lists per phase are
+/// Optional effect with declared phases (a registry of sub-models, as LAMMPS's granular models). Lists per phase are
 /// built when effects are added; an absent effect costs nothing.
 class Effect {
  public:
