@@ -11,6 +11,7 @@ studies never hold a second copy of those rules.
 """
 import os
 import subprocess
+import time
 
 
 def finished(run_dir):
@@ -61,6 +62,26 @@ def branch_source(coordinator, scene, runs, exclude_last_stage=True):
                 best = (step, path)
                 break
     return best[1] if best else None
+
+
+def stop_runs(active):
+    """Stops the launch/run processes of a study after Ctrl-C or SIGTERM: `active` holds
+    (key, process, log file, start time) entries. After Ctrl-C the runs have the signal too;
+    otherwise (SIGTERM, or SIGINT ignored in a background job) each launch/run is asked to stop
+    with SIGTERM (its trap stops its own processes), then killed after 15 s. Logs are closed."""
+    t_end = time.time() + 2
+    for _, p, _, _ in active:
+        try:
+            p.wait(timeout=max(0.0, t_end - time.time()))
+        except subprocess.TimeoutExpired:
+            p.terminate()
+    for _, p, log, _ in active:
+        try:
+            p.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+        log.close()
 
 
 def coordinator_command():

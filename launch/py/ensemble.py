@@ -59,6 +59,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import accuracy_study  # noqa: E402  (set_key, set_stage_key: scene text edits)
 import paper_figures  # noqa: E402  (read_csv, initial_stiffness, elastic_stiffness, history_path)
+import branching  # noqa: E402  (stop_runs)
 
 ROOT = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 SEED_DIR = re.compile(r"^seed-(\d+)$")
@@ -515,21 +516,7 @@ def run(ens, scene, seeds, jobs=1, sets=(), stage_sets=(), launcher=None):
     except KeyboardInterrupt:
         print("ensemble: interrupted; stopping %d run(s); run the same command again to resume" % len(active),
               file=sys.stderr)
-        # After Ctrl-C the runs have the signal too; otherwise (SIGTERM, or SIGINT ignored in a
-        # background job) launch/run is asked to stop with SIGTERM (its trap stops its processes).
-        t_end = time.time() + 2
-        for k, p, log, _ in active.values():
-            try:
-                p.wait(timeout=max(0.0, t_end - time.time()))
-            except subprocess.TimeoutExpired:
-                p.terminate()
-        for k, p, log, _ in active.values():
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-            log.close()
+        branching.stop_runs(list(active.values()))
         return 130
     if interrupted:
         print("ensemble: interrupted (seeds %s); run the same command again to resume" %

@@ -294,19 +294,8 @@ class Sweep:
         except KeyboardInterrupt:
             print("sweep: interrupted; stopping %d run(s); continue with launch/sweep --into %s" %
                   (len(active), self.folder), file=sys.stderr)
-            t_end = time.time() + 2
-            for run, p, log, _ in active.values():
-                try:
-                    p.wait(timeout=max(0.0, t_end - time.time()))
-                except subprocess.TimeoutExpired:
-                    p.terminate()
+            branching.stop_runs(list(active.values()))
             for run, p, log, t0 in active.values():
-                try:
-                    p.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait()
-                log.close()
                 if p.returncode == 0 and branching.finished(self.run_dir(run)):  # it finished meanwhile
                     self.finish_row(run, "finished", 0, time.time() - t0)
                 else:
