@@ -18,6 +18,7 @@ Parts:
   rate   inertial number I in {1e-2, 3.3e-3, 1e-3, 3.3e-4} (30x below the paper's 1e-2), each with
          penetration-stage local damping 0.7 and 0.1 (docs/theory.md 7.6)
   dt     dem.dt_safety 0.8 / 0.4 / 0.2 at the chosen rate (--rate, 1e-3) and damping (--damping, 0.1)
+  damping  penetration damping 0.05 and 0 against the protocol's 0.1 at the chosen rate
   box    the coupled model against DEM everywhere, at the chosen rate and damping, at upscaling 1.5
          in a 4 x 4 x 4 mm outer box: the DEM-only box (replication 2 x 2 x 4 of the 2 x 2 x 1 mm
          REV, box of walls), and a DEM block of 2 x 2 x 2 mm and of 2 x 2 x 3 mm in the FDM
@@ -83,6 +84,16 @@ def plan(parts, rate, damping, quick):
                 name = rate_variant(rate, damping)  # the same runs as the rate part's
                 edits.pop("dem.dt_safety")
             out.append((name, "dt", "dt_safety %s" % f, edits))
+    if "damping" in parts:
+        # Below the protocol's damping: 0.05 and 0 against 0.1 (rate_variant(rate, "0.1")).
+        steps = int(40000 * 1e-2 / float(rate) * 2)
+        out.append((rate_variant(rate, "0.1"), "damping", "damping 0.1",
+                    {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": "0.1",
+                     "stage:penetrate.steps": str(steps)}))
+        for a in ("0.05", "0"):
+            out.append((rate_variant(rate, a), "damping", "damping %s" % a,
+                        {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": a,
+                         "stage:penetrate.steps": str(steps)}))
     if "box" in parts:
         steps = int(40000 * 1e-2 / float(rate) * 2)
         pen = {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": damping,
@@ -191,7 +202,7 @@ def main():
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
     r.add_argument("study")
-    r.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box"])
+    r.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping"])
     r.add_argument("--seeds", type=int, default=5)
     r.add_argument("--jobs", type=int, default=1)
     r.add_argument("--rate", default="1e-3")
@@ -202,7 +213,7 @@ def main():
     t = sub.add_parser("table")
     t.add_argument("study")
     ls = sub.add_parser("list")
-    ls.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box"])
+    ls.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping"])
     a = p.parse_args()
     if a.cmd == "run":
         return cmd_run(a)
@@ -363,6 +374,13 @@ def cmd_table(a):
                     [("I %s, damping %s" % (meta["rate"], meta["damping"]),
                       [(variants[n]["label"], runs.get(n, [])) for n in names])], grid)
         figures.append("converge_dt.png")
+    if "damping" in meta["parts"]:
+        md += damping_tables(met, meta)
+        names = [rate_variant(meta["rate"], a) for a in ("0.1", "0.05", "0")]
+        band_figure(os.path.join(a.study, "converge_damping.png"), "Footing load, seed mean and 95 % band, by damping",
+                    [("I %s" % meta["rate"], [("damping %s" % n.rsplit("_a", 1)[1], runs.get(n, [])) for n in names])],
+                    grid)
+        figures.append("converge_damping.png")
     if "box" in meta["parts"]:
         md += box_tables(met, meta)
         names = [n for n, v in variants.items() if v["part"] == "box"]
@@ -415,6 +433,17 @@ def dt_tables(met, meta):
         cur = met.get("dt_%s_I%s_a%s" % (f, meta["rate"], meta["damping"]))
         if ref and cur:
             rows.append([f] + [paired(cur, ref, k) for k, _ in MEASURES])
+    return md + table_md(rows)
+
+
+def damping_tables(met, meta):
+    md = ["## Damping below the protocol's: 0.05 and 0 against 0.1 at I %s (paired over seeds)" % meta["rate"], ""]
+    ref = met.get(rate_variant(meta["rate"], "0.1"))
+    rows = [["damping"] + [lab for _, lab in MEASURES]]
+    for a in ("0.05", "0"):
+        cur = met.get(rate_variant(meta["rate"], a))
+        if ref and cur:
+            rows.append([a] + [paired(cur, ref, k) for k, _ in MEASURES])
     return md + table_md(rows)
 
 

@@ -5,6 +5,7 @@
 #                              [--quick] [--runs-root DIR | --into STUDY_DIR] [--table STUDY_DIR]
 #   --parts P      rate: I = 1e-2, 3.3e-3, 1e-3, 3.3e-4 at penetration damping 0.7 and 0.1;
 #                  dt: dem.dt_safety 0.8 / 0.4 / 0.2 at --rate and --damping (default "rate dt");
+#                  damping: penetration damping 0.05 and 0 against 0.1 at --rate;
 #                  box: the coupled model (DEM block 2 x 2 x 2 and 2 x 2 x 3 mm) against DEM
 #                  everywhere in the same 4 x 4 x 4 mm box, upscaling 1.5, at --rate and --damping
 #   --seeds N      seeds 1..N of every variant (default 5); seed k is the same bonded block in
@@ -34,7 +35,7 @@ while [ $# -gt 0 ]; do
     --runs-root) runs_root="$2"; shift ;;
     --into) into="$2"; shift ;;
     --table) table="$2"; shift ;;
-    -h|--help) sed -n '3,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h|--help) sed -n '3,24p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "converge study: unknown option '$1' (see launch/study converge --help)" >&2; exit 2 ;;
   esac
   shift
