@@ -437,83 +437,39 @@ int main(int argc, char** argv) {
       }
       runner.start_from(rs);
     }
-    // Checkpoints (docs/checkpoint-format.md): after every stage and every
-    // run.checkpoint_every_s of wall time inside stages, when the run has a folder and every
-    // node can save its state.
-    const bool at_stage_end = scene.boolean("run.checkpoint_stage_end");
-    const double every_s = scene.real("run.checkpoint_every_s");
-    const auto keep = static_cast<std::size_t>(scene.integer("run.checkpoint_keep"));
-    bool checkpoints_on = !opt.run_dir.empty() && (at_stage_end || every_s > 0);
-    auto last_checkpoint = std::chrono::steady_clock::now();
-    int n_checkpoints = 0;
-    double checkpoint_s = 0, checkpoint_mb = 0, last_mb = 0;
-    auto take = [&](const coord::RunnerState& rs) {
-      if (!checkpoints_on || (!rs.in_stage && !at_stage_end)) return;
-      const auto t0 = std::chrono::steady_clock::now();
-      const std::size_t si = rs.in_stage ? rs.stage : rs.stage - 1;
-      const auto& st = stage_list.at(si);
-      const std::int64_t last = rs.step - 1;
-      const std::string tag = st.name + "-" + std::to_string(last) + (rs.in_stage ? "" : "-end");
-      const std::string rel = "checkpoints/" + tag;
-      const std::filesystem::path dir = std::filesystem::path(opt.run_dir) / rel;
-      if (std::filesystem::exists(dir / "manifest.txt")) return;  // a resumed run at its own checkpoint
-      std::filesystem::create_directories(dir);
-      auto reps = ep->command(static_cast<std::int32_t>(demfdm::command_t::CHECKPOINT), roles, last,
-                              static_cast<std::int32_t>(si), st.name, 0.0, {}, rel);
-      for (auto& [role, r] : reps) {
-        bool saved = false;
-        for (int i = 0; i < r.n_values; ++i) saved = saved || (r.names[i] == "state_saved" && r.values[i] == 1.0);
-        if (!saved) {
-          log->warn("checkpoints are off for this run: node '{}' ({}) cannot save its state", role,
-                    ep->nodes().at(role).solver);
-          checkpoints_on = false;
-          std::filesystem::remove_all(dir);
-          return;
-        }
-      }
-      coord::CheckpointRecord rec;
-      rec.runner = rs;
-      rec.history = hist.state();
-      rec.scene_text = scene.text();
-      for (auto& [r, n] : ep->nodes()) rec.nodes.push_back({r, n.solver});
-      rec.participated = participants(stage_list, rs);
-      rec.outputs = coord::run_folder_files(opt.run_dir);
-      rec.run_id = opt.run_id;
-      io::write_atomically(dir / "coordinator.state", coord::record_bytes(rec, scene.hash()));
-      coord::Manifest m;
-      m.code_version = io::default_code_version();
-      m.scene_hash = scene.hash();
-      m.run_id = opt.run_id;
-      m.tag = tag;
-      m.stage = static_cast<std::int32_t>(si);
-      m.stage_name = st.name;
-      m.step = last;
-      m.in_stage = rs.in_stage;
-      m = coord::write_manifest(dir, m);
-      std::uint64_t bytes = 0;
-      for (auto& [f, h] : m.files) bytes += f.size;
-      const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-      ++n_checkpoints;
-      checkpoint_s += sec;
-      last_mb = static_cast<double>(bytes) / 1e6;
-      checkpoint_mb += last_mb;
-      log->info("checkpoint {}: {} files, {:.2f} MB, written in {:.3f} s", rel, m.files.size(), last_mb, sec);
-      // Keep the newest run.checkpoint_keep checkpoints inside stages (all stage-end ones).
-      if (rs.in_stage) {
-        std::vector<std::filesystem::path> inside;
-        for (auto& d : coord::checkpoints_latest_first(opt.run_dir))
-          if (d.filename().string().size() < 4 || d.filename().string().substr(d.filename().string().size() - 4) != "-end")
-            inside.push_back(d);
-        for (std::size_t i = keep; i < inside.size(); ++i) std::filesystem::remove_all(inside[i]);
-      }
-      last_checkpoint = std::chrono::steady_clock::now();
-    };
-    runner.set_checkpoints(
-        [&] {
-          return every_s > 0 &&
-                 std::chrono::duration<double>(std::chrono::steady_clock::now() - last_checkpoint).count() >= every_s;
+    // Checkpoints (docs/checkpoint-format.md, coord::CheckpointPolicy): after every stage and
+    // every run.checkpoint_every_s of wall time inside stages, when the run has a folder and
+    // every node can save its state.
+    coord::CheckpointPolicy checkpoints(
+        opt.run_dir,
+        {scene.boolean("run.checkpoint_stage_end"), scene.real("run.checkpoint_every_s"),
+         static_cast<std::size_t>(scene.integer("run.checkpoint_keep"))},
+        stage_list, scene.hash(), opt.run_id,
+        [&](const std::string& rel, std::int64_t last, std::int32_t si, const std::string& name) {
+          std::map<std::string, bool> saved;
+          for (auto& [role, r] : ep->command(static_cast<std::int32_t>(demfdm::command_t::CHECKPOINT), roles, last, si,
+                                             name, 0.0, {}, rel)) {
+            saved[role + " (" + ep->nodes().at(role).solver + ")"] = false;
+            for (int i = 0; i < r.n_values; ++i)
+              if (r.names[i] == "state_saved" && r.values[i] == 1.0) saved[role + " (" + ep->nodes().at(role).solver + ")"] = true;
+          }
+          return saved;
         },
-        take);
+        [&](const coord::RunnerState& rs) {
+          coord::CheckpointRecord rec;
+          rec.history = hist.state();
+          rec.scene_text = scene.text();
+          for (auto& [r, n] : ep->nodes()) rec.nodes.push_back({r, n.solver});
+          rec.participated = participants(stage_list, rs);
+          return rec;
+        },
+        [&](const std::string& line) {
+          if (line.rfind("checkpoints are off", 0) == 0)
+            log->warn("{}", line);
+          else
+            log->info("{}", line);
+        });
+    runner.set_checkpoints([&] { return checkpoints.due(); }, [&](const coord::RunnerState& rs) { checkpoints.take(rs); });
     // Footing kinematics (docs/theory.md §7.1): the rate-rule speed v (stage_speed), ramped up
     // from 0 over t_r = 2 ramp_depth_ratio D_f / v at the stage's start, evaluated at the middle
     // of the grant's steps in the stage's own time (steps are global over the run). The rate
@@ -565,13 +521,7 @@ int main(int argc, char** argv) {
     ep->shutdown("run finished");
     auto info = run_info(scene, *ep, bus->stats());
     info.rates = rates;
-    if (n_checkpoints > 0) {
-      std::ostringstream cs;
-      cs << std::setprecision(3) << n_checkpoints << " written in " << checkpoint_s << " s ("
-         << 100.0 * checkpoint_s / std::max(sum.wall_s, 1e-9) << " % of the run), " << checkpoint_mb
-         << " MB in all, the last " << last_mb << " MB";
-      info.checkpoints = cs.str();
-    }
+    info.checkpoints = checkpoints.summary(sum.wall_s);
     if (start)
       info.resumed = std::string(start->branch ? "branched from " : "resumed from ") + start->dir.string() +
                      " (after step " + std::to_string(start->manifest.step) + ")";

@@ -422,6 +422,83 @@ std::vector<std::string> drop_files_after(const fs::path& run_dir, const std::ve
   return dropped;
 }
 
+CheckpointPolicy::CheckpointPolicy(fs::path run_dir, Settings s, std::vector<schema::Stage> stages,
+                                   std::uint64_t scene_hash, std::int64_t run_id, SaveNodes save, Record record,
+                                   std::function<void(const std::string&)> log)
+    : run_dir_(std::move(run_dir)), s_(s), stages_(std::move(stages)), hash_(scene_hash), run_id_(run_id),
+      save_(std::move(save)), record_(std::move(record)), log_(std::move(log)),
+      on_(!run_dir_.empty() && (s.at_stage_end || s.every_s > 0)), last_(std::chrono::steady_clock::now()) {}
+
+bool CheckpointPolicy::due() const {
+  return on_ && s_.every_s > 0 &&
+         std::chrono::duration<double>(std::chrono::steady_clock::now() - last_).count() >= s_.every_s;
+}
+
+void CheckpointPolicy::take(const RunnerState& rs) {
+  if (!on_ || (!rs.in_stage && !s_.at_stage_end)) return;
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::size_t si = rs.in_stage ? rs.stage : rs.stage - 1;
+  const auto& st = stages_.at(si);
+  const std::int64_t last = rs.step - 1;
+  const std::string tag = st.name + "-" + std::to_string(last) + (rs.in_stage ? "" : "-end");
+  const std::string rel = "checkpoints/" + tag;
+  const fs::path dir = run_dir_ / rel;
+  if (fs::exists(dir / "manifest.txt")) return;  // a resumed run at its own checkpoint
+  fs::create_directories(dir);
+  for (auto& [role, saved] : save_(rel, last, static_cast<std::int32_t>(si), st.name))
+    if (!saved) {
+      log_("checkpoints are off for this run: node '" + role + "' cannot save its state");
+      on_ = false;
+      fs::remove_all(dir);
+      return;
+    }
+  auto rec = record_(rs);
+  rec.runner = rs;
+  rec.outputs = run_folder_files(run_dir_);
+  rec.run_id = run_id_;
+  io::write_atomically(dir / "coordinator.state", record_bytes(rec, hash_));
+  Manifest m;
+  m.code_version = io::default_code_version();
+  m.scene_hash = hash_;
+  m.run_id = run_id_;
+  m.tag = tag;
+  m.stage = static_cast<std::int32_t>(si);
+  m.stage_name = st.name;
+  m.step = last;
+  m.in_stage = rs.in_stage;
+  m = write_manifest(dir, m);
+  std::uint64_t bytes = 0;
+  for (auto& [f, h] : m.files) bytes += f.size;
+  const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  ++n_;
+  seconds_ += sec;
+  last_mb_ = static_cast<double>(bytes) / 1e6;
+  mb_ += last_mb_;
+  std::ostringstream os;
+  os << "checkpoint " << rel << ": " << m.files.size() << " files, " << std::fixed << std::setprecision(2) << last_mb_
+     << " MB, written in " << std::setprecision(3) << sec << " s";
+  log_(os.str());
+  // Keep the newest `keep` checkpoints inside stages (every stage-end one).
+  if (rs.in_stage) {
+    std::vector<fs::path> inside;
+    for (auto& d : checkpoints_latest_first(run_dir_)) {
+      const auto name = d.filename().string();
+      if (name.size() < 4 || name.compare(name.size() - 4, 4, "-end") != 0) inside.push_back(d);
+    }
+    for (std::size_t i = s_.keep; i < inside.size(); ++i) fs::remove_all(inside[i]);
+  }
+  last_ = std::chrono::steady_clock::now();
+}
+
+std::string CheckpointPolicy::summary(double run_wall_s) const {
+  if (n_ == 0) return "";
+  std::ostringstream cs;
+  cs << std::setprecision(3) << n_ << " written in " << seconds_ << " s ("
+     << 100.0 * seconds_ / std::max(run_wall_s, 1e-9) << " % of the run), " << mb_ << " MB in all, the last " << last_mb_
+     << " MB";
+  return cs.str();
+}
+
 namespace {
 
 // Every key of a scene with the value in effect, as text: "dem.specimen.d50" -> "1e-05",

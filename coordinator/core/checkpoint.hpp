@@ -17,8 +17,10 @@
 #pragma once
 
 #include <cstdint>
+#include <chrono>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -105,6 +107,51 @@ std::vector<FileEntry> run_folder_files(const std::filesystem::path& run_dir);
 // Resume: deletes the run-folder files written after the checkpoint (not in `ledger`) and
 // refuses a ledger file that is now shorter than recorded. Returns the names deleted.
 std::vector<std::string> drop_files_after(const std::filesystem::path& run_dir, const std::vector<FileEntry>& ledger);
+
+// The checkpoint policy of a run (scene keys run.checkpoint_stage_end, run.checkpoint_every_s,
+// run.checkpoint_keep): when to checkpoint, the folder and tag, the coordinator's record and the
+// manifest, the retention of checkpoints inside stages, and the cost figures for the summary.
+// The nodes' part is a callback: ask every node to save into a folder (relative to the run
+// folder) after a step, and say which could.
+class CheckpointPolicy {
+ public:
+  struct Settings {
+    bool at_stage_end = true;
+    double every_s = 600;
+    std::size_t keep = 2;
+  };
+  // (folder relative to the run folder, last step, stage index, stage name) -> role -> saved
+  using SaveNodes = std::function<std::map<std::string, bool>(const std::string&, std::int64_t, std::int32_t,
+                                                              const std::string&)>;
+  // What the coordinator records besides the runner state (the history position, the nodes...).
+  using Record = std::function<CheckpointRecord(const RunnerState&)>;
+
+  CheckpointPolicy(std::filesystem::path run_dir, Settings s, std::vector<schema::Stage> stages,
+                   std::uint64_t scene_hash, std::int64_t run_id, SaveNodes save, Record record,
+                   std::function<void(const std::string&)> log);
+  // Is a checkpoint inside a stage due (wall time since the last one)?
+  bool due() const;
+  // Takes the checkpoint of `rs` (a stage end or a step inside a stage) when the policy asks
+  // for one. A node that cannot save turns checkpoints off for the run (logged once).
+  void take(const RunnerState& rs);
+  bool on() const { return on_; }
+  // "N written in X s (P % of the run), M MB in all, the last L MB", or "" when none was.
+  std::string summary(double run_wall_s) const;
+
+ private:
+  std::filesystem::path run_dir_;
+  Settings s_;
+  std::vector<schema::Stage> stages_;
+  std::uint64_t hash_;
+  std::int64_t run_id_;
+  SaveNodes save_;
+  Record record_;
+  std::function<void(const std::string&)> log_;
+  bool on_;
+  std::chrono::steady_clock::time_point last_;
+  int n_ = 0;
+  double seconds_ = 0, mb_ = 0, last_mb_ = 0;
+};
 
 // Branch (launch/run SCENE --from CHECKPOINT): the keys of `scene` that would make the saved
 // state inconsistent, one line each naming the key and both values. Empty: the branch may

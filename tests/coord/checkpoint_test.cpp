@@ -583,3 +583,68 @@ TEST_F(Checkpoint, BranchRefusesFewerStagesThanRan) {
   ASSERT_FALSE(c.empty());
   EXPECT_TRUE(contains(joined(c), "ran 4 stages, the scene has 3")) << joined(c);
 }
+
+// The checkpoint policy of a run (coord::CheckpointPolicy): folder names, the record and the
+// manifest, retention of checkpoints inside stages, a node that cannot save, the due timer.
+TEST_F(Checkpoint, PolicyNamesKeepsAndStopsAsTheSceneSays) {
+  auto sc = config::Scene::parse("[dem]\n[continuum]\n[[stage]]\nname = \"gravity\"\nsteps = 100\n"
+                                 "[[stage]]\nname = \"penetrate\"\nsteps = 100\n",
+                                 "x.toml", schema::scene_schema());
+  auto stages = schema::stages(sc);
+  std::vector<std::string> lines;
+  bool can_save = true;
+  coord::CheckpointPolicy p(
+      dir, {true, 0.0, 2}, stages, sc.hash(), 77,
+      [&](const std::string& rel, std::int64_t, std::int32_t, const std::string&) {
+        write_file(dir / rel / "dem.state", "dem bytes " + rel);
+        return std::map<std::string, bool>{{"dem (dem_node)", true}, {"continuum (x)", can_save}};
+      },
+      [&](const coord::RunnerState&) {
+        coord::CheckpointRecord r;
+        r.scene_text = sc.text();
+        r.participated = {"dem"};
+        return r;
+      },
+      [&](const std::string& l) { lines.push_back(l); });
+  EXPECT_FALSE(p.due()) << "every_s = 0: no checkpoint inside stages";
+  coord::RunnerState end;
+  end.stage = 1;  // after stage 0
+  end.step = 40;
+  p.take(end);
+  auto m = coord::verify_checkpoint(dir / "checkpoints" / "gravity-39-end");
+  EXPECT_EQ(m.step, 39);
+  EXPECT_FALSE(m.in_stage);
+  EXPECT_EQ(m.run_id, 77);
+  auto rec = coord::load_record(dir / "checkpoints" / "gravity-39-end" / "coordinator.state", sc.hash());
+  EXPECT_EQ(rec.runner.step, 40);
+  EXPECT_EQ(rec.participated, std::vector<std::string>{"dem"});
+  // Inside the second stage: only the newest two are kept; the stage-end one stays.
+  for (std::int64_t step : {50, 60, 70}) {
+    coord::RunnerState in;
+    in.stage = 1;
+    in.in_stage = true;
+    in.step = step + 1;
+    p.take(in);
+  }
+  EXPECT_FALSE(fs::exists(dir / "checkpoints" / "penetrate-50"));
+  EXPECT_TRUE(fs::exists(dir / "checkpoints" / "penetrate-60" / "manifest.txt"));
+  EXPECT_TRUE(fs::exists(dir / "checkpoints" / "penetrate-70" / "manifest.txt"));
+  EXPECT_TRUE(fs::exists(dir / "checkpoints" / "gravity-39-end" / "manifest.txt"));
+  EXPECT_TRUE(contains(p.summary(100.0), "4 written in")) << p.summary(100.0);
+  EXPECT_TRUE(contains(lines.at(0), "checkpoint checkpoints/gravity-39-end: ")) << lines.at(0);
+  // A node that cannot save: no folder, checkpoints off for the run, one line naming it.
+  can_save = false;
+  coord::RunnerState last;
+  last.stage = 2;
+  last.step = 90;
+  p.take(last);
+  EXPECT_FALSE(p.on());
+  EXPECT_FALSE(fs::exists(dir / "checkpoints" / "penetrate-89-end"));
+  EXPECT_TRUE(contains(lines.back(), "node 'continuum (x)' cannot save")) << lines.back();
+  // A policy whose run has no folder never checkpoints; a tiny interval is due at once.
+  coord::CheckpointPolicy none("", {true, 600, 2}, stages, 0, 0, {}, {}, {});
+  EXPECT_FALSE(none.on());
+  EXPECT_FALSE(none.due());
+  coord::CheckpointPolicy soon(dir, {false, 1e-9, 2}, stages, 0, 0, {}, {}, {});
+  EXPECT_TRUE(soon.due());
+}
