@@ -449,9 +449,8 @@ int main(int argc, char** argv) {
           std::map<std::string, bool> saved;
           for (auto& [role, r] : ep->command(static_cast<std::int32_t>(demfdm::command_t::CHECKPOINT), roles, last, si,
                                              name, 0.0, {}, rel)) {
-            saved[role + " (" + ep->nodes().at(role).solver + ")"] = false;
-            for (int i = 0; i < r.n_values; ++i)
-              if (r.names[i] == "state_saved" && r.values[i] == 1.0) saved[role + " (" + ep->nodes().at(role).solver + ")"] = true;
+            bool& ok = saved[role + " (" + ep->nodes().at(role).solver + ")"];
+            for (int i = 0; i < r.n_values; ++i) ok = ok || (r.names[i] == "state_saved" && r.values[i] == 1.0);
           }
           return saved;
         },

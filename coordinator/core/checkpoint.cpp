@@ -114,14 +114,12 @@ std::string hex64(std::uint64_t v) {
   return os.str();
 }
 
-// Files a checkpoint never accounts for: logs (appended by every process, also across a
-// resume), the checkpoints themselves, traffic records, the summary (written at the end),
-// the scene copy, and process output captured by test harnesses.
-bool outside_ledger(const fs::path& rel) {
-  const auto first = rel.begin()->string();
-  if (first == "checkpoints" || first == "traffic.parts") return true;
-  if (rel.has_parent_path() && rel.parent_path() != "") return true;  // only top-level files
-  const auto name = rel.filename().string(), ext = rel.extension().string();
+// Top-level files a checkpoint never accounts for: logs (appended by every process, also
+// across a resume), traffic records, the summary (written at the end), the scene copy, and
+// process output captured by test harnesses. (Folders, such as checkpoints/ and
+// traffic.parts/, are never in the ledger.)
+bool outside_ledger(const fs::path& file) {
+  const auto name = file.filename().string(), ext = file.extension().string();
   return ext == ".log" || ext == ".out" || ext == ".lcmlog" || name == "summary.txt" || name == "summary.json" ||
          name == "scene.toml" || name == "traffic_compare.txt" || name.rfind("blowup_", 0) == 0 ||
          name.find(".tmp") != std::string::npos;
@@ -394,9 +392,8 @@ std::vector<FileEntry> run_folder_files(const fs::path& run_dir) {
   std::vector<FileEntry> out;
   for (auto& e : fs::directory_iterator(run_dir)) {
     if (!e.is_regular_file()) continue;
-    auto rel = e.path().filename();
-    if (outside_ledger(rel)) continue;
-    out.push_back({rel.string(), fs::file_size(e.path())});
+    if (outside_ledger(e.path())) continue;
+    out.push_back({e.path().filename().string(), fs::file_size(e.path())});
   }
   std::sort(out.begin(), out.end(), [](const FileEntry& a, const FileEntry& b) { return a.name < b.name; });
   return out;
