@@ -48,13 +48,17 @@ RunSummary Runner::run() {
     auto t0 = std::chrono::steady_clock::now();
     double stage_wall_before = 0;
     std::int64_t end;  // exclusive
-    const bool resuming = resume.has_value();
-    std::int64_t resume_posted = 0;
-    std::vector<std::pair<std::int64_t, std::map<std::string, double>>> resume_pending;
+    // The coupling step of a grant follows the stable steps reported with the grants collected
+    // before it was posted. With a window of W grants, grant p (in posting order) is posted
+    // after grant p - W was collected, so it sees the reports up to p - W and not the later
+    // ones, even when a checkpoint has collected them already: reports wait in pending_dt
+    // until the grant that may use them is posted.
+    std::int64_t posted = 0;
+    std::deque<std::pair<std::int64_t, std::map<std::string, double>>> pending_dt;
     if (resume) {
       // Inside the stage: its STAGE_BEGIN was answered before the checkpoint.
-      resume_posted = resume->grants_posted;
-      resume_pending = resume->pending_dt;
+      posted = resume->grants_posted;
+      pending_dt.assign(resume->pending_dt.begin(), resume->pending_dt.end());
       ss = resume->current;
       stage_wall_before = ss.wall_s;
       clock_ = resume->clock;
@@ -75,13 +79,6 @@ RunSummary Runner::run() {
       clock_.stage_first_step = step;
       end = step + st.steps;
     }
-    // The coupling step of a grant follows the stable steps reported with the grants collected
-    // before it was posted. With a window of W grants, grant p (in posting order) is posted
-    // after grant p - W was collected, so it sees the reports up to p - W and not the later
-    // ones, even when a checkpoint has collected them already: reports wait in pending_dt
-    // until the grant that may use them is posted.
-    std::int64_t posted = 0;
-    std::deque<std::pair<std::int64_t, std::map<std::string, double>>> pending_dt;
     std::deque<std::int64_t> outstanding_index;  // posting index of each outstanding grant
     auto apply_dt_until = [&](std::int64_t index) {
       while (!pending_dt.empty() && pending_dt.front().first <= index) {
@@ -89,10 +86,6 @@ RunSummary Runner::run() {
         pending_dt.pop_front();
       }
     };
-    if (resuming) {
-      posted = resume_posted;
-      pending_dt.assign(resume_pending.begin(), resume_pending.end());
-    }
     auto state_now = [&](bool in_stage) {
       RunnerState s;
       s.stage = in_stage ? si : si + 1;
