@@ -75,6 +75,20 @@ def initial_stiffness(disp, load, d_f):
     return float(k), float(b), float(dc), float(disp[ih])
 
 
+def elastic_branch(load, failed):
+    """(i0, ie): the elastic branch of a footing curve, from the first row with a load to the last
+    row before the first ball-ball bond failure (failed: the cumulative dem.bond_failures); None
+    when the footing never carried a load. The rule of k_e in every tool (and of the
+    coordinator's result, coordinator/core/results.cpp)."""
+    hit = np.nonzero(load > 0)[0]
+    if len(hit) == 0:
+        return None
+    i0 = ie = int(hit[0])
+    while ie + 1 < len(load) and failed[ie + 1] <= failed[i0]:
+        ie += 1
+    return i0, ie
+
+
 def elastic_stiffness(run):
     """k_e [N/m] and the load [N] at the end of the elastic branch (first contact to the last row
     before the first bond failure); (nan, nan) without the dem.bond_failures column or with fewer
@@ -83,12 +97,10 @@ def elastic_stiffness(run):
     if "dem.bond_failures" not in h:
         return float("nan"), float("nan")
     disp, load, failed = h["dem.footing_disp_m"], h["dem.footing_fz_N"], h["dem.bond_failures"]
-    hit = np.nonzero(load > 0)[0]
-    if len(hit) == 0:
+    branch = elastic_branch(load, failed)
+    if branch is None:
         return float("nan"), float("nan")
-    i0 = ie = int(hit[0])
-    while ie + 1 < len(disp) and failed[ie + 1] <= failed[i0]:
-        ie += 1
+    i0, ie = branch
     if ie - i0 + 1 < 5:
         return float("nan"), float(load[ie])
     return float(np.polyfit(disp[i0:ie + 1], load[i0:ie + 1], 1)[0]), float(load[ie])

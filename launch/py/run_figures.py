@@ -25,6 +25,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import paper_figures  # noqa: E402  (elastic_branch: the k_e rule)
+
 
 def read_csv(path):
     with open(path) as f:
@@ -70,18 +73,12 @@ def bond_strength(scene):
 
 
 def elastic_branch(cols):
-    """Indices (first, last) of the elastic branch: first loaded row to the last row before the
-    first bond failure (launch/py/paper_figures.elastic_stiffness), or None."""
+    """Indices (first, last) of the elastic branch (paper_figures.elastic_branch) when it has at
+    least 5 rows, or None."""
     if "dem.bond_failures" not in cols:
         return None
-    load, failed = cols["dem.footing_fz_N"], cols["dem.bond_failures"]
-    hit = np.nonzero(load > 0)[0]
-    if len(hit) == 0:
-        return None
-    i0 = ie = int(hit[0])
-    while ie + 1 < len(load) and failed[ie + 1] <= failed[i0]:
-        ie += 1
-    return (i0, ie) if ie - i0 + 1 >= 5 else None
+    b = paper_figures.elastic_branch(cols["dem.footing_fz_N"], cols["dem.bond_failures"])
+    return b if b and b[1] - b[0] + 1 >= 5 else None
 
 
 def load_settlement(run, scene, out):

@@ -2,26 +2,28 @@
 (command line: `python3 -m demfdm RUN [RUN ...]`, demfdm/__main__.py).
 """
 import math
+import os
+import sys
 
 import numpy as np
 
 from .run import Run
 
+_LAUNCH_PY = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+if _LAUNCH_PY not in sys.path:
+    sys.path.append(_LAUNCH_PY)
+import paper_figures  # noqa: E402  (elastic_branch: the k_e rule)
+
 MEASURES = ("peak_N", "settlement_at_peak_m", "k_e_N_m", "final_N", "wall_s")
 
 
 def elastic_stiffness(settlement, load, failures):
-    """k_e [N/m]: least-squares slope of load on settlement from the first loaded row to the last
-    row before the first bond failure (the rule of launch/py/paper_figures.elastic_stiffness);
-    NaN with fewer than 5 rows."""
-    hit = np.nonzero(load > 0)[0]
-    if len(hit) == 0:
+    """k_e [N/m]: least-squares slope of load on settlement over the elastic branch
+    (launch/py/paper_figures.elastic_branch); NaN with fewer than 5 rows."""
+    branch = paper_figures.elastic_branch(load, failures)
+    if branch is None or branch[1] - branch[0] + 1 < 5:
         return float("nan")
-    i0 = ie = int(hit[0])
-    while ie + 1 < len(load) and failures[ie + 1] <= failures[i0]:
-        ie += 1
-    if ie - i0 + 1 < 5:
-        return float("nan")
+    i0, ie = branch
     return float(np.polyfit(settlement[i0:ie + 1], load[i0:ie + 1], 1)[0])
 
 
