@@ -3,8 +3,15 @@
 // replication, coupled gravity, penetration; three processes over the bus) run twice with two
 // OpenMP threads per node; every CSV of the two run folders (node histories, stress profiles,
 // the coordinator's per-step histories, specimen stages) must be identical byte for byte.
+// The first run is also the golden data of a reduced coupled scene (issue 15 item 1): its CSVs
+// must match tests/golden/data/footing_small.golden (per file: size, line count and FNV-1a 64
+// of the bytes, and every 200th line in full, so that a difference can be located).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cinttypes>
+
+#include "tests/golden/golden.hpp"
 #include "tests/stability/scene_run.hpp"
 
 using namespace demfdm::testing;
@@ -12,6 +19,28 @@ using namespace demfdm::testing;
 namespace {
 const std::string kBin = DEMFDM_BIN_DIR;
 const std::string kSrc = DEMFDM_SOURCE_DIR;
+// Golden text of a run folder's CSV files (sorted by name).
+std::string csv_digest(const fs::path& dir) {
+  std::vector<fs::path> files;
+  for (auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".csv") files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  std::ostringstream o;
+  o << "# demfdm golden data: the CSV files of scenes/footing_small.toml with threads = 2\n"
+    << "# (tests/stability/determinism_test.cpp): size, lines, FNV-1a 64, every 200th line and the last\n";
+  for (const fs::path& f : files) {
+    const std::string text = slurp(f);
+    const auto ls = demfdm::golden::lines(text);
+    char h[32];
+    std::snprintf(h, sizeof h, "%016" PRIx64, demfdm::golden::fnv1a64(text));
+    const std::string name = f.filename().string();
+    o << "file " << name << " bytes " << text.size() << " lines " << ls.size() << " fnv1a64 " << h << "\n";
+    for (std::size_t i = 0; i < ls.size(); ++i)
+      if (i % 200 == 0 || i + 1 == ls.size()) o << name << ":" << i + 1 << " " << ls[i] << "\n";
+  }
+  return o.str();
+}
+
 }  // namespace
 
 TEST(Determinism, CoupledFootingRunIsBitIdenticalWithTwoThreads) {
@@ -28,6 +57,14 @@ TEST(Determinism, CoupledFootingRunIsBitIdenticalWithTwoThreads) {
     ASSERT_TRUE(fs::exists(other)) << e.path().filename() << " only in the first run";
     EXPECT_EQ(slurp(e.path()), slurp(other)) << e.path().filename() << " differs between the two runs";
     ++compared;
+  }
+  const std::string digest = csv_digest(a.dir);
+  if (demfdm::golden::update_mode()) {
+    demfdm::golden::write("footing_small.golden", digest);
+    std::cout << "[ golden   ] wrote " << demfdm::golden::data_dir() << "/footing_small.golden\n";
+  } else {
+    for (const std::string& d : demfdm::golden::compare("footing_small.golden", digest, 6))
+      ADD_FAILURE() << "the reduced coupled footing's histories differ from their golden data: " << d;
   }
   std::cout << "[ figures  ] " << compared << " CSV files identical byte for byte\n";
   EXPECT_GE(compared, 8);
