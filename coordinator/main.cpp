@@ -1,6 +1,9 @@
 // coordinator: validates the scene, starts the protocol, runs the stages, ends the run.
 //
-//   coordinator SCENE --check              validate only (exit 0, or 2 with one error line)
+//   coordinator SCENE --check              validate only (exit 0, or 2 with one error line): the
+//                                          schema, then every role's `EXE --check SCENE` (the
+//                                          node's own mapping and engine checks)
+//   coordinator SCENE --check --set-executable=ROLE=EXE ...   the same with another executable
 //   coordinator SCENE --print-nodes        "role executable" lines for launch/run
 //   coordinator --help-scene [--markdown]  every scene key with unit, default and doc
 //   coordinator SCENE --run-id=N [--lcm-url=URL] [--run-dir=DIR] [-v]
@@ -21,6 +24,7 @@
 #include <fstream>
 #include <iomanip>
 #include <iostream>
+#include <map>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -30,6 +34,7 @@
 #include "git_commit.hpp"
 #include "coordinator/core/centrifuge.hpp"
 #include "coordinator/core/checkpoint.hpp"
+#include "coordinator/core/node_check.hpp"
 #include "coordinator/core/progress.hpp"
 #include "coordinator/core/quasi_static.hpp"
 #include "coordinator/core/results.hpp"
@@ -45,6 +50,7 @@ namespace {
 const char* kUsage =
     "usage: coordinator SCENE [--check | --print-nodes | --print-effective] [--run-id=N] [--lcm-url=URL]\n"
     "                         [--run-dir=DIR] [-v] [--resume | --from=CHECKPOINT_DIR] [--set table.key=value ...]\n"
+    "                         [--set-executable=ROLE=EXE ...]\n"
     "       coordinator --help-scene [--markdown]\n";
 
 // Adapts the bus endpoint to the stage machine's transport interface.
@@ -182,6 +188,22 @@ double stage_speed(const config::Scene& scene, const schema::Stage& st) {
                               v.real("mean_stress"), v.real("speed_factor"));
 }
 
+// The footing kinematics of every penetrate stage must be finite and positive (a run that cannot
+// move its footing as asked never starts). Throws config::Error naming the stage's key.
+void check_kinematics(const config::Scene& scene) {
+  for (const auto& st : schema::stages(scene)) {
+    if (st.action != "penetrate") continue;
+    const double v = stage_speed(scene, st);
+    if (!std::isfinite(v) || !(v > 0)) {
+      std::ostringstream o;
+      o << "I = " << st.view.real("inertial_number") << " giving v = " << v << " m/s";
+      st.view.fail("inertial_number",
+                   "a rate whose footing speed v = I L_p / (d50 sqrt(rho_s / P)) x speed_factor is finite and > 0",
+                   o.str());
+    }
+  }
+}
+
 // Rate and quasi-static measures of a penetrate stage (coordinator/core/quasi_static.hpp).
 // E, nu: the first [[continuum.material]] with a continuum, else the stage's rock_young and 1/3;
 // rho_b: dem.specimen.bulk_density, else 0.48 rho_s (as the DEM's sigma_v); sigma_c: the tensile
@@ -265,6 +287,7 @@ int main(int argc, char** argv) {
   std::string from;
   std::vector<std::string> sets;  // --set table.key=value (or --set=table.key=value), in order
   bool print_effective = false;
+  std::map<std::string, std::string> executables;  // --set-executable=ROLE=EXE (launch/run's overrides)
   std::vector<char*> args;
   for (int i = 0; i < argc; ++i) {
     std::string a = argv[i];
@@ -278,6 +301,14 @@ int main(int argc, char** argv) {
       sets.push_back(a == "--set" ? argv[++i] : a.substr(6));
     } else if (a == "--print-effective") {
       print_effective = true;
+    } else if (a.rfind("--set-executable=", 0) == 0) {
+      const std::string v = a.substr(17);
+      const auto eq = v.find('=');
+      if (eq == std::string::npos || eq == 0 || eq + 1 == v.size()) {
+        std::cerr << "coordinator: --set-executable needs ROLE=EXECUTABLE, found '" << v << "'\n" << kUsage;
+        return 2;
+      }
+      executables[v.substr(0, eq)] = v.substr(eq + 1);
     } else {
       args.push_back(argv[i]);
     }
@@ -321,6 +352,7 @@ int main(int argc, char** argv) {
   config::Scene scene;
   try {
     scene = config::Scene::load(pos[0], schema::scene_schema(), sets);
+    check_kinematics(scene);
   } catch (const config::Error& e) {
     std::cerr << e.what() << "\n";
     return 2;
@@ -351,6 +383,21 @@ int main(int argc, char** argv) {
     return 0;
   }
   if (check) {
+    // Every check a node would run: each role's executable checks the scene without a bus.
+    const std::string bin = coord::own_bin_dir();
+    for (auto& r : roles) {
+      const std::string name = executables.count(r) ? executables[r] : schema::executable(scene, r);
+      const std::string exe = coord::resolve_executable(name, bin);
+      if (exe.empty()) {
+        std::cerr << scene.where(r + ".executable") << ": " << r << ".executable: expected a program in " << bin
+                  << " or on PATH, found '" << name << "' (not found)\n";
+        return 2;
+      }
+      if (auto err = coord::check_node(exe, pos[0], sets)) {
+        std::cerr << *err << "\n";
+        return 2;
+      }
+    }
     std::cout << pos[0];
     for (auto& s : sets) std::cout << " --set " << s;
     std::cout << ": OK (" << schema::stages(scene).size() << " stages; nodes:";

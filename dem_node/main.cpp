@@ -89,22 +89,13 @@ struct Block {
 };
 
 Block block_of(const config::Scene& s) {
+  const schema::DemBlock d = schema::dem_block(s);  // one definition for the checks and this node
   Block b;
-  auto c = s.reals("dem.specimen.cell");
-  b.cell = {c[0], c[1], c[2]};
-  auto r = s.integers("dem.specimen.replicate");
-  b.nx = static_cast<int>(r[0]);
-  b.ny = static_cast<int>(r[1]);
-  b.nz = static_cast<int>(r[2]);
-  auto o = s.reals("dem.specimen.origin");
-  if (o.size() == 3) {
-    b.origin = {o[0], o[1], o[2]};
-  } else if (!o.empty()) {
-    s.fail("dem.specimen.origin", "an empty list or [x, y, z] in m", std::to_string(o.size()) + " numbers");
-  } else if (s.has("continuum")) {
-    auto box = s.reals("continuum.mesh.size");
-    b.origin = {(box[0] - b.cell.x * b.nx) / 2, (box[1] - b.cell.y * b.ny) / 2, box[2] - b.height()};
-  }
+  b.origin = {d.origin[0], d.origin[1], d.origin[2]};
+  b.cell = {d.cell[0], d.cell[1], d.cell[2]};
+  b.nx = d.n[0];
+  b.ny = d.n[1];
+  b.nz = d.n[2];
   return b;
 }
 
@@ -119,6 +110,20 @@ class DemParticipant : public node::Participant {
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     kick_ = s_.reals("dem.kick");
     if (!kick_.empty() && kick_.size() != 3) s_.fail("dem.kick", "an empty list or [vx, vy, vz] in m/s", std::to_string(kick_.size()) + " numbers");
+    // dem.dt_fixed against the largest critical step any packing of this PSD can have (at
+    // --check, before any ball exists; every stage begin checks the real one).
+    if (user_dt_ > 0 && s_.string("dem.dt_above_critical") == "error") {
+      const double bound = largest_critical_step();
+      if (user_dt_ > bound) {
+        std::ostringstream os;
+        os.precision(6);
+        os << "a step <= " << bound << " s, the largest critical step of any packing of this PSD (docs/theory.md "
+           << "1.8: the smallest ball with a single contact; more contacts or bonds only lower it)";
+        std::ostringstream found;
+        found << user_dt_ << " s";
+        s_.fail("dem.dt_fixed", os.str(), found.str());
+      }
+    }
     frame_every_ = s_.integer("dem.output.frame_every");
     history_every_ = s_.integer("dem.output.history_every");
     gravity_level_ = s_.has("gravity") ? s_.real("gravity.level") : 0.0;
@@ -270,6 +275,26 @@ class DemParticipant : public node::Participant {
       safe_dt_key_ = key;
     }
     return safe_dt_;
+  }
+  // Upper bound of the critical step of 1.8 [s] for any packing of the scene's PSD: the smallest
+  // upscaled ball with one linear contact, to a ball of the smallest or of the largest size (the
+  // larger of the two); every further contact or bond adds stiffness and lowers the step.
+  double largest_critical_step() const {
+    dem::WorldParams p = world_.params();
+    p.periodic.enabled = false;
+    p.dt_safety = 1.0;
+    p.threads = 1;
+    const double sc = s_.real("dem.specimen.scale");
+    const double rmin = 0.5 * sc * s_.real("dem.specimen.d_min"), rmax = 0.5 * sc * s_.real("dem.specimen.d_max");
+    double best = 0.0;
+    for (double rp : {rmin, rmax}) {
+      dem::World w(p);
+      w.add_ball({0, 0, 0}, rmin);
+      w.add_ball({(rmin + rp) * (1 - 1e-9), 0, 0}, rp);  // a slight overlap: one active contact
+      w.prepare();
+      best = std::max(best, w.critical_timestep());
+    }
+    return best;
   }
   // Critical step of 1.8 without the safety factor [s].
   double critical_dt() const { return safe_dt() / world_.params().dt_safety; }
@@ -758,7 +783,6 @@ class DemParticipant : public node::Participant {
     // distance rho is within the footprint touches the flat bottom at its top, z + r; one
     // beyond the footprint's edge (r_f < rho < r_f + r) touches the bottom rim at
     // z + sqrt(r^2 - (rho - r_f)^2), lower than its top (the footing is a cylinder).
-    double ztop = block_.z_top();
     const auto& b = world_.balls();
     double r_f = f.diameter / 2;
     double best = -std::numeric_limits<double>::infinity();
@@ -768,7 +792,11 @@ class DemParticipant : public node::Participant {
       if (out >= r) continue;
       best = std::max(best, b.x[i].z + (out <= 0 ? r : std::sqrt(r * r - out * out)));
     }
-    if (!std::isfinite(best)) best = ztop;
+    if (!std::isfinite(best))
+      throw std::runtime_error(fmt::format(
+          "penetrate: no ball lies under the footing's footprint (D {} m centred at ({}, {})): the footing would never "
+          "touch the block; place it over the block (dem.footing.centre, dem.footing.diameter)",
+          f.diameter, axis.x, axis.y));
     f.bottom_centre = {axis.x, axis.y, best};
     f.velocity = {0, 0, 0};
     world_.set_footing(f);

@@ -102,7 +102,7 @@ std::string range_phrase(const Param& p) {
 }
 
 bool in_range(const Param& p, double x) {
-  if (std::isnan(x)) return false;
+  if (!std::isfinite(x)) return false;  // no key accepts infinity or NaN
   if (p.lo && (p.lo_open ? !(x > *p.lo) : !(x >= *p.lo))) return false;
   if (p.hi && (p.hi_open ? !(x < *p.hi) : !(x <= *p.hi))) return false;
   return true;

@@ -2,6 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iomanip>
+#include <map>
+#include <sstream>
 
 namespace demfdm::schema {
 namespace {
@@ -191,7 +194,7 @@ void declare_family(config::Section& dem, const char* name, const FamilyDefaults
             "Give the linear part zero stiffness when bonding (interface bonds: no repulsion from initial "
             "overlaps, docs/theory.md 2.6).");
   f.real("sb_rmul", "-", 1.0, "Soft bond radius multiplier lambda.").min(0.0, true);
-  f.real("sb_mcf", "-", 1.0, "Soft bond moment contribution factor beta.").min(0.0).max(1.0);
+  f.real("sb_mcf", "-", 1.0, "Soft bond moment contribution factor beta.").min(0.0, true).max(1.0);
   f.real("sb_bmul", "-", 1.0, "Soft bond bending-friction multiplier lambda_b.").min(0.0);
   f.real("sb_ten", "Pa", 0.45e6, "Soft bond tensile strength sigma_c.").min(0.0);
   f.real("sb_coh", "Pa", 0.45e6, "Soft bond cohesion c.").min(0.0);
@@ -262,7 +265,8 @@ void declare_dem(config::Section& root) {
   sp.real("increment_budget", "t_c", 16000.0,
           "Budget of each expansion increment in critical steps t_c (docs/theory.md 4.11; 20,000 steps at "
           "dt_safety 0.8). An increment that does not reach expansion_ratio within it stops the run.")
-      .min(0.0, true);
+      .min(0.0, true)
+      .max(1e9);
   sp.real("dt_safety", "-", 0.8,
           "Time step of specimen preparation (the generate, servo, bond and replicate stages) = this * critical "
           "step (1.8); dem.dt_safety applies from the first later stage. Preparation counts its rules in critical "
@@ -289,7 +293,8 @@ void declare_dem(config::Section& root) {
   sp.real("servo_budget", "t_c", 320000.0,
           "Budget of the servo at low friction in critical steps t_c (then half of it at the final friction; "
           "4.11). A servo that does not reach servo_tol and servo_ratio within it stops the run.")
-      .min(0.0, true);
+      .min(0.0, true)
+      .max(1e9);
   sp.real("servo_fric", "-", 0.1, "Friction during servo compaction (4.3 step 4: 0 to 0.1).").min(0.0);
   sp.real("bond_gap", "m", -1.0, "Bond contacts with gap <= this; negative: 1e-3 d_min (4.6).");
   sp.integers("replicate", "-", std::vector<std::int64_t>{1, 1, 5}, "Copies alpha x beta x gamma (4.7).")
@@ -362,18 +367,27 @@ void declare_stages(config::Section& root) {
       .min(0.0, true);
   st.real("k0", "-", -1.0, "K0 for 'geostatic'; negative: nu/(1-nu) of each zone's material.");
   st.boolean("reset_displacements", false, "Set continuum displacements to zero at the stage's start.");
-  st.real("inertial_number", "-", 1e-3, "penetrate: inertial number I of the footing rate (docs/theory.md 7.1).")
-      .min(0.0, true);
-  st.real("plastic_zone_ratio", "-", 3.0, "penetrate: L_p / D_f in v = I L_p / (d50 sqrt(rho_s / P)).").min(0.0, true);
+  st.real("inertial_number", "-", 1e-3,
+          "penetrate: inertial number I of the footing rate (docs/theory.md 7.1); I >= 1 is no longer a granular "
+          "flow regime.")
+      .min(0.0, true)
+      .max(1.0, true);
+  st.real("plastic_zone_ratio", "-", 3.0, "penetrate: L_p / D_f in v = I L_p / (d50 sqrt(rho_s / P)).")
+      .min(0.0, true)
+      .max(100.0);
   st.real("mean_stress", "Pa", 1e6, "penetrate: mean stress P at the footing tip in the rate rule (U12).").min(0.0, true);
   st.real("depth_ratio", "-", 0.2, "penetrate: stop when the footing has moved this many D_f (paper: 0.2).")
-      .min(0.0, true);
-  st.real("speed_factor", "-", 1.0, "penetrate: multiply the rate-rule speed (stability studies).").min(0.0, true);
+      .min(0.0, true)
+      .max(1.0);
+  st.real("speed_factor", "-", 1.0, "penetrate: multiply the rate-rule speed (stability studies).")
+      .min(0.0, true)
+      .max(1000.0);
   st.real("ramp_depth_ratio", "-", 0.01,
           "penetrate: the footing speed rises linearly in time from 0 to the rate-rule speed v while the footing "
           "moves this many D_f (ramp time t_r = 2 ramp_depth_ratio D_f / v), so that it does not hit the block "
           "at first contact (docs/stages.md); 0: full speed from the first step.")
-      .min(0.0);
+      .min(0.0)
+      .max(1.0);
   st.real("quasi_static_limit", "-", 1.0,
           "penetrate: the largest impedance ratio rho_b c v / sigma_c (c the P-wave speed of the rock, sigma_c "
           "the ball-ball bond tensile strength) treated as quasi-static; the run summary warns above it "
@@ -393,7 +407,11 @@ void declare_stages(config::Section& root) {
   st.real("strain_rate", "1/s", 0.5, "ucs: platen approach rate / specimen height.").min(0.0, true);
   st.real("max_strain", "-", 0.01, "ucs: stop at this axial strain.").min(0.0, true);
   st.strings("nodes", std::vector<std::string>{}, "Roles taking part ('dem', 'continuum'); empty: all of the scene's.");
-  st.integer("steps", "-", std::nullopt, "Step budget in coupling steps.").min(1);
+  st.integer("steps", "-", std::nullopt,
+             "Step budget in coupling steps (at most 1e12: a year of steps at 30 kHz; larger budgets would "
+             "overflow the step counters).")
+      .min(1)
+      .max(1e12);
   st.choice("until", {"steps", "done"}, std::string("steps"),
             "steps: run exactly 'steps'; done: stop when every node reports its exit criterion met.");
   st.choice("on_budget", {"fail", "continue"}, std::string("fail"),
@@ -402,7 +420,99 @@ void declare_stages(config::Section& root) {
   st.integer("steps_per_grant", "-", 1,
              "Coupling steps granted per command. The nodes still report every step's values (one row per step), "
              "so larger blocks only cut bus traffic; an until = \"done\" stage then ends at a block boundary.")
-      .min(1);
+      .min(1)
+      .max(1000000);
+}
+
+// Stage keys read by one group of actions only.
+const char* const kActionKeys[] = {"inertial_number", "plastic_zone_ratio", "mean_stress", "depth_ratio",
+                                   "speed_factor",    "ramp_depth_ratio",   "quasi_static_limit", "rock_young",
+                                   "strain_rate",     "max_strain",         "k0"};
+
+std::string num(double v) {
+  std::ostringstream o;
+  o << std::setprecision(6) << v;
+  return o.str();
+}
+
+// Cross-field checks of the DEM part (the ranges of single keys are declared with the keys).
+void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
+  const double dmin = sc.real("dem.specimen.d_min"), dmax = sc.real("dem.specimen.d_max"),
+               d50 = sc.real("dem.specimen.d50");
+  if (!(dmin < dmax)) ctx.fail("dem.specimen.d_min", "a diameter < d_max = " + num(dmax) + " m", num(dmin) + " m");
+  if (d50 < dmin || d50 > dmax)
+    ctx.fail("dem.specimen.d50", "a diameter in [d_min, d_max] = [" + num(dmin) + ", " + num(dmax) + "] m",
+             num(d50) + " m");
+  const auto st = stages(sc);
+  auto has_action = [&](const char* a) {
+    return std::any_of(st.begin(), st.end(), [&](const Stage& x) { return x.action == a; });
+  };
+  for (const char* fam : {"ball_ball", "ball_wall", "ball_facet", "ball_footing"}) {
+    const std::string f = std::string("dem.") + fam;
+    if (sc.string(f + ".model") == "softbond" && !(sc.real(f + ".emod") > 0))
+      ctx.fail(f + ".emod", "a modulus > 0 Pa for the soft bond (its only stiffness set)", num(sc.real(f + ".emod")) + " Pa");
+  }
+  const bool bonds = has_action("bond") || (has_action("generate") && sc.real("dem.specimen.bond_coordination") >= 0);
+  if (bonds && sc.string("dem.ball_ball.model") == "linear")
+    ctx.fail("dem.ball_ball.model", "'pbond' or 'softbond' (the scene bonds the specimen: a bond stage, or "
+             "dem.specimen.bond_coordination >= 0)", "'linear'");
+  // The couple stage bonds the balls to the interface facets (docs/theory.md 2.6).
+  if (has_action("couple") && sc.string("dem.ball_facet.model") == "linear")
+    ctx.fail("dem.ball_facet.model", "'pbond' or 'softbond' (a couple stage bonds the balls to the interface facets)",
+             "'linear'");
+  // A derived REV stress (sigma_v < 0: rho_b N g0 H_D) needs gravity.
+  const double g = sc.has("gravity") ? sc.real("gravity.level") * sc.real("gravity.g0") : 0.0;
+  if (has_action("servo") && sc.real("dem.specimen.sigma_v") < 0 && !(g > 0))
+    ctx.fail("dem.specimen.sigma_v",
+             "a stress > 0 Pa: a negative sigma_v is derived from the self-weight rho_b N g0 H_D, and this scene's "
+             "gravity is zero",
+             num(sc.real("dem.specimen.sigma_v")) + (sc.has("gravity") ? " with gravity.level " + num(sc.real("gravity.level"))
+                                                                        : " without a [gravity] section"));
+  const DemBlock b = dem_block(sc);
+  if (!sc.has("dem.footing")) return;
+  const auto c = sc.reals("dem.footing.centre");
+  if (!c.empty() && c.size() != 2)
+    ctx.fail("dem.footing.centre", "an empty list or [x, y] in m", std::to_string(c.size()) + " numbers");
+  if (!has_action("penetrate")) return;
+  // The footing's disc must lie inside the block's top face (the footing is placed on the
+  // highest ball under its footprint; outside the block it would never touch it).
+  const double d = sc.real("dem.footing.diameter");
+  const double cx = c.empty() ? b.origin[0] + b.size(0) / 2 : c[0], cy = c.empty() ? b.origin[1] + b.size(1) / 2 : c[1];
+  if (d > std::min(b.size(0), b.size(1)))
+    ctx.fail("dem.footing.diameter",
+             "a diameter <= the DEM block's top face, " + num(b.size(0)) + " x " + num(b.size(1)) + " m", num(d) + " m");
+  const double r = d / 2;
+  if (cx - r < b.origin[0] || cx + r > b.origin[0] + b.size(0) || cy - r < b.origin[1] || cy + r > b.origin[1] + b.size(1))
+    ctx.fail(c.empty() ? "dem.footing.diameter" : "dem.footing.centre",
+             "a footing disc inside the DEM block's top face x in [" + num(b.origin[0]) + ", " +
+                 num(b.origin[0] + b.size(0)) + "], y in [" + num(b.origin[1]) + ", " + num(b.origin[1] + b.size(1)) + "] m",
+             "a disc of diameter " + num(d) + " m centred at (" + num(cx) + ", " + num(cy) + ")");
+}
+
+// The continuum mesh: the inner box inside the outer box, zone sizes that fit them.
+void check_mesh(const config::Scene& sc, config::CheckContext& ctx) {
+  const auto size = sc.reals("continuum.mesh.size"), inner = sc.reals("continuum.mesh.inner_size");
+  const auto io = sc.reals("continuum.mesh.inner_origin");
+  if (!io.empty() && io.size() != 3)
+    ctx.fail("continuum.mesh.inner_origin", "an empty list or [x, y, z] in m", std::to_string(io.size()) + " numbers");
+  const double near = sc.real("continuum.mesh.size_near"), far = sc.real("continuum.mesh.size_far");
+  if (near > far)
+    ctx.fail("continuum.mesh.size_near", "a zone size <= size_far = " + num(far) + " m", num(near) + " m");
+  const char* axis = "xyz";
+  for (int a = 0; a < 3; ++a) {
+    const double lo = io.empty() ? (a < 2 ? (size[a] - inner[a]) / 2 : size[a] - inner[a]) : io[a];
+    if (inner[a] > size[a] || lo < 0 || lo + inner[a] > size[a] * (1 + 1e-12))
+      ctx.fail(io.empty() ? "continuum.mesh.inner_size" : "continuum.mesh.inner_origin",
+               std::string("an inner box inside the mesh box along ") + axis[a] + " (size " + num(size[a]) + " m)",
+               "[" + num(lo) + ", " + num(lo + inner[a]) + "] m");
+    if (near > size[a])
+      ctx.fail("continuum.mesh.size_near", std::string("a zone size <= the mesh box along ") + axis[a] + ", " + num(size[a]) + " m",
+               num(near) + " m");
+    if (inner[a] > 0 && near > inner[a])
+      ctx.fail("continuum.mesh.size_near",
+               std::string("a zone size <= the inner box along ") + axis[a] + ", " + num(inner[a]) + " m (at least one zone across it)",
+               num(near) + " m");
+  }
 }
 
 config::Schema build() {
@@ -418,7 +528,12 @@ config::Schema build() {
   declare_chain(root);
   declare_stages(root);
 
-  s.check([](const config::Scene& sc, config::CheckContext& ctx) {
+  // Defaults of the action keys: the effective scene of a run (config::Scene::effective_toml)
+  // writes every key of every stage, so only a value other than the default is refused.
+  std::map<std::string, double> action_key_default;
+  for (const char* key : kActionKeys)
+    action_key_default[key] = std::get<double>(*root.find("stage")->section->find(key)->param->def);
+  s.check([action_key_default](const config::Scene& sc, config::CheckContext& ctx) {
     if (!sc.has("dem") && !sc.has("continuum"))
       ctx.fail("dem", "a [dem] or a [continuum] section (a scene needs at least one node)", "neither");
     if (sc.has("coupling") && !(sc.has("dem") && sc.has("continuum")))
@@ -444,10 +559,23 @@ config::Schema build() {
                    "[" + std::to_string(inner[0]) + ", " + std::to_string(inner[1]) + ", " + std::to_string(inner[2]) + "]");
       }
     }
+    if (sc.has("dem")) check_dem(sc, ctx);
+    if (sc.has("continuum")) check_mesh(sc, ctx);
     auto present = roles(sc);
     for (std::size_t i = 0; i < sc.count("stage"); ++i) {
       auto e = sc.at("stage", i);
       std::string p = "stage[" + std::to_string(i) + "]";
+      const std::string act = e.string("action");
+      for (const char* key : kActionKeys) {
+        const auto* acts = stage_key_actions(key);
+        if (e.explicitly_set(key) && e.real(key) != action_key_default.at(key) &&
+            std::find(acts->begin(), acts->end(), act) == acts->end()) {
+          std::string list;
+          for (auto& a : *acts) list += (list.empty() ? "'" : "' or '") + a;
+          ctx.fail(p + "." + key, "a key of a " + list + "' stage only (it has no effect in a '" + act + "' stage)",
+                   "it in a '" + act + "' stage");
+        }
+      }
       auto nodes = e.strings("nodes");
       for (std::size_t j = 0; j < nodes.size(); ++j)
         if (std::find(present.begin(), present.end(), nodes[j]) == present.end()) {
@@ -470,6 +598,37 @@ config::Schema build() {
   return s;
 }
 }  // namespace
+
+DemBlock dem_block(const config::Scene& s) {
+  DemBlock b;
+  const auto c = s.reals("dem.specimen.cell");
+  const auto r = s.integers("dem.specimen.replicate");
+  for (int a = 0; a < 3; ++a) {
+    b.cell[a] = c[static_cast<std::size_t>(a)];
+    b.n[a] = static_cast<int>(r[static_cast<std::size_t>(a)]);
+  }
+  const auto o = s.reals("dem.specimen.origin");
+  if (o.size() == 3) {
+    for (int a = 0; a < 3; ++a) b.origin[a] = o[static_cast<std::size_t>(a)];
+  } else if (!o.empty()) {
+    s.fail("dem.specimen.origin", "an empty list or [x, y, z] in m", std::to_string(o.size()) + " numbers");
+  } else if (s.has("continuum")) {
+    const auto box = s.reals("continuum.mesh.size");
+    b.origin[0] = (box[0] - b.size(0)) / 2;
+    b.origin[1] = (box[1] - b.size(1)) / 2;
+    b.origin[2] = box[2] - b.size(2);
+  }
+  return b;
+}
+
+const std::vector<std::string>* stage_key_actions(const std::string& key) {
+  static const std::vector<std::string> penetrate{"penetrate"}, ucs{"ucs"}, geostatic{"geostatic", "couple"};
+  if (key == "strain_rate" || key == "max_strain") return &ucs;
+  if (key == "k0") return &geostatic;
+  for (const char* k : kActionKeys)
+    if (key == k) return &penetrate;
+  return nullptr;
+}
 
 const config::Schema& scene_schema() {
   static const config::Schema s = build();

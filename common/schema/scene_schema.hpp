@@ -32,4 +32,23 @@ struct Stage {
 };
 std::vector<Stage> stages(const config::Scene& s);
 
+// Geometry of the DEM block of a scene with [dem]: the REV cell dem.specimen.cell replicated
+// dem.specimen.replicate times, its minimum corner at dem.specimen.origin, or (empty origin)
+// in the continuum's pocket (centred in x and y, top flush with the box top), or at [0, 0, 0].
+// One definition for the checks and the DEM node. Throws config::Error naming
+// dem.specimen.origin if it holds neither 0 nor 3 numbers.
+struct DemBlock {
+  double origin[3] = {0, 0, 0};  // [m] minimum corner
+  double cell[3] = {0, 0, 0};    // [m] REV cell
+  int n[3] = {1, 1, 1};          // replication
+  double size(int a) const { return cell[a] * n[a]; }  // [m] block edge along axis a
+  double z_top() const { return origin[2] + size(2); }
+};
+DemBlock dem_block(const config::Scene& s);
+
+// Stage keys that only one group of actions reads (docs/stages.md); the checks refuse such a key
+// written in a stage of another action. Returns the actions of `key`, or nothing for a key that
+// every action reads.
+const std::vector<std::string>* stage_key_actions(const std::string& key);
+
 }  // namespace demfdm::schema

@@ -380,9 +380,12 @@ TEST(LaunchRunTraffic, ChannelsAndOff) {
   EXPECT_FALSE(fs::exists(dir / "off" / "traffic.parts"));
   // A failed run (the continuum exits at once; the coordinator gives up after 1 s) still gets
   // its merged log: the scene broadcasts and the DEM's hellos.
+  // (The stand-in passes launch/run's `--check` of every node executable, then fails.)
   std::ofstream(dir / "fails.toml") << base << "\n[bus]\nstartup_s = 1\n";
+  std::ofstream(dir / "fails.sh") << "#!/bin/sh\n[ \"$1\" = --check ] && exit 0\nexit 1\n";
+  fs::permissions(dir / "fails.sh", fs::perms::owner_all);
   auto [c4, o4] = run_cmd({"/bin/bash", run, (dir / "fails.toml").string(), "--no-build", "--run-dir",
-                           (dir / "fails").string(), "--set-executable", "continuum=/bin/false"},
+                           (dir / "fails").string(), "--set-executable", "continuum=" + (dir / "fails.sh").string()},
                           (dir / "fails.out").string());
   EXPECT_EQ(c4, 3) << o4;
   EXPECT_FALSE(fs::exists(dir / "fails" / "traffic.parts")) << o4;

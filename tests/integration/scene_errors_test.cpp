@@ -2,6 +2,7 @@
 // before anything starts; launch/run never overwrites an earlier run folder.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <thread>
 
@@ -156,3 +157,76 @@ TEST(LaunchRun, CtrlCStopsEveryProcess) {
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   EXPECT_NE(std::system(("pgrep -f '[r]un-dir=" + dir.string() + "' >/dev/null").c_str()), 0) << "orphaned processes";
 }
+
+// Issue 15 item 6: `--check` runs every check a node would run, cross-field ones included. Each
+// bad input is refused with exit 2 and one line that names the key (through an override of the
+// default scene: the line names the override).
+TEST(SceneErrors, CrossFieldAndNodeChecksRefuseAtCheck) {
+  struct Bad {
+    const char* set;
+    const char* key;  // the key the line must name
+  };
+  const Bad cases[] = {
+      {"dem.ball_ball.sb_mcf=0", "dem.ball_ball.sb_mcf"},           // the engine refused it only at start
+      {"dem.ball_ball.emod=inf", "dem.ball_ball.emod"},             // no key accepts infinity
+      {"continuum.mesh.size_near=inf", "continuum.mesh.size_near"},
+      {"dem.ball_ball.emod=0", "dem.ball_ball.emod"},               // soft bond: its only stiffness
+      {"dem.specimen.d_min=0.3e-3", "dem.specimen.d_min"},          // PSD bounds
+      {"dem.specimen.d50=1e-300", "dem.specimen.d50"},
+      {"gravity.level=0", "dem.specimen.sigma_v"},                  // derived stress without gravity
+      {"dem.footing.diameter=5e-3", "dem.footing.diameter"},        // wider than the block's top face
+      {"dem.footing.diameter=1e308", "dem.footing.diameter"},
+      {"dem.footing.centre=[1.0,1.0]", "dem.footing.centre"},       // 1 m outside the block
+      {"dem.footing.centre=[1,2,3,4]", "dem.footing.centre"},       // a centre of four numbers
+      {"stage.penetrate.steps=9223372036854775807", "stage.penetrate.steps"},  // overflowing budget
+      {"stage.penetrate.inertial_number=1e308", "stage.penetrate.inertial_number"},
+      {"stage.servo.depth_ratio=0.3", "stage.servo.depth_ratio"},   // a penetrate key in a servo stage
+      {"dem.ball_facet.model=linear", "dem.ball_facet.model"},      // the couple stage bonds to the facets
+      {"continuum.mesh.size_near=5e-3", "continuum.mesh.size_near"},  // zones larger than size_far
+      {"dem.dt_fixed=1e-3", "dem.dt_fixed"},                        // above any critical step (dem_node --check)
+  };
+  const auto dir = scratch("demfdm-crossfield-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  int i = 0;
+  for (const Bad& b : cases) {
+    SCOPED_TRACE(b.set);
+    const auto out = dir / ("case" + std::to_string(i++) + ".out");
+    auto p = spawn({kBin + "/coordinator", kSrc + "/scenes/default.toml", "--check", "--set", b.set}, {}, out.string());
+    auto st = wait_for(p, 30);
+    ASSERT_TRUE(st.has_value());
+    const std::string text = read_file(out.string());
+    EXPECT_EQ(exit_code(*st), 2) << text;
+    EXPECT_NE(text.find(b.key), std::string::npos) << text;
+    EXPECT_NE(text.find("expected"), std::string::npos) << text;
+    EXPECT_EQ(std::count(text.begin(), text.end(), '\n'), 1) << "one line: " << text;
+  }
+  // The default scene itself passes, nodes included.
+  const auto out = dir / "good.out";
+  auto p = spawn({kBin + "/coordinator", kSrc + "/scenes/default.toml", "--check"}, {}, out.string());
+  auto st = wait_for(p, 30);
+  ASSERT_TRUE(st.has_value());
+  EXPECT_EQ(exit_code(*st), 0) << read_file(out.string());
+}
+
+// A node executable runs its own checks without a bus: `dem_node --check SCENE [--set ...]`.
+TEST(SceneErrors, NodeExecutablesCheckTheSceneAlone) {
+  const auto dir = scratch("demfdm-nodecheck-" + std::to_string(getpid()));
+  fs::create_directories(dir);
+  auto run = [&](const std::vector<std::string>& args, const std::string& tag) {
+    const auto out = dir / (tag + ".out");
+    auto p = spawn(args, {}, out.string());
+    auto st = wait_for(p, 30);
+    EXPECT_TRUE(st.has_value());
+    return std::make_pair(st ? exit_code(*st) : -1, read_file(out.string()));
+  };
+  auto [c1, o1] = run({kBin + "/dem_node", "--check", kSrc + "/scenes/default.toml"}, "dem-ok");
+  EXPECT_EQ(c1, 0) << o1;
+  auto [c2, o2] = run({kBin + "/fdm_node", "--check", kSrc + "/scenes/default.toml"}, "fdm-ok");
+  EXPECT_EQ(c2, 0) << o2;
+  auto [c3, o3] = run({kBin + "/dem_node", "--check", kSrc + "/scenes/default.toml", "--set", "dem.dt_fixed=1e-3"}, "dem-bad");
+  EXPECT_EQ(c3, 2) << o3;
+  EXPECT_NE(o3.find("dem.dt_fixed"), std::string::npos) << o3;
+  auto [c4, o4] = run({kBin + "/fdm_node", "--check"}, "fdm-noscene");
+  EXPECT_EQ(c4, 2) << o4;
+}
+

@@ -1691,7 +1691,7 @@ std::size_t World::bond_ball_ball(double lo, double hi) {
   if (p_.ball_ball.model == ContactModel::kLinear)
     throw std::invalid_argument(
         "bond_ball_ball: family 'ball_ball' uses model 'linear', which cannot bond; set "
-        "ball_ball.model to 'linearpbond' or 'softbond'.");
+        "ball_ball.model to 'pbond' or 'softbond'.");
   if (!prepared_) prepare();
   std::size_t cnt = 0;
   for (std::size_t c = 0; c < pc_.size(); ++c) {
@@ -1719,7 +1719,7 @@ std::size_t World::bond_ball_facet(double hi) {
   if (p_.ball_facet.model == ContactModel::kLinear)
     throw std::invalid_argument(
         "bond_ball_facet: family 'ball_facet' uses model 'linear', which cannot bond; set "
-        "ball_facet.model to 'linearpbond' (the paper's interface, §2.6).");
+        "ball_facet.model to 'pbond' (the paper's interface, §2.6).");
   if (!prepared_) prepare();
   std::size_t cnt = 0;
   for (std::size_t c = 0; c < fcc_.size(); ++c) {
