@@ -28,6 +28,7 @@
 #include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
 #include "demfdm/io/csv_series.hpp"
@@ -413,7 +414,7 @@ class DemParticipant : public node::Participant {
     const double node_before = world_.time();
     world_.step(interval_);  // its phases are reported by add_phase_times()
     clock_.advanced(node_before, dt, world_.time());
-    work_ += boundary_power() * world_.dt() * static_cast<double>(interval_);
+    work_ += dem::boundary_power(world_) * world_.dt() * static_cast<double>(interval_);
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
       node::Timed t(effect_s_["output.history"]);
       auto fz = world_.has_footing() ? world_.footing_reaction().z : 0.0;
@@ -463,7 +464,7 @@ class DemParticipant : public node::Participant {
     v.push_back({"dt_critical_s", crit});
     if (!is_generation(st.action) && !energy_pending_) {
       const auto e = world_.energy();
-      const double total = total_energy(), w = work_ + gravity_work();
+      const double total = total_energy(), w = work_ + dem::gravity_work(world_, x_begin_);
       const double dissipated = total - e.kinetic - e.strain - (energy_begin_ - mechanical_begin_);
       // Relative to the largest energy flow of the stage.
       const double scale = std::max({std::abs(w), mechanical_begin_, e.kinetic + e.strain, std::abs(dissipated), 1e-300});
@@ -603,27 +604,6 @@ class DemParticipant : public node::Participant {
     const auto e = world_.energy();
     return e.kinetic + e.strain + e.damping + e.friction + e.softening;
   }
-  // Power of the moving boundaries on the balls [W]: footing and interface facets (the force
-  // of a wall on the balls is minus the balls' force on it).
-  double boundary_power() {
-    double p = 0;
-    if (world_.has_footing()) p -= dem::dot(world_.footing_reaction(), world_.footing().p.velocity);
-    for (int w = 0; w < world_.num_facet_walls(); ++w) {
-      const auto& fw = world_.facet_wall(w);
-      for (std::size_t k = 0; k < fw.vel.size() && k < fw.vforce.size(); ++k) p -= dem::dot(fw.vforce[k], fw.vel[k]);
-    }
-    return p;
-  }
-  // Work of gravity on the balls since the stage began [J].
-  double gravity_work() const {
-    if (!world_.gravity_on()) return 0.0;
-    const auto& b = world_.balls();
-    const dem::Vec3 g = world_.gravity();
-    double w = 0;
-    for (std::size_t i = 0; i < b.size() && i < x_begin_.size(); ++i) w += b.m[i] * dem::dot(g, b.x[i] - x_begin_[i]);
-    return w;
-  }
-
   // Box the balls must stay in: the continuum's pocket if coupled, else the DEM block.
   std::pair<dem::Vec3, dem::Vec3> domain() const {
     dem::Vec3 lo = block_.origin;
@@ -634,12 +614,9 @@ class DemParticipant : public node::Participant {
   // dem.kick: the highest ball gets the given velocity (stability studies).
   void kick() {
     kicked_ = true;
+    if (world_.num_balls() == 0) return;
+    const std::size_t top = dem::kick_highest_ball(world_, {kick_[0], kick_[1], kick_[2]});
     const auto& b = world_.balls();
-    if (b.size() == 0) return;
-    std::size_t top = 0;
-    for (std::size_t i = 1; i < b.size(); ++i)
-      if (b.x[i].z + b.r[i] > b.x[top].z + b.r[top]) top = i;
-    world_.balls().v[top] = {kick_[0], kick_[1], kick_[2]};
     spdlog::info("dem: kick: ball id {} at ({}, {}, {}) gets velocity ({}, {}, {}) m/s", b.id[top], b.x[top].x,
                  b.x[top].y, b.x[top].z, kick_[0], kick_[1], kick_[2]);
   }
@@ -658,33 +635,10 @@ class DemParticipant : public node::Participant {
   // DEM-only box (dem.specimen.box = "walls"): planes on the bottom and the four sides of the
   // replicated block, normals pointing inwards, then the depth scaling of the coupled set-up.
   void box_walls() {
-    if (world_.periodic())
-      throw std::invalid_argument("dem.specimen.box = \"walls\": the block is still periodic (no replicate stage before)");
-    // Walls touch the outermost ball surfaces: the cut faces of the replicated block have balls
-    // that reach past them, and a linear wall contact would push those out at once.
-    const auto& b = world_.balls();
-    dem::Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-    for (std::size_t i = 0; i < b.size(); ++i)
-      for (int k = 0; k < 3; ++k) {
-        lo[k] = std::min(lo[k], b.x[i][k] - b.r[i]);
-        hi[k] = std::max(hi[k], b.x[i][k] + b.r[i]);
-      }
-    const double lx = hi.x - lo.x, ly = hi.y - lo.y;
-    const dem::Vec3 o = lo, c{0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.5 * (lo.z + hi.z)};
-    auto plane = [&](dem::Vec3 point, dem::Vec3 normal, dem::Vec3 axis1) {
-      dem::PlaneWallParams p;
-      p.point = point;
-      p.normal = normal;
-      p.axis1 = axis1;
-      world_.add_plane(p);
-    };
-    plane({c.x, c.y, o.z}, {0, 0, 1}, {1, 0, 0});
-    plane({o.x, c.y, c.z}, {1, 0, 0}, {0, 1, 0});
-    plane({o.x + lx, c.y, c.z}, {-1, 0, 0}, {0, 1, 0});
-    plane({c.x, o.y, c.z}, {0, 1, 0}, {1, 0, 0});
-    plane({c.x, o.y + ly, c.z}, {0, -1, 0}, {1, 0, 0});
+    const auto [lo, hi] = dem::add_box_walls(world_);
     box_done_ = true;
-    spdlog::info("dem: DEM-only box: 5 walls around the {} x {} m block (bottom at z = {} m)", lx, ly, lo.z);
+    spdlog::info("dem: DEM-only box: 5 walls around the {} x {} m block (bottom at z = {} m)", hi.x - lo.x, hi.y - lo.y,
+                 lo.z);
     world_.prepare();
     scale_with_depth();
     world_.prepare();
@@ -779,27 +733,8 @@ class DemParticipant : public node::Participant {
     auto c = s_.reals("dem.footing.centre");
     dem::Vec3 axis = block_.centre();
     if (c.size() == 2) axis = {c[0], c[1], 0};
-    // Bottom at the height of first contact: penetration counts from there. A ball whose axis
-    // distance rho is within the footprint touches the flat bottom at its top, z + r; one
-    // beyond the footprint's edge (r_f < rho < r_f + r) touches the bottom rim at
-    // z + sqrt(r^2 - (rho - r_f)^2), lower than its top (the footing is a cylinder).
-    const auto& b = world_.balls();
-    double r_f = f.diameter / 2;
-    double best = -std::numeric_limits<double>::infinity();
-    for (std::size_t i = 0; i < b.size(); ++i) {
-      const double dx = b.x[i].x - axis.x, dy = b.x[i].y - axis.y, rho = std::sqrt(dx * dx + dy * dy);
-      const double out = rho - r_f, r = b.r[i];
-      if (out >= r) continue;
-      best = std::max(best, b.x[i].z + (out <= 0 ? r : std::sqrt(r * r - out * out)));
-    }
-    if (!std::isfinite(best))
-      throw std::runtime_error(fmt::format(
-          "penetrate: no ball lies under the footing's footprint (D {} m centred at ({}, {})): the footing would never "
-          "touch the block; place it over the block (dem.footing.centre, dem.footing.diameter)",
-          f.diameter, axis.x, axis.y));
-    f.bottom_centre = {axis.x, axis.y, best};
-    f.velocity = {0, 0, 0};
-    world_.set_footing(f);
+    f.bottom_centre = axis;
+    const double best = dem::place_footing_at_first_contact(world_, f);
     footing_z0_ = best;
     spdlog::info("dem: footing D {} m at ({}, {}), bottom z {} m", f.diameter, axis.x, axis.y, best);
     return {{"footing_z0_m", best}};
@@ -854,41 +789,6 @@ class DemParticipant : public node::Participant {
             {"peak_reached", r.report.converged ? 1.0 : 0.0}};
   }
 
-  // Unbalanced-force ratio of the load-bearing skeleton under gravity: the engine's ratio
-  // (mean |F_unb| over balls / mean contact force) without the rattlers, the balls that touch
-  // nothing and whose whole force is their weight. A rattler in the gap of a loose packing
-  // falls at (1 - alpha) N g under local damping and needs a physical time far longer than the
-  // skeleton's equilibration to land; it carries no load, so it only keeps the engine's ratio
-  // at about (rattler share) x (ball weight / mean contact force), e.g. 4e-2 in
-  // scenes/footing_small.toml at 100 g, whatever the budget.
-  struct SkeletonRatio {
-    double ratio = 0;
-    std::size_t rattlers = 0;
-  };
-  SkeletonRatio skeleton_ratio() const {
-    SkeletonRatio r;
-    const auto& b = world_.balls();
-    const dem::Vec3 g = world_.gravity();
-    double sum = 0;
-    std::size_t n = 0;
-    for (std::size_t i = 0; i < b.size(); ++i) {
-      dem::Vec3 f = b.f[i] + b.fa[i];
-      dem::Vec3 c = f - b.m[i] * g;  // contact part of the force
-      if (c.x == 0 && c.y == 0 && c.z == 0) {
-        ++r.rattlers;
-        continue;
-      }
-      double s2 = 0;
-      for (int k = 0; k < 3; ++k)
-        if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
-      sum += std::sqrt(s2);
-      ++n;
-    }
-    const double fc = world_.mean_contact_force();
-    r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
-    return r;
-  }
-
   // The engine's unbalanced-force ratio of the current state, computed once per state (the
   // history row, the step report and the exit criterion all read it; it rebuilds every
   // contact force).
@@ -899,9 +799,9 @@ class DemParticipant : public node::Participant {
     }
     return ratio_;
   }
-  const SkeletonRatio& skeleton() {
+  const dem::SkeletonRatio& skeleton() {
     if (!skeleton_valid_) {
-      skeleton_ = skeleton_ratio();
+      skeleton_ = dem::skeleton_ratio(world_);
       skeleton_valid_ = true;
     }
     return skeleton_;
@@ -931,20 +831,16 @@ class DemParticipant : public node::Participant {
     auto csv = io::CsvSeries::create(dir_ / ("dem_profile_" + st.name + ".csv"),
                                      {"depth_m", "depth_top_m", "depth_bottom_m", "szz_Pa", "sxx_Pa", "syy_Pa",
                                       "balls_1", "selfweight_szz_Pa", "rho_b_kg_m3", "d_max_m"});
-    for (int i = 0; i < n; ++i) {
-      dem::Region r;
-      r.kind = dem::Region::Kind::kBox;
-      double z_hi = block_.z_top() - h * i / n, z_lo = block_.z_top() - h * (i + 1) / n;
-      r.lo = {block_.origin.x, block_.origin.y, z_lo};
-      r.hi = {block_.origin.x + lx, block_.origin.y + ly, z_hi};
-      std::size_t count = 0;
-      const auto& b = world_.balls();
-      for (std::size_t k = 0; k < b.size(); ++k) count += r.contains(b.x[k]) ? 1 : 0;
-      auto sig = dem::region_stress(world_, r);
-      double d = block_.z_top() - 0.5 * (z_lo + z_hi);
-      csv.append({d, block_.z_top() - z_hi, block_.z_top() - z_lo, sig[8], sig[0], sig[4], static_cast<double>(count),
-                  -rho_b * g * d, rho_b, d_max});
-    }
+    dem::ProfileBox box;
+    box.x_lo = block_.origin.x;
+    box.y_lo = block_.origin.y;
+    box.x_hi = block_.origin.x + lx;
+    box.y_hi = block_.origin.y + ly;
+    box.z_top = block_.z_top();
+    box.height = h;
+    for (const auto& sl : dem::stress_profile(world_, box, n))
+      csv.append({sl.depth, sl.depth_top, sl.depth_bottom, sl.szz, sl.sxx, sl.syy, static_cast<double>(sl.balls),
+                  -rho_b * g * sl.depth, rho_b, d_max});
     csv.close();
   }
 
@@ -1005,7 +901,7 @@ class DemParticipant : public node::Participant {
   double weight_ = -1;
   double ratio_ = 0;           // engine ratio of the current state (ratio())
   bool ratio_valid_ = false;   // cleared by every call that changes the state
-  SkeletonRatio skeleton_;     // skeleton ratio of the current state (skeleton())
+  dem::SkeletonRatio skeleton_;     // skeleton ratio of the current state (skeleton())
   bool skeleton_valid_ = false;
   node::EnergyJump energy_jump_;
   double user_dt_ = 0, escape_margin_ = 0;

@@ -223,6 +223,7 @@ class World {
   Vec3 facet_wall_force(int wall) const;
   Vec3 facet_walls_total_force() const;
   FacetWall& facet_wall(int i) { return fwalls_[static_cast<std::size_t>(i)]; }
+  const FacetWall& facet_wall(int i) const { return fwalls_[static_cast<std::size_t>(i)]; }
   int num_facet_walls() const { return static_cast<int>(fwalls_.size()); }
 
   void set_footing(const FootingParams& p);

@@ -1,0 +1,65 @@
+// Stage procedures and diagnostics of the DEM node that need no scene and no bus (issue 15 item 4:
+// the node executable only adapts messages and scene keys to these calls). Each is unit-tested in
+// tests/dem/procedures_test.cpp.
+#pragma once
+
+#include <cstddef>
+#include <vector>
+
+#include "demfdm/dem/world.hpp"
+
+namespace demfdm::dem {
+
+/// Unbalanced-force ratio of the load-bearing skeleton under gravity (docs/paper-study.md): the
+/// engine's ratio (mean |F_unb| over balls / mean contact force) without the rattlers, the balls
+/// whose contact force is exactly zero (their whole force is their weight: under local damping a
+/// rattler in a pore falls for far longer than the skeleton needs to settle, and would keep the
+/// engine's ratio at about rattler share x weight / mean contact force). Fixed components do not
+/// count. Infinite when no ball carries a contact force.
+struct SkeletonRatio {
+  double ratio = 0.0;
+  std::size_t rattlers = 0;
+};
+SkeletonRatio skeleton_ratio(const World& w);
+
+/// One horizontal slab of a vertical stress profile: particle-based stress (region_stress) of the
+/// balls whose centres lie in the slab, depth measured down from the block top.
+struct ProfileSlab {
+  double depth = 0, depth_top = 0, depth_bottom = 0;  // [m] slab centre, top, bottom
+  double szz = 0, sxx = 0, syy = 0;                   // [Pa] tension positive
+  std::size_t balls = 0;                              // centres inside the slab
+};
+/// The box x in [x_lo, x_hi], y in [y_lo, y_hi], from z_top down `height`, cut into `slabs` equal
+/// horizontal slabs, top first (Fig. 3 profiles).
+struct ProfileBox {
+  double x_lo = 0, y_lo = 0, x_hi = 0, y_hi = 0;  // [m] footprint
+  double z_top = 0, height = 0;                   // [m] top of the block, its height
+};
+std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs);
+
+/// DEM-only box (scene dem.specimen.box = "walls"): five planar walls (family ball_wall) on the
+/// bottom and the four sides of the balls' bounding box, each touching the outermost ball surfaces
+/// (a wall placed at a cut face would overlap the balls that reach past it and push them out at
+/// once), normals pointing inwards. Throws std::invalid_argument while the world is periodic or
+/// has no ball. Returns the bounding box of the ball surfaces [lo, hi].
+std::pair<Vec3, Vec3> add_box_walls(World& w);
+
+/// Places the footing `f` (its bottom_centre x and y give the axis; z is ignored) at first
+/// contact: the highest point where a ball touches its flat bottom (a ball within the footprint,
+/// at its top z + r) or its bottom rim (a ball whose axis distance rho is in (r_f, r_f + r), at
+/// z + sqrt(r^2 - (rho - r_f)^2)), at rest. Returns the bottom height [m]. Throws
+/// std::runtime_error when no ball lies under the footprint (the footing would never touch).
+double place_footing_at_first_contact(World& w, FootingParams f);
+
+/// Power of the moving boundaries on the balls [W]: the footing and the facet walls (the force of
+/// a wall on the balls is minus the balls' force on it), from the last force pass.
+double boundary_power(const World& w);
+
+/// Work of gravity on the balls since positions `x_begin` [J] (0 without gravity).
+double gravity_work(const World& w, const std::vector<Vec3>& x_begin);
+
+/// The ball whose top (z + r) is highest gets velocity `v` (stability studies); returns its row.
+/// Throws std::invalid_argument without balls.
+std::size_t kick_highest_ball(World& w, const Vec3& v);
+
+}  // namespace demfdm::dem

@@ -1,0 +1,142 @@
+#include "demfdm/dem/procedures.hpp"
+
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+#include "demfdm/dem/measure.hpp"
+
+namespace demfdm::dem {
+
+SkeletonRatio skeleton_ratio(const World& w) {
+  SkeletonRatio r;
+  const auto& b = w.balls();
+  const Vec3 g = w.gravity();
+  double sum = 0;
+  std::size_t n = 0;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    Vec3 f = b.f[i] + b.fa[i];
+    Vec3 c = f - b.m[i] * g;  // contact part of the force
+    if (c.x == 0 && c.y == 0 && c.z == 0) {
+      ++r.rattlers;
+      continue;
+    }
+    double s2 = 0;
+    for (int k = 0; k < 3; ++k)
+      if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
+    sum += std::sqrt(s2);
+    ++n;
+  }
+  const double fc = w.mean_contact_force();
+  r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
+  return r;
+}
+
+std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs) {
+  if (slabs < 1) throw std::invalid_argument("stress_profile: slabs must be >= 1");
+  std::vector<ProfileSlab> out;
+  const double h = box.height, top = box.z_top;
+  const auto& b = w.balls();
+  for (int i = 0; i < slabs; ++i) {
+    Region r;
+    r.kind = Region::Kind::kBox;
+    const double z_hi = top - h * i / slabs, z_lo = top - h * (i + 1) / slabs;
+    r.lo = {box.x_lo, box.y_lo, z_lo};
+    r.hi = {box.x_hi, box.y_hi, z_hi};
+    ProfileSlab s;
+    for (std::size_t k = 0; k < b.size(); ++k) s.balls += r.contains(b.x[k]) ? 1 : 0;
+    const auto sig = region_stress(w, r);
+    s.depth = top - 0.5 * (z_lo + z_hi);
+    s.depth_top = top - z_hi;
+    s.depth_bottom = top - z_lo;
+    s.szz = sig[8];
+    s.sxx = sig[0];
+    s.syy = sig[4];
+    out.push_back(s);
+  }
+  return out;
+}
+
+std::pair<Vec3, Vec3> add_box_walls(World& w) {
+  if (w.periodic())
+    throw std::invalid_argument("dem.specimen.box = \"walls\": the block is still periodic (no replicate stage before)");
+  const auto& b = w.balls();
+  if (b.size() == 0) throw std::invalid_argument("dem.specimen.box = \"walls\": no balls to enclose");
+  Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+  for (std::size_t i = 0; i < b.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      lo[k] = std::min(lo[k], b.x[i][k] - b.r[i]);
+      hi[k] = std::max(hi[k], b.x[i][k] + b.r[i]);
+    }
+  const double lx = hi.x - lo.x, ly = hi.y - lo.y;
+  const Vec3 o = lo, c{0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.5 * (lo.z + hi.z)};
+  auto plane = [&](Vec3 point, Vec3 normal, Vec3 axis1) {
+    PlaneWallParams p;
+    p.point = point;
+    p.normal = normal;
+    p.axis1 = axis1;
+    w.add_plane(p);
+  };
+  plane({c.x, c.y, o.z}, {0, 0, 1}, {1, 0, 0});
+  plane({o.x, c.y, c.z}, {1, 0, 0}, {0, 1, 0});
+  plane({o.x + lx, c.y, c.z}, {-1, 0, 0}, {0, 1, 0});
+  plane({c.x, o.y, c.z}, {0, 1, 0}, {1, 0, 0});
+  plane({c.x, o.y + ly, c.z}, {0, -1, 0}, {1, 0, 0});
+  return {lo, hi};
+}
+
+double place_footing_at_first_contact(World& w, FootingParams f) {
+  const Vec3 axis = f.bottom_centre;
+  const auto& b = w.balls();
+  const double r_f = f.diameter / 2;
+  double best = -std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double dx = b.x[i].x - axis.x, dy = b.x[i].y - axis.y, rho = std::sqrt(dx * dx + dy * dy);
+    const double out = rho - r_f, r = b.r[i];
+    if (out >= r) continue;
+    best = std::max(best, b.x[i].z + (out <= 0 ? r : std::sqrt(r * r - out * out)));
+  }
+  if (!std::isfinite(best)) {
+    std::ostringstream os;
+    os << "penetrate: no ball lies under the footing's footprint (D " << f.diameter << " m centred at (" << axis.x
+       << ", " << axis.y << ")): the footing would never touch the block; place it over the block "
+       << "(dem.footing.centre, dem.footing.diameter)";
+    throw std::runtime_error(os.str());
+  }
+  f.bottom_centre = {axis.x, axis.y, best};
+  f.velocity = {0, 0, 0};
+  w.set_footing(f);
+  return best;
+}
+
+double boundary_power(const World& w) {
+  double p = 0;
+  if (w.has_footing()) p -= dot(w.footing_reaction(), w.footing().p.velocity);
+  for (int k = 0; k < w.num_facet_walls(); ++k) {
+    const auto& fw = w.facet_wall(k);
+    for (std::size_t j = 0; j < fw.vel.size() && j < fw.vforce.size(); ++j) p -= dot(fw.vforce[j], fw.vel[j]);
+  }
+  return p;
+}
+
+double gravity_work(const World& w, const std::vector<Vec3>& x_begin) {
+  if (!w.gravity_on()) return 0.0;
+  const auto& b = w.balls();
+  const Vec3 g = w.gravity();
+  double work = 0;
+  for (std::size_t i = 0; i < b.size() && i < x_begin.size(); ++i) work += b.m[i] * dot(g, b.x[i] - x_begin[i]);
+  return work;
+}
+
+std::size_t kick_highest_ball(World& w, const Vec3& v) {
+  const auto& b = w.balls();
+  if (b.size() == 0) throw std::invalid_argument("kick: the world has no balls");
+  std::size_t top = 0;
+  for (std::size_t i = 1; i < b.size(); ++i)
+    if (b.x[i].z + b.r[i] > b.x[top].z + b.r[top]) top = i;
+  w.balls().v[top] = v;
+  return top;
+}
+
+}  // namespace demfdm::dem

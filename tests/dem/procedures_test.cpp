@@ -1,0 +1,155 @@
+// DEM stage procedures and diagnostics moved out of the node executable (issue 15 item 4,
+// demfdm/dem/procedures.hpp), each against an analytic answer or a stated invariant.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <stdexcept>
+
+#include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/procedures.hpp"
+
+using namespace demfdm::dem;
+
+namespace {
+WorldParams plain() {
+  WorldParams p;
+  p.threads = 1;
+  p.ball_ball.model = ContactModel::kLinear;
+  return p;
+}
+}  // namespace
+
+// Two stacked balls on a floor carry contact forces; a ball far above them falls freely (a
+// rattler). The skeleton ratio is the mean |F_unb| of the two over the mean contact force.
+TEST(Procedures, SkeletonRatioLeavesOutRattlers) {
+  WorldParams p = plain();
+  p.local_damping = 0.0;
+  World w(p);
+  const double R = 1e-3;
+  w.add_ball({0, 0, R * (1 - 1e-3)}, R);            // pressed 1 µm into the floor
+  w.add_ball({0, 0, R * (3 - 2e-3) - 0.5e-6}, R);   // resting on it, 0.5 µm overlap
+  w.add_ball({0.1, 0, 0.5}, R);                     // far from everything
+  PlaneWallParams floor;
+  floor.point = {0, 0, 0};
+  w.add_plane(floor);
+  w.set_gravity(true, 1.0);
+  w.prepare();
+  const SkeletonRatio s = skeleton_ratio(w);
+  EXPECT_EQ(s.rattlers, 1u);
+  const auto& b = w.balls();
+  const double fc = w.mean_contact_force();
+  ASSERT_GT(fc, 0.0);
+  EXPECT_DOUBLE_EQ(s.ratio, (norm(b.f[0] + b.fa[0]) + norm(b.f[1] + b.fa[1])) / 2 / fc);
+  // The rattler's whole force is its weight.
+  EXPECT_DOUBLE_EQ(b.f[2].z, -b.m[2] * 9.81);
+}
+
+// The slabs tile the block from its top down; every ball centre inside the block is counted
+// once; in a box without forces the stresses are zero.
+TEST(Procedures, StressProfileSlabsTileTheBlock) {
+  World w(plain());
+  const double R = 1e-4;
+  int n = 0;
+  for (int k = 0; k < 10; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i, ++n) w.add_ball({(2 * i + 1) * 1.2 * R, (2 * j + 1) * 1.2 * R, (2 * k + 1) * 1.2 * R}, R);
+  w.prepare();
+  ProfileBox box;
+  box.x_hi = box.y_hi = 6 * 1.2 * R;
+  box.z_top = 20 * 1.2 * R;
+  box.height = box.z_top;
+  const auto slabs = stress_profile(w, box, 5);
+  ASSERT_EQ(slabs.size(), 5u);
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < slabs.size(); ++i) {
+    count += slabs[i].balls;
+    EXPECT_NEAR(slabs[i].depth_top, box.height * i / 5, 1e-15);
+    EXPECT_NEAR(slabs[i].depth_bottom, box.height * (i + 1) / 5, 1e-15);
+    EXPECT_NEAR(slabs[i].depth, 0.5 * (slabs[i].depth_top + slabs[i].depth_bottom), 1e-15);
+    EXPECT_EQ(slabs[i].szz, 0.0);  // no contact touches: spacing 2.4 R
+    EXPECT_EQ(slabs[i].balls, 18u);
+  }
+  EXPECT_EQ(count, static_cast<std::size_t>(n));
+  EXPECT_THROW(stress_profile(w, box, 0), std::invalid_argument);
+}
+
+// Five walls touch the outermost ball surfaces: no wall overlaps a ball, and each touches one.
+TEST(Procedures, BoxWallsTouchTheOutermostSurfaces) {
+  World w(plain());
+  w.add_ball({0, 0, 0}, 1e-3);
+  w.add_ball({3e-3, 1e-3, 0.5e-3}, 0.8e-3);
+  w.add_ball({1e-3, 4e-3, 2e-3}, 1.2e-3);
+  const auto [lo, hi] = add_box_walls(w);
+  ASSERT_EQ(w.num_planes(), 5);
+  EXPECT_DOUBLE_EQ(lo.x, -1e-3);
+  EXPECT_DOUBLE_EQ(hi.x, 3.8e-3);
+  EXPECT_DOUBLE_EQ(lo.z, -1e-3);
+  EXPECT_DOUBLE_EQ(hi.y, 5.2e-3);
+  const auto& b = w.balls();
+  for (int k = 0; k < 5; ++k) {
+    const PlaneWall& pw = w.plane(k);
+    double closest = 1e300;
+    for (std::size_t i = 0; i < b.size(); ++i) closest = std::min(closest, dot(b.x[i] - pw.p.point, pw.p.normal) - b.r[i]);
+    EXPECT_NEAR(closest, 0.0, 1e-18) << "wall " << k;  // touching, never overlapping
+  }
+  WorldParams per = plain();
+  per.periodic.enabled = true;
+  per.periodic.length = {1, 1, 1};
+  World wp(per);
+  wp.add_ball({0.5, 0.5, 0.5}, 1e-3);
+  EXPECT_THROW(add_box_walls(wp), std::invalid_argument);
+  World empty(plain());
+  EXPECT_THROW(add_box_walls(empty), std::invalid_argument);
+}
+
+// First contact: a ball under the footprint touches the bottom at its top; one beyond the edge
+// touches the rim at z + sqrt(r^2 - (rho - r_f)^2); none under the footprint is an error.
+TEST(Procedures, FootingPlacedAtFirstContactIncludingTheRim) {
+  World w(plain());
+  const double r = 1e-3;
+  w.add_ball({0, 0, 0}, r);            // under the centre: top at 1e-3
+  w.add_ball({2.5e-3, 0, 0.5e-3}, r);  // 0.5 mm beyond the rim of a 4 mm footing
+  FootingParams f;
+  f.diameter = 4e-3;
+  f.bottom_centre = {0, 0, 123.0};  // z is ignored
+  const double z = place_footing_at_first_contact(w, f);
+  EXPECT_DOUBLE_EQ(z, 0.5e-3 + std::sqrt(r * r - 0.5e-3 * 0.5e-3));
+  ASSERT_TRUE(w.has_footing());
+  EXPECT_DOUBLE_EQ(w.footing().p.bottom_centre.z, z);
+  EXPECT_EQ(w.footing().p.velocity.z, 0.0);
+  f.bottom_centre = {1.0, 1.0, 0};  // 1 m away from every ball
+  EXPECT_THROW(place_footing_at_first_contact(w, f), std::runtime_error);
+}
+
+// The footing pushing a ball down at v: the boundary power is -F.v; gravity's work is m g dz.
+TEST(Procedures, BoundaryPowerAndGravityWork) {
+  World w(plain());
+  w.add_ball({0, 0, 0}, 1e-3);
+  FootingParams f;
+  f.diameter = 1e-3;
+  f.bottom_centre = {0, 0, 0};
+  place_footing_at_first_contact(w, f);
+  w.set_footing_position({0, 0, 1e-3 - 1e-6});  // 1 µm into the ball
+  w.set_footing_velocity({0, 0, -0.5});
+  w.prepare();
+  const Vec3 F = w.footing_reaction();
+  ASSERT_GT(F.z, 0.0);  // the ball pushes the footing up
+  EXPECT_DOUBLE_EQ(boundary_power(w), -dot(F, Vec3{0, 0, -0.5}));
+  EXPECT_GT(boundary_power(w), 0.0);  // the footing works on the ball
+  const std::vector<Vec3> x0 = w.balls().x;
+  EXPECT_EQ(gravity_work(w, x0), 0.0);  // gravity off
+  w.set_gravity(true, 2.0);
+  w.balls().x[0].z -= 1e-4;
+  EXPECT_NEAR(gravity_work(w, x0), w.balls().m[0] * 2.0 * 9.81 * 1e-4, 1e-15);
+}
+
+TEST(Procedures, KickGivesTheHighestTopItsVelocity) {
+  World w(plain());
+  w.add_ball({0, 0, 1e-3}, 1e-3);    // top 2e-3
+  w.add_ball({1, 0, 1.5e-3}, 0.2e-3);  // top 1.7e-3: higher centre, lower top
+  EXPECT_EQ(kick_highest_ball(w, {0, 0, 3}), 0u);
+  EXPECT_EQ(w.balls().v[0].z, 3.0);
+  EXPECT_EQ(w.balls().v[1].z, 0.0);
+  World empty(plain());
+  EXPECT_THROW(kick_highest_ball(empty, {0, 0, 1}), std::invalid_argument);
+}
