@@ -221,12 +221,11 @@ coord::RateMeasures stage_rates(const config::Scene& scene, const schema::Stage&
       poisson = material_default("poisson");
     }
   }
-  double rho_b = scene.real("dem.specimen.bulk_density");
-  if (rho_b < 0) rho_b = 0.48 * scene.real("dem.density");
+  const double rho_b = scene.real_or_word("dem.specimen.bulk_density").value_or(0.48 * scene.real("dem.density"));
   std::optional<double> sigma_c;
   const auto& model = scene.string("dem.ball_ball.model");
   if (model == "softbond") sigma_c = scene.real("dem.ball_ball.sb_ten");
-  if (model == "pbond" && scene.real("dem.ball_ball.pb_ten") >= 0) sigma_c = scene.real("dem.ball_ball.pb_ten");
+  if (model == "pbond") sigma_c = scene.real_or_word("dem.ball_ball.pb_ten");  // none: unbreakable
   double speed = stage_speed(scene, st);
   return coord::rate_measures(speed, v.real("inertial_number"),
                               coord::ramp_time(v.real("ramp_depth_ratio"), scene.real("dem.footing.diameter"), speed),

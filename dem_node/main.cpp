@@ -52,7 +52,7 @@ dem::ContactFamilyParams family(const config::Scene& s, const std::string& name)
   f.linear.fric = s.real(k("fric"));
   f.linear.wall_length = s.string(k("wall_length")) == "diameter" ? dem::WallLength::kDiameter : dem::WallLength::kRadius;
   const double inf = std::numeric_limits<double>::infinity();
-  auto strength = [&](const char* key) { return s.real(k(key)) < 0 ? inf : s.real(k(key)); };
+  auto strength = [&](const char* key) { return s.real_or_word(k(key)).value_or(inf); };
   f.pbond.emod = s.real(k("pb_emod"));
   f.pbond.kratio = s.real(k("pb_kratio"));
   f.pbond.rmul = s.real(k("pb_rmul"));
@@ -314,9 +314,9 @@ class DemParticipant : public node::Participant {
        // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
        // dem.damping and dem.dt_fixed change nothing before the first later stage.
       auto& wp = world_.mutable_params();
-      const double alpha = st.view.real("damping");
+      const auto alpha = st.view.real_or_word("damping");
       wp.dt_safety = s_.real(preparing_ ? "dem.specimen.dt_safety" : "dem.dt_safety");
-      wp.local_damping = alpha >= 0 ? alpha : s_.real(preparing_ ? "dem.specimen.damping" : "dem.damping");
+      wp.local_damping = alpha ? *alpha : s_.real(preparing_ ? "dem.specimen.damping" : "dem.damping");
       if (preparing_) wp.dt_fixed = 0.0;
       safe_dt_key_ = {-1, -1, -1};  // the cached critical step holds the previous factor
     }
@@ -332,8 +332,8 @@ class DemParticipant : public node::Participant {
     } else if (a == "servo") {
       v = report(servo());
     } else if (a == "bond") {
-      double gap = s_.real("dem.specimen.bond_gap");
-      if (gap < 0) gap = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
+      const double gap = s_.real_or_word("dem.specimen.bond_gap")
+                             .value_or(1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale"));
       v = report(dem::install_bonds(world_, -std::numeric_limits<double>::infinity(), gap));
     } else if (a == "replicate") {
       dem::ReplicateParams p;
@@ -652,13 +652,13 @@ class DemParticipant : public node::Participant {
     p.seed = static_cast<std::uint64_t>(s_.integer("run.seed"));
     p.n_particles = static_cast<std::size_t>(s_.integer("dem.specimen.n_particles"));
     p.porosity_final = s_.real("dem.specimen.porosity");
-    p.porosity_target = s_.real("dem.specimen.porosity_target");
+    p.porosity_target = s_.real_or_word("dem.specimen.porosity_target").value_or(p.porosity_final);
     p.initial_scale = s_.real("dem.specimen.initial_scale");
     p.increments = static_cast<int>(s_.integer("dem.specimen.increments"));
     p.ratio_tol = s_.real("dem.specimen.expansion_ratio");
     p.increment_budget = s_.real("dem.specimen.increment_budget");
     auto r = dem::generate_rev(world_, p);
-    const double z = s_.real("dem.specimen.bond_coordination");
+    const double z = s_.real_or_word("dem.specimen.bond_coordination").value_or(0.0);
     if (z > 0) {  // bonds over the gaps that give Table 1's Z (docs/ucs-study.md)
       auto floor = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
       auto z0 = dem::coordination(world_).z;  // touching contacts only
@@ -671,10 +671,8 @@ class DemParticipant : public node::Participant {
 
   // sigma_v at the bottom of the DEM block for the scene's g-level (docs/theory.md 4.5, 7.4).
   double sigma_v() const {
-    double sv = s_.real("dem.specimen.sigma_v");
-    if (sv >= 0) return sv;
-    double rho_b = s_.real("dem.specimen.bulk_density");
-    if (rho_b < 0) rho_b = 0.48 * s_.real("dem.density");
+    if (const auto sv = s_.real_or_word("dem.specimen.sigma_v")) return *sv;
+    const double rho_b = s_.real_or_word("dem.specimen.bulk_density").value_or(0.48 * s_.real("dem.density"));
     double g = s_.has("gravity") ? s_.real("gravity.level") * s_.real("gravity.g0") : 9.81;
     return rho_b * g * block_.height();
   }

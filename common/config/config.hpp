@@ -60,6 +60,7 @@ struct Param {
   std::optional<double> lo, hi;  // numeric range (also applied to each list element)
   bool lo_open = false, hi_open = false;
   std::vector<std::string> choices;  // Kind::Choice
+  std::string word;  // Kind::Real: a word the key may hold instead of a number ("auto", "none")
   std::optional<std::size_t> length;  // fixed list length, e.g. 3 for a vector
 };
 
@@ -79,6 +80,10 @@ struct ParamBuilder {
   ParamBuilder& min(double lo, bool open = false);
   ParamBuilder& max(double hi, bool open = false);
   ParamBuilder& length(std::size_t n);
+  // A number key that may instead hold `word` (e.g. "auto": a value derived from others, or
+  // "none"), never a negative sentinel; `is_default`: the word is the default. Read it with
+  // Scene::real_or_word(); Scene::real() on the word is a programming error.
+  ParamBuilder& or_word(std::string word, bool is_default);
 };
 
 class Scene;
@@ -231,6 +236,8 @@ class Scene {
   bool has(std::string_view path) const;
   bool explicitly_set(std::string_view path) const;  // key (or section) given in the file
   double real(std::string_view path) const;
+  // A Real key declared with or_word(): the number, or nothing when it holds its word.
+  std::optional<double> real_or_word(std::string_view path) const;
   std::int64_t integer(std::string_view path) const;
   bool boolean(std::string_view path) const;
   // Also Choice and Path (Path returned resolved to an absolute path).

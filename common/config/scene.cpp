@@ -272,6 +272,7 @@ class Loader {
       }
       case Kind::Real: {
         double x;
+        if (v.is_string() && !p.word.empty() && v.as_string()->get() == p.word) return Value(p.word);
         if (v.is_integer())
           x = static_cast<double>(v.as_integer()->get());  // int -> real promotion
         else if (v.is_floating_point())
@@ -767,7 +768,15 @@ bool Scene::has(std::string_view path) const {
 bool Scene::explicitly_set(std::string_view path) const { return has(path); }
 
 double Scene::real(std::string_view path) const {
-  return std::get<double>(value_of(path, Kind::Real, "real"));
+  const Value& v = value_of(path, Kind::Real, "real");
+  if (const auto* w = std::get_if<std::string>(&v))
+    throw std::logic_error("config: " + std::string(path) + " holds '" + *w + "'; read it with real_or_word()");
+  return std::get<double>(v);
+}
+std::optional<double> Scene::real_or_word(std::string_view path) const {
+  const Value& v = value_of(path, Kind::Real, "real_or_word");
+  if (std::holds_alternative<std::string>(v)) return std::nullopt;
+  return std::get<double>(v);
 }
 std::int64_t Scene::integer(std::string_view path) const {
   return std::get<std::int64_t>(value_of(path, Kind::Int, "integer"));

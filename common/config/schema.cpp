@@ -223,7 +223,13 @@ void check_default(const Param& p, const std::string& path) {
   };
   switch (p.kind) {
     case Kind::Int: check_num(static_cast<double>(std::get<std::int64_t>(v)), path); break;
-    case Kind::Real: check_num(std::get<double>(v), path); break;
+    case Kind::Real:
+      if (const auto* w = std::get_if<std::string>(&v)) {
+        if (*w != p.word) schema_bug(path, "default '" + *w + "' is not " + describe(p));
+      } else {
+        check_num(std::get<double>(v), path);
+      }
+      break;
     case Kind::RealList: {
       const auto& l = std::get<std::vector<double>>(v);
       check_len(l.size());
@@ -255,7 +261,7 @@ std::string describe(const Param& p) {
   switch (p.kind) {
     case Kind::Bool: return "a boolean (true or false)";
     case Kind::Int: return numeric_phrase(p, "an integer");
-    case Kind::Real: return numeric_phrase(p, "a number");
+    case Kind::Real: return numeric_phrase(p, "a number") + (p.word.empty() ? "" : " or '" + p.word + "'");
     case Kind::String: return "a string";
     case Kind::Choice: {
       std::string s = "one of ";
@@ -303,6 +309,15 @@ ParamBuilder& ParamBuilder::max(double hi, bool open) {
   if (!is_numeric(param->kind)) schema_bug(path, "max() on a non-numeric parameter");
   param->hi = hi;
   param->hi_open = open;
+  check_default(*param, path);
+  return *this;
+}
+
+ParamBuilder& ParamBuilder::or_word(std::string word, bool is_default) {
+  if (param->kind != Kind::Real) schema_bug(path, "or_word() on a parameter that is not a number");
+  if (word.empty()) schema_bug(path, "or_word() with an empty word");
+  param->word = std::move(word);
+  if (is_default) param->def = Value(param->word);
   check_default(*param, path);
   return *this;
 }

@@ -187,8 +187,12 @@ void declare_family(config::Section& dem, const char* name, const FamilyDefaults
   f.real("pb_kratio", "-", 2.4, "Parallel bond stiffness ratio.").min(0.0, true);
   f.real("pb_rmul", "-", 1.0, "Parallel bond radius multiplier lambda-bar.").min(0.0, true);
   f.real("pb_mcf", "-", 1.0, "Parallel bond moment contribution factor beta-bar.").min(0.0).max(1.0);
-  f.real("pb_ten", "Pa", 0.45e6, "Parallel bond tensile strength; negative: unbreakable.");
-  f.real("pb_coh", "Pa", 0.45e6, "Parallel bond cohesion; negative: unbreakable.");
+  f.real("pb_ten", "Pa", 0.45e6, "Parallel bond tensile strength; \"unbreakable\": no tensile failure.")
+      .min(0.0)
+      .or_word("unbreakable", false);
+  f.real("pb_coh", "Pa", 0.45e6, "Parallel bond cohesion; \"unbreakable\": no shear failure.")
+      .min(0.0)
+      .or_word("unbreakable", false);
   f.real("pb_fa", "deg", 32.0, "Parallel bond friction angle.").min(0.0).max(90.0, true);
   f.boolean("pb_zero_linear", d.zero_linear,
             "Give the linear part zero stiffness when bonding (interface bonds: no repulsion from initial "
@@ -254,11 +258,16 @@ void declare_dem(config::Section& root) {
   sp.integer("n_particles", "-", 0,
              "Number of balls; 0: the PSD's expected count at 'porosity' in the cell (Table 1 N_p).").min(0);
   sp.real("porosity", "-", 0.5195, "Final porosity n of the specimen (Table 1, scale 1); sets N_p.").min(0.0, true).max(1.0, true);
-  sp.real("porosity_target", "-", -1.0,
-          "Porosity reached by frictionless radius expansion (4.3); negative: 'porosity'.").max(1.0, true);
-  sp.real("bond_coordination", "-", -1.0,
+  sp.real("porosity_target", "-", std::nullopt,
+          "Porosity reached by frictionless radius expansion (4.3); \"auto\": 'porosity'.")
+      .min(0.0, true)
+      .max(1.0, true)
+      .or_word("auto", true);
+  sp.real("bond_coordination", "-", std::nullopt,
           "generate: after the expansion, bond every pair up to the gap that gives this bonded coordination "
-          "number (Table 1: 6.82; docs/ucs-study.md); negative: no bonding in 'generate'.");
+          "number (Table 1: 6.82; docs/ucs-study.md); \"none\": no bonding in 'generate'.")
+      .min(0.0, true)
+      .or_word("none", true);
   sp.real("initial_scale", "-", 0.6, "Initial radii = d/2 * this (4.3).").min(0.0, true).max(1.0);
   sp.integer("increments", "-", 5, "Radius-expansion increments.").min(1);
   sp.real("expansion_ratio", "-", 1e-3, "Unbalanced ratio to reach after each expansion increment.").min(0.0, true);
@@ -279,10 +288,14 @@ void declare_dem(config::Section& root) {
       .min(0.0)
       .max(1.0, true);
   sp.real("k0", "-", 0.5, "sigma_h / sigma_v of the REV servo (U7).").min(0.0);
-  sp.real("sigma_v", "Pa", -1.0,
-          "REV vertical stress; negative: rho_b N g0 H_D, the self-weight stress at the DEM block's bottom "
-          "(docs/theory.md 4.5), with rho_b = (1 - 0.52) rho_s unless bulk_density is set.");
-  sp.real("bulk_density", "kg/m^3", -1.0, "Bulk density for sigma_v; negative: 0.48 rho_s.");
+  sp.real("sigma_v", "Pa", std::nullopt,
+          "REV vertical stress (compression positive); \"auto\": rho_b N g0 H_D, the self-weight stress at the DEM "
+          "block's bottom (docs/theory.md 4.5), with rho_b = (1 - 0.52) rho_s unless bulk_density is set.")
+      .min(0.0, true)
+      .or_word("auto", true);
+  sp.real("bulk_density", "kg/m^3", std::nullopt, "Bulk density for sigma_v; \"auto\": 0.48 rho_s.")
+      .min(0.0, true)
+      .or_word("auto", true);
   sp.real("servo_tol", "-", 0.005, "Servo stress tolerance |s - s*| / s*.").min(0.0, true);
   sp.real("servo_ratio", "-", 1e-4, "Servo unbalanced-ratio criterion.").min(0.0, true);
   sp.real("servo_gain", "1/t_c", 0.375,
@@ -296,7 +309,8 @@ void declare_dem(config::Section& root) {
       .min(0.0, true)
       .max(1e9);
   sp.real("servo_fric", "-", 0.1, "Friction during servo compaction (4.3 step 4: 0 to 0.1).").min(0.0);
-  sp.real("bond_gap", "m", -1.0, "Bond contacts with gap <= this; negative: 1e-3 d_min (4.6).");
+  sp.real("bond_gap", "m", std::nullopt, "bond stage: bond contacts with gap <= this; \"auto\": 1e-3 d_min (4.6).")
+      .or_word("auto", true);
   sp.integers("replicate", "-", std::vector<std::int64_t>{1, 1, 5}, "Copies alpha x beta x gamma (4.7).")
       .length(3).min(1);
   sp.choice("box", {"none", "walls"}, std::string("none"),
@@ -400,10 +414,12 @@ void declare_stages(config::Section& root) {
           "default: E50 of the UCS study, docs/ucs-study.md. With a continuum: the first "
           "[[continuum.material]]'s young and poisson.")
       .min(0.0, true);
-  st.real("damping", "-", -1.0,
+  st.real("damping", "-", std::nullopt,
           "DEM local damping alpha in this stage (docs/theory.md 1.3: the penetration stage may use less than the "
-          "0.7 of equilibration); negative: dem.damping.")
-      .max(0.99);
+          "0.7 of equilibration); \"auto\": dem.damping (dem.specimen.damping in preparation stages).")
+      .min(0.0)
+      .max(0.99)
+      .or_word("auto", true);
   st.real("strain_rate", "1/s", 0.5, "ucs: platen approach rate / specimen height.").min(0.0, true);
   st.real("max_strain", "-", 0.01, "ucs: stop at this axial strain.").min(0.0, true);
   st.strings("nodes", std::vector<std::string>{}, "Roles taking part ('dem', 'continuum'); empty: all of the scene's.");
@@ -452,7 +468,7 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
     if (sc.string(f + ".model") == "softbond" && !(sc.real(f + ".emod") > 0))
       ctx.fail(f + ".emod", "a modulus > 0 Pa for the soft bond (its only stiffness set)", num(sc.real(f + ".emod")) + " Pa");
   }
-  const bool bonds = has_action("bond") || (has_action("generate") && sc.real("dem.specimen.bond_coordination") >= 0);
+  const bool bonds = has_action("bond") || (has_action("generate") && sc.real_or_word("dem.specimen.bond_coordination"));
   if (bonds && sc.string("dem.ball_ball.model") == "linear")
     ctx.fail("dem.ball_ball.model", "'pbond' or 'softbond' (the scene bonds the specimen: a bond stage, or "
              "dem.specimen.bond_coordination >= 0)", "'linear'");
@@ -462,12 +478,12 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
              "'linear'");
   // A derived REV stress (sigma_v < 0: rho_b N g0 H_D) needs gravity.
   const double g = sc.has("gravity") ? sc.real("gravity.level") * sc.real("gravity.g0") : 0.0;
-  if (has_action("servo") && sc.real("dem.specimen.sigma_v") < 0 && !(g > 0))
+  if (has_action("servo") && !sc.real_or_word("dem.specimen.sigma_v") && !(g > 0))
     ctx.fail("dem.specimen.sigma_v",
-             "a stress > 0 Pa: a negative sigma_v is derived from the self-weight rho_b N g0 H_D, and this scene's "
-             "gravity is zero",
-             num(sc.real("dem.specimen.sigma_v")) + (sc.has("gravity") ? " with gravity.level " + num(sc.real("gravity.level"))
-                                                                        : " without a [gravity] section"));
+             "a stress > 0 Pa: \"auto\" derives it from the self-weight rho_b N g0 H_D, and this scene's gravity is "
+             "zero",
+             std::string("\"auto\"") + (sc.has("gravity") ? " with gravity.level " + num(sc.real("gravity.level"))
+                                                           : " without a [gravity] section"));
   const DemBlock b = dem_block(sc);
   if (!sc.has("dem.footing")) return;
   const auto c = sc.reals("dem.footing.centre");

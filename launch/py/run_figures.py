@@ -67,8 +67,8 @@ def bond_strength(scene):
     model = bb.get("model", "softbond")  # the scene schema's default (docs/scene-reference.md)
     if model == "softbond":
         return float(bb.get("sb_ten", 4.5e5)), "dem.ball_ball.sb_ten"
-    if model == "pbond" and float(bb.get("pb_ten", -1)) >= 0:
-        return float(bb["pb_ten"]), "dem.ball_ball.pb_ten"
+    if model == "pbond" and bb.get("pb_ten", 4.5e5) != "unbreakable":
+        return float(bb.get("pb_ten", 4.5e5)), "dem.ball_ball.pb_ten"
     return None, None
 
 

@@ -813,3 +813,47 @@ TEST(ConfigDocs, Describe) {
   EXPECT_EQ(cfg::format_value(cfg::Value(2.5e-5)), "2.5e-5");
   EXPECT_EQ(cfg::format_value(cfg::Value(std::vector<double>{0, 0, -9.81})), "[0, 0, -9.81]");
 }
+
+// A "derived" value is an explicit word, never a negative number (issue 15 item 5): a number key
+// declared with or_word() holds a number in its range or the word; a negative number is refused
+// with the word named; infinity and NaN are never accepted.
+TEST(ConfigScene, NumberOrWord) {
+  cfg::Schema s;
+  auto& sp = s.root().section("specimen", "REV", Presence::Required);
+  sp.real("sigma_v", "Pa", std::nullopt, "Vertical stress; auto: from the self-weight").min(0, true).or_word("auto", true);
+  sp.real("pb_ten", "Pa", 4.5e5, "Tensile strength; unbreakable: none").min(0).or_word("unbreakable", false);
+  auto parse = [&](const std::string& text, std::vector<std::string> sets = {}) {
+    return cfg::Scene::parse(text, "w.toml", s, ".", sets);
+  };
+  const auto a = parse("[specimen]\n");
+  EXPECT_FALSE(a.real_or_word("specimen.sigma_v").has_value());  // the default is the word
+  EXPECT_EQ(*a.real_or_word("specimen.pb_ten"), 4.5e5);
+  EXPECT_THROW(a.real("specimen.sigma_v"), std::logic_error);  // a word read as a number: a bug
+  const auto b = parse("[specimen]\nsigma_v = 5e3\npb_ten = \"unbreakable\"\n");
+  EXPECT_EQ(*b.real_or_word("specimen.sigma_v"), 5e3);
+  EXPECT_EQ(b.real("specimen.sigma_v"), 5e3);
+  EXPECT_FALSE(b.real_or_word("specimen.pb_ten").has_value());
+  // The effective TOML writes the word and reads back the same.
+  const auto c = parse(b.effective_toml());
+  EXPECT_FALSE(c.real_or_word("specimen.pb_ten").has_value());
+  EXPECT_EQ(c.real("specimen.sigma_v"), 5e3);
+  // Overrides take the word as the file does.
+  EXPECT_FALSE(parse("[specimen]\nsigma_v = 5e3\n", {"specimen.sigma_v=auto"}).real_or_word("specimen.sigma_v"));
+  auto err = [&](const std::string& text) {
+    try {
+      parse(text);
+    } catch (const cfg::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(err("[specimen]\nsigma_v = -5e3\n"), "w.toml:2:11: specimen.sigma_v: expected a number > 0 Pa or 'auto', found -5000");
+  EXPECT_EQ(err("[specimen]\nsigma_v = \"derived\"\n"),
+            "w.toml:2:11: specimen.sigma_v: expected a number > 0 Pa or 'auto', found string 'derived'");
+  EXPECT_EQ(err("[specimen]\npb_ten = inf\n"),
+            "w.toml:2:10: specimen.pb_ten: expected a number >= 0 Pa or 'unbreakable', found inf");
+  // A word on a key that is not a number, or an empty word, is a schema bug.
+  cfg::Schema bad;
+  EXPECT_THROW(bad.root().string("name", std::string("x"), "doc").or_word("auto", true), std::logic_error);
+  EXPECT_THROW(bad.root().real("v", "", 1.0, "doc").or_word("", false), std::logic_error);
+}

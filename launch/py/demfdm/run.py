@@ -136,7 +136,7 @@ class Run:
         model = bb.get("model", DEFAULT_BALL_BALL_MODEL)
         if model == "softbond":
             return float(bb.get("sb_ten", 0.45e6))
-        if model == "pbond" and float(bb.get("pb_ten", 0.45e6)) >= 0:
+        if model == "pbond" and bb.get("pb_ten", 0.45e6) != "unbreakable":
             return float(bb.get("pb_ten", 0.45e6))
         return None
 
