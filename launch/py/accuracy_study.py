@@ -2,15 +2,24 @@
 """Accuracy-cost study (launch/study accuracy; docs/accuracy-study.md).
 
 Usage:
-  /usr/bin/python3 launch/py/accuracy_study.py run STUDY_DIR [--quick] [--only KNOB ...]
+  /usr/bin/python3 launch/py/accuracy_study.py run STUDY_DIR [--quick] [--seeds N] [--only KNOB ...] [--no-branch]
+  /usr/bin/python3 launch/py/accuracy_study.py plan [STUDY_DIR] [--quick] [--seeds N] [--only KNOB ...]
   /usr/bin/python3 launch/py/accuracy_study.py table STUDY_DIR
   /usr/bin/python3 launch/py/accuracy_study.py list
 
-run: derives every variant of each knob from scenes/accuracy_footing.toml (footing) or
-scenes/ucs_sbm_s1.5.toml (UCS) by setting `table.key = value` in the scene text, runs each
-distinct scene once through launch/run (sequentially, one thread per node), then writes the table
-and the figure. table: rebuilds accuracy_table.{csv,md} and accuracy_pareto.png from the run
-folders of STUDY_DIR (plan.json). Needs DEMFDM_ROOT (and DEMFDM_BUILD for launch/run).
+run: every setting of each knob is a scene file and overrides (launch/run --set): a setting of
+the footing problem is scenes/accuracy_footing.toml with some keys set (the DEM-only reference of
+the dem_only knob: scenes/accuracy_footing_box.toml, the same problem without its continuum), one
+of the UCS problem scenes/ucs_sbm_s1.5.toml. Settings with the same values in effect (the
+coordinator's effective scene) are one run. Every run is checked by the coordinator before any
+starts (a bad one: its error line, exit 2); then each distinct run goes through launch/run SCENE
+--set ... (sequentially, one thread per node) into STUDY_DIR/<run>/, which records its effective
+scene as scene.toml, and the table and the figure are written. Rerun into the same folder, a
+study runs only what has not run (a run is known by its values in effect, also in folders written
+before the studies used overrides). plan: the runs and their launch/run commands, each checked by
+the coordinator, and with STUDY_DIR which have run; nothing starts. table: rebuilds
+accuracy_table.{csv,md} and accuracy_pareto.png from the run folders of STUDY_DIR (plan.json).
+Needs DEMFDM_ROOT (and DEMFDM_BUILD for launch/run and the coordinator).
 
 For each run: wall time of the run (summary.json totals, the coordinator's clock), and the error
 against the most accurate setting of its knob: peak load (UCS: the UCS), initial stiffness
@@ -20,10 +29,10 @@ against the most accurate setting of its knob: peak load (UCS: the UCS), initial
 """
 import argparse
 import csv
-import hashlib
 import json
 import os
 import re
+import shlex
 import subprocess
 import sys
 import time
@@ -38,143 +47,68 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import compare_curves  # noqa: E402  (the normalised curve difference)
 import paper_figures  # noqa: E402  (initial-stiffness rule and the footing curve of a run folder)
 import branching  # noqa: E402  (which saved state a run may start from)
+import overrides  # noqa: E402  (scene variants as launch/run --set overrides)
 
 FOOTING_SCENE = "scenes/accuracy_footing.toml"
+# The footing problem with DEM everywhere (no continuum, a box of walls; its header lists the
+# differences): an override sets keys, it cannot remove the [continuum] and [coupling] sections.
+BOX_SCENE = "scenes/accuracy_footing_box.toml"
 UCS_SCENE = "scenes/ucs_sbm_s1.5.toml"
+BASE_SCENES = {"footing": FOOTING_SCENE, "ucs": UCS_SCENE}
 
 
-def set_key(text, dotted, value):
-    """Sets `key = value` in table `table` ("table.key"; the first [[table]] of an array of tables)
-    of a TOML text. Fails when the table or the key is not in the text (no silent additions)."""
-    table, _, key = dotted.rpartition(".")
-    lines = text.split("\n")
-    start = None
-    for i, line in enumerate(lines):
-        s = line.strip()
-        if s in ("[%s]" % table, "[[%s]]" % table):
-            start = i + 1
-            break
-    if start is None:
-        raise KeyError("scene has no table [%s] (setting %s)" % (table, dotted))
-    for i in range(start, len(lines)):
-        s = lines[i].strip()
-        if s.startswith("["):
-            break
-        m = re.match(r"^(\s*)%s\s*=" % re.escape(key), lines[i])
-        if m:
-            lines[i] = "%s%s = %s" % (m.group(1), key, value)
-            return "\n".join(lines)
-    raise KeyError("table [%s] of the scene has no key '%s'" % (table, key))
+def setting(label, *sets, scene=None):
+    """A knob setting: (label, overrides, scene file relative to the repository; None: the
+    problem's base scene)."""
+    return (label, list(sets), scene)
 
 
-def quiet_traffic(text):
-    """Study and ensemble runs record no traffic log unless the scene says traffic_log itself: a
-    coupled run's log holds every interface message (about 1 GB for the default scene), which a
-    study of load curves does not need. [output] traffic_log = false is added."""
-    if re.search(r"(?m)^\s*traffic_log\s*=", text):
-        return text
-    if re.search(r"(?m)^\s*\[output\]\s*$", text):
-        return re.sub(r"(?m)^(\s*\[output\]\s*)$", r"\1\ntraffic_log = false", text, count=1)
-    return text.rstrip("\n") + "\n\n[output]\ntraffic_log = false\n"
-
-
-def set_stage_key(text, stage, key, value, add=False):
-    """Sets `key = value` in the [[stage]] named `stage`; fails when the stage is absent, and when
-    the key is absent unless add (then the line is appended to the stage)."""
-    parts = re.split(r"(?m)^(?=\[\[stage\]\])", text)
-    for i, p in enumerate(parts):
-        if p.startswith("[[stage]]") and re.search(r'(?m)^name\s*=\s*"%s"\s*$' % re.escape(stage), p):
-            new, n = re.subn(r"(?m)^%s\s*=.*$" % re.escape(key), "%s = %s" % (key, value), p)
-            if n == 0 and add:
-                body = p.rstrip("\n")
-                new, n = body + "\n%s = %s\n" % (key, value) + p[len(body):].lstrip("\n"), 1
-                new = new if new.endswith("\n") else new + "\n"
-            if n != 1:
-                raise KeyError("stage '%s' has %d '%s' keys (expected 1)" % (stage, n, key))
-            parts[i] = new
-            return "".join(parts)
-    raise KeyError("scene has no stage named '%s'" % stage)
-
-
-def dem_only_box(text):
-    """The footing scene without its continuum: drops [continuum*] and [coupling], turns the
-    coupled gravity stage into a DEM equilibrium stage and puts the block in a box of walls
-    (dem.specimen.box = "walls"). The caller sets the replication so that the DEM block fills
-    the outer size of the coupled model."""
-    out, skip = [], False
-    for line in text.split("\n"):
-        s = line.strip()
-        if s.startswith("["):
-            name = s.strip("[]")
-            skip = name.startswith("continuum") or name == "coupling"
-        if skip:
-            continue
-        if re.match(r"^coupled\s*=", s):
-            continue
-        out.append(line)
-    text = "\n".join(out)
-    text, n = re.subn(r'(?m)^action\s*=\s*"couple"\s*$', 'action = "equilibrium"', text)
-    if n != 1:
-        raise KeyError("footing scene: expected one stage with action \"couple\", found %d" % n)
-    if "\n[dem.specimen]\n" not in text:
-        raise KeyError("footing scene has no [dem.specimen] table")
-    return text.replace("\n[dem.specimen]\n", '\n[dem.specimen]\nbox = "walls"\n', 1)
-
-
-def apply(text, edits):
-    for k, v in edits.items():
-        if k == "transform" and v == "dem_only_box":
-            text = dem_only_box(text)
-        elif k.startswith("stage:") or k.startswith("stage+:"):
-            stage, _, key = k.partition(":")[2].partition(".")
-            text = set_stage_key(text, stage, key, v, add=k.startswith("stage+:"))
-        else:
-            text = set_key(text, k, v)
-    return text
-
-
-# Knobs: name -> (problem, what it trades, [(label, edits)] most accurate first, label of the most
-# accurate setting (the reference), labels of the --quick subset). Every label's edits apply to the
-# problem's base scene. When the reference run did not finish, the most accurate finished setting
-# is the reference (marked "ref*" in the table).
+# Knobs: name -> (problem, what it trades, [settings] most accurate first, label of the most
+# accurate setting (the reference), labels of the --quick subset). Every setting's overrides apply
+# to its scene (the problem's base scene unless it names one). When the reference run did not
+# finish, the most accurate finished setting is the reference (marked "ref*" in the table).
 def knobs(quick):
     f = {}
     f["scale"] = ("footing", "particle upscaling factor (fewer, larger balls)",
-                  [("1", {"dem.specimen.scale": 1}), ("1.3", {"dem.specimen.scale": 1.3}),
-                   ("1.5", {"dem.specimen.scale": 1.5}), ("2", {"dem.specimen.scale": 2})], "1", ["1.5", "2"])
+                  [setting("1", "dem.specimen.scale=1"), setting("1.3", "dem.specimen.scale=1.3"),
+                   setting("1.5", "dem.specimen.scale=1.5"), setting("2", "dem.specimen.scale=2")], "1", ["1.5", "2"])
     f["interval"] = ("footing", "DEM steps per coupling exchange",
-                     [("1", {}), ("2", {"coupling.interval": 2}), ("5", {"coupling.interval": 5}),
-                      ("10", {"coupling.interval": 10})], "1", ["1", "5"])
+                     [setting("1"), setting("2", "coupling.interval=2"), setting("5", "coupling.interval=5"),
+                      setting("10", "coupling.interval=10")], "1", ["1", "5"])
     f["scheme"] = ("footing", "serial (no lag) or parallel (one-step lag, both cores busy) coupling",
-                   [("serial", {}), ("parallel", {"coupling.scheme": '"parallel"'})], "serial", ["serial", "parallel"])
+                   [setting("serial"), setting("parallel", 'coupling.scheme="parallel"')], "serial",
+                   ["serial", "parallel"])
     # Coupled DEM-FDM against a DEM-only box of the same 4 x 4 x 4 mm outer size, at upscaling 2
-    # (the smallest practical DEM-only model): the DEM box is the reference.
-    small = {"dem.specimen.scale": 2, "continuum.mesh.size": "[4e-3, 4e-3, 4e-3]"}
+    # (the smallest practical DEM-only model): the DEM box (BOX_SCENE: replication 2 x 2 x 4, box
+    # of walls) is the reference.
     f["dem_only"] = ("footing", "a DEM block in an FDM continuum instead of DEM everywhere (same 4 mm box, scale 2)",
-                     [("dem_box", dict(small, **{"dem.specimen.replicate": "[2, 2, 4]", "transform": "dem_only_box"})),
-                      ("coupled", dict(small, **{"dem.specimen.replicate": "[1, 1, 2]",
-                                                 "continuum.mesh.inner_size": "[2e-3, 2e-3, 2e-3]"}))],
+                     [setting("dem_box", "dem.specimen.scale=2", scene=BOX_SCENE),
+                      setting("coupled", "dem.specimen.scale=2", "continuum.mesh.size=[4e-3, 4e-3, 4e-3]",
+                              "dem.specimen.replicate=[1, 1, 2]", "continuum.mesh.inner_size=[2e-3, 2e-3, 2e-3]")],
                      "dem_box", [])
     f["dt_safety"] = ("footing", "time step as a fraction of the critical step (DEM dt_safety; FDM "
                       "timestep_safety scaled by the same factor)",
-                      [("0.4", {"dem.dt_safety": 0.4, "continuum.timestep_safety": 0.25}),
-                       ("0.64", {"dem.dt_safety": 0.64, "continuum.timestep_safety": 0.4}),
-                       ("0.8", {}),
-                       ("0.95", {"dem.dt_safety": 0.95, "continuum.timestep_safety": 0.59375})], "0.4", ["0.8", "0.95"])
+                      [setting("0.4", "dem.dt_safety=0.4", "continuum.timestep_safety=0.25"),
+                       setting("0.64", "dem.dt_safety=0.64", "continuum.timestep_safety=0.4"),
+                       setting("0.8"),
+                       setting("0.95", "dem.dt_safety=0.95", "continuum.timestep_safety=0.59375")], "0.4",
+                      ["0.8", "0.95"])
     f["zone_size"] = ("footing", "FDM zone size (size_near and size_far times the factor)",
-                      [("0.5", {"continuum.mesh.size_near": 0.25e-3, "continuum.mesh.size_far": 0.75e-3}),
-                       ("1", {}),
-                       ("2", {"continuum.mesh.size_near": 1e-3, "continuum.mesh.size_far": 3e-3})], "0.5", ["1", "2"])
+                      [setting("0.5", "continuum.mesh.size_near=0.25e-3", "continuum.mesh.size_far=0.75e-3"),
+                       setting("1"),
+                       setting("2", "continuum.mesh.size_near=1e-3", "continuum.mesh.size_far=3e-3")], "0.5",
+                      ["1", "2"])
     f["continuum"] = ("footing", "explicit FDM or the implicit continuum solver (fem_node)",
-                      [("fdm", {}), ("fem", {"continuum.executable": '"fem_node"'})], "fdm", [])
+                      [setting("fdm"), setting("fem", 'continuum.executable="fem_node"')], "fdm", [])
     f["damping"] = ("footing", "DEM local damping alpha of the penetration stage (the gravity stage keeps 0.7)",
-                    [("0.1", {"stage+:penetrate.damping": 0.1}), ("0.3", {"stage+:penetrate.damping": 0.3}),
-                     ("0.7", {})], "0.1", [])
+                    [setting("0.1", "stage.penetrate.damping=0.1"), setting("0.3", "stage.penetrate.damping=0.3"),
+                     setting("0.7")], "0.1", [])
     f["seed"] = ("footing", "generator seed: not a trade, the run-to-run scatter an error must exceed to mean anything",
-                 [("1", {}), ("2", {"run.seed": 2}), ("3", {"run.seed": 3})], "1", [])
+                 [setting("1"), setting("2", "run.seed=2"), setting("3", "run.seed=3")], "1", [])
     f["ucs_scale"] = ("ucs", "particle upscaling factor of the UCS test",
-                      [("1", {"dem.specimen.scale": 1}), ("1.3", {"dem.specimen.scale": 1.3}),
-                       ("1.5", {"dem.specimen.scale": 1.5}), ("2", {"dem.specimen.scale": 2})], "1", ["1.5", "2"])
+                      [setting("1", "dem.specimen.scale=1"), setting("1.3", "dem.specimen.scale=1.3"),
+                       setting("1.5", "dem.specimen.scale=1.5"), setting("2", "dem.specimen.scale=2")], "1",
+                      ["1.5", "2"])
     if quick:  # the subsets, each against its own most accurate member
         out = {}
         for k, (prob, what, sets, ref, sub) in f.items():
@@ -185,73 +119,97 @@ def knobs(quick):
     return f
 
 
-def base_text(root, problem, quick):
-    if problem == "footing":
-        text = quiet_traffic(open(os.path.join(root, FOOTING_SCENE)).read())
-        if quick:  # development: larger balls, shallower penetration
-            text = apply(text, {"dem.specimen.scale": 2, "stage:penetrate.depth_ratio": 0.05})
-        return text
-    text = quiet_traffic(open(os.path.join(root, UCS_SCENE)).read())
-    if quick:
-        text = apply(text, {"stage:ucs.max_strain": 0.002})
-    return text
+def base_sets(problem, quick):
+    """The overrides every run of a problem starts with: --quick's development settings."""
+    if not quick:
+        return []
+    if problem == "footing":  # larger balls, shallower penetration
+        return ["dem.specimen.scale=2", "stage.penetrate.depth_ratio=0.05"]
+    return ["stage.ucs.max_strain=0.002"]
 
 
-def text_hash(text):
-    return hashlib.sha1(text.encode()).hexdigest()[:10]
+class PlanError(Exception):
+    """A setting the coordinator refuses, or a study folder that ran other values: exit 2."""
 
 
-def existing_runs(study):
-    """hash -> run name of the scenes already written to a study folder (reused when extending it)."""
+def existing_runs(study, coordinator=None):
+    """fingerprint -> run name of the run folders already in a study folder (their scene.toml read
+    through the coordinator: an effective scene, or the edited scene copy of a study written
+    before the studies used overrides), so that extending or resuming a study reuses them."""
     out = {}
     if os.path.isdir(study):
-        for f in sorted(os.listdir(study)):
-            if f.endswith(".toml"):
-                out.setdefault(text_hash(open(os.path.join(study, f)).read()), {"name": f[:-5]})
+        for name in sorted(os.listdir(study)):
+            v = overrides.run_values(os.path.join(study, name), coordinator)
+            if v is not None:
+                out.setdefault(overrides.digest(v), name)
     return out
 
 
-def plan(root, quick, only, existing=None, seeds=1):
-    """Runs to make and table entries. With seeds > 1 every footing setting runs with the generator
-    seeds 1..seeds and is measured on the seed-averaged curve (the footing's single-run scatter is
-    large at this size); the seed knob is then dropped (its role is the table's scatter column)."""
+def plan(root, quick, only, existing=None, seeds=1, coordinator=None):
+    """Runs to make ({fingerprint: {name, scene, sets}}) and table entries. With seeds > 1 every
+    footing setting runs with the generator seeds 1..seeds and is measured on the seed-averaged
+    curve (the footing's single-run scatter is large at this size); the seed knob is then dropped
+    (its role is the table's scatter column). Every run is checked by the coordinator here
+    (coordinator SCENE --check --set ...): a setting it refuses raises PlanError with its error
+    line."""
     ks = knobs(quick)
     if seeds > 1:
         ks.pop("seed", None)
     if only:
         bad = [k for k in only if k not in ks]
         if bad:
-            print("accuracy study: unknown knob(s) %s; knobs%s: %s" %
-                  (" ".join(bad), " (--quick)" if quick else "", " ".join(ks)), file=sys.stderr)
-            raise SystemExit(2)
+            raise PlanError("unknown knob(s) %s; knobs%s: %s" % (" ".join(bad), " (--quick)" if quick else "",
+                                                                 " ".join(ks)))
         ks = {k: ks[k] for k in only}
     runs, entries = {}, []
-    for h, r in (existing or {}).items():
-        runs[h] = dict(r, text=None)
+    taken = {}  # run name -> fingerprint, of the study folder's runs
+    for fp, name in (existing or {}).items():
+        runs[fp] = {"name": name, "scene": None}
+        taken[name] = fp
     for k, (prob, what, sets, ref, _) in ks.items():
-        base = base_text(root, prob, quick)
-        for label, edits in sets:
+        for label, extra, scene in sets:
+            path = os.path.join(root, scene or BASE_SCENES[prob])
             names = []
             for sd in (range(1, seeds + 1) if prob == "footing" and seeds > 1 else [None]):
-                e2 = dict(edits)
-                if sd is not None:
-                    e2["run.seed"] = sd
-                text = apply(base, e2)
-                h = text_hash(text)
-                r = runs.setdefault(h, {"name": "%s_%s_%s%s" % (prob, k, label, "" if sd is None else "_s%d" % sd),
-                                        "text": text})
-                r["text"] = text
+                s = base_sets(prob, quick) + extra + ([] if sd is None else ["run.seed=%d" % sd])
+                s = overrides.quiet_traffic(path, overrides.merge(s))
+                try:
+                    fp = overrides.fingerprint(path, s, coordinator)
+                except ValueError as ex:
+                    raise PlanError("knob %s, setting %s: %s" % (k, label, ex))
+                name = "%s_%s_%s%s" % (prob, k, label, "" if sd is None else "_s%d" % sd)
+                if fp not in runs and taken.get(name, fp) != fp:
+                    raise PlanError("the study folder's run %s ran other values than knob %s, setting %s now "
+                                    "gives (a scene changed?); use a new study folder, or remove that run folder"
+                                    % (name, k, label))
+                r = runs.setdefault(fp, {"name": name})
+                r.update(scene=path, sets=s)
                 names.append(r["name"])
             entries.append({"problem": prob, "knob": k, "what": what, "setting": label, "reference": label == ref,
                             "run": names[0], "runs": names})
-    return {h: r for h, r in runs.items() if r["text"] is not None}, entries
+    planned = {h: r for h, r in runs.items() if r["scene"] is not None}
+    for r in planned.values():  # as launch/run checks it: the scene, then every node executable
+        ok, msg = overrides.check(r["scene"], r["sets"], coordinator)
+        if not ok:
+            raise PlanError("run %s: %s" % (r["name"], msg))
+    return planned, entries
 
 
-def run_all(root, study, runs, branch=True):
-    # Footing runs first, then the UCS runs from the coarsest to the finest (scale 1, the longest, last).
+def command(root, r, launcher=None):
+    """The launch/run command of a planned run (without --no-build, --run-dir and --from)."""
+    return [launcher or os.path.join(root, "launch/run"), r["scene"]] + overrides.set_args(r["sets"])
+
+
+def run_order(runs):
+    """Footing runs first, then the UCS runs from the coarsest to the finest (scale 1, the longest, last)."""
     order = list(runs.values())
-    order = [r for r in order if not r["name"].startswith("ucs_")] + \
+    return [r for r in order if not r["name"].startswith("ucs_")] + \
         [r for r in reversed(order) if r["name"].startswith("ucs_")]
+
+
+def run_all(root, study, runs, branch=True, coordinator=None, launcher=None):
+    coordinator = list(coordinator) if coordinator else branching.coordinator_command()
+    order = run_order(runs)
     for i, r in enumerate(order):
         d = os.path.join(study, r["name"])
         if os.path.exists(os.path.join(d, "summary.json")):
@@ -260,21 +218,40 @@ def run_all(root, study, runs, branch=True):
             print("accuracy study: %s failed in an earlier pass (remove its folder to run it again)" % r["name"],
                   file=sys.stderr)
             continue
-        scene = os.path.join(study, r["name"] + ".toml")
-        open(scene, "w").write(r["text"])
         # A run that shares its first stages with a finished one starts from its saved state
-        # (launch/py/branching.py; the same bits as from scratch).
+        # (launch/py/branching.py; the coordinator decides, with the run's overrides; the same
+        # bits as from scratch).
         others = [os.path.join(study, o["name"]) for o in order if o is not r]
-        source = branching.branch_source(branching.coordinator_command(), scene, others) if branch else None
+        source = branching.branch_source(coordinator + overrides.set_args(r["sets"]), r["scene"], others) \
+            if branch else None
         t0 = time.time()
+        cmd = command(root, r, launcher) + ["--no-build", "--run-dir", d] + (["--from", source] if source else [])
         with open(os.path.join(study, r["name"] + ".log"), "w") as log:
-            rc = subprocess.call([os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", d] +
-                                 (["--from", source] if source else []), stdout=log, stderr=subprocess.STDOUT)
+            rc = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT)
         print("accuracy study: [%d/%d] %s %s in %.0f s%s" % (i + 1, len(order), r["name"],
                                                              "done" if rc == 0 else "FAILED (rc %d)" % rc,
                                                              time.time() - t0,
                                                              ", branched from " + os.path.relpath(source, study)
                                                              if source else ""), file=sys.stderr, flush=True)
+
+
+def print_plan(root, study, runs, entries):
+    """The plan for people: every distinct run with its launch/run command (and, with a study
+    folder, whether it has run), then which run serves which knob setting."""
+    order = run_order(runs)
+    print("# %d distinct runs (each checked by the coordinator)" % len(order))
+    for r in order:
+        state = ""
+        if study:
+            d = os.path.join(study, r["name"])
+            state = ("finished" if branching.finished(d) else "failed or unfinished" if os.path.exists(d)
+                     else "to run") + ": "
+        cmd = [os.path.relpath(c, root) for c in command(root, r)[:2]] + command(root, r)[2:]
+        print("%s%s: %s" % (state, r["name"], shlex.join(cmd)))
+    print("# knob settings -> runs")
+    for e in entries:
+        print("%-9s %-10s %-8s%s %s" % (e["problem"], e["knob"], e["setting"], " (ref)" if e["reference"] else "      ",
+                                       " ".join(e["runs"])))
 
 
 def run_wall(d):
@@ -447,39 +424,60 @@ def pareto_figure(study, rows):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("command", choices=["run", "table", "list"])
+    ap.add_argument("command", choices=["run", "plan", "table", "list"])
     ap.add_argument("study", nargs="?")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", nargs="+", default=[])
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--no-branch", action="store_true", help="run every scene from scratch (no launch/run --from)")
+    ap.add_argument("--launcher", help=argparse.SUPPRESS)  # tests: a stand-in for launch/run
     a = ap.parse_args()
     root = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     if a.command == "list":
         for k, (prob, what, sets, ref, sub) in knobs(False).items():
             print("%-10s %-8s %s: %s (reference %s; --quick: %s)" % (k, prob, what, " / ".join(s[0] for s in sets), ref,
                                                                      " / ".join(sub) or "skipped"))
-        return
+        return 0
+    if a.command == "plan":
+        try:
+            runs, entries = plan(root, a.quick, a.only, existing_runs(a.study) if a.study else None, a.seeds)
+        except PlanError as ex:
+            print("accuracy study: %s" % ex, file=sys.stderr)
+            return 2
+        print_plan(root, a.study, runs, entries)
+        return 0
     if not a.study:
         ap.error("%s needs STUDY_DIR" % a.command)
     if a.command == "run":
-        runs, entries = plan(root, a.quick, a.only, existing_runs(a.study), a.seeds)
-        os.makedirs(a.study, exist_ok=True)
-        d_f = float(re.search(r"(?m)^diameter = (\S+)", open(os.path.join(root, FOOTING_SCENE)).read()).group(1))
         plan_path = os.path.join(a.study, "plan.json")
-        if os.path.exists(plan_path):  # extend an existing study (e.g. --only KNOB into the same folder)
-            old = json.load(open(plan_path))
+        old = json.load(open(plan_path)) if os.path.exists(plan_path) else None
+        if old is not None:  # extend an existing study (e.g. --only KNOB into the same folder)
             if old["quick"] != a.quick:
-                raise SystemExit("accuracy study: %s is a %s study" % (a.study, "quick" if old["quick"] else "full"))
+                print("accuracy study: %s is a %s study" % (a.study, "quick" if old["quick"] else "full"), file=sys.stderr)
+                return 2
             if old.get("seeds", 1) != a.seeds:
-                raise SystemExit("accuracy study: %s was planned with --seeds %d" % (a.study, old.get("seeds", 1)))
+                print("accuracy study: %s was planned with --seeds %d" % (a.study, old.get("seeds", 1)), file=sys.stderr)
+                return 2
+        try:
+            runs, entries = plan(root, a.quick, a.only, existing_runs(a.study), a.seeds)
+        except PlanError as ex:
+            print("accuracy study: %s" % ex, file=sys.stderr)
+            return 2
+        os.makedirs(a.study, exist_ok=True)
+        d_f = float(overrides.scene_values(os.path.join(root, FOOTING_SCENE))["dem"]["footing"]["diameter"])
+        described = dict(old.get("runs", {})) if old else {}
+        described.update({r["name"]: {"scene": os.path.relpath(r["scene"], root), "set": r["sets"]}
+                          for r in runs.values()})
+        if old is not None:
             have = {(e["knob"], e["setting"]) for e in entries}
             entries = [e for e in old["entries"] if (e["knob"], e["setting"]) not in have] + entries
-        json.dump({"quick": a.quick, "seeds": a.seeds, "d_f": d_f, "entries": entries}, open(plan_path, "w"), indent=1)
+        json.dump({"quick": a.quick, "seeds": a.seeds, "d_f": d_f, "entries": entries, "runs": described},
+                  open(plan_path, "w"), indent=1)
         print("accuracy study: %d settings, %d distinct runs in %s" % (len(entries), len(runs), a.study), file=sys.stderr)
-        run_all(root, a.study, runs, branch=not a.no_branch)
+        run_all(root, a.study, runs, branch=not a.no_branch, launcher=a.launcher)
     table(a.study)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -3,11 +3,12 @@
 
 A study runs many variants of one scene. Variants that share their first stages (the same
 specimen, seed and gravity equilibrium, only a later stage or a free key differs) need not
-compute them again: `launch/run SCENE --from CHECKPOINT` starts after a saved stage-end state
-and gives the same bits as a run from scratch (docs/checkpoint-format.md). Whether a variant may
-branch from a checkpoint is decided by the coordinator itself (`coordinator SCENE --check
---from=CHECKPOINT` exits 0 only when no key of the scene contradicts the saved state), so the
-studies never hold a second copy of those rules.
+compute them again: `launch/run SCENE [--set ...] --from CHECKPOINT` starts after a saved
+stage-end state and gives the same bits as a run from scratch (docs/checkpoint-format.md).
+Whether a variant may branch from a checkpoint is decided by the coordinator itself
+(`coordinator SCENE --set ... --check --from=CHECKPOINT` exits 0 only when no key of the scene
+with its overrides contradicts the saved state), so the studies never hold a second copy of
+those rules.
 """
 import os
 import subprocess
@@ -44,8 +45,11 @@ def stage_end_checkpoints(run_dir):
 def branch_source(coordinator, scene, runs, exclude_last_stage=True):
     """The stage-end checkpoint among the finished `runs` (run folders) that `scene` may start
     from and that saves the most steps, or None. `coordinator` is the command that checks it
-    (a list, e.g. [build/bin/coordinator]). The checkpoint of a run's last stage is skipped when
-    exclude_last_stage (a branch after the last stage would run nothing)."""
+    (a list, e.g. [build/bin/coordinator]), followed by the variant's overrides when it has some
+    ([build/bin/coordinator, "--set=KEY=VALUE", ...]: the scene with its overrides is what must
+    agree with the saved state, as launch/run SCENE --from CHECKPOINT --set ... checks it). The
+    checkpoint of a run's last stage is skipped when exclude_last_stage (a branch after the last
+    stage would run nothing)."""
     best = None
     for run in runs:
         if not finished(run):

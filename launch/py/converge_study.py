@@ -4,15 +4,19 @@
 Usage:
   /usr/bin/python3 launch/py/converge_study.py run STUDY_DIR [--parts rate dt] [--seeds N]
                                                 [--jobs J] [--rate I] [--damping A] [--quick]
-                                                [--only VARIANT ...]
+                                                [--only VARIANT ...] [--no-branch]
   /usr/bin/python3 launch/py/converge_study.py table STUDY_DIR
-  /usr/bin/python3 launch/py/converge_study.py list [--parts ...]
+  /usr/bin/python3 launch/py/converge_study.py list [--parts ...] [--rate I] [--damping A] [--quick]
+                                                 [--seeds N] [--check]
 
-Every variant is an ensemble over seeds 1..N of scenes/accuracy_footing.toml with some keys set
-(accuracy_study.apply); its runs go to STUDY_DIR/<variant>/seed-<k>/ (launch/run folders, the
-edited scene beside them as seed-<k>.toml). Specimen preparation does not depend on the knobs
-varied here (docs/theory.md 4.11), so seed k is the same bonded block in every variant and
-knobs are compared by paired differences over seeds.
+Every variant is an ensemble over seeds 1..N of scenes/accuracy_footing.toml with some keys
+overridden (launch/run --set; the DEM-everywhere arm of the box part: scenes/accuracy_footing_box.toml,
+the same problem without its continuum, whose header lists the differences); seed k adds
+run.seed=k, and no run records a traffic log unless the scene says so (output.traffic_log=false).
+Its runs go to STUDY_DIR/<variant>/seed-<k>/ (launch/run folders; each records its effective
+scene as scene.toml, launch/run's output goes to <variant>/seed-<k>.out). Specimen preparation
+does not depend on the knobs varied here (docs/theory.md 4.11), so seed k is the same bonded block
+in every variant and knobs are compared by paired differences over seeds.
 
 Parts:
   rate   inertial number I in {1e-2, 3.3e-3, 1e-3, 3.3e-4} (30x below the paper's 1e-2), each with
@@ -25,18 +29,22 @@ Parts:
          continuum. Seed k is the same REV in every arm (replicated differently), so the arms are
          compared by paired differences against the DEM box.
 
-run: runs the variants' missing seeds (a finished seed folder is kept: an interrupted study
-resumes), up to J runs at once. Each seed's specimen and gravity equilibrium are computed once
-per group of variants that differ only in their penetration stage: the first run of a group
-goes from scratch, the others branch from its latest stage-end checkpoint they may start from
-(launch/run --from, docs/checkpoint-format.md; the coordinator's --check decides), which gives
-the same bits as a run from scratch and saves the preparation (--no-branch: every run from
-scratch). table: tables and figures (convergence_tables.md,
-converge_seeds.csv, converge_rate.png, converge_dt.png in the study folder).
+run: checks every planned run with the coordinator (coordinator SCENE --check --set ...; a bad
+one: its error line, exit 2, nothing runs), then runs the variants' missing seeds (a finished seed
+folder is kept: an interrupted study resumes), up to J runs at once, each as launch/run SCENE
+--set ... Each seed's specimen and gravity equilibrium are computed once per group of variants
+that differ only in their penetration stage: the first run of a group goes from scratch, the
+others branch from its latest stage-end checkpoint they may start from (launch/run --from,
+docs/checkpoint-format.md; the coordinator's --check with the run's overrides decides), which
+gives the same bits as a run from scratch and saves the preparation (--no-branch: every run from
+scratch). table: tables and figures (convergence_tables.md, converge_seeds.csv, converge_rate.png,
+converge_dt.png in the study folder). list: the variants, their scenes and overrides (--check:
+each variant and seed checked by the coordinator; nothing runs).
 """
 import argparse
 import json
 import os
+import shlex
 import subprocess
 import sys
 import time
@@ -45,11 +53,14 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import accuracy_study  # noqa: E402  (scene edits: apply, set_key)
 import branching  # noqa: E402  (which saved state a run may start from)
 import ensemble  # noqa: E402  (runs of an ensemble folder, statistics with t-based intervals)
+import overrides  # noqa: E402  (scene variants as launch/run --set overrides)
 
 BASE_SCENE = "scenes/accuracy_footing.toml"
+# DEM everywhere (the box part's reference): the footing problem without its continuum, in a box
+# of walls; an override sets keys, it cannot remove the [continuum] and [coupling] sections.
+BOX_SCENE = "scenes/accuracy_footing_box.toml"
 RATES = ["1e-2", "3.3e-3", "1e-3", "3.3e-4"]
 DAMPINGS = ["0.7", "0.1"]
 STEPS = ["0.8", "0.4", "0.2"]
@@ -63,52 +74,49 @@ def box_variant(arm, rate, damping):
     return "box_%s_I%s_a%s" % (arm, rate, damping)
 
 
+def penetration(rate, damping, steps):
+    """The overrides of the penetration stage: inertial number, local damping, step budget."""
+    return [overrides.stage_set("penetrate", "inertial_number", rate), overrides.stage_set("penetrate", "damping", damping),
+            overrides.stage_set("penetrate", "steps", steps)]
+
+
 def plan(parts, rate, damping, quick):
-    """[(variant name, part, label, edits)] in the order they run (cheapest first)."""
+    """[(variant name, part, label, scene (relative to the repository), overrides)] in the order
+    they run (cheapest first)."""
     out = []
     if "rate" in parts:
         for r in RATES:
             for a in DAMPINGS:
                 # The budget grows with the stroke time; the stage ends at depth_ratio.
                 steps = int(40000 * 1e-2 / float(r) * 2)
-                out.append((rate_variant(r, a), "rate", "I %s, damping %s" % (r, a),
-                            {"stage:penetrate.inertial_number": r, "stage+:penetrate.damping": a,
-                             "stage:penetrate.steps": str(steps)}))
+                out.append((rate_variant(r, a), "rate", "I %s, damping %s" % (r, a), BASE_SCENE,
+                            penetration(r, a, steps)))
     if "dt" in parts:
         for f in STEPS:
             steps = int(40000 * 1e-2 / float(rate) * 2 * 0.8 / float(f))
-            edits = {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": damping,
-                     "stage:penetrate.steps": str(steps), "dem.dt_safety": f}
+            sets = penetration(rate, damping, steps)
             name = "dt_%s_I%s_a%s" % (f, rate, damping)
             if f == "0.8":
                 name = rate_variant(rate, damping)  # the same runs as the rate part's
-                edits.pop("dem.dt_safety")
-            out.append((name, "dt", "dt_safety %s" % f, edits))
+            else:
+                sets.append("dem.dt_safety=%s" % f)
+            out.append((name, "dt", "dt_safety %s" % f, BASE_SCENE, sets))
     if "damping" in parts:
         # Below the protocol's damping: 0.05 and 0 against 0.1 (rate_variant(rate, "0.1")).
         steps = int(40000 * 1e-2 / float(rate) * 2)
-        out.append((rate_variant(rate, "0.1"), "damping", "damping 0.1",
-                    {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": "0.1",
-                     "stage:penetrate.steps": str(steps)}))
-        for a in ("0.05", "0"):
-            out.append((rate_variant(rate, a), "damping", "damping %s" % a,
-                        {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": a,
-                         "stage:penetrate.steps": str(steps)}))
+        for a in ("0.1", "0.05", "0"):
+            out.append((rate_variant(rate, a), "damping", "damping %s" % a, BASE_SCENE, penetration(rate, a, steps)))
     if "box" in parts:
         steps = int(40000 * 1e-2 / float(rate) * 2)
-        pen = {"stage:penetrate.inertial_number": rate, "stage+:penetrate.damping": damping,
-               "stage:penetrate.steps": str(steps)}
-        small = {"continuum.mesh.size": "[4e-3, 4e-3, 4e-3]"}
-        # The transform (drop the continuum, walls around the block) comes after every key edit.
-        out.append((box_variant("dem", rate, damping), "box", "DEM everywhere (4 x 4 x 4 mm box)",
-                    dict(small, **pen, **{"dem.specimen.replicate": "[2, 2, 4]", "transform": "dem_only_box"})))
+        pen = penetration(rate, damping, steps)
+        out.append((box_variant("dem", rate, damping), "box", "DEM everywhere (4 x 4 x 4 mm box)", BOX_SCENE, pen))
         for h in (2, 3):
-            out.append((box_variant("coupled%d" % h, rate, damping), "box",
-                        "DEM block 2 x 2 x %d mm in FDM" % h,
-                        dict(small, **pen, **{"dem.specimen.replicate": "[1, 1, %d]" % h,
-                                              "continuum.mesh.inner_size": "[2e-3, 2e-3, %de-3]" % h})))
+            out.append((box_variant("coupled%d" % h, rate, damping), "box", "DEM block 2 x 2 x %d mm in FDM" % h,
+                        BASE_SCENE, ["continuum.mesh.size=[4e-3, 4e-3, 4e-3]"] + pen +
+                        ["dem.specimen.replicate=[1, 1, %d]" % h, "continuum.mesh.inner_size=[2e-3, 2e-3, %de-3]" % h]))
     if quick:
-        out = [(n, p, l, dict(e, **{"stage:penetrate.depth_ratio": "0.05"})) for n, p, l, e in out]
+        out = [(n, p, lab, sc, s + [overrides.stage_set("penetrate", "depth_ratio", "0.05")])
+               for n, p, lab, sc, s in out]
     seen, uniq = set(), []
     for v in out:
         if v[0] not in seen:
@@ -120,7 +128,23 @@ def plan(parts, rate, damping, quick):
 finished = branching.finished
 
 
-def run_one(root, study, variant, edits, seed, branch=True):
+def seed_sets(root, scene, sets, seed):
+    """The overrides of one seed's run: the variant's, run.seed, and no traffic log unless the
+    scene says traffic_log."""
+    return overrides.quiet_traffic(os.path.join(root, scene), list(sets) + ["run.seed=%d" % seed])
+
+
+def check_jobs(root, jobs):
+    """Every (variant, scene, sets, seed) job checked by the coordinator: [error lines]."""
+    bad = []
+    for name, scene, sets, seed in jobs:
+        ok, msg = overrides.check(os.path.join(root, scene), seed_sets(root, scene, sets, seed))
+        if not ok:
+            bad.append("%s seed %d: %s" % (name, seed, msg))
+    return bad
+
+
+def run_one(root, study, variant, scene, sets, seed, branch=True, launcher=None):
     vdir = os.path.join(study, variant)
     os.makedirs(vdir, exist_ok=True)
     run_dir = os.path.join(vdir, "seed-%d" % seed)
@@ -133,48 +157,53 @@ def run_one(root, study, variant, edits, seed, branch=True):
     except FileExistsError:
         return (variant, seed, 0, "running elsewhere (%s)" % lock)
     try:
-        return run_locked(root, study, variant, edits, seed, vdir, run_dir, branch)
+        return run_locked(root, study, variant, scene, sets, seed, vdir, run_dir, branch, launcher)
     finally:
         os.remove(lock)
 
 
-def branch_source(study, scene, seed):
+def branch_source(study, scene, sets, seed):
     """The stage-end checkpoint of a finished run of this seed in the study that the variant's
-    scene may start from (launch/py/branching.py: the coordinator decides), or None."""
+    scene with its overrides may start from (launch/py/branching.py: the coordinator decides),
+    or None."""
     try:
         with open(os.path.join(study, "plan.json")) as f:
             variants = json.load(f)["variants"]
     except (OSError, ValueError, KeyError):
         return None
     runs = [os.path.join(study, v["name"], "seed-%d" % seed) for v in variants]
-    return branching.branch_source(branching.coordinator_command(), scene, runs)
+    return branching.branch_source(branching.coordinator_command() + overrides.set_args(sets), scene, runs)
 
 
-def run_locked(root, study, variant, edits, seed, vdir, run_dir, branch=True):
+def run_locked(root, study, variant, scene, sets, seed, vdir, run_dir, branch=True, launcher=None):
     if os.path.exists(run_dir):  # an interrupted or failed run: keep it under another name
         os.rename(run_dir, run_dir + ".failed-%d" % int(time.time()))
-    with open(os.path.join(root, BASE_SCENE)) as f:
-        text = f.read()
-    text = accuracy_study.apply(text, edits)
-    text = accuracy_study.quiet_traffic(accuracy_study.set_key(text, "run.seed", str(seed)))
-    scene = os.path.join(vdir, "seed-%d.toml" % seed)
-    with open(scene, "w") as f:
-        f.write(text)
-    source = branch_source(study, scene, seed) if branch else None
+    path = os.path.join(root, scene)
+    sets = seed_sets(root, scene, sets, seed)
+    source = branch_source(study, path, sets, seed) if branch else None
     t0 = time.time()
     with open(os.path.join(vdir, "seed-%d.out" % seed), "w") as out:
-        code = subprocess.call(["bash", os.path.join(root, "launch/run"), scene, "--no-build", "--run-dir", run_dir] +
-                               (["--from", source] if source else []), stdout=out, stderr=subprocess.STDOUT)
+        code = subprocess.call(([launcher] if launcher else ["bash", os.path.join(root, "launch/run")]) +
+                               [path, "--no-build"] + overrides.set_args(sets) +
+                               ["--run-dir", run_dir] + (["--from", source] if source else []),
+                               stdout=out, stderr=subprocess.STDOUT)
     how = "%.0f s" % (time.time() - t0) + (", branched from %s" % os.path.relpath(source, study) if source else "")
     return (variant, seed, code, how)
 
 
 def cmd_run(a):
     root = os.environ["DEMFDM_ROOT"]
-    os.makedirs(a.study, exist_ok=True)
     variants = plan(a.parts, a.rate, a.damping, a.quick)
+    jobs = [(n, sc, s, k) for n, _, _, sc, s in variants for k in range(1, a.seeds + 1) if not a.only or n in a.only]
+    bad = check_jobs(root, jobs)
+    if bad:
+        print("converge study: the coordinator refuses %d run(s); nothing runs:\n  %s" % (len(bad), "\n  ".join(bad)),
+              file=sys.stderr)
+        return 2
+    os.makedirs(a.study, exist_ok=True)
     meta = {"base_scene": BASE_SCENE, "seeds": a.seeds, "parts": a.parts, "rate": a.rate, "damping": a.damping,
-            "quick": a.quick, "variants": [{"name": n, "part": p, "label": l, "edits": e} for n, p, l, e in variants]}
+            "quick": a.quick, "variants": [{"name": n, "part": p, "label": lab, "scene": sc, "set": s}
+                                           for n, p, lab, sc, s in variants]}
     path = os.path.join(a.study, "plan.json")
     if os.path.isfile(path):  # extend: keep the variants already planned
         with open(path) as f:
@@ -184,10 +213,10 @@ def cmd_run(a):
         meta["parts"] = sorted(set(old["parts"]) | set(a.parts))
     with open(path, "w") as f:
         json.dump(meta, f, indent=1)
-    jobs = [(n, e, s) for n, _, _, e in variants for s in range(1, a.seeds + 1) if not a.only or n in a.only]
     failed = []
     with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        for variant, seed, code, how in pool.map(lambda j: run_one(root, a.study, *j, branch=not a.no_branch), jobs):
+        for variant, seed, code, how in pool.map(
+                lambda j: run_one(root, a.study, *j, branch=not a.no_branch, launcher=a.launcher), jobs):
             print("converge study: %s seed %d: %s (exit %d)" % (variant, seed, how, code), file=sys.stderr, flush=True)
             if code != 0:
                 failed.append("%s seed %d (exit %d, output %s/%s/seed-%d.out)" % (variant, seed, code, a.study, variant, seed))
@@ -197,30 +226,46 @@ def cmd_run(a):
     return 0
 
 
+def cmd_list(a):
+    root = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    variants = plan(a.parts, a.rate, a.damping, a.quick)
+    for n, part, label, scene, sets in variants:
+        print("%-28s %-7s %-34s launch/run %s" % (n, part, label, shlex.join(
+            [scene] + overrides.set_args(seed_sets(root, scene, sets, 1)))))
+    if not a.check:
+        return 0
+    bad = check_jobs(root, [(n, sc, s, k) for n, _, _, sc, s in variants for k in range(1, a.seeds + 1)])
+    for b in bad:
+        print("converge study: refused: %s" % b, file=sys.stderr)
+    print("converge study: %d variant(s) x %d seed(s) checked by the coordinator, %d refused" %
+          (len(variants), a.seeds, len(bad)), file=sys.stderr)
+    return 2 if bad else 0
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="cmd", required=True)
     r = sub.add_parser("run")
     r.add_argument("study")
-    r.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping"])
-    r.add_argument("--seeds", type=int, default=5)
+    ls = sub.add_parser("list")
+    for q in (r, ls):
+        q.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping"])
+        q.add_argument("--seeds", type=int, default=5)
+        q.add_argument("--rate", default="1e-3")
+        q.add_argument("--damping", default="0.1")
+        q.add_argument("--quick", action="store_true")
     r.add_argument("--jobs", type=int, default=1)
-    r.add_argument("--rate", default="1e-3")
-    r.add_argument("--damping", default="0.1")
-    r.add_argument("--quick", action="store_true")
     r.add_argument("--only", nargs="+", help="run only these variants (names as in 'list')")
     r.add_argument("--no-branch", action="store_true", help="run every variant from scratch (no --from)")
+    r.add_argument("--launcher", help=argparse.SUPPRESS)  # tests: a stand-in for launch/run
+    ls.add_argument("--check", action="store_true", help="check every variant and seed with the coordinator")
     t = sub.add_parser("table")
     t.add_argument("study")
-    ls = sub.add_parser("list")
-    ls.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping"])
     a = p.parse_args()
     if a.cmd == "run":
         return cmd_run(a)
     if a.cmd == "list":
-        for n, part, label, e in plan(a.parts, "1e-3", "0.1", False):
-            print("%-28s %-6s %-24s %s" % (n, part, label, e))
-        return 0
+        return cmd_list(a)
     return cmd_table(a)
 
 

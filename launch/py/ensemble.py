@@ -4,22 +4,26 @@ the footing curve as a mean with a 95 % band and the scalar measures with confid
 
 Usage:
   /usr/bin/python3 launch/py/ensemble.py run ENSEMBLE_DIR --scene SCENE --seeds SPEC [--jobs J]
-      [--set table.key=value ...] [--stage-set stage.key=value ...]
+      [--set table.key=value ...] [--stage-set stage.key=value ...] [--check]
   /usr/bin/python3 launch/py/ensemble.py table ENSEMBLE_DIR [--stage penetrate] [--intervals 4]
   (launch/run SCENE --seeds SPEC [--jobs J] does both.)
 
 run: SPEC is N (seeds 1..N), A-B (seeds A..B) or a comma list of seeds and ranges (1,4,7-9).
-For every seed k the scene text gets `run.seed = k` (the key is added to [run] when the scene
-does not set it), `[output] traffic_log = false` unless the scene sets traffic_log itself (a
-traffic log per seed would take about 1 GB for the default scene) and the --set / --stage-set edits (accuracy_study.set_key / set_stage_key; a
---stage-set key absent from the stage is added), is kept as ENSEMBLE_DIR/seed-<k>.toml and runs
-through launch/run --no-build --run-dir ENSEMBLE_DIR/seed-<k> (output in seed-<k>.log), at most J
-runs at once (default 1). Every edited scene is validated before anything starts. A seed whose
-folder holds a finished run (summary.json, summary.txt not "FAILED") is not run again, so an
-interrupted ensemble resumes; an unfinished folder is kept as seed-<k>.incomplete-<i> and the seed
-runs again. A finished seed run from a different scene text is an error (use a new folder). A
-failed run is named with its exit code and the last lines of its output; the command exits 3
-after the other runs have finished (2: bad arguments or scene, 130: interrupted).
+Seed k runs `launch/run SCENE --no-build --set ... --run-dir ENSEMBLE_DIR/seed-<k>` (output in
+seed-<k>.log), at most J runs at once (default 1). Its overrides (seed_sets): the --set ones
+(table.key=value, as launch/run --set takes them), the --stage-set ones (stage.key=value, the
+same as --set stage.STAGE.key=value), run.seed=k, and output.traffic_log=false unless the scene or
+an override says traffic_log (a traffic log per seed would take about 1 GB for the default
+scene). The scene file is never edited: each run records its effective scene as
+seed-<k>/scene.toml. Every seed's overrides are checked (launch/run SCENE --check --set ...)
+before anything starts (--check: only that). A seed whose folder holds a finished run
+(summary.json, summary.txt not "FAILED") is not run again, so an interrupted ensemble resumes; an
+unfinished folder is kept as seed-<k>.incomplete-<i> and the seed runs again. A finished seed run
+with other values in effect than the scene with the seed's overrides (compared through the
+coordinator, so a folder written before ensembles used overrides counts as well) is an error
+(use a new folder). A failed run is named with its exit code and the last lines of its output;
+the command exits 3 after the other runs have finished (2: bad arguments or scene, 130:
+interrupted).
 
 table: reads every finished ENSEMBLE_DIR/seed-<k>/ run and writes
   ensemble.csv        the mean curve: displacement grid, mean load, sd, standard error, 95 % band
@@ -36,7 +40,7 @@ interpolation, over the range that every seed reaches.
 Confidence intervals: mean +- t(0.975, n-1) se, se = sd / sqrt(n) (sample sd, n-1).
 
 Library: load_runs(dir), common_grid(runs), curve_stats(runs, grid), scalar_stats(values),
-interval_means(disp, load, edges), t975(dof), parse_seeds(spec), seed_scene(text, seed, ...).
+interval_means(disp, load, edges), t975(dof), parse_seeds(spec), seed_sets(scene, seed, ...).
 """
 import argparse
 import csv
@@ -57,9 +61,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-import accuracy_study  # noqa: E402  (set_key, set_stage_key: scene text edits)
 import paper_figures  # noqa: E402  (read_csv, initial_stiffness, elastic_stiffness, history_path)
-import branching  # noqa: E402  (stop_runs)
+import branching  # noqa: E402  (stop_runs, coordinator_command)
+import overrides  # noqa: E402  (scene variants as launch/run --set overrides)
 
 ROOT = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 SEED_DIR = re.compile(r"^seed-(\d+)$")
@@ -318,9 +322,9 @@ def table(ens, stage="penetrate", intervals=4):
     scale = {"m": (1e3, "mm"), "N/m": (1.0, "N/m"), "N": (1.0, "N"), "s": (1.0, "s")}
     lines = ["# Seed ensemble: %s, n = %d" % (scene, n), ""]
     if meta:
-        edits = meta.get("set", []) + ["[[stage]] " + e for e in meta.get("stage_set", [])]
-        lines += ["Scene `%s`%s; stage `%s`; seeds %s." % (meta.get("scene"), (", edits: " + ", ".join(
-            "`%s`" % e for e in edits)) if edits else "", stage, ", ".join(map(str, seeds))), ""]
+        sets = meta.get("set", []) + ["stage." + e for e in meta.get("stage_set", [])]
+        lines += ["Scene `%s`%s; stage `%s`; seeds %s." % (meta.get("scene"), (", overrides: " + ", ".join(
+            "`--set %s`" % e for e in sets)) if sets else "", stage, ", ".join(map(str, seeds))), ""]
     else:
         lines += ["Stage `%s`; seeds %s." % (stage, ", ".join(map(str, seeds))), ""]
     if skipped:
@@ -351,8 +355,8 @@ def table(ens, stage="penetrate", intervals=4):
               "|---|" + "---|" * len(stats)]
     for j, sd in enumerate(seeds):
         lines.append("| %d | " % sd + " | ".join(_fmt(st[3][j] * scale[st[2]][0]) for st in stats) + " |")
-    lines += ["", "Files: `ensemble.csv` (mean curve), `ensemble_stats.csv`, `ensemble.png`, `seed-<k>/` (runs), "
-              "`seed-<k>.toml` (their scenes).", ""]
+    lines += ["", "Files: `ensemble.csv` (mean curve), `ensemble_stats.csv`, `ensemble.png`, `seed-<k>/` (runs; "
+              "`seed-<k>/scene.toml`: the scene each ran, with its overrides).", ""]
     text = "\n".join(lines)
     open(os.path.join(ens, "ensemble.md"), "w").write(text)
     print(text)
@@ -397,29 +401,24 @@ def parse_seeds(spec):
     return sorted(seeds)
 
 
-def seed_scene(text, seed, sets=(), stage_sets=()):
-    """The scene text with run.seed = seed (added to [run], or a [run] table appended, when absent)
-    and the edits "table.key=value" (accuracy_study.set_key) and "stage.key=value"
-    (accuracy_study.set_stage_key; the key is added to the stage when absent)."""
-    try:
-        text = accuracy_study.set_key(text, "run.seed", seed)
-    except KeyError:
-        if re.search(r"(?m)^\s*\[run\]\s*$", text):
-            text = re.sub(r"(?m)^(\s*\[run\]\s*)$", r"\1\nseed = %d" % seed, text, count=1)
-        else:
-            text = text.rstrip("\n") + "\n\n[run]\nseed = %d\n" % seed
+def seed_sets(scene, seed, sets=(), stage_sets=()):
+    """The overrides of seed `seed`'s run of the scene file: the "table.key=value" ones, the
+    "stage.key=value" ones as "stage.STAGE.key=value", run.seed = seed, and
+    output.traffic_log=false unless the scene or an override says traffic_log. A malformed one
+    raises KeyError (the coordinator checks the rest)."""
+    out = []
     for e in sets:
         k, eq, v = e.partition("=")
         if not eq or "." not in k:
             raise KeyError("--set %s: expected table.key=value" % e)
-        text = accuracy_study.set_key(text, k.strip(), v.strip())
+        out.append("%s=%s" % (k.strip(), v.strip()))
     for e in stage_sets:
         k, eq, v = e.partition("=")
         stage, dot, key = k.strip().partition(".")
-        if not eq or not dot:
+        if not eq or not dot or not stage or not key:
             raise KeyError("--stage-set %s: expected stage.key=value" % e)
-        text = accuracy_study.set_stage_key(text, stage, key, v.strip(), add=True)
-    return accuracy_study.quiet_traffic(text)
+        out.append(overrides.stage_set(stage, key.strip(), v.strip()))
+    return overrides.quiet_traffic(scene, out + ["run.seed=%d" % seed])
 
 
 def tail(path, n=15):
@@ -429,37 +428,44 @@ def tail(path, n=15):
         return []
 
 
-def run(ens, scene, seeds, jobs=1, sets=(), stage_sets=(), launcher=None):
+def run(ens, scene, seeds, jobs=1, sets=(), stage_sets=(), launcher=None, check_only=False, coordinator=None):
     """Runs the seeds (see the module doc); returns the exit code (0, 2 bad scene, 3 a run failed,
-    130 interrupted)."""
+    130 interrupted). check_only: check every seed's overrides and the finished seeds, run nothing.
+    coordinator: the command that reads scenes (default: the build's coordinator)."""
     launcher = launcher or os.path.join(ROOT, "launch", "run")
-    text = open(scene).read()
-    texts = {}
-    for k in seeds:
-        try:
-            texts[k] = seed_scene(text, k, sets, stage_sets)
-        except KeyError as ex:
-            print("ensemble: %s" % ex.args[0], file=sys.stderr)
-            return 2
-    os.makedirs(ens, exist_ok=True)
+    try:
+        seed_runs = {k: seed_sets(scene, k, sets, stage_sets) for k in seeds}
+    except KeyError as ex:
+        print("ensemble: %s" % ex.args[0], file=sys.stderr)
+        return 2
     pending, done_before = [], []
     for k in seeds:
         d = os.path.join(ens, "seed-%d" % k)
         if os.path.isdir(d) and run_finished(d):
-            if os.path.exists(os.path.join(d, "scene.toml")) and open(os.path.join(d, "scene.toml")).read() != texts[k]:
-                print("ensemble: %s was run from a different scene text; use a new ensemble folder" % d, file=sys.stderr)
+            try:
+                same = overrides.ran(d, scene, seed_runs[k], coordinator)
+            except ValueError as ex:
+                print("ensemble: seed %d: the scene with its overrides is refused: %s" % (k, ex), file=sys.stderr)
+                return 2
+            if not same:
+                print("ensemble: %s was run from a different scene or other values than seed %d's (%s); use a new "
+                      "ensemble folder" % (d, k, " ".join(overrides.set_args(seed_runs[k]))), file=sys.stderr)
                 return 2
             done_before.append(k)
         else:
             pending.append(k)
-    for k in pending:  # validate every scene before anything starts
-        path = os.path.join(ens, "seed-%d.toml" % k)
-        open(path, "w").write(texts[k])
-        r = subprocess.run([launcher, path, "--check", "--no-build"], capture_output=True, text=True)
+    for k in pending:  # check every seed's run before anything starts
+        r = subprocess.run([launcher, scene, "--check", "--no-build"] + overrides.set_args(seed_runs[k]),
+                           capture_output=True, text=True)
         if r.returncode != 0:
-            print("ensemble: seed %d: the edited scene is invalid (exit %d): %s" %
+            print("ensemble: seed %d: the scene with its overrides is refused (exit %d): %s" %
                   (k, r.returncode, (r.stderr or r.stdout).strip()), file=sys.stderr)
             return 2
+    if check_only:
+        print("ensemble: %d seed(s) checked, %d of them finished before in %s" % (len(seeds), len(done_before), ens),
+              file=sys.stderr)
+        return 0
+    os.makedirs(ens, exist_ok=True)
     meta_path = os.path.join(ens, "ensemble.json")
     meta = json.load(open(meta_path)) if os.path.exists(meta_path) else {}
     meta.update(scene=os.path.abspath(scene), set=list(sets), stage_set=list(stage_sets),
@@ -485,8 +491,8 @@ def run(ens, scene, seeds, jobs=1, sets=(), stage_sets=(), launcher=None):
             while queue and len(active) < max(1, jobs):
                 k = queue.pop(0)
                 log = open(os.path.join(ens, "seed-%d.log" % k), "w")
-                p = subprocess.Popen([launcher, os.path.join(ens, "seed-%d.toml" % k), "--no-build", "--run-dir",
-                                      os.path.join(ens, "seed-%d" % k)], stdout=log, stderr=subprocess.STDOUT)
+                p = subprocess.Popen([launcher, scene, "--no-build"] + overrides.set_args(seed_runs[k]) +
+                                     ["--run-dir", os.path.join(ens, "seed-%d" % k)], stdout=log, stderr=subprocess.STDOUT)
                 active[p.pid] = (k, p, log, time.time())
             pid, status = os.wait()
             if pid not in active:
@@ -542,6 +548,7 @@ def main(argv=None):
     r.add_argument("--jobs", type=int, default=1, help="runs at once (default 1)")
     r.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE")
     r.add_argument("--stage-set", action="append", default=[], metavar="STAGE.KEY=VALUE")
+    r.add_argument("--check", action="store_true", help="check every seed's run, run nothing")
     r.add_argument("--launcher", help=argparse.SUPPRESS)  # tests: a stand-in for launch/run
     t = sub.add_parser("table", help="tables and figure of an ensemble folder")
     t.add_argument("ensemble")
@@ -564,7 +571,7 @@ def main(argv=None):
             raise KeyboardInterrupt
         signal.signal(signal.SIGTERM, stop)  # SIGTERM stops the runs as Ctrl-C does
         try:
-            return run(a.ensemble, a.scene, seeds, a.jobs, a.set, a.stage_set, a.launcher)
+            return run(a.ensemble, a.scene, seeds, a.jobs, a.set, a.stage_set, a.launcher, a.check)
         except KeyboardInterrupt:  # before any run started
             print("ensemble: interrupted", file=sys.stderr)
             return 130

@@ -29,8 +29,9 @@ status, exit code, wall time of launch/run, the result of its summary.json (peak
 final_N, target_reached; empty for a run without a footing), and branched_from (the checkpoint
 it started from, relative to the sweep folder)), rewritten after every run, and the runs. Rerun
 with --into on the folder, a sweep runs only what has not finished: a finished run (summary.json,
-summary.txt not FAILED) is kept when its scene.toml is the effective scene of its combination
-(else: error, use a new folder); an unfinished folder is kept as <k>.incomplete-<i> and rerun.
+summary.txt not FAILED) is kept when its scene.toml has the values in effect of its combination
+(read through the coordinator; else: error, use a new folder); an unfinished folder is kept as
+<k>.incomplete-<i> and rerun.
 Exit code: 0 every run finished, 2 bad arguments or a bad combination, 3 a run failed (the others
 still run), 130 interrupted (rerun with --into to continue).
 
@@ -50,6 +51,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import branching  # noqa: E402  (finished, branch_source, coordinator_command)
+import overrides  # noqa: E402  (set_args, quiet_traffic, check, ran: scene variants as overrides)
 
 ROOT = os.environ.get("DEMFDM_ROOT", os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 RESULT_KEYS = ("peak_N", "k_e_N_m", "final_N", "target_reached")
@@ -136,7 +138,7 @@ def plan_runs(vary, seeds, sets=()):
 
 
 def set_args(run):
-    return ["--set=" + s for s in run["sets"]]
+    return overrides.set_args(run["sets"])
 
 
 def describe(run):
@@ -144,11 +146,6 @@ def describe(run):
     if run["seed"] is not None:
         parts.append("seed %d" % run["seed"])
     return ", ".join(parts) or "the scene as it is"
-
-
-def effective(coordinator, scene, run):
-    r = subprocess.run(coordinator + [scene] + set_args(run) + ["--print-effective"], capture_output=True, text=True)
-    return r.stdout if r.returncode == 0 else None
 
 
 def read_result(run_dir):
@@ -367,10 +364,8 @@ def sweep(a):
             if "=" in s and s.split("=", 1)[0].strip() in keys:
                 raise SweepError("--set %s: the key is also varied" % s)
         sets = list(a.set)
-        text = open(a.scene).read()
-        if not re.search(r"(?m)^\s*traffic_log\s*=", text) and "output.traffic_log" not in keys and \
-                not any(s.split("=", 1)[0].strip() == "output.traffic_log" for s in sets):
-            sets.append("output.traffic_log=false")
+        if "output.traffic_log" not in keys:
+            sets = overrides.quiet_traffic(a.scene, sets)
         plan = {"scene": os.path.realpath(a.scene), "vary": [[k, v] for k, v in vary], "set": sets, "seeds": seeds}
         if stored is not None and stored != plan:
             diff = [k for k in ("scene", "vary", "set", "seeds") if stored.get(k) != plan.get(k)]
@@ -386,9 +381,9 @@ def sweep(a):
 
     # Every combination is valid before anything starts.
     for run in runs:
-        r = subprocess.run(coordinator + [plan["scene"], "--check"] + set_args(run), capture_output=True, text=True)
-        if r.returncode != 0:
-            raise SweepError("run %d (%s): %s" % (run["run"], describe(run), (r.stderr or r.stdout).strip()))
+        ok, msg = overrides.check(plan["scene"], run["sets"], coordinator)
+        if not ok:
+            raise SweepError("run %d (%s): %s" % (run["run"], describe(run), msg))
     print("sweep: %d combination(s) valid (%s)" % (len(runs), plan["scene"]), file=sys.stderr)
     if a.check:
         return 0
@@ -418,9 +413,11 @@ def sweep(a):
     for run in runs:
         d = sw.run_dir(run)
         if os.path.isdir(d) and branching.finished(d):
-            want = effective(coordinator, plan["scene"], run)
-            have = open(os.path.join(d, "scene.toml")).read() if os.path.isfile(os.path.join(d, "scene.toml")) else ""
-            if want != have:
+            try:
+                same = overrides.ran(d, plan["scene"], run["sets"], coordinator)
+            except ValueError:
+                same = False
+            if not same:
                 raise SweepError("%s was run from another scene or other values than run %d (%s); use a new sweep "
                                  "folder" % (d, run["run"], describe(run)))
             # The earlier pass's row when it saw the run finish; else the run's own wall time.

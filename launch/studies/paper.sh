@@ -2,13 +2,15 @@
 # The paper's coupled footing study (Figs. 3-7): SBM at 1, 50, 100, 200 g and PBM at 100 g, upscaling 1.5.
 #
 # Usage: launch/study paper [--only "100g_sbm 100g_pbm ..."] [--seeds N [--jobs J]] [--runs-root DIR]
-#                           [--figures STUDY_DIR]
+#                           [--figures STUDY_DIR] [--check]
 #   --only LIST      run only these scenes (names after scenes/paper_, default: all five)
 #   --seeds N        each scene as a seed ensemble (seeds 1..N, launch/py/ensemble.py; J runs at once):
 #                    ensemble tables per scene and the paper's findings with confidence intervals
 #                    (findings.md, launch/py/paper_findings.py); the figures use seed 1
 #   --runs-root DIR  where the study folder goes (default ./runs; env DEMFDM_RUNS_ROOT)
 #   --figures DIR    do not run anything: redraw the figures of an existing study folder
+#   --check          run nothing: list the runs (each scene as it is; with --seeds, seed k with
+#                    --set run.seed=k) and check each with the coordinator
 # Writes DIR/studies/<date>-paper/ with one run folder per scene (scenes/paper_*.toml, each
 # about 10 minutes on this 2-core machine), run_wall_s.txt in each, then fig3..fig7 as CSV and PNG
 # and summary.csv (peak load, initial stiffness, bond counts per run) via
@@ -17,7 +19,7 @@ set -euo pipefail
 root="${DEMFDM_ROOT:?run through launch/study}"
 runs_root="${DEMFDM_RUNS_ROOT:-$PWD/runs}"
 all="100g_sbm 100g_pbm 1g_sbm 50g_sbm 200g_sbm"
-only="$all"; study=""; seeds=""; jobs=1
+only="$all"; study=""; seeds=""; jobs=1; check=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --only) only="$2"; shift ;;
@@ -25,7 +27,8 @@ while [ $# -gt 0 ]; do
     --figures) study="$2"; shift ;;
     --seeds) seeds="$2"; shift ;;
     --jobs) jobs="$2"; shift ;;
-    -h|--help) sed -n '3,15p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --check) check=1 ;;
+    -h|--help) sed -n '3,17p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "paper study: unknown option '$1' (see launch/study paper --help)" >&2; exit 2 ;;
   esac
   shift
@@ -33,6 +36,22 @@ done
 for n in $only; do
   [ -f "$root/scenes/paper_$n.toml" ] || { echo "paper study: no scene scenes/paper_$n.toml" >&2; exit 2; }
 done
+if [ "$check" -eq 1 ]; then
+  refused=0
+  for n in $only; do
+    if [ -n "$seeds" ]; then
+      echo "launch/run scenes/paper_$n.toml --seeds $seeds (seed k: --set run.seed=k --set output.traffic_log=false)"
+      /usr/bin/python3 "$root/launch/py/ensemble.py" run "${TMPDIR:-/tmp}/demfdm-paper-check-$$/$n" \
+        --scene "$root/scenes/paper_$n.toml" --seeds "$seeds" --check || refused=$((refused + 1))
+    else
+      echo "launch/run scenes/paper_$n.toml"
+      "$root/launch/run" "$root/scenes/paper_$n.toml" --check --no-build > /dev/null || refused=$((refused + 1))
+    fi
+  done
+  echo "paper study: $(echo $only | wc -w) scene(s) checked by the coordinator, $refused refused" >&2
+  [ "$refused" -eq 0 ] || exit 2
+  exit 0
+fi
 if [ -z "$study" ]; then
   study="$runs_root/studies/$(date +%Y%m%d-%H%M%S)-paper"
   mkdir -p "$study"

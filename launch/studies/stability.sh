@@ -2,69 +2,92 @@
 # Stability suite at full size: the hard cases of tests/stability on a paper scene, with a table.
 #
 # Usage: launch/study stability [--scene FILE] [--only "g200 g1000 ..."] [--runs-root DIR] [--table STUDY_DIR]
+#                               [--check]
 #   --scene FILE     base scene (default scenes/paper_100g_sbm.toml: 38075 balls, ~10 min per run here)
 #   --only LIST      run only these cases (default: all; base runs first when a dt case is asked for)
 #   --runs-root DIR  where the study folder goes (default ./runs; env DEMFDM_RUNS_ROOT)
 #   --table DIR      do not run anything: rebuild the table of an existing study folder
+#   --check          list each case's launch/run command and check it with the coordinator; run
+#                    nothing (the dt cases with a stand-in critical step of 1e-8 s: the study
+#                    takes it from its base run)
 # Cases (docs/stability.md): base, g200, g1000, soft_continuum (FDM young / 100), stiff_continuum
 # (x 100), fast_footing (speed_factor 10), bond_cascade (soft bonds 100 x weaker), undamped
 # (dem.damping 0, depth scaling off), dt_09 (dem.dt_fixed = 0.9 x the base run's smallest
 # critical step), dt_above (3 x its largest: must be refused), dt_reduce (same, reduced), escape
-# (top ball kicked at 200 m/s: must stop naming it).
+# (top ball kicked at 200 m/s: must stop naming it). Each case is the base scene with overrides
+# (launch/run --set; its run folder records the effective scene as scene.toml).
 # Writes DIR/studies/<date>-stability/<case>/ (run folders) and table.csv + table.md.
 set -euo pipefail
 root="${DEMFDM_ROOT:?run through launch/study}"
 runs_root="${DEMFDM_RUNS_ROOT:-$PWD/runs}"
 scene="$root/scenes/paper_100g_sbm.toml"
 all="base g200 g1000 soft_continuum stiff_continuum fast_footing bond_cascade undamped dt_09 dt_above dt_reduce escape"
-only="$all"; study=""
+only="$all"; study=""; check=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --scene) scene="$2"; shift ;;
     --only) only="$2"; shift ;;
     --runs-root) runs_root="$2"; shift ;;
     --table) study="$2"; shift ;;
-    -h|--help) sed -n '3,15p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --check) check=1 ;;
+    -h|--help) sed -n '3,19p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "stability study: unknown option '$1' (see launch/study stability --help)" >&2; exit 2 ;;
   esac
   shift
 done
 [ -f "$scene" ] || { echo "stability study: no scene $scene" >&2; exit 2; }
 
-# Scene variant of a case: the base scene with the case's edits (first match of each).
-variant() {
-  /usr/bin/python3 - "$scene" "$1" "${2:-}" <<'PY'
-import sys, re
-text, case, crit = open(sys.argv[1]).read(), sys.argv[2], sys.argv[3]
-def sub(pattern, repl):
-    global text
-    new, n = re.subn(pattern, repl, text, count=1, flags=re.M)
-    if n != 1:
-        sys.exit(f"stability study: case {case}: the scene has no line matching {pattern!r}")
-    text = new
+# The overrides of a case, one per line (launch/run "$scene" --set each): the scene file itself is
+# never edited. Values that scale the scene's own (the continuum's Young modulus) are read from its
+# effective scene (every value in effect, defaults filled; launch/py/overrides.py).
+case_sets() {
+  /usr/bin/python3 - "$root/launch/py" "$scene" "$1" "${2:-}" <<'PY'
+import sys, tomllib
+sys.path.insert(0, sys.argv[1])
+import overrides
+scene, case, crit = sys.argv[2], sys.argv[3], sys.argv[4]
 lo, hi = (float(x) for x in crit.split(":")) if crit else (0.0, 0.0)
-edits = {
-    "base": [],
-    "g200": [(r"^level = .*$", "level = 200")],
-    "g1000": [(r"^level = .*$", "level = 1000")],
-    "soft_continuum": [(r"^young = ([0-9.e+-]+)$", lambda m: f"young = {float(m.group(1)) / 100:g}")],
-    "stiff_continuum": [(r"^young = ([0-9.e+-]+)$", lambda m: f"young = {float(m.group(1)) * 100:g}")],
-    "fast_footing": [(r"^mean_stress = (.*)$", r"mean_stress = \1\nspeed_factor = 10")],
-    "bond_cascade": [(r"^\[dem.ball_ball\]$", "[dem.ball_ball]\nsb_ten = 4.5e3\nsb_coh = 4.5e3")
-                     if re.search(r"^\[dem.ball_ball\]$", text, re.M) else
-                     (r"^\[dem.specimen\]$", "[dem.ball_ball]\nsb_ten = 4.5e3\nsb_coh = 4.5e3\n\n[dem.specimen]")],
-    "undamped": [(r"^\[dem\]$", "[dem]\ndamping = 0.0"), (r"^\[dem.specimen\]$", "[dem.specimen]\ndepth_scaling = \"none\"")],
-    "dt_09": [(r"^\[dem\]$", f"[dem]\ndt_fixed = {0.9 * lo:.6e}")],
-    "dt_above": [(r"^\[dem\]$", f"[dem]\ndt_fixed = {3 * hi:.6e}")],
-    "dt_reduce": [(r"^\[dem\]$", f"[dem]\ndt_fixed = {3 * hi:.6e}\ndt_above_critical = \"reduce\"")],
-    "escape": [(r"^\[dem\]$", "[dem]\nkick = [0.0, 0.0, 200.0]")],
+def young(scale):
+    mats = tomllib.loads(overrides.effective(scene)).get("continuum", {}).get("material", [])
+    if not mats:
+        sys.exit(f"stability study: case {case}: the scene has no [[continuum.material]]")
+    return [f"continuum.material[0].young={scale(float(mats[0]['young'])):g}"]
+def penetration_stage():
+    # The stage that sets mean_stress in the scene file (else the first penetration stage).
+    stages = overrides.scene_values(scene).get("stage", [])
+    for pick in (lambda s: "mean_stress" in s, lambda s: s.get("action") == "penetrate"):
+        for i, s in enumerate(stages):
+            if pick(s):
+                return "stage.%s" % s["name"] if s.get("name") else "stage[%d]" % i
+    sys.exit(f"stability study: case {case}: the scene has no penetration stage")
+cases = {
+    "base": lambda: [],
+    "g200": lambda: ["gravity.level=200"],
+    "g1000": lambda: ["gravity.level=1000"],
+    "soft_continuum": lambda: young(lambda e: e / 100),
+    "stiff_continuum": lambda: young(lambda e: e * 100),
+    "fast_footing": lambda: [penetration_stage() + ".speed_factor=10"],
+    "bond_cascade": lambda: ["dem.ball_ball.sb_ten=4.5e3", "dem.ball_ball.sb_coh=4.5e3"],
+    "undamped": lambda: ["dem.damping=0.0", 'dem.specimen.depth_scaling="none"'],
+    "dt_09": lambda: [f"dem.dt_fixed={0.9 * lo:.6e}"],
+    "dt_above": lambda: [f"dem.dt_fixed={3 * hi:.6e}"],
+    "dt_reduce": lambda: [f"dem.dt_fixed={3 * hi:.6e}", 'dem.dt_above_critical="reduce"'],
+    "escape": lambda: ["dem.kick=[0.0, 0.0, 200.0]"],
 }
-if case not in edits:
+if case not in cases:
     sys.exit(f"stability study: unknown case {case}")
-for p, r in edits[case]:
-    sub(p, r)
-sys.stdout.write(text)
+for s in cases[case]():
+    print(s)
 PY
+}
+
+# The launch/run --set arguments of a case (into the array set_args).
+case_args() {
+  local out s
+  out="$(case_sets "$1" "${2:-}")" || exit 2
+  set_args=()
+  while IFS= read -r s; do [ -n "$s" ] && set_args+=("--set=$s"); done <<< "$out"
+  return 0
 }
 
 # Smallest and largest DEM critical step of a finished run (history columns dem.dt_critical_s).
@@ -83,6 +106,22 @@ print(f"{min(vals)!r}:{max(vals)!r}")
 PY
 }
 
+if [ "$check" -eq 1 ]; then
+  refused=0
+  for c in $only; do
+    case_args "$c" "1e-8:1e-8"
+    shown=""
+    for s in "${set_args[@]}"; do
+      if [[ "$s" =~ ^[A-Za-z0-9._=/:+-]+$ ]]; then shown+=" $s"; else shown+=" '$s'"; fi
+    done
+    echo "$c: launch/run $scene$shown"
+    "$root/launch/run" "$scene" --check --no-build "${set_args[@]}" > /dev/null || refused=$((refused + 1))
+  done
+  echo "stability study: $(echo $only | wc -w) case(s) checked by the coordinator, $refused refused" >&2
+  [ "$refused" -eq 0 ] || exit 2
+  exit 0
+fi
+
 if [ -z "$study" ]; then
   study="$runs_root/studies/$(date +%Y%m%d-%H%M%S)-stability"
   mkdir -p "$study"
@@ -94,10 +133,10 @@ if [ -z "$study" ]; then
   crit=""
   for c in $order; do
     case "$c" in dt_*) [ -n "$crit" ] || crit=$(critical_range "$study/base") ;; esac
-    variant "$c" "$crit" > "$study/$c.toml"
+    case_args "$c" "$crit"
     t0=$(date +%s.%N)
     code=0
-    "$root/launch/run" "$study/$c.toml" --no-build --run-dir "$study/$c" >"$study/$c.log" 2>&1 || code=$?
+    "$root/launch/run" "$scene" --no-build "${set_args[@]}" --run-dir "$study/$c" >"$study/$c.log" 2>&1 || code=$?
     t1=$(date +%s.%N)
     mkdir -p "$study/$c"
     echo "$code" > "$study/$c/exit_code.txt"

@@ -5,7 +5,9 @@ Fake run folders (summary, checkpoint folders with and without manifest) stand i
 and a stub stands in for `coordinator SCENE --check --from=CHECKPOINT` (it accepts a checkpoint
 when the scene file names it), so the selection is checked on its own: the accepted checkpoint
 that saves the most steps, never the last stage of a run (nothing would be left to run), never
-one of an unfinished or failed run or without a manifest, None when nothing is accepted. The
+one of an unfinished or failed run or without a manifest, None when nothing is accepted. A study
+variant's overrides reach the check (the command is the coordinator and the variant's --set
+arguments, as the studies call it): a stub that accepts only with a given override. The
 coordinator's own acceptance rules are tested in tests/integration/checkpoint_test.cpp and
 tests/coord/checkpoint_test.cpp.
 """
@@ -68,6 +70,18 @@ try:
     got = branching.branch_source(coord, scene("s5", [ck(u, "replicate-3-end"), ck(f, "replicate-3-end"),
                                                       ck(n, "gravity-499-end"), ck(n, "replicate-3-end")]), [u, f, n])
     check(got == ck(n, "replicate-3-end"), "unfinished, failed and manifest-less are skipped: %s" % got)
+    # The overrides of a variant go with the check: coordinator --set=... SCENE --check --from=...
+    stub2 = os.path.join(root, "stub2.py")
+    with open(stub2, "w") as f:
+        f.write("import sys\nargs = sys.argv[1:]\nscene = [x for x in args if not x.startswith('--')][0]\n"
+                "ck = [x for x in args if x.startswith('--from=')][0].split('=', 1)[1]\n"
+                "ok = '--check' in args and '--set=stage.penetrate.damping=0.1' in args and ck in open(scene).read()\n"
+                "sys.exit(0 if ok else 2)\n")
+    s6 = scene("s6", [ck(a, "gravity-460-end")])
+    got = branching.branch_source([sys.executable, stub2, "--set=stage.penetrate.damping=0.1"], s6, [a, b])
+    check(got == ck(a, "gravity-460-end"), "the check with the variant's overrides: %s" % got)
+    got = branching.branch_source([sys.executable, stub2, "--set=stage.penetrate.damping=0.3"], s6, [a, b])
+    check(got is None, "other overrides must reach the check (refused): %s" % got)
     check(branching.stage_end_checkpoints(a) == [(900, ck(a, "penetrate-900-end")), (460, ck(a, "gravity-460-end")),
                                                  (3, ck(a, "replicate-3-end"))], "stage-end checkpoints, latest first")
 finally:

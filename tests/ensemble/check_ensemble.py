@@ -9,14 +9,19 @@ forms, and its run/table commands on stand-ins (no simulator):
     interval edges between samples and uneven sampling) and on a quadratic (exact integral);
   * curve_stats / common_grid on synthetic curves y = a_i d with different strokes and samplings
     (mean, se, band, n, the common range);
-  * parse_seeds and seed_scene (run.seed set or added, --set / --stage-set edits, bad keys fail);
+  * parse_seeds and seed_sets (the overrides of a seed's run: --set, --stage-set as stage.STAGE.key,
+    run.seed, no traffic log unless the scene or an override says traffic_log; malformed ones fail);
   * `table` on fake run folders (history CSV, summary.json, scene.toml): the files, n, the
     measures per seed, an unfinished seed left out and named;
-  * `run` with a stand-in launcher (--launcher): J = 2 runs at once, a failing seed named with its
-    exit code and last output lines and exit 3 after the others finish, resume (finished seeds
-    not rerun, the unfinished folder kept as seed-<k>.incomplete-1), a bad --set fails with exit 2
-    before anything runs.
-Usage: check_ensemble.py LAUNCH_PY_FOLDER
+  * `run` with a stand-in launcher (--launcher) on scenes/chain_serial.toml and the build's
+    coordinator (it checks the overrides and writes the effective scene a run records): every seed
+    runs the scene file with --set overrides (no scene text is written), J = 2 runs at once, a
+    failing seed named with its exit code and last output lines and exit 3 after the others
+    finish, resume (finished seeds not rerun, the unfinished folder kept as
+    seed-<k>.incomplete-1), a seed folder written before ensembles used overrides (an edited copy
+    of the scene as its scene.toml) counts as finished, other values refused, --check runs
+    nothing, a bad --set fails with exit 2 before anything runs.
+Usage: check_ensemble.py LAUNCH_PY_FOLDER   (environment: DEMFDM_BUILD, default the source's build/)
 """
 import json
 import math
@@ -31,6 +36,7 @@ TOOLS = sys.argv[1]
 sys.path.insert(0, TOOLS)
 import numpy as np  # noqa: E402
 import ensemble  # noqa: E402
+import branching  # noqa: E402
 
 failures = []
 
@@ -155,7 +161,7 @@ steps = 100
 """
 
 
-def test_scene_edits():
+def test_scene_edits(tmp):
     check(ensemble.parse_seeds("3") == [1, 2, 3], "seeds 3")
     check(ensemble.parse_seeds("4-6") == [4, 5, 6], "seeds 4-6")
     check(ensemble.parse_seeds("1,4,7-9") == [1, 4, 7, 8, 9], "seeds 1,4,7-9")
@@ -165,23 +171,24 @@ def test_scene_edits():
             failures.append("seeds %r must be refused" % bad)
         except ValueError:
             pass
-    t = ensemble.seed_scene(SCENE, 7, ["dem.footing.diameter=0.5e-3"], ["penetrate.depth_ratio=0.05"])
-    check("seed = 7\n" in t and "seed = 3" not in t, "run.seed set")
-    check("diameter = 0.5e-3" in t, "--set applied")
-    check(t.rstrip().endswith("depth_ratio = 0.05\n\n[output]\ntraffic_log = false"),
-          "--stage-set added to the penetrate stage, then no traffic log")
-    t = ensemble.seed_scene(SCENE.replace("seed = 3\n", ""), 4)
-    check("[run]\nseed = 4\n" in t, "run.seed added to [run] when absent")
-    t = ensemble.seed_scene("[dem]\nx = 1\n", 5)
-    check(t.endswith("[run]\nseed = 5\n\n[output]\ntraffic_log = false\n"), "a [run] table appended when absent")
-    check("traffic_log = false" not in ensemble.seed_scene("[output]\ntraffic_log = true\n", 5),
-          "a scene that says traffic_log keeps it")
-    check("[output]\ntraffic_log = false\nx = 1" in ensemble.seed_scene("[output]\nx = 1\n", 5),
-          "traffic_log = false added to an existing [output]")
-    for sets, stages in ((["dem.nope=1"], []), (["nodot=1"], []), ([], ["nostage.steps=1"])):
+    scene = os.path.join(tmp, "edits.toml")
+    open(scene, "w").write(SCENE)
+    before = open(scene).read()
+    s = ensemble.seed_sets(scene, 7, ["dem.footing.diameter=0.5e-3"], ["penetrate.depth_ratio=0.05"])
+    check(s == ["dem.footing.diameter=0.5e-3", "stage.penetrate.depth_ratio=0.05", "run.seed=7",
+                "output.traffic_log=false"], "seed_sets: --set, --stage-set, seed, no traffic log: %s" % s)
+    check(open(scene).read() == before, "the scene file must not change")
+    s = ensemble.seed_sets(scene, 2, ["output.traffic_log=true"])
+    check(s == ["output.traffic_log=true", "run.seed=2"], "an override that says traffic_log keeps it: %s" % s)
+    open(scene, "w").write(SCENE + "\n[output]\ntraffic_log = true\n")
+    check(ensemble.seed_sets(scene, 5) == ["run.seed=5"], "a scene that says traffic_log keeps it")
+    open(scene, "w").write(SCENE + "\n[output]\nx = 1\n")
+    check(ensemble.seed_sets(scene, 5) == ["run.seed=5", "output.traffic_log=false"],
+          "an [output] table without traffic_log gets traffic_log=false")
+    for sets, stages in ((["nodot=1"], []), (["dem.x"], []), ([], ["nostage=1"]), ([], [".steps=1"])):
         try:
-            ensemble.seed_scene(SCENE, 1, sets, stages)
-            failures.append("edit %s %s must fail" % (sets, stages))
+            ensemble.seed_sets(scene, 1, sets, stages)
+            failures.append("override %s %s must fail" % (sets, stages))
         except KeyError:
             pass
 
@@ -189,7 +196,7 @@ def test_scene_edits():
 def fake_run(d, seed, slope, wall, stroke=1e-4, failed=False):
     """A run folder as launch/run leaves it: scene.toml, history_4_penetrate.csv, summary.json/txt."""
     os.makedirs(d)
-    open(os.path.join(d, "scene.toml"), "w").write(ensemble.seed_scene(SCENE, seed))
+    open(os.path.join(d, "scene.toml"), "w").write(SCENE.replace("seed = 3", "seed = %d" % seed))
     if failed:
         open(os.path.join(d, "summary.txt"), "w").write("FAILED: a node died\n")
         return
@@ -253,19 +260,24 @@ def test_table(tmp):
 
 
 LAUNCHER = r"""#!/usr/bin/python3
-# Stand-in for launch/run: "SCENE --check --no-build" or "SCENE --no-build --run-dir DIR".
-import json, os, re, sys, time
+# Stand-in for launch/run: "SCENE --check --no-build --set=K=V ..." (the coordinator checks) or
+# "SCENE --no-build --set=K=V ... --run-dir DIR" (the run folder gets the effective scene, as
+# launch/run writes it, and a fake history whose load grows with the seed).
+import json, os, subprocess, sys, time
 a = sys.argv[1:]
 scene = a[0]
-text = open(scene).read()
-seed = int(re.search(r"(?m)^seed = (\d+)", text).group(1))
+sets = [x for x in a if x.startswith("--set=")]
+seed = int([x for x in sets if x.startswith("--set=run.seed=")][-1].split("=")[-1])
+coord = os.environ["FAKE_COORD"]
 open(os.environ["FAKE_LOG"], "a").write("%s %d %.3f\n" % ("check" if "--check" in a else "run", seed, time.time()))
 if "--check" in a:
-    sys.exit(0)
+    sys.exit(subprocess.call([coord, scene, "--check"] + sets))
 d = a[a.index("--run-dir") + 1]
 os.makedirs(d)
-open(os.path.join(d, "scene.toml"), "w").write(text)
+eff = subprocess.run([coord, scene, "--print-effective"] + sets, capture_output=True, text=True, check=True).stdout
+open(os.path.join(d, "scene.toml"), "w").write(eff)
 time.sleep(0.6)
+open(os.environ["FAKE_LOG"], "a").write("done %d %.3f\n" % (seed, time.time()))
 if seed == int(os.environ.get("FAKE_FAIL", "0")):
     print("node dem: blow-up at step 12")
     print("launch/run: finished with code 3; run folder " + d)
@@ -279,55 +291,90 @@ open(os.path.join(d, "summary.txt"), "w").write("total: 50 coupling steps in 0.6
 """
 
 
+def calls(log, kind):
+    return [line.split() for line in open(log) if line.startswith(kind + " ")] if os.path.exists(log) else []
+
+
 def test_run(tmp):
+    coord = branching.coordinator_command()[0]
+    if not os.access(coord, os.X_OK):
+        failures.append("no coordinator at %s (set DEMFDM_BUILD)" % coord)
+        return
     launcher = os.path.join(tmp, "fake_run")
     open(launcher, "w").write(LAUNCHER)
     os.chmod(launcher, 0o755)
-    scene = os.path.join(tmp, "fake.toml")
-    open(scene, "w").write(SCENE)
+    chain = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(TOOLS))), "scenes", "chain_serial.toml")
+    scene = os.path.join(tmp, "chain.toml")
+    shutil.copy(chain, scene)
+    text = open(scene).read()
     ens = os.path.join(tmp, "runs")
     log = os.path.join(tmp, "calls")
-    env = dict(os.environ, FAKE_LOG=log, FAKE_FAIL="2")
+    env = dict(os.environ, FAKE_LOG=log, FAKE_FAIL="2", FAKE_COORD=coord)
 
     def ens_run(*extra, env=env):
         return subprocess.run([sys.executable, os.path.join(TOOLS, "ensemble.py"), "run", ens, "--scene", scene,
                                "--launcher", launcher] + list(extra), capture_output=True, text=True, env=env)
 
     r = ens_run("--seeds", "1-3", "--set", "dem.nope=1")
-    check(r.returncode == 2 and "nope" in r.stderr, "a bad --set must fail with exit 2: %d %s" % (r.returncode, r.stderr))
-    check(not os.path.exists(log), "nothing may run after a bad --set")
+    check(r.returncode == 2 and "--set dem.nope=1" in r.stderr and "unknown key" in r.stderr,
+          "a bad --set must fail with exit 2, naming it: %d %s" % (r.returncode, r.stderr))
+    check(not calls(log, "run") and not os.path.exists(ens), "nothing may run after a bad --set")
+    r = ens_run("--seeds", "1-3", "--check")
+    check(r.returncode == 0 and "3 seed(s) checked" in r.stderr, "--check: %d %s" % (r.returncode, r.stderr))
+    check(len(calls(log, "check")) >= 3 and not calls(log, "run") and not os.path.exists(ens),
+          "--check must check every seed and run nothing")
     r = ens_run("--seeds", "3", "--jobs", "2")
     check(r.returncode == 3, "a failed seed must give exit 3 (got %d)" % r.returncode)
     check("seed 2 FAILED (exit code 3)" in r.stderr and "blow-up at step 12" in r.stderr,
           "the failed seed must be named with its exit code and last lines: %s" % r.stderr)
     check("FAILED seeds: seed-2 (exit code 3)" in r.stderr, "the final line must list the failed seeds: %s" % r.stderr)
+    check(open(scene).read() == text and not [f for f in os.listdir(ens) if f.endswith(".toml")],
+          "no scene text may be written: the scene file is run with overrides")
     for k in (1, 3):
-        check(os.path.exists(os.path.join(ens, "seed-%d" % k, "summary.json")), "seed %d must finish" % k)
-        check("seed = %d\n" % k in open(os.path.join(ens, "seed-%d.toml" % k)).read(), "seed-%d.toml" % k)
-    calls = [line.split() for line in open(log)]
-    runs = [(int(s), float(t)) for c, s, t in calls if c == "run"]
+        d = os.path.join(ens, "seed-%d" % k)
+        check(os.path.exists(os.path.join(d, "summary.json")), "seed %d must finish" % k)
+        eff = open(os.path.join(d, "scene.toml")).read()
+        check("--set run.seed=%d" % k in eff and "\nseed = %d\n" % k in eff and "traffic_log = false" in eff,
+              "seed-%d/scene.toml must be the effective scene with run.seed and no traffic log" % k)
+    runs = [(int(s), float(t)) for _, s, t in calls(log, "run")]
     check(sorted(s for s, _ in runs) == [1, 2, 3], "runs: %s" % runs)
-    check(len(runs) == 3 and abs(runs[0][1] - runs[1][1]) < 0.5, "--jobs 2: the first two runs start together: %s" % runs)
+    ends = {int(s): float(t) for _, s, t in calls(log, "done")}
+    first = sorted(runs, key=lambda x: x[1])[:2]
+    check(len(runs) == 3 and len(first) == 2 and first[1][1] < ends.get(first[0][0], 0),
+          "--jobs 2: the first two runs run at the same time: starts %s, ends %s" % (runs, ends))
     # Resume: seeds 1 and 3 are not rerun; the unfinished seed 2 is kept aside and runs again (now passing).
-    os.remove(log)
+    if os.path.exists(log):
+        os.remove(log)
     r = ens_run("--seeds", "3", env=dict(env, FAKE_FAIL="0"))
     check(r.returncode == 0, "resume must pass: %d %s" % (r.returncode, r.stderr))
-    calls = [line.split() for line in open(log)]
-    check([int(s) for c, s, _ in calls if c == "run"] == [2], "resume must run seed 2 only: %s" % calls)
+    check([int(s) for _, s, _ in calls(log, "run")] == [2], "resume must run seed 2 only: %s" % calls(log, "run"))
     check(os.path.isdir(os.path.join(ens, "seed-2.incomplete-1")), "the failed folder must be kept")
     check("seeds 1,3 already finished" in r.stderr, "resume must say what it skips: %s" % r.stderr)
-    # A finished seed run from another scene text is refused.
-    r = ens_run("--seeds", "1", "--set", "dem.footing.diameter=0.5e-3")
-    check(r.returncode == 2 and "different scene" in r.stderr, "changed scene must be refused: %s" % r.stderr)
+    # A seed folder of an ensemble written before ensembles used overrides: its scene.toml is an
+    # edited copy of the scene (run.seed set, [output] traffic_log = false appended). It ran the
+    # same values, so it counts as finished.
+    old = os.path.join(ens, "seed-4")
+    shutil.copytree(os.path.join(ens, "seed-1"), old)
+    open(os.path.join(old, "scene.toml"), "w").write(
+        text.replace('[run]\n', '[run]\nseed = 4\n', 1) + "\n[output]\ntraffic_log = false\n")
+    if os.path.exists(log):
+        os.remove(log)
+    r = ens_run("--seeds", "4-4", env=dict(env, FAKE_FAIL="0"))
+    check(r.returncode == 0 and not calls(log, "run") and "seeds 4 already finished" in r.stderr,
+          "an old-style finished seed folder must be kept: %d %s" % (r.returncode, r.stderr))
+    # A finished seed run with other values is refused.
+    r = ens_run("--seeds", "1", "--set", "chain.stiffness=200")
+    check(r.returncode == 2 and "different scene" in r.stderr, "changed values must be refused: %s" % r.stderr)
     r = subprocess.run([sys.executable, os.path.join(TOOLS, "ensemble.py"), "table", ens], capture_output=True, text=True)
-    check(r.returncode == 0 and "n = 3" in r.stdout, "table after resume: %s %s" % (r.stdout[-300:], r.stderr))
+    check(r.returncode == 0 and "n = 4" in r.stdout, "table after resume: %s %s" % (r.stdout[-300:], r.stderr))
 
 
 def main():
     tmp = tempfile.mkdtemp(prefix="demfdm-ensemble-unit-")
     try:
-        for t in (test_t, test_scalar_stats, test_interval_means, test_curve_stats, test_scene_edits):
+        for t in (test_t, test_scalar_stats, test_interval_means, test_curve_stats):
             t()
+        test_scene_edits(tmp)
         test_table(tmp)
         test_run(tmp)
     finally:
