@@ -124,7 +124,10 @@ def verdict(diff, half, ref):
     if not (np.isfinite(diff) and np.isfinite(half)) or ref == 0:
         return "n/a"
     word = "not resolved" if abs(diff) <= half else "differs"
-    return "%s (%+.1f ± %.1f %%)" % (word, 100 * diff / ref, 100 * half / abs(ref))
+    x, h = 100 * diff / ref, 100 * half / abs(ref)
+    if max(abs(x), h) >= 1:
+        return "%s (%+.1f ± %.1f %%)" % (word, x, h)
+    return "%s (%+.2g ± %.2g %%)" % (word, x, h)  # below 1 %: two significant digits
 
 
 def interval_means(disp, load, edges):

@@ -29,7 +29,8 @@ try:
     # stroke): verdicts against 100 g
     def col(row, i):
         return [c.strip() for c in row.split("|")[1:-1]][i]
-    g1, g200 = rows["1"], rows["200"]
+    assert "## The same, paired by seed" in text, text
+    g1, g200 = rows["1"], rows["200"]  # the paired rows (the last with that key)
     assert col(g1, 2).startswith("not resolved"), g1
     assert col(g200, 2).startswith("differs"), g200
     pct = float(re.search(r"\(([-+][0-9.]+) ±", col(g200, 2)).group(1))
