@@ -1,14 +1,15 @@
 #include "fdm_node/scene_params.hpp"
 
+#include <stdexcept>
 #include <string>
 
-namespace demfdm::fdm {
+namespace demfdm::continuum {
 namespace {
 std::array<double, 3> vec3(const std::vector<double>& v) { return {v[0], v[1], v[2]}; }
 }  // namespace
 
-MeshParams mesh_from_scene(const config::Scene& s) {
-  MeshParams m;
+fdm::MeshParams mesh_from_scene(const config::Scene& s) {
+  fdm::MeshParams m;
   auto size = s.reals("continuum.mesh.size");
   m.length = size[0];
   m.width = size[1];
@@ -25,20 +26,29 @@ MeshParams mesh_from_scene(const config::Scene& s) {
   m.size_far = s.real("continuum.mesh.size_far");
   m.growth = s.real("continuum.mesh.growth");
   try {
-    validate(m);
+    fdm::validate(m);
   } catch (const std::invalid_argument& e) {
     s.fail("continuum.mesh", "a valid mesh", e.what());
   }
   return m;
 }
 
-std::optional<Box> region_from_scene(const config::Scene& e) {
+std::optional<fdm::Box> region_from_scene(const config::Scene& e) {
   auto lo = e.reals("region_lo"), hi = e.reals("region_hi");
   if (lo.size() != hi.size() || (lo.size() != 0 && lo.size() != 3))
     e.fail("region_lo", "region_lo and region_hi both empty or both [x, y, z]",
            std::to_string(lo.size()) + " and " + std::to_string(hi.size()) + " numbers");
-  if (lo.size() == 3) return Box{vec3(lo), vec3(hi)};
+  if (lo.size() == 3) return fdm::Box{vec3(lo), vec3(hi)};
   return std::nullopt;
 }
 
-}  // namespace demfdm::fdm
+ElasticMaterial elastic_from_scene(const config::Scene& e) {
+  ElasticMaterial m;
+  m.density = e.real("density");
+  m.young = e.real("young");
+  m.poisson = e.real("poisson");
+  m.region = region_from_scene(e);
+  return m;
+}
+
+}  // namespace demfdm::continuum

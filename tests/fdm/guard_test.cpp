@@ -91,3 +91,16 @@ TEST(FdmGuard, NaNStressNamesTheZoneAndItsNeighbours) {
   EXPECT_EQ(listed, neighbours);
   EXPECT_TRUE(corners.count(f->gridpoint)) << "the first gridpoint named must be a corner of the zone";
 }
+
+// The kinetic-energy jump report names the gridpoint with the largest 1/2 m |v|^2.
+TEST(FdmGuard, FastestGridpointHasTheLargestKineticEnergy) {
+  Model m(small());
+  m.reset_velocities();
+  EXPECT_EQ(fastest_gridpoint(m), 0) << "all at rest: the first gridpoint";
+  const std::int32_t slow = 21, fast = 42;
+  m.set_velocity(slow, {0.0, 0.0, 1.0});
+  m.set_velocity(fast, {0.0, 3.0, 0.0});
+  const auto mass = m.inertial_masses();
+  ASSERT_GT(mass[fast] * 9.0, mass[slow] * 1.0);
+  EXPECT_EQ(fastest_gridpoint(m), fast);
+}

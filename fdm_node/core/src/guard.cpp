@@ -37,6 +37,18 @@ bool all_finite(std::span<const double> a) {
 
 }  // namespace
 
+std::int32_t fastest_gridpoint(const Model& m) {
+  const auto v = m.velocities();
+  const auto mass = m.inertial_masses();
+  std::size_t worst = 0;
+  double e_worst = -1;
+  for (std::size_t g = 0; g < m.num_gridpoints(); ++g) {
+    double e = 0.5 * mass[g] * (v[3 * g] * v[3 * g] + v[3 * g + 1] * v[3 * g + 1] + v[3 * g + 2] * v[3 * g + 2]);
+    if (e > e_worst) e_worst = e, worst = g;
+  }
+  return static_cast<std::int32_t>(worst);
+}
+
 std::string describe_gridpoint(const Model& m, std::int32_t g) {
   const auto gi = static_cast<std::size_t>(g);
   std::ostringstream os;

@@ -18,30 +18,6 @@ void require(bool ok, const char* field, const char* range, double value) {
 
 }  // namespace
 
-void validate(const MeshParams& p) {
-  require(p.length > 0.0 && std::isfinite(p.length), "mesh.length", "a finite value > 0 m", p.length);
-  require(p.width > 0.0 && std::isfinite(p.width), "mesh.width", "a finite value > 0 m", p.width);
-  require(p.height > 0.0 && std::isfinite(p.height), "mesh.height", "a finite value > 0 m", p.height);
-  const double ext[3] = {p.length, p.width, p.height};
-  static const char* kSize[3] = {"mesh.inner_size[0] (L_D)", "mesh.inner_size[1] (W_D)", "mesh.inner_size[2] (H_D)"};
-  const bool any = p.inner_size[0] > 0.0 || p.inner_size[1] > 0.0 || p.inner_size[2] > 0.0;
-  for (int d = 0; d < 3; ++d) {
-    if (any) {
-      require(p.inner_size[d] > 0.0 && p.inner_size[d] <= ext[d], kSize[d],
-              "a value in (0, box extent] (all three zero for no inner box)", p.inner_size[d]);
-    } else {
-      require(p.inner_size[d] == 0.0, kSize[d], "0 when the other inner sizes are 0", p.inner_size[d]);
-    }
-  }
-  require(!(p.pocket && !any), "mesh.pocket", "false when inner_size is zero (no pocket to open)", 1.0);
-  require(p.size_near > 0.0 && std::isfinite(p.size_near), "mesh.size_near", "a finite value > 0 m", p.size_near);
-  require(p.size_far >= p.size_near && std::isfinite(p.size_far), "mesh.size_far", "a finite value >= size_near", p.size_far);
-  require(p.growth >= 1.0 && p.growth <= 2.0, "mesh.growth", "a ratio in [1, 2]", p.growth);
-  // Guard against meshes that would not fit in memory by mistake (about 2e7 zones).
-  const double nmax = (p.length / p.size_near + 1) * (p.width / p.size_near + 1) * (p.height / p.size_near + 1);
-  require(nmax < 2e7, "mesh.size_near", "a size giving fewer than 2e7 zones", p.size_near);
-}
-
 void validate(const Material& m) {
   require(m.density > 0.0 && std::isfinite(m.density), "material.density", "a finite value > 0 kg/m^3", m.density);
   require(m.young > 0.0 && std::isfinite(m.young), "material.young", "a finite value > 0 Pa", m.young);

@@ -24,6 +24,10 @@ struct GuardFinding {
 /// non-finite stress reaches the zone forces of its corners in the same zone pass.
 std::optional<GuardFinding> check_finite(const Model& m);
 
+/// The gridpoint with the largest kinetic energy 1/2 m |v|^2 (inertial mass), the first one on
+/// a tie: the one a kinetic-energy jump report names.
+std::int32_t fastest_gridpoint(const Model& m);
+
 /// Position, velocity, displacement, zone force and fixity of gridpoint g, one line.
 std::string describe_gridpoint(const Model& m, std::int32_t g);
 /// Centre, volume-averaged stress and plastic state of zone z, one line.

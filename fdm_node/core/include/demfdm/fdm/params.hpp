@@ -3,62 +3,15 @@
 // validate() (throws std::invalid_argument naming the field, the range and the value found).
 #pragma once
 
-#include <array>
 #include <cstdint>
-#include <limits>
 #include <optional>
 #include <vector>
+
+#include "demfdm/fdm/mesh.hpp"  // MeshParams, Box, kNaN (library fdm_mesh)
 
 namespace demfdm::fdm {
 
 inline constexpr double kStandardGravity = 9.81;  // [m/s^2] g0 (docs/theory.md 0.1)
-inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-
-// Axis-aligned box [lo, hi] used for the inner (pocket / refinement) region and for
-// material-group regions.
-struct Box {
-  std::array<double, 3> lo{0.0, 0.0, 0.0};  // [m] minimum corner
-  std::array<double, 3> hi{0.0, 0.0, 0.0};  // [m] maximum corner
-  [[nodiscard]] bool contains(const std::array<double, 3>& p) const {
-    return p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] &&
-           p[2] <= hi[2];
-  }
-};
-
-// Structured hexahedral mesh of the box [0,L]x[0,W]x[0,H] (docs/theory.md 5.1).
-// Grid lines pass through the faces of an inner box; zones have size `size_near` inside and
-// next to it and grow by `growth` per zone up to `size_far` towards the outer boundary.
-// With `pocket` the inner box is left open (the DEM block) and its faces shared with zones
-// form the coupling interface (docs/theory.md 6.2).
-struct MeshParams {
-  double length = 16e-3;  // [m] L, extent in x (docs/theory.md 0.3)
-  double width = 16e-3;   // [m] W, extent in y (docs/theory.md 0.3)
-  double height = 16e-3;  // [m] H, extent in z (docs/theory.md 0.3)
-  // [m] L_D, W_D, H_D of the inner box (docs/theory.md 0.3: 4 x 4 x 10 mm). All three zero: no
-  // inner box, the grid is uniform with spacing <= size_near on every axis.
-  std::array<double, 3> inner_size{4e-3, 4e-3, 10e-3};
-  // [m] minimum corner of the inner box; NaN components take the default position: centred
-  // in x and y, top face flush with z = H (docs/theory.md 5.1 [RECON]).
-  std::array<double, 3> inner_origin{kNaN, kNaN, kNaN};
-  bool pocket = true;        // [-] true: inner box left open for the DEM block; false: meshed
-  double size_near = 0.5e-3; // [m] zone size inside and next to the inner box (docs/theory.md 5.1)
-  double size_far = 2e-3;    // [m] largest zone size towards the outer boundary
-  double growth = 1.2;       // [-] zone-to-zone size ratio outside the inner box, in [1, 2]
-
-  // A plain box with uniform zones of size <= `size` and no inner box (verification runs).
-  static MeshParams plain_box(double length, double width, double height, double size) {
-    MeshParams p;
-    p.length = length;
-    p.width = width;
-    p.height = height;
-    p.inner_size = {0.0, 0.0, 0.0};
-    p.pocket = false;
-    p.size_near = size;
-    p.size_far = size;
-    p.growth = 1.0;
-    return p;
-  }
-};
 
 // Constitutive model of a zone group (docs/theory.md 5.4).
 enum class Constitutive : std::uint8_t { kElastic = 0, kMohrCoulomb = 1 };
@@ -125,7 +78,6 @@ struct GeostaticStress {
 };
 
 // Throws std::invalid_argument naming the first bad field.
-void validate(const MeshParams& p);
 void validate(const Material& m);
 void validate(const ModelParams& p);
 

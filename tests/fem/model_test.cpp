@@ -9,7 +9,7 @@
 
 #include <Eigen/Dense>
 
-#include "fem_model.hpp"
+#include "demfdm/fem/model.hpp"
 
 using namespace demfdm;
 

@@ -14,7 +14,7 @@
 #include <memory>
 
 #include "demfdm/fdm/model.hpp"
-#include "fem_model.hpp"
+#include "demfdm/fem/model.hpp"
 
 using namespace demfdm;
 

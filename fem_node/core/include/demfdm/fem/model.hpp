@@ -28,7 +28,6 @@
 
 #include "demfdm/fdm/mesh.hpp"
 #include "demfdm/io/state_file.hpp"
-#include "demfdm/fdm/params.hpp"
 
 namespace demfdm::fem {
 

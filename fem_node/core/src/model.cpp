@@ -1,4 +1,4 @@
-#include "fem_model.hpp"
+#include "demfdm/fem/model.hpp"
 
 #include <chrono>
 #include <cmath>
