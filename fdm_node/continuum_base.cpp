@@ -60,7 +60,8 @@ void NodeBase::require_action(const schema::Stage& st) const {
 
 proto::Values NodeBase::begin_stage(const schema::Stage& st) {
   if (st.action == "geostatic" || st.action == "couple") {
-    const double k0 = st.view.real("k0");
+    const auto k0_in = st.view.real_or_word("k0");  // "auto": nu/(1-nu) of each zone
+    const double k0 = k0_in ? *k0_in : -1.0;
     set_geostatic_stress(k0 < 0 ? fdm::kNaN : k0);
     spdlog::info("{}: geostatic stresses assigned (K0 {})", names_.log,
                  k0 < 0 ? std::string("nu/(1-nu)") : std::to_string(k0));

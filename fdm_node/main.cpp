@@ -40,7 +40,7 @@ fdm::ModelParams model_params(const config::Scene& s) {
     mat.cohesion = e.real("cohesion");
     mat.friction_deg = e.real("friction_deg");
     mat.dilation_deg = e.real("dilation_deg");
-    mat.tension = e.real("tension") < 0 ? fdm::kNaN : e.real("tension");
+    mat.tension = e.real_or_word("tension").value_or(fdm::kNaN);  // "auto": the apex value
     g.region = el.region;
     return g;
   });

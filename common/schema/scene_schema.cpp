@@ -143,7 +143,9 @@ void declare_continuum(config::Section& root) {
   mat.real("cohesion", "Pa", 0.0, "Mohr-Coulomb cohesion c.").min(0.0);
   mat.real("friction_deg", "deg", 30.0, "Mohr-Coulomb friction angle.").min(0.0).max(90.0, true);
   mat.real("dilation_deg", "deg", 0.0, "Mohr-Coulomb dilation angle (<= friction).").min(0.0).max(90.0, true);
-  mat.real("tension", "Pa", -1.0, "Tension cut-off (tension positive); negative: the apex value c/tan(phi).");
+  mat.real("tension", "Pa", std::nullopt, "Tension cut-off (tension positive); \"auto\": the apex value c/tan(phi).")
+      .min(0.0)
+      .or_word("auto", true);
   mat.reals("region_lo", "m", std::vector<double>{}, "Minimum corner of the group's box; empty: every zone.");
   mat.reals("region_hi", "m", std::vector<double>{}, "Maximum corner of the group's box; empty: every zone.");
   auto& punch = c.section("punch",
@@ -379,7 +381,9 @@ void declare_stages(config::Section& root) {
             "inertial number; the stage ends at 'depth'. ucs: unconfined compression between platens.");
   st.real("ratio", "-", 1e-5, "Equilibrium criterion: unbalanced-force ratio (FLAC3D ratio-average, docs/theory.md 5.11).")
       .min(0.0, true);
-  st.real("k0", "-", -1.0, "K0 for 'geostatic'; negative: nu/(1-nu) of each zone's material.");
+  st.real("k0", "-", std::nullopt, "K0 for 'geostatic' and 'couple'; \"auto\": nu/(1-nu) of each zone's material.")
+      .min(0.0)
+      .or_word("auto", true);
   st.boolean("reset_displacements", false, "Set continuum displacements to zero at the stage's start.");
   st.real("inertial_number", "-", 1e-3,
           "penetrate: inertial number I of the footing rate (docs/theory.md 7.1); I >= 1 is no longer a granular "
@@ -546,9 +550,11 @@ config::Schema build() {
 
   // Defaults of the action keys: the effective scene of a run (config::Scene::effective_toml)
   // writes every key of every stage, so only a value other than the default is refused.
-  std::map<std::string, double> action_key_default;
-  for (const char* key : kActionKeys)
-    action_key_default[key] = std::get<double>(*root.find("stage")->section->find(key)->param->def);
+  std::map<std::string, std::optional<double>> action_key_default;  // nothing: the key's word ("auto")
+  for (const char* key : kActionKeys) {
+    const config::Value& def = *root.find("stage")->section->find(key)->param->def;
+    action_key_default[key] = std::holds_alternative<double>(def) ? std::optional<double>(std::get<double>(def)) : std::nullopt;
+  }
   s.check([action_key_default](const config::Scene& sc, config::CheckContext& ctx) {
     if (!sc.has("dem") && !sc.has("continuum"))
       ctx.fail("dem", "a [dem] or a [continuum] section (a scene needs at least one node)", "neither");
@@ -584,7 +590,7 @@ config::Schema build() {
       const std::string act = e.string("action");
       for (const char* key : kActionKeys) {
         const auto* acts = stage_key_actions(key);
-        if (e.explicitly_set(key) && e.real(key) != action_key_default.at(key) &&
+        if (e.explicitly_set(key) && e.real_or_word(key) != action_key_default.at(key) &&
             std::find(acts->begin(), acts->end(), act) == acts->end()) {
           std::string list;
           for (auto& a : *acts) list += (list.empty() ? "'" : "' or '") + a;
