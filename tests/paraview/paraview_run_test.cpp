@@ -9,6 +9,8 @@
 //  * launch/paraview/open_run.py opens the run in pvpython under xvfb-run and renders the last
 //    time step into a PNG that is not blank; skipped where pvpython or xvfb-run is absent.
 #include <gtest/gtest.h>
+
+#include <optional>
 #include <hdf5.h>
 
 #include <algorithm>
@@ -247,12 +249,19 @@ TEST(ParaviewRun, OpenRunScriptRendersTheLastTimeStep) {
   const fs::path& run = run_dir();
   const auto png = run.parent_path() / "last.png", state = run.parent_path() / "run.pvsm";
   const auto log = run.parent_path() / "pvpython.out";
-  auto p = spawn({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", "pvpython",
-                  kSrc + "/launch/paraview/open_run.py", run.string(), "--png", png.string(), "--state", state.string(),
-                  "--size", "800", "600"},
-                 {}, log.string());
-  auto st = wait_for(p, 240);
-  if (!st) kill_and_reap(p);
+  // The virtual X server itself can fail to come up on a loaded machine ("bad X server
+  // connection", seen once with three runs and the suite sharing two cores); that is not what
+  // this test checks, so such a start is tried once more.
+  std::optional<int> st;
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    auto p = spawn({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 1280x1024x24", "pvpython",
+                    kSrc + "/launch/paraview/open_run.py", run.string(), "--png", png.string(), "--state",
+                    state.string(), "--size", "800", "600"},
+                   {}, log.string());
+    st = wait_for(p, 240);
+    if (!st) kill_and_reap(p);
+    if (read_file(log.string()).find("bad X server connection") == std::string::npos) break;
+  }
   ASSERT_TRUE(st && exit_code(*st) == 0) << read_file(log.string());
   ASSERT_TRUE(fs::exists(png)) << read_file(log.string());
   EXPECT_GT(fs::file_size(png), 0u);
