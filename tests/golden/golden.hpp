@@ -52,16 +52,6 @@ inline std::vector<std::string> lines(const std::string& s) {
   return v;
 }
 
-/// FNV-1a 64 of a byte string.
-inline std::uint64_t fnv1a64(const std::string& s) {
-  std::uint64_t h = 0xcbf29ce484222325ull;
-  for (unsigned char c : s) {
-    h ^= c;
-    h *= 0x100000001b3ull;
-  }
-  return h;
-}
-
 inline std::string slurp(const std::string& path, bool& ok) {
   std::ifstream f(path);
   ok = static_cast<bool>(f);

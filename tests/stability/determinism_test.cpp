@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <cinttypes>
 
+#include "demfdm/io/state_file.hpp"
 #include "tests/golden/golden.hpp"
 #include "tests/stability/scene_run.hpp"
 
@@ -32,7 +33,7 @@ std::string csv_digest(const fs::path& dir) {
     const std::string text = slurp(f);
     const auto ls = demfdm::golden::lines(text);
     char h[32];
-    std::snprintf(h, sizeof h, "%016" PRIx64, demfdm::golden::fnv1a64(text));
+    std::snprintf(h, sizeof h, "%016" PRIx64, demfdm::io::fnv1a64(text.data(), text.size()));
     const std::string name = f.filename().string();
     o << "file " << name << " bytes " << text.size() << " lines " << ls.size() << " fnv1a64 " << h << "\n";
     for (std::size_t i = 0; i < ls.size(); ++i)
