@@ -44,9 +44,10 @@ namespace {
 dem::ContactFamilyParams family(const config::Scene& s, const std::string& name) {
   auto k = [&](const char* key) { return "dem." + name + "." + key; };
   dem::ContactFamilyParams f;
-  auto m = s.string(k("model"));
-  f.model = m == "pbond" ? dem::ContactModel::kLinearPBond
-                         : m == "softbond" ? dem::ContactModel::kSoftBond : dem::ContactModel::kLinear;
+  // The laws are looked up by name in the registry (laws/registry.hpp); a schema choice with no
+  // law behind it is refused here, and so at --check (every node runs its check).
+  if (!dem::law_from_name(s.string(k("model")), f.model))
+    throw std::invalid_argument("dem." + name + ".model: no contact law named '" + s.string(k("model")) + "'");
   f.linear.emod = s.real(k("emod"));
   f.linear.kratio = s.real(k("kratio"));
   f.linear.fric = s.real(k("fric"));
@@ -77,6 +78,8 @@ dem::ContactFamilyParams family(const config::Scene& s, const std::string& name)
                                                                        : dem::CohesionSoftening::kNone;
   b.bending_in_softening = s.boolean(k("sb_bending_in_softening"));
   b.moments = s.string(k("sb_unbonded_moments")) == "none" ? dem::UnbondedMoments::kNone : dem::UnbondedMoments::kJiang;
+  f.hertz.shear = s.real(k("hz_shear"));
+  f.hertz.poisson = s.real(k("hz_poisson"));
   return f;
 }
 

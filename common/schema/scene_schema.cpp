@@ -178,8 +178,8 @@ struct FamilyDefaults {
 
 void declare_family(config::Section& dem, const char* name, const FamilyDefaults& d) {
   auto& f = dem.section(name, d.doc, config::Presence::Optional);
-  f.choice("model", {"linear", "pbond", "softbond"}, std::string(d.model),
-           "Contact model: linear (1.7), linear parallel bond (2), soft bond (3).");
+  f.choice("model", {"linear", "pbond", "softbond", "hertz"}, std::string(d.model),
+           "Contact model: linear (1.7), linear parallel bond (2), soft bond (3), Hertz-Mindlin without bond (1.9).");
   f.real("emod", "Pa", 2.8e9, "Deformability modulus E* of the linear part (soft bond: its only stiffness).").min(0.0);
   f.real("kratio", "-", 2.4, "Normal-to-shear stiffness ratio kappa*.").min(0.0, true);
   f.real("fric", "-", d.fric, "Friction coefficient mu of unbonded contacts.").min(0.0);
@@ -218,6 +218,8 @@ void declare_family(config::Section& dem, const char* name, const FamilyDefaults
             "Bending drives softening with the normal opening (PFC); false: normal only (Ma & Huang).");
   f.choice("sb_unbonded_moments", {"jiang", "none"}, std::string("jiang"),
            "Moment limits of unbonded soft-bond contacts (3.5, U3).");
+  f.real("hz_shear", "Pa", 1.0e9, "Hertz-Mindlin: shear modulus G of the grain material (1.9).").min(0.0, true);
+  f.real("hz_poisson", "-", 0.25, "Hertz-Mindlin: Poisson ratio nu of the grain material (1.9).").min(0.0).max(0.5, true);
 }
 
 void declare_dem(config::Section& root) {
@@ -473,13 +475,18 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
       ctx.fail(f + ".emod", "a modulus > 0 Pa for the soft bond (its only stiffness set)", num(sc.real(f + ".emod")) + " Pa");
   }
   const bool bonds = has_action("bond") || (has_action("generate") && sc.real_or_word("dem.specimen.bond_coordination"));
-  if (bonds && sc.string("dem.ball_ball.model") == "linear")
+  // Laws with a bond: pbond and softbond (dem_node/core laws/registry.hpp, kBond).
+  auto can_bond = [&](const std::string& key) {
+    const std::string m = sc.string(key);
+    return m == "pbond" || m == "softbond";
+  };
+  if (bonds && !can_bond("dem.ball_ball.model"))
     ctx.fail("dem.ball_ball.model", "'pbond' or 'softbond' (the scene bonds the specimen: a bond stage, or "
-             "dem.specimen.bond_coordination >= 0)", "'linear'");
+             "dem.specimen.bond_coordination >= 0)", "'" + sc.string("dem.ball_ball.model") + "'");
   // The couple stage bonds the balls to the interface facets (docs/theory.md 2.6).
-  if (has_action("couple") && sc.string("dem.ball_facet.model") == "linear")
+  if (has_action("couple") && !can_bond("dem.ball_facet.model"))
     ctx.fail("dem.ball_facet.model", "'pbond' or 'softbond' (a couple stage bonds the balls to the interface facets)",
-             "'linear'");
+             "'" + sc.string("dem.ball_facet.model") + "'");
   // A derived REV stress (sigma_v < 0: rho_b N g0 H_D) needs gravity.
   const double g = sc.has("gravity") ? sc.real("gravity.level") * sc.real("gravity.g0") : 0.0;
   if (has_action("servo") && !sc.real_or_word("dem.specimen.sigma_v") && !(g > 0))

@@ -474,7 +474,7 @@ TEST(DemCheckpoint, FileAndStreamRoundTrip) {
   EXPECT_EQ(h.kind, "dem");
   EXPECT_EQ(h.code_version, "v-test");
   EXPECT_EQ(h.scene_hash, kSceneHash);
-  EXPECT_EQ(h.format_version, 1u);
+  EXPECT_EQ(h.format_version, demfdm::io::kStateFormatVersion);
   std::stringstream ss;
   save_state(*a, ss, {kSceneHash, "v-test"});
   World c{WorldParams{}};

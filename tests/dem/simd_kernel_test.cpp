@@ -240,6 +240,21 @@ TEST(SimdKernel, SoftBondFreeVariantsBitIdentical) {
             0);
 }
 
+// Hertz–Mindlin (docs/theory.md §1.9): the lane loop calls the law's own formula (hertz_core),
+// so the vector pass gives the scalar one bit for bit, tangent stiffnesses included.
+TEST(SimdKernel, HertzPeriodicStrainedAndFreeBitIdentical) {
+  Scene sc;
+  sc.name = "hertz periodic strained";
+  sc.model = ContactModel::kHertz;
+  check_scene(sc);
+  Scene fr = sc;
+  fr.name = "hertz free";
+  fr.periodic = false;
+  fr.rate = 0.0;
+  fr.steps = 40;
+  check_scene(fr);
+}
+
 // Two threads: contact blocks per thread and the fixed-order reduction are shared by both
 // passes, so the vectorised pass repeats the scalar one bit for bit there too.
 TEST(SimdKernel, TwoThreadsBitIdentical) {

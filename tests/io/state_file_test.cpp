@@ -102,7 +102,7 @@ std::string reseal(std::string b) {
 TEST(StateFile, EveryTypeRoundTripsBitExactly) {
   const std::string b = sample();
   StateReader r(b, "mem", "dem", kHash);
-  EXPECT_EQ(r.header().format_version, 1u);
+  EXPECT_EQ(r.header().format_version, io::kStateFormatVersion);
   EXPECT_EQ(r.header().kind, "dem");
   EXPECT_EQ(r.header().code_version, "demfdm test");
   EXPECT_EQ(r.header().scene_hash, kHash);
@@ -173,8 +173,10 @@ TEST(StateFile, RefusalsNameTheFile) {
   refusal("", f, "truncated: 0 bytes");
   refusal(good.substr(0, 12), f, "truncated");
   std::string v2 = good;
-  v2[8] = 2;
-  refusal(v2, f, "format version 2, this code reads version 1");
+  v2[8] = static_cast<char>(kStateFormatVersion + 1);
+  refusal(v2, f,
+          "format version " + std::to_string(kStateFormatVersion + 1) + ", this code reads version " +
+              std::to_string(kStateFormatVersion));
   refusal(good.substr(0, good.size() - 1), f, "truncated: ");
   refusal(good.substr(0, good.size() / 2), f, "truncated: ");
   refusal(good + "x", f, "trailing bytes");

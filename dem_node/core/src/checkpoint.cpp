@@ -20,8 +20,9 @@ static_assert(sizeof(BondHist) == 104, "BondHist changed: update the checkpoint 
 static_assert(sizeof(LinearParams) == 56, "LinearParams changed: update the checkpoint");
 static_assert(sizeof(ParallelBondParams) == 64, "ParallelBondParams changed: update the checkpoint");
 static_assert(sizeof(SoftBondParams) == 80, "SoftBondParams changed: update the checkpoint");
-static_assert(sizeof(ContactFamilyParams) == 208, "ContactFamilyParams changed: update the checkpoint");
-static_assert(sizeof(WorldParams) == 976, "WorldParams changed: update the checkpoint");
+static_assert(sizeof(HertzParams) == 16, "HertzParams changed: update the checkpoint");
+static_assert(sizeof(ContactFamilyParams) == 224, "ContactFamilyParams changed: update the checkpoint");
+static_assert(sizeof(WorldParams) == 1040, "WorldParams changed: update the checkpoint");
 static_assert(sizeof(PlaneWallParams) == 152, "PlaneWallParams changed: update the checkpoint");
 static_assert(sizeof(PlaneWall) == 240, "PlaneWall changed: update the checkpoint");
 static_assert(sizeof(FacetWall) == 224, "FacetWall changed: update the checkpoint");
@@ -29,7 +30,7 @@ static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
 static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
 static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
-static_assert(sizeof(World) == 2944, "World changed: is the new member state? update the checkpoint");
+static_assert(sizeof(World) == 3008, "World changed: is the new member state? update the checkpoint");
 #endif
 
 namespace {
@@ -82,6 +83,8 @@ void put(io::StateWriter& o, const ContactFamilyParams& f) {
   o.u8(static_cast<std::uint8_t>(sb.cohesion));
   o.b(sb.bending_in_softening);
   o.u8(static_cast<std::uint8_t>(sb.moments));
+  o.f64(f.hertz.shear);
+  o.f64(f.hertz.poisson);
 }
 
 void put(io::StateWriter& o, const WorldParams& p) {
@@ -227,7 +230,7 @@ E get_enum(io::SectionReader& in, std::uint8_t last, const char* what) {
 
 ContactFamilyParams get_family(io::SectionReader& in) {
   ContactFamilyParams f;
-  f.model = get_enum<ContactModel>(in, 2, "contact model");
+  f.model = get_enum<ContactModel>(in, 3, "contact model");
   LinearParams& l = f.linear;
   l.emod = in.f64();
   l.kratio = in.f64();
@@ -260,6 +263,8 @@ ContactFamilyParams get_family(io::SectionReader& in) {
   sb.cohesion = get_enum<CohesionSoftening>(in, 1, "softbond.cohesion");
   sb.bending_in_softening = in.b();
   sb.moments = get_enum<UnbondedMoments>(in, 1, "softbond.moments");
+  f.hertz.shear = in.f64();
+  f.hertz.poisson = in.f64();
   return f;
 }
 
@@ -604,7 +609,7 @@ struct CheckpointAccess {
       in.done();
       const std::size_t m = pc.a.size();
       if (pc.b.size() != m || pc.shift.size() != m || pc.h.size() != m) in.fail("contact arrays of different lengths");
-      if (pc.bond.size() != (p.ball_ball.model != ContactModel::kLinear ? m : 0))
+      if (pc.bond.size() != (law_has_bond(p.ball_ball.model) ? m : 0))
         in.fail("bond histories (" + std::to_string(pc.bond.size()) + ") do not match the ball_ball contact model");
       for (std::size_t c = 0; c < m; ++c)
         if (pc.a[c] >= n || pc.b[c] >= n) in.fail("contact " + std::to_string(c) + " names a ball row out of range");
@@ -634,19 +639,19 @@ struct CheckpointAccess {
       auto in = r.section("plane_contacts");
       plc = get_wall_contacts(in);
       in.done();
-      check_wall_contacts(in, plc, n, planes.size(), p.ball_wall.model != ContactModel::kLinear, nullptr);
+      check_wall_contacts(in, plc, n, planes.size(), law_has_bond(p.ball_wall.model), nullptr);
     }
     {
       auto in = r.section("facet_contacts");
       fcc = get_wall_contacts(in);
       in.done();
-      check_wall_contacts(in, fcc, n, fwalls.size(), p.ball_facet.model != ContactModel::kLinear, &fwalls);
+      check_wall_contacts(in, fcc, n, fwalls.size(), law_has_bond(p.ball_facet.model), &fwalls);
     }
     {
       auto in = r.section("footing_contacts");
       ftc = get_wall_contacts(in);
       in.done();
-      check_wall_contacts(in, ftc, n, 1, p.ball_footing.model != ContactModel::kLinear, nullptr);
+      check_wall_contacts(in, ftc, n, 1, law_has_bond(p.ball_footing.model), nullptr);
     }
     r.finish();
 

@@ -8,7 +8,6 @@ namespace demfdm::dem {
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;
-bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
 bool pair_active(const World& w, std::size_t c) {
   const auto& pc = w.pair_contacts();
   if (pc.h[c].flags & ContactHist::kActive) return true;

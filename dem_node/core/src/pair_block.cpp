@@ -4,6 +4,8 @@
 // builds give the same bits; tests/dem/simd_kernel_test.cpp checks this against the scalar pass.
 #include "demfdm/dem/pair_block.hpp"
 
+#include "demfdm/dem/laws/registry.hpp"
+
 namespace demfdm::dem::pairblock {
 
 namespace baseline {
@@ -54,6 +56,14 @@ Fn softbond_kernel(Isa isa) {
     case Isa::kAvx2: return &avx2::softbond_block;
     case Isa::kAvx512: return &avx512::softbond_block;
     default: return &baseline::softbond_block;
+  }
+}
+
+Fn hertz_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::hertz_block;
+    case Isa::kAvx512: return &avx512::hertz_block;
+    default: return &baseline::hertz_block;
   }
 }
 

@@ -2,18 +2,13 @@
 #include "demfdm/dem/params.hpp"
 
 #include <sstream>
+
+#include "demfdm/dem/laws/registry.hpp"
 #include <stdexcept>
 
 namespace demfdm::dem {
 
-const char* to_string(ContactModel m) {
-  switch (m) {
-    case ContactModel::kLinear: return "linear";
-    case ContactModel::kLinearPBond: return "linearpbond";
-    case ContactModel::kSoftBond: return "softbond";
-  }
-  return "?";
-}
+const char* to_string(ContactModel m) { return law_name(m); }
 
 const char* to_string(BondState s) {
   switch (s) {
@@ -58,6 +53,8 @@ void validate(const ContactFamilyParams& p, const std::string& w) {
   require(s.soft >= 0.0, w + ".softbond.soft (zeta)", ">= 0", s.soft);
   require(s.cut >= 0.0, w + ".softbond.cut (gamma)", ">= 0", s.cut);
   require(s.twist_factor >= 0.0, w + ".softbond.twist_factor", ">= 0", s.twist_factor);
+  require(p.hertz.shear > 0.0 && std::isfinite(p.hertz.shear), w + ".hertz.shear", "> 0 Pa and finite", p.hertz.shear);
+  require(p.hertz.poisson >= 0.0 && p.hertz.poisson < 0.5, w + ".hertz.poisson", "in [0, 0.5)", p.hertz.poisson);
   if (p.model == ContactModel::kSoftBond)
     require(p.linear.emod > 0.0 || p.linear.kn_fixed > 0.0, w + ".linear.emod",
             "> 0 for the soft bond (its only stiffness set)", p.linear.emod);

@@ -12,7 +12,6 @@ namespace demfdm::dem {
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;
-bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
 
 void fill_report(World& w, StageReport& r) {
   r.ratio = w.unbalanced_ratio();
@@ -202,16 +201,16 @@ void PeriodicServo::apply(World& w, Phase) {
   const Vec3 L = w.cell_length();
   const auto& pc = w.pair_contacts();
   double K[3][3] = {};
+  const ContactFamilyParams& fam = w.params().ball_ball;
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const ContactHist& h = pc.h[c];
-    const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
-    if (!(h.flags & ContactHist::kActive) && !bd) continue;
-    const bool lin = linear_spring_acts(h, w.params().ball_ball.model);
-    double kn = lin ? h.kn : 0.0, ks = lin ? h.ks : 0.0;
-    if (bd && w.params().ball_ball.model == ContactModel::kLinearPBond) {
-      kn += pc.bond[c].kn * pc.bond[c].area();
-      ks += pc.bond[c].kn / w.params().ball_ball.pbond.kratio * pc.bond[c].area();
-    }
+    const BondHist* bh = pc.bond.empty() ? nullptr : &pc.bond[c];
+    if (!(h.flags & ContactHist::kActive) && !(bh && bonded(bh->state))) continue;
+    // The law's translational springs (the rotational ones do not strain the cell).
+    const ContactStiffness st = visit_law(fam.model, [&](auto law) {
+      return decltype(law)::stiffness(h, bh, fam, w.balls().r[pc.a[c]], w.balls().r[pc.b[c]]);
+    });
+    const double kn = st.k, ks = st.ks;
     const Vec3 l = w.branch(c);
     const Vec3 n = l * (1.0 / norm(l));
     for (int a = 0; a < 3; ++a) {

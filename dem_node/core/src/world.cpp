@@ -42,7 +42,6 @@ class Lap {
   std::chrono::steady_clock::time_point t_;
 };
 
-inline bool bonded(BondState s) { return s == BondState::kIntact || s == BondState::kSoftening; }
 
 // Force and torque sums of a run of ball–ball contacts onto the balls, in contact order. The
 // list is sorted by A: the sums on A are kept in registers for the run of contacts that share
@@ -205,35 +204,8 @@ std::vector<std::uint32_t> World::reorder_spatially() {
   return newrow;
 }
 
-LawConst World::law_const(const ContactFamilyParams& f) const {
-  LawConst c;
-  c.rgap = f.linear.rgap;
-  c.rescale = p_.rescale_shear;
-  if (f.model == ContactModel::kLinearPBond) {
-    c.beta = f.pbond.mcf;
-    c.ks_kn = 1.0 / f.pbond.kratio;
-    c.sigc = f.pbond.ten;
-    c.coh = f.pbond.coh;
-    c.tanphi = std::tan(f.pbond.fa_deg * kPi / 180.0);
-  }
-  if (f.model == ContactModel::kSoftBond) {
-    const auto& s = f.softbond;
-    c.beta = s.mcf;
-    c.bmul = s.bmul;
-    c.twist = s.twist_factor;
-    c.zeta = s.soft;
-    c.gamma = s.cut;
-    c.ret = s.ret;
-    c.unload = s.unload;
-    c.cohesion = s.cohesion;
-    c.bend_soft = s.bending_in_softening;
-    c.moments = s.moments;
-    c.ks_kn = 1.0 / f.linear.kratio;
-    c.sigc = s.ten;
-    c.coh = s.coh;
-    c.tanphi = std::tan(s.fa_deg * kPi / 180.0);
-  }
-  return c;
+LawConst World::law_const(const ContactFamilyParams& f, bool wall) const {
+  return visit_law(f.model, [&](auto law) { return decltype(law)::constants(f, p_.rescale_shear, wall); });
 }
 
 // Precomputed per-contact constants from the deformability method (§1.7, §2.2, §3.3).
@@ -250,45 +222,15 @@ void World::init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondH
     rbar = ra;
     L = fam.linear.wall_length == WallLength::kRadius ? ra : 2.0 * ra;
   }
-  const bool zero_lin = bond && fam.model == ContactModel::kLinearPBond && fam.pbond.zero_linear &&
-                        bonded(bond->state);
-  if (fam.model == ContactModel::kSoftBond) {
-    // One stiffness set (§3.1): per-area k_n = E*/L, contact K_n = k_n A with A = π R̄².
-    const double rb = fam.softbond.rmul * rbar;
-    const double area = kPi * rb * rb;
-    const double kna = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed / area : fam.linear.emod / L;
-    bond->rb = rb;
-    bond->kn = kna;
-    h.kn = kna * area;
-    h.ks = kna / fam.linear.kratio * area;
-  } else {
-    // Same operations in the same order as the soft bond's K_n = (E*/L)·A and
-    // K_s = (E*/(L κ*))·A above: an unbonded soft-bond contact and a linear one then carry
-    // bit-identical stiffnesses, so a SBM and a PBM sample of one seed are the same sample
-    // until the bonds are installed (tests/coupled compares the two on one sample).
-    const double area = kPi * rbar * rbar;
-    const double kn = fam.linear.kn_fixed > 0.0 ? fam.linear.kn_fixed : fam.linear.emod / L * area;
-    const double ks = fam.linear.kn_fixed > 0.0 ? kn / fam.linear.kratio
-                                                : fam.linear.emod / L / fam.linear.kratio * area;
-    h.kn = zero_lin ? 0.0 : kn;
-    h.ks = zero_lin ? 0.0 : ks;
-    if (fam.model == ContactModel::kLinearPBond) {
-      const auto& pb = fam.pbond;
-      const double rb = pb.rmul * rbar;
-      bond->rb = rb;
-      bond->kn = pb.emod / L;
-    }
-  }
-  h.mu = fam.linear.fric;
-  if (fam.linear.mode == NormalMode::kIncremental) h.flags |= ContactHist::kIncremental;
+  visit_law(fam.model, [&](auto law) { decltype(law)::init(rbar, L, h, bond, fam); });
 }
 
 void World::refresh_contact_constants() {
-  const bool bb = p_.ball_ball.model != ContactModel::kLinear;
+  const bool bb = law_has_bond(p_.ball_ball.model);
   for (std::size_t c = 0; c < pc_.size(); ++c)
     init_contact(pc_.a[c], pc_.b[c], pc_.h[c], bb ? &pc_.bond[c] : nullptr, p_.ball_ball, false);
   auto wall = [&](WallContacts& wc, const ContactFamilyParams& fam) {
-    const bool bd = fam.model != ContactModel::kLinear;
+    const bool bd = law_has_bond(fam.model);
     for (std::size_t c = 0; c < wc.size(); ++c)
       init_contact(wc.ball[c], 0, wc.h[c], bd ? &wc.bond[c] : nullptr, fam, true);
   };
@@ -538,19 +480,13 @@ void World::set_cell(const Vec3& origin, const Vec3& length) {
 }
 
 Vec3 World::pair_force(std::size_t c) const {
-  const ContactHist& h = pc_.h[c];
-  Vec3 F = h.fn * h.n_old + h.fs;
-  if (p_.ball_ball.model == ContactModel::kLinearPBond) {
-    const BondHist& b = pc_.bond[c];
-    if (b.state == BondState::kIntact) F += (-b.nb) * h.n_old + b.fsb;
-  }
-  return F;
+  const BondHist* b = pc_.bond.empty() ? nullptr : &pc_.bond[c];
+  return visit_law(p_.ball_ball.model, [&](auto law) { return decltype(law)::force(pc_.h[c], b); });
 }
 
 Vec3 World::pair_moment(std::size_t c) const {
-  if (p_.ball_ball.model == ContactModel::kLinear) return Vec3{};
-  const BondHist& b = pc_.bond[c];
-  return b.mt * pc_.h[c].n_old + b.mb;
+  const BondHist* b = pc_.bond.empty() ? nullptr : &pc_.bond[c];
+  return visit_law(p_.ball_ball.model, [&](auto law) { return decltype(law)::moment(pc_.h[c], b); });
 }
 
 Vec3 World::branch(std::size_t c) const {
@@ -579,7 +515,7 @@ void World::append_pair(std::uint32_t a, std::uint32_t b, const std::array<std::
   pc_.b.push_back(b);
   pc_.shift.push_back(s);
   pc_.h.push_back(h);
-  if (p_.ball_ball.model != ContactModel::kLinear) pc_.bond.push_back(bond ? *bond : BondHist{});
+  if (law_has_bond(p_.ball_ball.model)) pc_.bond.push_back(bond ? *bond : BondHist{});
   dirty_ = true;
 }
 
@@ -703,7 +639,7 @@ void World::rebuild() {
     return (std::uint64_t(x.a) << 32 | x.b) < (std::uint64_t(y.a) << 32 | y.b);
   });
   // merge the history keyed by (id_A, id_B): a contact's history follows the pair
-  const bool has_bond = p_.ball_ball.model != ContactModel::kLinear;
+  const bool has_bond = law_has_bond(p_.ball_ball.model);
   std::vector<Key> keys(pc_.size());
   for (std::size_t c = 0; c < pc_.size(); ++c) {
     const std::uint64_t ia = pt_.id[pc_.a[c]], ib = pt_.id[pc_.b[c]];
@@ -828,7 +764,7 @@ void World::rebuild_walls() {
   const std::size_t n = pt_.size();
   auto merge = [&](WallContacts& old, std::vector<WallCand>& cands, const ContactFamilyParams& fam,
                    auto wall_id) {
-    const bool has_bond = fam.model != ContactModel::kLinear;
+    const bool has_bond = law_has_bond(fam.model);
     std::vector<Key> keys(old.size());
     for (std::size_t c = 0; c < old.size(); ++c)
       keys[c] = {pt_.id[old.ball[c]], wall_id(old.wall[c]), static_cast<std::uint32_t>(c)};
@@ -967,11 +903,11 @@ void World::rebuild_walls() {
 // thread 0 and a private buffer for every other thread; the buffers are then summed in
 // thread order. The static partition makes the result bit-identical from run to run for a
 // given thread count (determinism: same scene, seed and thread count, same bits).
-template <ContactModel M, bool Periodic>
+template <class Law, bool Periodic>
 void World::pair_pass(double dt) {
   const std::int64_t m = static_cast<std::int64_t>(pc_.size());
   const std::size_t n = pt_.size();
-  const LawConst lc = law_const(p_.ball_ball);
+  const LawConst lc = law_const(p_.ball_ball, false);
   // No array aliases another (restrict lets loads be kept across the force stores).
   const Vec3* __restrict__ X = pt_.x.data();
   const Vec3* __restrict__ V = pt_.v.data();
@@ -991,11 +927,9 @@ void World::pair_pass(double dt) {
   // Vectorised blocks (pair_block.hpp) where the law has a lane kernel; bit-identical to the
   // scalar loop below (tests/dem/simd_kernel_test.cpp).
   pairblock::Fn kern = nullptr;
-  if constexpr (M != ContactModel::kLinearPBond) {
+  {
     pairblock::Isa isa;
-    if (block_isa(kernel_, isa) && lc.rescale && (M == ContactModel::kLinear || lc.unload == SoftUnload::kElastic)) {
-      kern = M == ContactModel::kLinear ? pairblock::linear_kernel(isa) : pairblock::softbond_kernel(isa);
-    }
+    if (block_isa(kernel_, isa)) kern = Law::lane_kernel(isa, lc);
   }
   const pairblock::Ctx ctx{V, W, R, H, BD, lc, dt, ed, Periodic && strained};
   // The helpers below are forced inline: left to GCC, the soft-bond block pass measured 1.27 x
@@ -1039,12 +973,7 @@ void World::pair_pass(double dt) {
   // would be F = M = 0 with kActive and kSlip cleared. (Bitwise & on purpose: one
   // unpredictable branch at most.)
   auto idle = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, double d2) __attribute__((always_inline)) {
-    if constexpr (M == ContactModel::kLinearPBond) {
-      return false;
-    } else {
-      const double reach = R[a] + R[b] + rgap;
-      return (d2 > reach * reach) & (H[c].fn == 0.0) & (M == ContactModel::kLinear || !bonded(BD[c].state));
-    }
+    return Law::idle(d2, R[a] + R[b] + rgap, H[c], BD ? BD + c : nullptr);
   };
   constexpr std::uint8_t kActSlip = ContactHist::kActive | ContactHist::kSlip;
   // Scalar kinematics and law of one live contact: force F on B and the torques added to A
@@ -1070,22 +999,23 @@ void World::pair_pass(double dt) {
     k.dtheta = (W[b] - W[a]) * dt;
     k.wmean = 0.5 * (W[a] + W[b]);
     k.dt = dt;
+    if constexpr (Law::kNeedsReff) k.reff = R[a] * R[b] / (R[a] + R[b]);
     Vec3 Mo;
-    if constexpr (M != ContactModel::kLinear) {
+    if constexpr (Law::kBond) {
       // A bond leaving the intact state is rare: one compare per contact, an atomic add per event.
       const bool was_intact = BD[c].state == BondState::kIntact;
-      F = contact_law<M>(k, H[c], BD + c, lc, Mo);
+      F = Law::update(k, H[c], BD + c, lc, Mo);
       if (was_intact && BD[c].state != BondState::kIntact) {
 #pragma omp atomic
         ++bond_failures_;
       }
     } else {
-      F = contact_law<M>(k, H[c], BD ? BD + c : nullptr, lc, Mo);
+      F = Law::update(k, H[c], nullptr, lc, Mo);
     }
     // (F_s × n̂ would drop the rounding noise of the normal part, but reloading h.fs right
     // after the law's store measured 3 % slower than using F from registers.)
     const Vec3 fxn = cross(F, nn);
-    if constexpr (M != ContactModel::kLinear) {
+    if constexpr (Law::kBond) {
       TA = sa * fxn - Mo;  // ℓ_A × (−F) − M
       TB = sb * fxn + Mo;
     } else {
@@ -1147,7 +1077,7 @@ void World::pair_pass(double dt) {
         in.d2[n] = d2;
         in.hasn[n] = (fl & ContactHist::kHasNormal) != 0;
         in.incr[n] = (fl & ContactHist::kIncremental) != 0;
-        in.scalar[n] = M == ContactModel::kSoftBond && !bonded(BD[c].state);
+        in.scalar[n] = Law::lane_needs_scalar(BD ? BD + c : nullptr);
         n += !skip;
       }
       if (n == 0) break;
@@ -1164,22 +1094,7 @@ void World::pair_pass(double dt) {
         if (out.scalar[l]) {
           law_rare(cl, a, b, Vec3{in.dx[l], in.dy[l], in.dz[l]}, in.d2[l], F, TA, TB);
         } else {
-          ContactHist& h = H[cl];
-          h.fs = {out.fs[0][l], out.fs[1][l], out.fs[2][l]};
-          h.fn = out.fn[l];
-          h.n_old = {out.n[0][l], out.n[1][l], out.n[2][l]};
-          if constexpr (M == ContactModel::kLinear) {
-            h.e_slip = out.e_slip[l];
-            std::uint8_t fl = static_cast<std::uint8_t>(
-                (h.flags | ContactHist::kHasNormal) & ~(ContactHist::kActive | ContactHist::kSlip));
-            if (out.active[l]) fl |= ContactHist::kActive;
-            if (out.slip[l]) fl |= ContactHist::kSlip;
-            h.flags = fl;
-          } else {
-            h.flags |= ContactHist::kHasNormal;
-            BD[cl].mb = {out.mb[0][l], out.mb[1][l], out.mb[2][l]};
-            BD[cl].mt = out.mt[l];
-          }
+          Law::store_lane(H[cl], BD ? BD + cl : nullptr, out, l);
           F = {out.F[0][l], out.F[1][l], out.F[2][l]};
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
@@ -1261,7 +1176,7 @@ void World::pair_pass(double dt) {
 // spins at w_wall (0 for the rigid walls): contact kinematics at the middle of the overlap
 // (docs/theory.md 1.4-1.5), the family's law, and the per-contact results stored in wc. Returns the
 // force on the wall.
-template <ContactModel M>
+template <class Law>
 Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const Vec3& n, double dist,
                   const Vec3& v_wall, const Vec3& w_wall, const LawConst& lc, double dt) {
   const std::uint32_t i = wc.ball[c];
@@ -1274,8 +1189,9 @@ Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const V
   k.dtheta = (w_wall - pt.w[i]) * dt;
   k.wmean = 0.5 * (pt.w[i] + w_wall);
   k.dt = dt;
+  if constexpr (Law::kNeedsReff) k.reff = pt.r[i];
   Vec3 Mo;
-  const Vec3 F = contact_law<M>(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
+  const Vec3 F = Law::update(k, wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], lc, Mo);
   wc.F[c] = F;
   wc.M[c] = Mo;
   wc.TA[c] = cross(F, la) - Mo;
@@ -1283,9 +1199,9 @@ Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const V
   return F;
 }
 
-template <ContactModel M>
+template <class Law>
 void World::plane_pass(double dt) {
-  const LawConst lc = law_const(p_.ball_wall);
+  const LawConst lc = law_const(p_.ball_wall, true);
   WallContacts& wc = plc_;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
   for (auto& pw : planes_) { pw.reaction = Vec3{}; pw.k_sum = 0.0; }
@@ -1294,14 +1210,14 @@ void World::plane_pass(double dt) {
     PlaneWall& pw = planes_[wc.wall[c]];
     Vec3 n;
     const double dist = plane_distance(pt_.x[i], pw, n);
-    pw.reaction += wall_contact<M>(pt_, wc, c, n, dist, pw.p.velocity, Vec3{}, lc, dt);
+    pw.reaction += wall_contact<Law>(pt_, wc, c, n, dist, pw.p.velocity, Vec3{}, lc, dt);
     if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
   }
 }
 
-template <ContactModel M>
+template <class Law>
 void World::facet_pass(double dt) {
-  const LawConst lc = law_const(p_.ball_facet);
+  const LawConst lc = law_const(p_.ball_facet, true);
   WallContacts& wc = fcc_;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
   const bool restore_linear =
@@ -1324,7 +1240,7 @@ void World::facet_pass(double dt) {
     wc.bary[c] = w;
     const auto& tr = fw.tri[static_cast<std::size_t>(ft)];
     const Vec3 vf = w.x * fw.vel[tr[0]] + w.y * fw.vel[tr[1]] + w.z * fw.vel[tr[2]];
-    wall_contact<M>(pt_, wc, c, n, best, vf, fw.tri_spin[static_cast<std::size_t>(ft)], lc, dt);
+    wall_contact<Law>(pt_, wc, c, n, best, vf, fw.tri_spin[static_cast<std::size_t>(ft)], lc, dt);
     // §2.6, §6.3: a bonded interface contact has no linear part (zero_linear); once its bond
     // breaks it is an ordinary linear contact again, from the configuration at the break (its
     // force starts at 0 and grows with further overlap), so the ball cannot cross the wall.
@@ -1358,9 +1274,9 @@ void World::facet_pass(double dt) {
   }
 }
 
-template <ContactModel M>
+template <class Law>
 void World::footing_pass(double dt) {
-  const LawConst lc = law_const(p_.ball_footing);
+  const LawConst lc = law_const(p_.ball_footing, true);
   WallContacts& wc = ftc_;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
   const double R = 0.5 * footing_.p.diameter;
@@ -1369,7 +1285,7 @@ void World::footing_pass(double dt) {
     const std::uint32_t i = wc.ball[c];
     Vec3 q, n;
     const double dist = closest_point_cylinder(pt_.x[i], footing_.p.bottom_centre, R, footing_.p.height, q, n);
-    footing_.reaction += wall_contact<M>(pt_, wc, c, n, dist, footing_.p.velocity, Vec3{}, lc, dt);
+    footing_.reaction += wall_contact<Law>(pt_, wc, c, n, dist, footing_.p.velocity, Vec3{}, lc, dt);
   }
 }
 
@@ -1378,39 +1294,21 @@ void World::force_pass(double dt) {
   const bool per = p_.periodic.enabled;
   Lap lap;
   times_.pair_model = to_string(p_.ball_ball.model);
-  switch (p_.ball_ball.model) {
-    case ContactModel::kLinear:
-      per ? pair_pass<ContactModel::kLinear, true>(dt) : pair_pass<ContactModel::kLinear, false>(dt);
-      break;
-    case ContactModel::kLinearPBond:
-      per ? pair_pass<ContactModel::kLinearPBond, true>(dt) : pair_pass<ContactModel::kLinearPBond, false>(dt);
-      break;
-    case ContactModel::kSoftBond:
-      per ? pair_pass<ContactModel::kSoftBond, true>(dt) : pair_pass<ContactModel::kSoftBond, false>(dt);
-      break;
-  }
+  visit_law(p_.ball_ball.model, [&](auto law) {
+    using L = decltype(law);
+    per ? pair_pass<L, true>(dt) : pair_pass<L, false>(dt);
+  });
   lap(times_.pair);
-  auto wall_pass = [&](const ContactFamilyParams& f, auto lin, auto pb, auto sb) {
-    switch (f.model) {
-      case ContactModel::kLinear: lin(); break;
-      case ContactModel::kLinearPBond: pb(); break;
-      case ContactModel::kSoftBond: sb(); break;
-    }
-  };
-  if (!planes_.empty())
-    wall_pass(p_.ball_wall, [&] { plane_pass<ContactModel::kLinear>(dt); },
-              [&] { plane_pass<ContactModel::kLinearPBond>(dt); },
-              [&] { plane_pass<ContactModel::kSoftBond>(dt); });
-  if (!planes_.empty()) lap(times_.plane);
-  if (!fwalls_.empty())
-    wall_pass(p_.ball_facet, [&] { facet_pass<ContactModel::kLinear>(dt); },
-              [&] { facet_pass<ContactModel::kLinearPBond>(dt); },
-              [&] { facet_pass<ContactModel::kSoftBond>(dt); });
-  if (!fwalls_.empty()) lap(times_.facet);
+  if (!planes_.empty()) {
+    visit_law(p_.ball_wall.model, [&](auto law) { plane_pass<decltype(law)>(dt); });
+    lap(times_.plane);
+  }
+  if (!fwalls_.empty()) {
+    visit_law(p_.ball_facet.model, [&](auto law) { facet_pass<decltype(law)>(dt); });
+    lap(times_.facet);
+  }
   if (footing_.enabled) {
-    wall_pass(p_.ball_footing, [&] { footing_pass<ContactModel::kLinear>(dt); },
-              [&] { footing_pass<ContactModel::kLinearPBond>(dt); },
-              [&] { footing_pass<ContactModel::kSoftBond>(dt); });
+    visit_law(p_.ball_footing.model, [&](auto law) { footing_pass<decltype(law)>(dt); });
     lap(times_.footing);
   } else {
     footing_.reaction = Vec3{};
@@ -1552,50 +1450,36 @@ void World::integrate(double dt) {
 double World::critical_timestep() {
   const std::size_t n = pt_.size();
   std::vector<double> kt(n, 0.0), kr(n, 0.0);
-  const bool bb_bond = !pc_.bond.empty();
-  for (std::size_t c = 0; c < pc_.size(); ++c) {
-    const ContactHist& h = pc_.h[c];
-    const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
-    const bool bd = b && bonded(b->state);
-    if (!(h.flags & ContactHist::kActive) && !bd) continue;
-    const bool lin = linear_spring_acts(h, p_.ball_ball.model);
-    double k = lin ? h.kn : 0.0, krot = 0.0;
-    if (b) {
-      if (p_.ball_ball.model == ContactModel::kLinearPBond) {
-        if (bd) { k += b->kn * b->area(); krot += b->kn * b->inertia(); }
-      } else if (bd || p_.ball_ball.softbond.moments != UnbondedMoments::kNone) {
-        // An unbonded soft-bond contact without the §3.5 moment law carries no moment: it
-        // is a linear contact, and its critical step is the linear one.
-        krot += b->kn * b->inertia();
-      }
+  // Each counted contact adds the stiffnesses of its law (Law::stiffness): translational to
+  // both balls, rotational plus k_s R² to each.
+  visit_law(p_.ball_ball.model, [&](auto law) {
+    using L = decltype(law);
+    const bool bb_bond = !pc_.bond.empty();
+    for (std::size_t c = 0; c < pc_.size(); ++c) {
+      const ContactHist& h = pc_.h[c];
+      const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
+      if (!(h.flags & ContactHist::kActive) && !(b && bonded(b->state))) continue;
+      const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
+      const ContactStiffness s = L::stiffness(h, b, p_.ball_ball, pt_.r[a], pt_.r[bb]);
+      kt[a] += s.k;
+      kt[bb] += s.k;
+      kr[a] += s.krot + s.ks * pt_.r[a] * pt_.r[a];
+      kr[bb] += s.krot + s.ks * pt_.r[bb] * pt_.r[bb];
     }
-    const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
-    kt[a] += k;
-    kt[bb] += k;
-    const double ks = (lin ? h.ks : 0.0) + ((bd && p_.ball_ball.model == ContactModel::kLinearPBond)
-                                  ? b->kn / p_.ball_ball.pbond.kratio * b->area() : 0.0);
-    kr[a] += krot + ks * pt_.r[a] * pt_.r[a];
-    kr[bb] += krot + ks * pt_.r[bb] * pt_.r[bb];
-  }
+  });
   auto wall = [&](const WallContacts& wc, const ContactFamilyParams& fam) {
-    for (std::size_t c = 0; c < wc.size(); ++c) {
-      const ContactHist& h = wc.h[c];
-      const BondHist* b = wc.bond.empty() ? nullptr : &wc.bond[c];
-      const bool bd = b && bonded(b->state);
-      if (!(h.flags & ContactHist::kActive) && !bd) continue;
-      const bool lin = linear_spring_acts(h, fam.model);
-      double k = lin ? h.kn : 0.0, ks = lin ? h.ks : 0.0, krot = 0.0;
-      if (b && fam.model == ContactModel::kLinearPBond && bd) {
-        k += b->kn * b->area();
-        ks += b->kn / fam.pbond.kratio * b->area();
-        krot += b->kn * b->inertia();
-      } else if (b && fam.model == ContactModel::kSoftBond && (bd || fam.softbond.moments != UnbondedMoments::kNone)) {
-        krot += b->kn * b->inertia();
+    visit_law(fam.model, [&](auto law) {
+      using L = decltype(law);
+      for (std::size_t c = 0; c < wc.size(); ++c) {
+        const ContactHist& h = wc.h[c];
+        const BondHist* b = wc.bond.empty() ? nullptr : &wc.bond[c];
+        if (!(h.flags & ContactHist::kActive) && !(b && bonded(b->state))) continue;
+        const std::uint32_t i = wc.ball[c];
+        const ContactStiffness s = L::stiffness(h, b, fam, pt_.r[i], 0.0);
+        kt[i] += s.k;
+        kr[i] += s.krot + s.ks * pt_.r[i] * pt_.r[i];
       }
-      const std::uint32_t i = wc.ball[c];
-      kt[i] += k;
-      kr[i] += krot + ks * pt_.r[i] * pt_.r[i];
-    }
+    });
   };
   wall(plc_, p_.ball_wall);
   wall(fcc_, p_.ball_facet);
@@ -1606,12 +1490,14 @@ double World::critical_timestep() {
     if (kr[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.inertia[i] / kr[i]));
   }
   if (!std::isfinite(dt)) {
-    // No active contact: use one contact with an equal ball (k_n = π R E*/2, §7.2).
-    for (std::size_t i = 0; i < n; ++i) {
-      const auto& lp = p_.ball_ball.linear;
-      const double k = lp.kn_fixed > 0.0 ? lp.kn_fixed : kPi * pt_.r[i] * lp.emod * 0.5;
-      if (k > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / k));
-    }
+    // No active contact: use one contact with an equal ball (the law's reference stiffness;
+    // linear springs: k_n = π R E*/2, §7.2).
+    visit_law(p_.ball_ball.model, [&](auto law) {
+      for (std::size_t i = 0; i < n; ++i) {
+        const double k = decltype(law)::reference_stiffness(pt_.r[i], p_.ball_ball);
+        if (k > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / k));
+      }
+    });
     if (!std::isfinite(dt)) dt = 1e-6;
   }
   return p_.dt_safety * dt;
@@ -1641,13 +1527,22 @@ void World::prepare() {
   prepared_ = true;
 }
 
+// A law whose stiffness grows with the overlap (Hertz–Mindlin, §1.9) has the step recomputed
+// every step; the others every dt_interval steps (§1.8).
+std::int64_t World::dt_interval() const {
+  bool varies = false;
+  for (const ContactFamilyParams* f : {&p_.ball_ball, &p_.ball_wall, &p_.ball_facet, &p_.ball_footing})
+    varies |= visit_law(f->model, [](auto law) { return decltype(law)::kStiffnessVaries; });
+  return varies ? 1 : p_.dt_interval;
+}
+
 void World::step() {
   if (!prepared_) prepare();
   run_effects(0);
   Lap lap;
   if (p_.dt_fixed > 0.0) {
     dt_ = p_.dt_fixed;
-  } else if (last_dt_step_ < 0 || step_ - last_dt_step_ >= p_.dt_interval) {
+  } else if (last_dt_step_ < 0 || step_ - last_dt_step_ >= dt_interval()) {
     dt_ = critical_timestep();
     last_dt_step_ = step_;
   }
@@ -1688,10 +1583,10 @@ void World::step(std::int64_t n) {
 // bonds
 
 std::size_t World::bond_ball_ball(double lo, double hi) {
-  if (p_.ball_ball.model == ContactModel::kLinear)
-    throw std::invalid_argument(
-        "bond_ball_ball: family 'ball_ball' uses model 'linear', which cannot bond; set "
-        "ball_ball.model to 'pbond' or 'softbond'.");
+  if (!law_has_bond(p_.ball_ball.model))
+    throw std::invalid_argument(std::string("bond_ball_ball: family 'ball_ball' uses model '") +
+                                law_name(p_.ball_ball.model) +
+                                "', which cannot bond; set ball_ball.model to 'pbond' or 'softbond'.");
   if (!prepared_) prepare();
   std::size_t cnt = 0;
   for (std::size_t c = 0; c < pc_.size(); ++c) {
@@ -1701,14 +1596,10 @@ std::size_t World::bond_ball_ball(double lo, double hi) {
     const double gap = norm(d) - pt_.r[pc_.a[c]] - pt_.r[pc_.b[c]];
     if (gap < lo || gap > hi) continue;
     b.state = BondState::kIntact;
-    b.sigma_t = p_.ball_ball.model == ContactModel::kSoftBond ? p_.ball_ball.softbond.ten : p_.ball_ball.pbond.ten;
     ContactHist& h = pc_.h[c];
     h.flags |= ContactHist::kIncremental;  // §3.1: bonding switches to incremental mode
     if (!(h.flags & ContactHist::kHasNormal)) { h.n_old = d * (1.0 / norm(d)); h.flags |= ContactHist::kHasNormal; }
-    if (p_.ball_ball.model == ContactModel::kLinearPBond) {
-      b.nb = 0.0; b.fsb = Vec3{}; b.mt = 0.0; b.mb = Vec3{};  // §2.3: bond force starts at 0
-      if (p_.ball_ball.pbond.zero_linear) { h.kn = h.ks = 0.0; h.fn = 0.0; h.fs = Vec3{}; }
-    }
+    visit_law(p_.ball_ball.model, [&](auto law) { decltype(law)::install_bond(h, b, p_.ball_ball); });
     ++cnt;
   }
   last_dt_step_ = -1;
@@ -1716,10 +1607,10 @@ std::size_t World::bond_ball_ball(double lo, double hi) {
 }
 
 std::size_t World::bond_ball_facet(double hi) {
-  if (p_.ball_facet.model == ContactModel::kLinear)
-    throw std::invalid_argument(
-        "bond_ball_facet: family 'ball_facet' uses model 'linear', which cannot bond; set "
-        "ball_facet.model to 'pbond' (the paper's interface, §2.6).");
+  if (!law_has_bond(p_.ball_facet.model))
+    throw std::invalid_argument(std::string("bond_ball_facet: family 'ball_facet' uses model '") +
+                                law_name(p_.ball_facet.model) +
+                                "', which cannot bond; set ball_facet.model to 'pbond' (the paper's interface, §2.6).");
   if (!prepared_) prepare();
   std::size_t cnt = 0;
   for (std::size_t c = 0; c < fcc_.size(); ++c) {
@@ -1735,14 +1626,10 @@ std::size_t World::bond_ball_facet(double hi) {
     }
     if (best - pt_.r[fcc_.ball[c]] > hi) continue;
     b.state = BondState::kIntact;
-    b.sigma_t = p_.ball_facet.model == ContactModel::kSoftBond ? p_.ball_facet.softbond.ten : p_.ball_facet.pbond.ten;
     ContactHist& h = fcc_.h[c];
     h.flags |= ContactHist::kIncremental | ContactHist::kHasNormal;
     h.n_old = n;
-    if (p_.ball_facet.model == ContactModel::kLinearPBond) {
-      b.nb = 0.0; b.fsb = Vec3{}; b.mt = 0.0; b.mb = Vec3{};
-      if (p_.ball_facet.pbond.zero_linear) { h.kn = h.ks = 0.0; h.fn = 0.0; h.fs = Vec3{}; }
-    }
+    visit_law(p_.ball_facet.model, [&](auto law) { decltype(law)::install_bond(h, b, p_.ball_facet); });
     ++cnt;
   }
   last_dt_step_ = -1;
@@ -1767,22 +1654,15 @@ Energy World::energy() const {
   e.softening = e_soft_dead_;
   auto add = [&](const std::vector<ContactHist>& hs, const std::vector<BondHist>& bs,
                  const ContactFamilyParams& fam) {
-    const ContactModel m = fam.model;
-    const double ks_kn = 1.0 / (m == ContactModel::kSoftBond ? fam.linear.kratio : fam.pbond.kratio);
-    for (std::size_t c = 0; c < hs.size(); ++c) {
-      const ContactHist& h = hs[c];
-      if (h.kn > 0.0) e.strain += 0.5 * h.fn * h.fn / h.kn;
-      if (h.ks > 0.0) e.strain += 0.5 * norm2(h.fs) / h.ks;
-      e.friction += h.e_slip;
-      if (bs.empty()) continue;
-      const BondHist& b = bs[c];
-      e.softening += b.e_soft;
-      if (b.kn <= 0.0) continue;
-      if (m == ContactModel::kLinearPBond) {
-        e.strain += 0.5 * b.nb * b.nb / (b.kn * b.area()) + 0.5 * norm2(b.fsb) / (b.kn * ks_kn * b.area());
+    visit_law(fam.model, [&](auto law) {
+      for (std::size_t c = 0; c < hs.size(); ++c) {
+        const ContactHist& h = hs[c];
+        const BondHist* b = bs.empty() ? nullptr : &bs[c];
+        decltype(law)::add_strain(e.strain, h, b, fam);
+        e.friction += h.e_slip;
+        if (b) e.softening += b->e_soft;
       }
-      e.strain += 0.5 * b.mt * b.mt / (b.kn * ks_kn * b.polar()) + 0.5 * norm2(b.mb) / (b.kn * b.inertia());
-    }
+    });
   };
   add(pc_.h, pc_.bond, p_.ball_ball);
   add(plc_.h, plc_.bond, p_.ball_wall);

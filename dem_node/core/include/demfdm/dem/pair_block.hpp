@@ -3,8 +3,9 @@
 //
 // Stage 1 (World::pair_pass, scalar, contact order): idle test, branch vector d, lane list.
 // Stage 2 (here, one lane loop compiled for the baseline ISA, AVX2 and AVX-512, chosen at run
-// time): kinematics and the law for all lanes with branch-free selects. Every lane performs the
-// operations of the scalar law (contact_kernels.hpp) in the same order; IEEE +, −, ×, ÷ and √
+// time): kinematics and the law for all lanes with branch-free selects. Every lane calls the
+// formula functions of the scalar law (laws/*.hpp: linear_core, softbond_predict, hertz_core,
+// rotate_xyz), so a formula is written once; IEEE +, −, ×, ÷ and √
 // are exact per lane and the build forbids FMA contraction (-ffp-contract=off), so each lane is
 // bit-identical to the scalar law. Rare paths (soft bond: peak exceeded, softening step,
 // breakage, shear break; unbonded soft-bond contacts; a plane rotation large enough to need
@@ -17,7 +18,7 @@
 
 #include <cstdint>
 
-#include "demfdm/dem/contact_kernels.hpp"
+#include "demfdm/dem/contact_state.hpp"
 #include "demfdm/dem/vec3.hpp"
 
 namespace demfdm::dem::pairblock {
@@ -42,6 +43,7 @@ struct Out {
   double n[3][kLanes];   // unit normal (new n_old)
   double fs[3][kLanes], fn[kLanes], e_slip[kLanes];
   double mb[3][kLanes], mt[kLanes];  // soft bond
+  double kn[kLanes], ks[kLanes];     // Hertz–Mindlin: tangent stiffnesses
   std::int64_t active[kLanes], slip[kLanes];  // new kActive / kSlip flags (linear)
   std::int64_t scalar[kLanes];  // lane must be redone by the scalar law
 };
@@ -95,6 +97,7 @@ Isa best_isa();
 /// rescale (World::pair_pass falls back to the scalar pass otherwise).
 Fn linear_kernel(Isa isa);
 Fn softbond_kernel(Isa isa);
+Fn hertz_kernel(Isa isa);
 MotionFn motion_kernel(Isa isa);
 
 }  // namespace demfdm::dem::pairblock

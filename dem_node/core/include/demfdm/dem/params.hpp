@@ -17,6 +17,7 @@ enum class ContactModel : std::uint8_t {
   kLinear = 0,       ///< linear, no tension, Coulomb friction (§1.7)
   kLinearPBond = 1,  ///< linear + parallel bond (§2, Potyondy & Cundall 2004)
   kSoftBond = 2,     ///< soft bond, linear softening in tension (§3, [RECON])
+  kHertz = 3,        ///< Hertz–Mindlin, no bond (§1.9)
 };
 
 /// Normal-force update of the linear model (§1.7 lin_mode).
@@ -96,12 +97,19 @@ struct SoftBondParams {
   UnbondedMoments moments = UnbondedMoments::kJiang;            // §3.5, U3
 };
 
+/// Hertz–Mindlin contact (§1.9): the grains' elastic constants; friction from LinearParams::fric.
+struct HertzParams {
+  double shear = 1.0e9;   // [Pa] G, shear modulus of the grain material
+  double poisson = 0.25;  // [-] ν, Poisson ratio of the grain material, in [0, 0.5)
+};
+
 /// Everything that defines the law of one contact family (ball–ball, ball–wall, …).
 struct ContactFamilyParams {
   ContactModel model = ContactModel::kLinear;  // [-] model of the family
   LinearParams linear;                         // linear part / soft-bond stiffness
   ParallelBondParams pbond;                    // used when model == kLinearPBond
   SoftBondParams softbond;                     // used when model == kSoftBond
+  HertzParams hertz;                           // used when model == kHertz
 };
 
 /// Axis-aligned periodic cell (§4.2).

@@ -327,16 +327,17 @@ class World {
   void rebuild_walls();
   bool need_rebuild() const;
   void force_pass(double dt);
-  template <ContactModel M, bool Periodic> void pair_pass(double dt);
-  template <ContactModel M> void plane_pass(double dt);
-  template <ContactModel M> void facet_pass(double dt);
-  template <ContactModel M> void footing_pass(double dt);
+  template <class Law, bool Periodic> void pair_pass(double dt);
+  template <class Law> void plane_pass(double dt);
+  template <class Law> void facet_pass(double dt);
+  template <class Law> void footing_pass(double dt);
   void gather();  // add the wall-contact forces to the balls (serial, contact order)
   void integrate(double dt);
   template <bool Energy, bool Periodic>
   void integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3& sc, double& ed, double& dmax);
   void update_facet_spin(FacetWall& fw);
-  LawConst law_const(const ContactFamilyParams& f) const;
+  LawConst law_const(const ContactFamilyParams& f, bool wall) const;
+  std::int64_t dt_interval() const;  // steps between recomputations of the critical step
 
   WorldParams p_;
   Particles pt_;
