@@ -972,8 +972,13 @@ void World::pair_pass(double dt) {
   // are proportional to F_n, so M_b = M_t = 0 as well; the result of the full law
   // would be F = M = 0 with kActive and kSlip cleared. (Bitwise & on purpose: one
   // unpredictable branch at most.)
+  // The bond record of contact c: only laws with bond state have one (no null test per contact).
+  auto bond_at = [&](std::int64_t c) __attribute__((always_inline)) -> BondHist* {
+    if constexpr (Law::kBond) return BD + c;
+    else return nullptr;
+  };
   auto idle = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, double d2) __attribute__((always_inline)) {
-    return Law::idle(d2, R[a] + R[b] + rgap, H[c], BD ? BD + c : nullptr);
+    return Law::idle(d2, R[a] + R[b] + rgap, H[c], bond_at(c));
   };
   constexpr std::uint8_t kActSlip = ContactHist::kActive | ContactHist::kSlip;
   // Scalar kinematics and law of one live contact: force F on B and the torques added to A
@@ -1077,7 +1082,7 @@ void World::pair_pass(double dt) {
         in.d2[n] = d2;
         in.hasn[n] = (fl & ContactHist::kHasNormal) != 0;
         in.incr[n] = (fl & ContactHist::kIncremental) != 0;
-        in.scalar[n] = Law::lane_needs_scalar(BD ? BD + c : nullptr);
+        in.scalar[n] = Law::lane_needs_scalar(bond_at(c));
         n += !skip;
       }
       if (n == 0) break;
@@ -1094,7 +1099,7 @@ void World::pair_pass(double dt) {
         if (out.scalar[l]) {
           law_rare(cl, a, b, Vec3{in.dx[l], in.dy[l], in.dz[l]}, in.d2[l], F, TA, TB);
         } else {
-          Law::store_lane(H[cl], BD ? BD + cl : nullptr, out, l);
+          Law::store_lane(H[cl], bond_at(cl), out, l);
           F = {out.F[0][l], out.F[1][l], out.F[2][l]};
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
