@@ -40,7 +40,7 @@
 #include "coordinator/core/results.hpp"
 #include "coordinator/core/runner.hpp"
 #include "coordinator/core/summary.hpp"
-#include "messages/node_runtime.hpp"
+#include "common/node/node_runtime.hpp"
 #include "messages/protocol.hpp"
 
 using namespace demfdm;

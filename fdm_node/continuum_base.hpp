@@ -20,7 +20,7 @@
 #include "demfdm/io/csv_series.hpp"
 #include "demfdm/io/model_time.hpp"
 #include "demfdm/io/results_output.hpp"
-#include "messages/node_runtime.hpp"
+#include "common/node/node_runtime.hpp"
 
 namespace demfdm::continuum {
 

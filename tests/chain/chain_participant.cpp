@@ -6,7 +6,7 @@
 #include <fstream>
 #include <iomanip>
 
-#include "messages/node_runtime.hpp"
+#include "common/node/node_runtime.hpp"
 #include "tests/chain/chain_model.hpp"
 
 using namespace demfdm;

@@ -1,7 +1,7 @@
 // The kinetic-energy jump test of the blow-up guard (node::EnergyJump, docs/stability.md).
 #include <gtest/gtest.h>
 
-#include "messages/node_runtime.hpp"
+#include "common/node/node_runtime.hpp"
 
 using demfdm::node::EnergyJump;
 

@@ -49,7 +49,7 @@ struct HertzLaw {
   static constexpr const char* kName = "hertz";
   static constexpr bool kBond = false;
   static constexpr bool kNeedsReff = true;
-  static constexpr bool kStiffnessVaries = true;  // stiffness depends on the overlap: step rechecked every step
+  static constexpr bool kStiffnessVaries = true;  // true: stiffness grows with the overlap (step rechecked every step)
   /// √(δ_ref/R*): the critical step counts every contact at least at the overlap δ_ref = 0.1 % of R*
   /// (and is recomputed every step, kStiffnessVaries).
   static constexpr double kRefOverlapRoot = 0.0316227766016838;
@@ -73,26 +73,15 @@ struct HertzLaw {
     h.mu = f.linear.fric;
   }
   [[gnu::always_inline]] static Vec3 update(const Kin& k, ContactHist& h, BondHist*, const LawConst& c, Vec3& Mo) {
-    const Vec3& n = k.n;
-    const double gs = k.gap - c.rgap;
     Mo = Vec3{};
-    if (gs > 0.0 && h.fn == 0.0) {  // untouched, nothing to carry
-      h.n_old = n;
-      h.flags |= ContactHist::kHasNormal;
-      h.fs = Vec3{};
-      h.flags &= static_cast<std::uint8_t>(~(ContactHist::kActive | ContactHist::kSlip));
-      return Vec3{};
-    }
-    if (h.flags & ContactHist::kHasNormal) rotate_into_plane(h.fs, h.n_old, n, k.wmean, k.dt, c.rescale);
-    h.n_old = n;
-    h.flags |= ContactHist::kHasNormal;
-    const double dun = dot(k.du, n);
-    const Vec3 dus = k.du - dun * n;
+    double gs, dun;
+    Vec3 dus;
+    if (!unbonded_kinematics(k, h, c, gs, dun, dus)) return Vec3{};
     const HertzStep r = hertz_core(gs, k.reff, dus.x, dus.y, dus.z, h.fs.x, h.fs.y, h.fs.z, c.hz_e, c.hz_g, h.mu,
                                    h.e_slip);
     h.kn = r.kn;
     h.ks = r.ks;
-    return store_normal_shear(h, r.ns, n);
+    return store_normal_shear(h, r.ns, k.n);
   }
   static bool idle(double d2, double reach, const ContactHist& h, const BondHist*) {
     return (d2 > reach * reach) & (h.fn == 0.0);

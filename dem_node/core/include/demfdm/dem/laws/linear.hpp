@@ -84,6 +84,29 @@ struct NormalShear {
   return store_normal_shear(h, r, n);
 }
 
+/// The common start of an unbonded law's update (linear, Hertz–Mindlin): an untouched contact
+/// (separated, force-free) is cleared and returns false; otherwise the shear force is rotated
+/// into the current plane (§1.6), the normal stored, and the increment split into its normal
+/// part `dun` (opening +) and in-plane part `dus` (§1.5); `gs` = g − g_r.
+[[gnu::always_inline]] inline bool unbonded_kinematics(const Kin& k, ContactHist& h, const LawConst& c, double& gs,
+                                                       double& dun, Vec3& dus) {
+  const Vec3& n = k.n;
+  gs = k.gap - c.rgap;
+  if (gs > 0.0 && h.fn == 0.0) {  // untouched, nothing to carry
+    h.n_old = n;
+    h.flags |= ContactHist::kHasNormal;
+    h.fs = Vec3{};
+    h.flags &= static_cast<std::uint8_t>(~(ContactHist::kActive | ContactHist::kSlip));
+    return false;
+  }
+  if (h.flags & ContactHist::kHasNormal) rotate_into_plane(h.fs, h.n_old, n, k.wmean, k.dt, c.rescale);
+  h.n_old = n;
+  h.flags |= ContactHist::kHasNormal;
+  dun = dot(k.du, n);
+  dus = k.du - dun * n;
+  return true;
+}
+
 /// Stiffnesses a contact adds to its balls for the critical step (§1.8): translational normal
 /// and shear, rotational (bond moments).
 struct ContactStiffness {
@@ -105,7 +128,7 @@ struct LinearLaw {
   static constexpr const char* kName = "linear";
   static constexpr bool kBond = false;       // per-contact BondHist storage
   static constexpr bool kNeedsReff = false;
-  static constexpr bool kStiffnessVaries = false;  // stiffness depends on the overlap: step rechecked every step  // Kin::reff read by update()
+  static constexpr bool kStiffnessVaries = false;  // true: stiffness grows with the overlap (step rechecked every step)  // Kin::reff read by update()
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
     LawConst c;
@@ -123,22 +146,11 @@ struct LinearLaw {
   /// The full law of one contact: plane rotation of the history (§1.6), the split of the
   /// increment (§1.5), §1.7. Returns the force on B; Mo gets the moment on B (none).
   [[gnu::always_inline]] static Vec3 update(const Kin& k, ContactHist& h, BondHist* /*b*/, const LawConst& c, Vec3& Mo) {
-    const Vec3& n = k.n;
-    const double gs = k.gap - c.rgap;
     Mo = Vec3{};
-    if (gs > 0.0 && h.fn == 0.0) {  // untouched, nothing to carry
-      h.n_old = n;
-      h.flags |= ContactHist::kHasNormal;
-      h.fs = Vec3{};
-      h.flags &= static_cast<std::uint8_t>(~(ContactHist::kActive | ContactHist::kSlip));
-      return Vec3{};
-    }
-    if (h.flags & ContactHist::kHasNormal) rotate_into_plane(h.fs, h.n_old, n, k.wmean, k.dt, c.rescale);
-    h.n_old = n;
-    h.flags |= ContactHist::kHasNormal;
-    const double dun = dot(k.du, n);
-    const Vec3 dus = k.du - dun * n;
-    return linear_update(h, gs, dun, dus, n);
+    double gs, dun;
+    Vec3 dus;
+    if (!unbonded_kinematics(k, h, c, gs, dun, dus)) return Vec3{};
+    return linear_update(h, gs, dun, dus, k.n);
   }
   /// A separated, force-free contact needs no update (its result would be F = 0).
   static bool idle(double d2, double reach, const ContactHist& h, const BondHist* /*b*/) {

@@ -199,7 +199,7 @@ struct SoftBondLaw {
   static constexpr const char* kName = "softbond";
   static constexpr bool kBond = true;
   static constexpr bool kNeedsReff = false;
-  static constexpr bool kStiffnessVaries = false;  // stiffness depends on the overlap: step rechecked every step
+  static constexpr bool kStiffnessVaries = false;  // true: stiffness grows with the overlap (step rechecked every step)
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
     constexpr double kPiL = 3.14159265358979323846;

@@ -1,4 +1,4 @@
-#include "messages/node_runtime.hpp"
+#include "common/node/node_runtime.hpp"
 
 #include <cmath>
 #include <csignal>
