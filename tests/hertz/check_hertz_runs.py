@@ -1,5 +1,13 @@
 #!/usr/bin/python3
-"""ctest hertz_footing_run: scenes/footing_small.toml with Hertz-Mindlin ball-footing contacts
+"""ctest hertz_runs: two whole runs with the Hertz-Mindlin law (docs/theory.md 1.9).
+
+1. scenes/hertz_rev.toml: Hertz-Mindlin ball-ball contacts, an unbonded REV generated, servoed
+isotropically to 12.5 kPa and cycled. Checks: exit 0; the servo stage's Love-Weber stress is
+12.5 kPa within 0.5 % on every axis (the servo's criterion) at a porosity below the loose
+generation's 0.52 and a coordination above 4 (a jammed, load-carrying packing); the cycle stage
+ends with an unbalanced ratio below 1e-5.
+
+2. scenes/footing_small.toml with Hertz-Mindlin ball-footing contacts
 (`launch/run SCENE --set dem.ball_footing.model=hertz --set stage.penetrate.depth_ratio=0.05
 --no-build --run-dir DIR`), with the executables of DEMFDM_BUILD. Checks: exit 0; the effective
 scene records the law; the footing, whose reaction comes only from its Hertz contacts, carried a
@@ -7,6 +15,7 @@ load and reached its target settlement. The same run with `--set dem.ball_footin
 naming the key. The temp folder is removed when the test passes, kept otherwise.
 Usage: check_hertz_footing.py SOURCE_ROOT   (environment: DEMFDM_BUILD)
 """
+import csv
 import json
 import os
 import shutil
@@ -54,6 +63,26 @@ def main():
     if bad.returncode != 2 or "dem.ball_footing.model" not in msg or "hertz" not in msg:
         failures.append("an unknown law was not refused at --check with exit 2 naming the key (exit %d):\n%s" %
                         (bad.returncode, msg[-1500:]))
+    rev_dir = os.path.join(tmp, "rev")
+    r = subprocess.run([launch, os.path.join(ROOT, "scenes", "hertz_rev.toml"), "--no-build", "--run-dir", rev_dir],
+                       capture_output=True, text=True, timeout=140)
+    print(r.stdout[-800:])
+    if r.returncode != 0:
+        failures.append("hertz_rev exited %d:\n%s" % (r.returncode, r.stderr[-3000:]))
+    else:
+        with open(os.path.join(rev_dir, "specimen_stages.csv")) as f:
+            rows = list(csv.DictReader(f))
+        servo = rows[-1]
+        print("servo stage: %s" % servo)
+        for k in ("sxx_Pa", "syy_Pa", "szz_Pa"):
+            if abs(-float(servo[k]) - 12.5e3) > 0.005 * 12.5e3:
+                failures.append("hertz_rev: %s = %s Pa, expected -12500 within 0.5 %%" % (k, servo[k]))
+        if not (float(servo["porosity_unit"]) < 0.52 and float(servo["coordination_unit"]) > 4.0):
+            failures.append("hertz_rev: not a jammed packing after the servo: %s" % servo)
+        with open(os.path.join(rev_dir, "history_2_cycle.csv")) as f:
+            last = list(csv.DictReader(f))[-1]
+        if not float(last["dem.ratio"]) < 1e-5:
+            failures.append("hertz_rev: the cycle ends at ratio %s" % last["dem.ratio"])
     if failures:
         print("FAIL:\n" + "\n".join(failures) + "\nkept %s" % tmp)
         return 1
