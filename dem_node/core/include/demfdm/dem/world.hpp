@@ -328,9 +328,13 @@ class World {
   bool need_rebuild() const;
   void force_pass(double dt);
   template <class Law, bool Periodic> void pair_pass(double dt);
-  template <class Law> void plane_pass(double dt);
-  template <class Law> void facet_pass(double dt);
-  template <class Law> void footing_pass(double dt);
+  // Wall kinds as geometries of the one wall-contact set (world.cpp): candidates at a rebuild,
+  // the surface point of a contact, and what the kind sums over its contacts.
+  struct PlaneGeometry;
+  struct FacetGeometry;
+  struct FootingGeometry;
+  template <class Law, class Geom>
+  void wall_set_pass(WallContacts& wc, const ContactFamilyParams& fam, Geom& g, double dt);
   void gather();  // add the wall-contact forces to the balls (serial, contact order)
   void integrate(double dt);
   template <bool Energy, bool Periodic>
