@@ -335,6 +335,7 @@ class World {
   struct FootingGeometry;
   template <class Law, class Geom>
   void wall_set_pass(WallContacts& wc, const ContactFamilyParams& fam, Geom& g, double dt);
+  void wall_passes(double dt);  // every wall kind's pass (walls.cpp)
   void gather();  // add the wall-contact forces to the balls (serial, contact order)
   void integrate(double dt);
   template <bool Energy, bool Periodic>
