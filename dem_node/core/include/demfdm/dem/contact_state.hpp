@@ -93,6 +93,14 @@ struct LawConst {
   double hz_g = 0.0;       // [Pa] Mindlin effective shear modulus G* of the family (§1.9)
 };
 
+/// The traits of a contact law (laws/registry.hpp) that most laws share; a law's type derives
+/// from this and states only what differs.
+struct LawDefaults {
+  static constexpr bool kBond = false;             // per-contact BondHist storage
+  static constexpr bool kNeedsReff = false;        // Kin::reff read by update()
+  static constexpr bool kStiffnessVaries = false;  // stiffness grows with the overlap: step rechecked every step
+};
+
 /// Select without a branch (a vector blend inside `omp simd` loops).
 [[gnu::always_inline]] inline double sel(bool c, double a, double b) { return c ? a : b; }
 

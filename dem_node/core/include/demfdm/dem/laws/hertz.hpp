@@ -44,12 +44,11 @@ struct HertzStep {
 }
 
 /// The registered type of the Hertz–Mindlin law (laws/registry.hpp).
-struct HertzLaw {
+struct HertzLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kHertz;
   static constexpr const char* kName = "hertz";
-  static constexpr bool kBond = false;
   static constexpr bool kNeedsReff = true;
-  static constexpr bool kStiffnessVaries = true;  // true: stiffness grows with the overlap (step rechecked every step)
+  static constexpr bool kStiffnessVaries = true;
   /// √(δ_ref/R*): the critical step counts every contact at least at the overlap δ_ref = 0.1 % of R*
   /// (and is recomputed every step, kStiffnessVaries).
   static constexpr double kRefOverlapRoot = 0.0316227766016838;

@@ -123,12 +123,9 @@ inline void deformability_springs(double rbar, double L, const LinearParams& lp,
 }
 
 /// The registered type of the linear law (laws/registry.hpp).
-struct LinearLaw {
+struct LinearLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kLinear;
   static constexpr const char* kName = "linear";
-  static constexpr bool kBond = false;       // per-contact BondHist storage
-  static constexpr bool kNeedsReff = false;
-  static constexpr bool kStiffnessVaries = false;  // true: stiffness grows with the overlap (step rechecked every step)  // Kin::reff read by update()
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
     LawConst c;

@@ -45,12 +45,10 @@ namespace demfdm::dem {
 
 
 /// The registered type of the parallel-bond law (laws/registry.hpp).
-struct PBondLaw {
+struct PBondLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kLinearPBond;
   static constexpr const char* kName = "pbond";
   static constexpr bool kBond = true;
-  static constexpr bool kNeedsReff = false;
-  static constexpr bool kStiffnessVaries = false;  // true: stiffness grows with the overlap (step rechecked every step)
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
     constexpr double kPiL = 3.14159265358979323846;

@@ -194,12 +194,10 @@ inline double softbond_plastic_elongation(const BondHist& b, const LawConst& c) 
 
 
 /// The registered type of the soft-bond law (laws/registry.hpp).
-struct SoftBondLaw {
+struct SoftBondLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kSoftBond;
   static constexpr const char* kName = "softbond";
   static constexpr bool kBond = true;
-  static constexpr bool kNeedsReff = false;
-  static constexpr bool kStiffnessVaries = false;  // true: stiffness grows with the overlap (step rechecked every step)
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
     constexpr double kPiL = 3.14159265358979323846;
