@@ -585,6 +585,7 @@ void World::rebuild() {
   std::vector<NewPair> np;
   np.reserve(pc_.size() + n * 4);
   for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t row_begin = np.size();
     const int c = cell_of[i];
     const int ci[3] = {c % nc[0], (c / nc[0]) % nc[1], c / (nc[0] * nc[1])};
     int lists[3][3] = {}, cnt[3] = {};
@@ -604,9 +605,12 @@ void World::rebuild() {
       for (int y = 0; y < cnt[1]; ++y)
         for (int x = 0; x < cnt[0]; ++x) {
           const std::size_t cc = (static_cast<std::size_t>(lists[2][z]) * nc[1] + lists[1][y]) * nc[0] + lists[0][x];
-          for (std::uint32_t k = cell_start[cc]; k < cell_start[cc + 1]; ++k) {
-            const std::uint32_t j = cell_items[k];
-            if (j <= i) continue;
+          // A cell lists its balls in ascending order: start after i (only j > i is a new pair).
+          const std::uint32_t* first = cell_items.data() + cell_start[cc];
+          const std::uint32_t* last = cell_items.data() + cell_start[cc + 1];
+          for (const std::uint32_t* it = std::upper_bound(first, last, static_cast<std::uint32_t>(i)); it != last;
+               ++it) {
+            const std::uint32_t j = *it;
             Vec3 d = pt_.x[j] - xi;
             std::array<std::int8_t, 4> s{0, 0, 0, 0};
             if (per)
@@ -618,29 +622,58 @@ void World::rebuild() {
             if (norm2(d) < rc * rc) np.push_back({static_cast<std::uint32_t>(i), j, s});
           }
         }
+    // Rows come in order of i, so sorting each row's partners by j sorts the list by (i, j)
+    // (each j is found once per i: every cell is visited once).
+    std::sort(np.begin() + static_cast<std::ptrdiff_t>(row_begin), np.end(),
+              [](const NewPair& x, const NewPair& y) { return x.b < y.b; });
   }
-  std::sort(np.begin(), np.end(), [](const NewPair& x, const NewPair& y) {
-    return (std::uint64_t(x.a) << 32 | x.b) < (std::uint64_t(y.a) << 32 | y.b);
-  });
   // merge the history keyed by (id_A, id_B): a contact's history follows the pair
   const bool has_bond = law_has_bond(p_.ball_ball.model);
-  std::vector<Key> keys(pc_.size());
-  for (std::size_t c = 0; c < pc_.size(); ++c) {
-    const std::uint64_t ia = pt_.id[pc_.a[c]], ib = pt_.id[pc_.b[c]];
-    keys[c] = {std::min(ia, ib), std::max(ia, ib), static_cast<std::uint32_t>(c)};
+  // The old list's rows are current (reorder_spatially remaps them). A rebuild leaves it sorted
+  // by (a, b) with a < b, like the new one: then one linear merge finds each old contact. A
+  // reorder or appended pairs break the order: then the history is found by its id key.
+  const std::size_t mo = pc_.size();
+  auto row_key = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
+  bool sorted = true;
+  for (std::size_t c = 0; c < mo && sorted; ++c)
+    sorted = pc_.a[c] < pc_.b[c] && (c == 0 || row_key(pc_.a[c - 1], pc_.b[c - 1]) < row_key(pc_.a[c], pc_.b[c]));
+  std::vector<Key> keys;
+  if (!sorted) {
+    keys.resize(mo);
+    for (std::size_t c = 0; c < mo; ++c) {
+      const std::uint64_t ia = pt_.id[pc_.a[c]], ib = pt_.id[pc_.b[c]];
+      keys[c] = {std::min(ia, ib), std::max(ia, ib), static_cast<std::uint32_t>(c)};
+    }
+    std::sort(keys.begin(), keys.end());
   }
-  std::sort(keys.begin(), keys.end());
-  std::vector<char> used(pc_.size(), 0);
+  std::vector<char> used(mo, 0);
+  std::size_t cursor = 0;  // linear merge
+  auto find_old = [&](std::uint32_t a, std::uint32_t b) -> std::int64_t {
+    if (sorted) {
+      const std::uint64_t k = row_key(a, b);
+      while (cursor < mo && row_key(pc_.a[cursor], pc_.b[cursor]) < k) ++cursor;
+      return cursor < mo && row_key(pc_.a[cursor], pc_.b[cursor]) == k ? static_cast<std::int64_t>(cursor) : -1;
+    }
+    const std::uint64_t ia = pt_.id[a], ib = pt_.id[b];
+    Key k{std::min(ia, ib), std::max(ia, ib), 0};
+    auto it = std::lower_bound(keys.begin(), keys.end(), k);
+    if (it != keys.end() && it->lo == k.lo && it->hi == k.hi && !used[it->idx]) return it->idx;
+    return -1;
+  };
   PairContacts q;
+  q.a.reserve(np.size());
+  q.b.reserve(np.size());
+  q.shift.reserve(np.size());
+  q.h.reserve(np.size());
+  if (has_bond) q.bond.reserve(np.size());
   auto push = [&](std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s) {
     q.a.push_back(a);
     q.b.push_back(b);
     q.shift.push_back(s);
-    const std::uint64_t ia = pt_.id[a], ib = pt_.id[b];
-    Key k{std::min(ia, ib), std::max(ia, ib), 0};
-    auto it = std::lower_bound(keys.begin(), keys.end(), k);
-    if (it != keys.end() && it->lo == k.lo && it->hi == k.hi && !used[it->idx]) {
-      const std::uint32_t oc = it->idx;
+    const std::uint64_t ia = pt_.id[a];
+    const std::int64_t found = find_old(a, b);
+    if (found >= 0) {
+      const std::uint32_t oc = static_cast<std::uint32_t>(found);
       used[oc] = 1;
       q.h.push_back(pc_.h[oc]);
       if (has_bond) q.bond.push_back(pc_.bond[oc]);
