@@ -584,6 +584,7 @@ void World::rebuild() {
   struct NewPair { std::uint32_t a, b; std::array<std::int8_t, 4> s; };
   std::vector<NewPair> np;
   np.reserve(pc_.size() + n * 4);
+  const Vec3 halfL = 0.5 * L;  // the same products as 0.5 * L[a]
   for (std::size_t i = 0; i < n; ++i) {
     const std::size_t row_begin = np.size();
     const int c = cell_of[i];
@@ -612,14 +613,20 @@ void World::rebuild() {
                ++it) {
             const std::uint32_t j = *it;
             Vec3 d = pt_.x[j] - xi;
-            std::array<std::int8_t, 4> s{0, 0, 0, 0};
+            // minimum image as selects (no unpredictable branch per candidate); the image
+            // shift is only worked out for the few candidates within reach
             if (per)
-              for (int a = 0; a < 3; ++a) {
-                if (d[a] > 0.5 * L[a]) { s[a] = -1; d[a] -= L[a]; }
-                else if (d[a] < -0.5 * L[a]) { s[a] = 1; d[a] += L[a]; }
-              }
+              for (int a = 0; a < 3; ++a) d[a] = d[a] > halfL[a] ? d[a] - L[a] : (d[a] < -halfL[a] ? d[a] + L[a] : d[a]);
             const double rc = ri + pt_.r[j];
-            if (norm2(d) < rc * rc) np.push_back({static_cast<std::uint32_t>(i), j, s});
+            if (norm2(d) < rc * rc) {
+              std::array<std::int8_t, 4> s{0, 0, 0, 0};
+              if (per)
+                for (int a = 0; a < 3; ++a) {
+                  const double e = pt_.x[j][a] - xi[a];
+                  s[a] = static_cast<std::int8_t>(e > halfL[a] ? -1 : (e < -halfL[a] ? 1 : 0));
+                }
+              np.push_back({static_cast<std::uint32_t>(i), j, s});
+            }
           }
         }
     // Rows come in order of i, so sorting each row's partners by j sorts the list by (i, j)
