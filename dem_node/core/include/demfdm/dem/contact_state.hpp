@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <numbers>
 
 #include "demfdm/dem/params.hpp"
 #include "demfdm/dem/vec3.hpp"
@@ -53,7 +54,7 @@ struct BondHist {
   BondState state = BondState::kNeverBonded;
   std::uint8_t slip_b = 0, slip_t = 0;  // soft-bond unbonded moment slip flags (§3.5)
   // Disc geometry derived from R̄ (cheaper than storing it: the loop is memory bound).
-  double area() const { return 3.14159265358979323846 * rb * rb; }  // A = π R̄²
+  double area() const { return std::numbers::pi * rb * rb; }  // A = π R̄²
   double inertia() const { return 0.25 * area() * rb * rb; }        // I = π R̄⁴/4
   double polar() const { return 0.5 * area() * rb * rb; }           // J = 2I
 };

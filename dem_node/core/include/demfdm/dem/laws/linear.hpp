@@ -116,8 +116,7 @@ struct ContactStiffness {
 /// Per-contact constants of the deformability method shared by the linear part of every
 /// linear-spring law (§1.7): K_n = A E*/L and K_s = K_n/κ* with A = π R̄², or k_n_fixed.
 inline void deformability_springs(double rbar, double L, const LinearParams& lp, double& kn, double& ks) {
-  constexpr double kPiL = 3.14159265358979323846;
-  const double area = kPiL * rbar * rbar;
+  const double area = std::numbers::pi * rbar * rbar;
   kn = lp.kn_fixed > 0.0 ? lp.kn_fixed : lp.emod / L * area;
   ks = lp.kn_fixed > 0.0 ? kn / lp.kratio : lp.emod / L / lp.kratio * area;
 }
@@ -158,8 +157,7 @@ struct LinearLaw : LawDefaults {
   }
   /// Stiffness of a contact with an equal ball when no contact exists yet (§7.2): π R E*/2.
   static double reference_stiffness(double r, const ContactFamilyParams& f) {
-    constexpr double kPiL = 3.14159265358979323846;
-    return f.linear.kn_fixed > 0.0 ? f.linear.kn_fixed : kPiL * r * f.linear.emod * 0.5;
+    return f.linear.kn_fixed > 0.0 ? f.linear.kn_fixed : std::numbers::pi * r * f.linear.emod * 0.5;
   }
   /// Elastic energy stored in the contact, added term by term to `e` (§8.18).
   static void add_strain(double& e, const ContactHist& h, const BondHist* /*b*/, const ContactFamilyParams& /*f*/) {

@@ -14,7 +14,7 @@ namespace demfdm::dem {
 [[gnu::always_inline]] inline void pbond_update(BondHist& b, const LawConst& c, double dun, const Vec3& dus, double dtt,
                          const Vec3& dtb, const Vec3& n, Vec3& F, Vec3& M) {
   const double A = b.area(), iA = 1.0 / A;
-  const double rb_I = 4.0 * 3.14159265358979323846 * b.rb * iA * iA;  // R̄/I = 4πR̄/A²
+  const double rb_I = 4.0 * std::numbers::pi * b.rb * iA * iA;  // R̄/I = 4πR̄/A²
   b.nb += b.kn * A * dun;
   b.fsb -= ((b.kn * c.ks_kn) * A) * dus;
   b.mt -= (b.kn * c.ks_kn) * b.polar() * dtt;
@@ -51,7 +51,6 @@ struct PBondLaw : LawDefaults {
   static constexpr bool kBond = true;
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
-    constexpr double kPiL = 3.14159265358979323846;
     LawConst c;
     c.rgap = f.linear.rgap;
     c.rescale = rescale;
@@ -59,7 +58,7 @@ struct PBondLaw : LawDefaults {
     c.ks_kn = 1.0 / f.pbond.kratio;
     c.sigc = f.pbond.ten;
     c.coh = f.pbond.coh;
-    c.tanphi = std::tan(f.pbond.fa_deg * kPiL / 180.0);
+    c.tanphi = std::tan(f.pbond.fa_deg * std::numbers::pi / 180.0);
     return c;
   }
   /// Linear springs as LinearLaw (zero once bonded with zero_linear, §2.6); bond radius

@@ -26,8 +26,8 @@ struct SoftPredict {
                                                            const LawConst& c) {
   SoftPredict p;
   // One division for the disc: 1/A; R̄/I = 4π R̄/A² and R̄/J = 2π R̄/A² (A = π R̄²).
-  const double A = 3.14159265358979323846 * rb * rb, iA = 1.0 / A;
-  const double rb_I = 4.0 * 3.14159265358979323846 * rb * iA * iA;
+  const double A = std::numbers::pi * rb * rb, iA = 1.0 / A;
+  const double rb_I = 4.0 * std::numbers::pi * rb * iA * iA;
   p.N = -hfn + kne * A * dun;
   p.fx = fx - ks * dsx;
   p.fy = fy - ks * dsy;
@@ -200,7 +200,6 @@ struct SoftBondLaw : LawDefaults {
   static constexpr bool kBond = true;
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
-    constexpr double kPiL = 3.14159265358979323846;
     const auto& s = f.softbond;
     LawConst c;
     c.rgap = f.linear.rgap;
@@ -218,15 +217,14 @@ struct SoftBondLaw : LawDefaults {
     c.ks_kn = 1.0 / f.linear.kratio;
     c.sigc = s.ten;
     c.coh = s.coh;
-    c.tanphi = std::tan(s.fa_deg * kPiL / 180.0);
+    c.tanphi = std::tan(s.fa_deg * std::numbers::pi / 180.0);
     return c;
   }
   /// One stiffness set (§3.1): per-area k_n = E*/L (or k_n_fixed/A), contact K_n = k_n A with
   /// A = π R̄², R̄ = λ R̄_contact.
   static void init(double rbar, double L, ContactHist& h, BondHist* b, const ContactFamilyParams& f) {
-    constexpr double kPiL = 3.14159265358979323846;
     const double rb = f.softbond.rmul * rbar;
-    const double area = kPiL * rb * rb;
+    const double area = std::numbers::pi * rb * rb;
     const double kna = f.linear.kn_fixed > 0.0 ? f.linear.kn_fixed / area : f.linear.emod / L;
     b->rb = rb;
     b->kn = kna;
