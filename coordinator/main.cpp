@@ -168,6 +168,7 @@ coord::RunInfo run_info(const config::Scene& scene, const proto::CoordinatorEndp
      << ", duplicates " << bs.duplicates << ", decode errors " << bs.decode_errors << "; own stalls "
      << ep.heartbeat().stalls() << " (longest " << std::round(ep.heartbeat().longest_stall_s() * 10) / 10 << " s)";
   info.bus = os.str();
+  info.host_cores = static_cast<int>(sysconf(_SC_NPROCESSORS_ONLN));
   return info;
 }
 

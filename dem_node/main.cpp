@@ -236,7 +236,7 @@ class DemParticipant : public node::Participant {
     const auto frames = o.frames, bytes = o.bytes, rows = o.rows;
     sec.done();
     clock_.set_state(c);
-    ratio_valid_ = skeleton_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     safe_dt_key_ = {-1, -1, -1};
     if (how.branch) {
       // A new run folder: new result files from the branch point on.
@@ -272,13 +272,14 @@ class DemParticipant : public node::Participant {
   }
   // dt_safety x the critical step of 1.8 [s], computed once per state (O(contacts)).
   double safe_dt() const {
-    const std::array<std::int64_t, 3> key{world_.step_count(), world_.rebuild_count(),
-                                          static_cast<std::int64_t>(world_.num_balls())};
-    if (key != safe_dt_key_) {
-      safe_dt_ = const_cast<dem::World&>(world_).critical_timestep();
-      safe_dt_key_ = key;
+    if (safe_dt_key() != safe_dt_key_) {
+      safe_dt_ = world_.contact_scan(true, false).dt;
+      safe_dt_key_ = safe_dt_key();
     }
     return safe_dt_;
+  }
+  std::array<std::int64_t, 3> safe_dt_key() const {
+    return {world_.step_count(), world_.rebuild_count(), static_cast<std::int64_t>(world_.num_balls())};
   }
   // Upper bound of the critical step of 1.8 [s] for any packing of the scene's PSD: the smallest
   // upscaled ball with one linear contact, to a ball of the smallest or of the largest size (the
@@ -309,7 +310,7 @@ class DemParticipant : public node::Participant {
     begin_model_time(st);
     const auto& a = st.action;
     stage_ratio_ = st.view.real("ratio");
-    ratio_valid_ = skeleton_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
     preparing_ = is_generation(a);
@@ -394,7 +395,7 @@ class DemParticipant : public node::Participant {
 
   void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
     if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
-    ratio_valid_ = skeleton_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     if (penetrating_) {
       if (values.empty()) throw std::runtime_error("penetrate: the coordinator sent no footing speed");
       world_.set_footing_velocity({0.0, 0.0, -values[0]});
@@ -429,6 +430,15 @@ class DemParticipant : public node::Participant {
   }
 
   proto::Values step_values() override {
+    // The report of this step needs both O(contacts) measurements of the state (the ratios'
+    // mean contact force and, for dt_stable, the critical step): one pass over the contacts.
+    if (!fc_valid_ && safe_dt_key() != safe_dt_key_ && world_.num_balls() > 0) {
+      const auto scan = world_.contact_scan(true, true);
+      safe_dt_ = scan.dt;
+      safe_dt_key_ = safe_dt_key();
+      fc_ = scan.fc;
+      fc_valid_ = true;
+    }
     proto::Values v{{"ratio", ratio()}, {"dt_s", world_.dt()}, {"dt_critical_s", critical_dt()}};
     if (world_.gravity_on()) {
       auto sk = skeleton();
@@ -490,7 +500,7 @@ class DemParticipant : public node::Participant {
 
   // Coupling (DEM role).
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
-    ratio_valid_ = skeleton_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     wall_ = world_.add_facet_wall(m.positions, m.triangles);
     n_iface_ = m.n_points();
     spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
@@ -795,14 +805,22 @@ class DemParticipant : public node::Participant {
   // contact force).
   double ratio() {
     if (!ratio_valid_) {
-      ratio_ = world_.unbalanced_ratio();
+      ratio_ = world_.unbalanced_ratio(mean_contact_force());
       ratio_valid_ = true;
     }
     return ratio_;
   }
+  // The mean contact force of the current state (both ratios divide by it; O(contacts)).
+  double mean_contact_force() {
+    if (!fc_valid_) {
+      fc_ = world_.mean_contact_force();
+      fc_valid_ = true;
+    }
+    return fc_;
+  }
   const dem::SkeletonRatio& skeleton() {
     if (!skeleton_valid_) {
-      skeleton_ = dem::skeleton_ratio(world_);
+      skeleton_ = dem::skeleton_ratio(world_, mean_contact_force());
       skeleton_valid_ = true;
     }
     return skeleton_;
@@ -904,6 +922,8 @@ class DemParticipant : public node::Participant {
   bool ratio_valid_ = false;   // cleared by every call that changes the state
   dem::SkeletonRatio skeleton_;     // skeleton ratio of the current state (skeleton())
   bool skeleton_valid_ = false;
+  double fc_ = 0.0;            // mean contact force of the state (mean_contact_force())
+  bool fc_valid_ = false;
   node::EnergyJump energy_jump_;
   double user_dt_ = 0, escape_margin_ = 0;
   std::vector<double> kick_;

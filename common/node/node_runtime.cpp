@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <time.h>
 #include <unistd.h>
 
 #include "common/log/log.hpp"
@@ -101,6 +102,15 @@ void guard(Participant& part, std::int64_t step, std::int64_t every, const std::
     where = "report in " + path;
   }
   throw BlowUp("blow-up guard: " + h->cause + " (" + where + ")");
+}
+
+// CPU time of the whole process (every thread, user + system) [s]: the STAGE_END report's
+// "cpu_s" is its increase over the stage, from which the summary gives each node's CPU
+// utilisation (cores kept busy).
+double process_cpu_s() {
+  timespec ts{};
+  if (clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts) != 0) return 0.0;
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 }  // namespace
 
@@ -234,6 +244,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
     bool mesh_done = false;
     std::int64_t kin_applied = -2;  // DEM: step of the continuum kinematics last applied
     bool in_stage = false;          // between a STAGE_BEGIN and its STAGE_END
+    double stage_cpu0 = process_cpu_s();  // process CPU time at the stage's begin (or restore)
     ep->hello(part->dt_stable());
 
     for (;;) {
@@ -313,6 +324,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
         rt.done();
         part->restore(r, how);
         r.finish();
+        stage_cpu0 = process_cpu_s();
         log->info("restored the state after step {} (stage {}, {}) from {}", step, stage_index,
                   in_stage ? "inside the stage" : "at its end", how.dir.string());
         // Inside a coupled stage the interface data of the saved step is in flight: the
@@ -336,6 +348,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
       stage_index = c.stage_index;
       if (c.command == demfdm::command_t::STAGE_BEGIN) {
         in_stage = true;
+        stage_cpu0 = process_cpu_s();
         log->info("stage {} '{}' ({}) begins after step {}", c.stage_index, st.name, st.action, c.header.step);
         auto values = part->stage_begin(st, c.header.step + 1);
         step = c.header.step;
@@ -400,6 +413,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
       } else if (c.command == demfdm::command_t::STAGE_END) {
         in_stage = false;
         auto values = part->stage_end(st, c.header.step);
+        values.push_back({"cpu_s", process_cpu_s() - stage_cpu0});
         std::ostringstream vs;
         vs.precision(10);
         for (auto& [k, v] : values) vs << " " << k << "=" << v;

@@ -73,11 +73,21 @@ std::map<std::string, double> effects_of(const NodeReport& end) {
   return out;
 }
 
+double cpu_of(const NodeReport& end) {
+  auto it = end.values.find(kCpuKey);
+  return it == end.values.end() ? -1.0 : it->second;
+}
+
 RunTotals run_totals(const RunSummary& sum) {
   RunTotals t;
   for (auto& s : sum.stages) {
     for (auto& [r, c] : s.compute_s) t.compute_s[r] += c;
     for (auto& [r, w] : s.wait_s) t.wait_s[r] += w;
+    for (auto& [r, rep] : s.end)
+      if (const double cpu = cpu_of(rep); cpu >= 0) {
+        t.cpu_s[r] += cpu;
+        t.cpu_wall_s[r] += s.wall_s;
+      }
     for (auto& [r, eff] : stage_effects(s))
       for (auto& [name, sec] : eff) t.effects[r][name] += sec;
   }
@@ -124,7 +134,11 @@ std::string summary_text(const RunInfo& info, const RunSummary& sum) {
     for (auto& [r, c] : s.compute_s) {
       double w = value_or_zero(s.wait_s, r);
       os << "    " << r << ": compute " << c << " s, bus wait " << w << " s (" << std::setprecision(1)
-         << share(w, c + w) << " %)" << std::setprecision(3) << "\n";
+         << share(w, c + w) << " %)" << std::setprecision(3);
+      if (auto e = s.end.find(r); e != s.end.end() && cpu_of(e->second) >= 0 && s.wall_s > 0)
+        os << ", CPU " << cpu_of(e->second) << " s (" << std::setprecision(2) << cpu_of(e->second) / s.wall_s
+           << " cores)" << std::setprecision(3);
+      os << "\n";
       auto it = eff.find(r);
       if (it == eff.end()) continue;
       os << "      effects:";
@@ -152,6 +166,23 @@ std::string summary_text(const RunInfo& info, const RunSummary& sum) {
       os << "    " << std::left << std::setw(20) << name << std::right << std::setw(12) << sec << " s "
          << std::setw(6) << std::setprecision(1) << share(sec, c) << " %" << std::setprecision(3) << "\n";
     }
+  }
+  if (!tot.cpu_s.empty()) {
+    // Cores kept busy: each node's CPU time over the wall time of the stages it reported on.
+    os << "CPU utilisation (cores busy over the stages' wall time):";
+    double together = 0;
+    bool first = true;
+    for (auto& [r, cpu] : tot.cpu_s) {
+      const double wall = value_or_zero(tot.cpu_wall_s, r), cores = wall > 0 ? cpu / wall : 0.0;
+      together += cores;
+      os << (first ? " " : ", ") << r << " " << std::setprecision(2) << cores << std::setprecision(3);
+      first = false;
+    }
+    os << "; together " << std::setprecision(2) << together << std::setprecision(3);
+    if (info.host_cores > 0)
+      os << " of the coordinator host's " << info.host_cores << " (" << std::setprecision(0)
+         << share(together, info.host_cores) << " %)" << std::setprecision(3);
+    os << "\n";
   }
   if (!info.bus.empty()) os << "coordinator bus: " << info.bus << "\n";
   if (!info.checkpoints.empty()) os << "checkpoints: " << info.checkpoints << "\n";
@@ -191,8 +222,11 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum) {
     for (auto& [r, c] : s.compute_s) {
       auto it = eff.find(r);
       os << (first ? "" : ", ") << json_string(r) << ": {\"compute_s\": " << json_number(c)
-         << ", \"wait_s\": " << json_number(value_or_zero(s.wait_s, r))
-         << ", \"effects\": " << json_effects(it == eff.end() ? std::map<std::string, double>{} : it->second, c) << "}";
+         << ", \"wait_s\": " << json_number(value_or_zero(s.wait_s, r));
+      if (auto e = s.end.find(r); e != s.end.end() && cpu_of(e->second) >= 0)
+        os << ", \"cpu_s\": " << json_number(cpu_of(e->second))
+           << ", \"cpu_cores\": " << json_number(s.wall_s > 0 ? cpu_of(e->second) / s.wall_s : 0.0);
+      os << ", \"effects\": " << json_effects(it == eff.end() ? std::map<std::string, double>{} : it->second, c) << "}";
       first = false;
     }
     os << "}}";
@@ -204,12 +238,17 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum) {
   for (auto& [r, c] : tot.compute_s) {
     auto it = tot.effects.find(r);
     os << (first ? "" : ",") << "\n    " << json_string(r) << ": {\"compute_s\": " << json_number(c)
-       << ", \"wait_s\": " << json_number(value_or_zero(tot.wait_s, r))
-       << ", \"effects\": " << json_effects(it == tot.effects.end() ? std::map<std::string, double>{} : it->second, c)
+       << ", \"wait_s\": " << json_number(value_or_zero(tot.wait_s, r));
+    if (auto cp = tot.cpu_s.find(r); cp != tot.cpu_s.end()) {
+      const double wall = value_or_zero(tot.cpu_wall_s, r);
+      os << ", \"cpu_s\": " << json_number(cp->second) << ", \"cpu_cores\": " << json_number(wall > 0 ? cp->second / wall : 0.0);
+    }
+    os << ", \"effects\": " << json_effects(it == tot.effects.end() ? std::map<std::string, double>{} : it->second, c)
        << "}";
     first = false;
   }
-  os << (tot.compute_s.empty() ? "}}" : "\n  }}");
+  os << (tot.compute_s.empty() ? "}" : "\n  }");
+  os << ", \"host_cores\": " << info.host_cores << "}";
   for (auto& [key, value] : info.extra_json) os << ",\n  " << json_string(key) << ": " << value;
   os << "\n}\n";
   return os.str();

@@ -17,6 +17,10 @@
 namespace demfdm::coord {
 
 inline constexpr const char* kEffectPrefix = "effect_s.";
+// CPU utilisation: a node reports, in its STAGE_END values, `cpu_s`, the CPU time of its whole
+// process (all threads, user + system) over the stage. The summary divides it by the stage's
+// wall time (cores the node kept busy) and adds the nodes up against the machine's cores.
+inline constexpr const char* kCpuKey = "cpu_s";
 
 struct NodeInfo {
   std::string role, solver, host, build_id;
@@ -37,15 +41,21 @@ struct RunInfo {
   // RunSummary::stages (coordinator/core/quasi_static.hpp). The text summary ends with a
   // "WARNING: not quasi-static:" line for each stage above its limit.
   std::map<std::size_t, RateMeasures> rates;
+  // Logical CPUs of the coordinator's host (0: unknown): the denominator of "cores busy".
+  int host_cores = 0;
 };
 
 // effect name -> seconds, from one node's STAGE_END values.
 std::map<std::string, double> effects_of(const NodeReport& end);
 
-// role -> effect -> seconds summed over the run; role -> compute seconds summed over the run.
+// A node's CPU seconds of one stage (its STAGE_END `cpu_s`); negative when not reported.
+double cpu_of(const NodeReport& end);
+
+// role -> effect -> seconds summed over the run; role -> compute seconds summed over the run;
+// role -> CPU seconds over the stages that reported them, and the wall time of those stages.
 struct RunTotals {
   std::map<std::string, std::map<std::string, double>> effects;
-  std::map<std::string, double> compute_s, wait_s;
+  std::map<std::string, double> compute_s, wait_s, cpu_s, cpu_wall_s;
 };
 RunTotals run_totals(const RunSummary& sum);
 

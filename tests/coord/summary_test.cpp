@@ -135,3 +135,51 @@ TEST(Summary, JsonIsValidAndCarriesStagesTotalsAndNodes) {
 TEST(Summary, JsonStringEscapes) {
   EXPECT_EQ(coord::json_string("a\"b\\c\n\x01"), "\"a\\\"b\\\\c\\n\\u0001\"");
 }
+
+// CPU utilisation (issue 16 item 2): each node's STAGE_END cpu_s over the stage's wall time, per
+// stage and over the run (only the stages a node reported CPU time for), and all nodes together
+// against the host's cores.
+TEST(Summary, CpuUtilisationPerStageAndNodeAndOverTheRun) {
+  coord::StageSummary a;
+  a.name = "gravity";
+  a.action = "couple";
+  a.first_step = 0;
+  a.last_step = 9;
+  a.wall_s = 10.0;
+  a.ended_by = "steps";
+  a.compute_s = {{"continuum", 1.0}, {"dem", 9.0}};
+  a.wait_s = {{"continuum", 9.0}, {"dem", 1.0}};
+  a.end["dem"].values = {{"cpu_s", 18.0}};
+  a.end["continuum"].values = {{"cpu_s", 1.0}};
+  coord::StageSummary b = a;
+  b.name = "penetrate";
+  b.first_step = 10;
+  b.last_step = 19;
+  b.wall_s = 30.0;
+  b.end["dem"].values = {{"cpu_s", 42.0}};
+  b.end["continuum"].values = {{"ratio", 1.0}};  // no CPU time reported (an older solver)
+  coord::RunSummary sum;
+  sum.stages = {a, b};
+  sum.wall_s = 40.0;
+  sum.steps = 20;
+  auto i = info();
+  i.host_cores = 2;
+  const std::string t = coord::summary_text(i, sum);
+  EXPECT_NE(t.find("dem: compute 9.000 s, bus wait 1.000 s (10.0 %), CPU 18.000 s (1.80 cores)"), std::string::npos) << t;
+  EXPECT_NE(t.find("continuum: compute 1.000 s, bus wait 9.000 s (90.0 %), CPU 1.000 s (0.10 cores)"), std::string::npos) << t;
+  EXPECT_NE(t.find("dem: compute 9.000 s, bus wait 1.000 s (10.0 %), CPU 42.000 s (1.40 cores)"), std::string::npos) << t;
+  EXPECT_NE(t.find("continuum: compute 1.000 s, bus wait 9.000 s (90.0 %)\n"), std::string::npos) << t;
+  // dem (18 + 42) / (10 + 30) = 1.50; continuum 1 / 10 = 0.10 (its one reporting stage)
+  EXPECT_NE(t.find("CPU utilisation (cores busy over the stages' wall time): continuum 0.10, dem 1.50; together 1.60 of "
+                   "the coordinator host's 2 (80 %)"),
+            std::string::npos)
+      << t;
+  const std::string j = coord::summary_json(i, sum);
+  EXPECT_TRUE(python_json_check(j, "j['stages'][0]['nodes']['dem']['cpu_cores'] == 1.8 and "
+                                   "j['stages'][1]['nodes']['dem']['cpu_s'] == 42 and "
+                                   "'cpu_s' not in j['stages'][1]['nodes']['continuum'] and "
+                                   "j['totals']['nodes']['dem']['cpu_cores'] == 1.5 and "
+                                   "abs(j['totals']['nodes']['continuum']['cpu_cores'] - 0.1) < 1e-12 and "
+                                   "j['totals']['host_cores'] == 2"))
+      << j;
+}

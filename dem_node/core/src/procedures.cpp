@@ -9,7 +9,9 @@
 
 namespace demfdm::dem {
 
-SkeletonRatio skeleton_ratio(const World& w) {
+SkeletonRatio skeleton_ratio(const World& w) { return skeleton_ratio(w, w.mean_contact_force()); }
+
+SkeletonRatio skeleton_ratio(const World& w, double fc) {
   SkeletonRatio r;
   const auto& b = w.balls();
   const Vec3 g = w.gravity();
@@ -28,7 +30,6 @@ SkeletonRatio skeleton_ratio(const World& w) {
     sum += std::sqrt(s2);
     ++n;
   }
-  const double fc = w.mean_contact_force();
   r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
   return r;
 }

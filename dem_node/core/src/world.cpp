@@ -1171,26 +1171,76 @@ void World::integrate(double dt) {
 // ------------------------------------------------------------------------------------------
 // timestep (§1.8)
 
-double World::critical_timestep() {
+void World::resize_scan_scratch(bool fc, bool dt) const {
+  const std::size_t m = pc_.size();
+  if (fc) scratch_norm_.resize(m);
+  if (dt) {
+    scratch_k_.resize(m);
+    scratch_ka_.resize(m);
+    scratch_kb_.resize(m);
+    scratch_live_.resize(m);
+  }
+}
+
+double World::critical_timestep() { return contact_scan(true, false).dt; }
+
+World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
+  ContactScan out;
   const std::size_t n = pt_.size();
-  std::vector<double> kt(n, 0.0), kr(n, 0.0);
-  // Each counted contact adds the stiffnesses of its law (Law::stiffness): translational to
-  // both balls, rotational plus k_s R² to each.
+  const std::int64_t m = static_cast<std::int64_t>(pc_.size());
+  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+  // One parallel pass over the ball-ball contacts computes each contact's terms (its force norm,
+  // its stiffnesses); the sums over them then run in contact order, the additions and their order
+  // of one serial loop: the same bits at any thread count.
+  resize_scan_scratch(want_fc, want_dt);
   visit_law(p_.ball_ball.model, [&](auto law) {
     using L = decltype(law);
     const bool bb_bond = !pc_.bond.empty();
-    for (std::size_t c = 0; c < pc_.size(); ++c) {
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
+    for (std::int64_t c = 0; c < m; ++c) {
       const ContactHist& h = pc_.h[c];
       const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
-      if (!(h.flags & ContactHist::kActive) && !(b && bonded(b->state))) continue;
+      if (want_fc) scratch_norm_[c] = norm(L::force(h, b));
+      if (!want_dt) continue;
+      // Each counted contact adds the stiffnesses of its law (Law::stiffness): translational to
+      // both balls, rotational plus k_s R² to each.
+      const bool live = (h.flags & ContactHist::kActive) || (b && bonded(b->state));
+      scratch_live_[c] = live;
+      if (!live) continue;
       const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
       const ContactStiffness s = L::stiffness(h, b, p_.ball_ball, pt_.r[a], pt_.r[bb]);
-      kt[a] += s.k;
-      kt[bb] += s.k;
-      kr[a] += s.krot + s.ks * pt_.r[a] * pt_.r[a];
-      kr[bb] += s.krot + s.ks * pt_.r[bb] * pt_.r[bb];
+      scratch_k_[c] = s.k;
+      scratch_ka_[c] = s.krot + s.ks * pt_.r[a] * pt_.r[a];
+      scratch_kb_[c] = s.krot + s.ks * pt_.r[bb] * pt_.r[bb];
     }
   });
+  if (want_fc) {
+    double sum = 0.0;
+    std::size_t cnt = 0;
+    for (std::int64_t c = 0; c < m; ++c) {
+      const double f = scratch_norm_[c];
+      if (f > 0.0) { sum += f; ++cnt; }
+    }
+    for (const WallContacts* wc : {&plc_, &fcc_, &ftc_})
+      for (std::size_t c = 0; c < wc->size(); ++c) {
+        const double f = norm(wc->F[c]);
+        if (f > 0.0) { sum += f; ++cnt; }
+      }
+    out.fc = cnt ? sum / double(cnt) : 0.0;
+  }
+  if (!want_dt) return out;
+  std::vector<double>& kt = scratch_kt_;
+  std::vector<double>& kr = scratch_kr_;
+  kt.assign(n, 0.0);
+  kr.assign(n, 0.0);
+  for (std::int64_t c = 0; c < m; ++c) {
+    if (!scratch_live_[c]) continue;
+    const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
+    kt[a] += scratch_k_[c];
+    kt[bb] += scratch_k_[c];
+    kr[a] += scratch_ka_[c];
+    kr[bb] += scratch_kb_[c];
+  }
   auto wall = [&](const WallContacts& wc, const ContactFamilyParams& fam) {
     visit_law(fam.model, [&](auto law) {
       using L = decltype(law);
@@ -1208,8 +1258,11 @@ double World::critical_timestep() {
   wall(plc_, p_.ball_wall);
   wall(fcc_, p_.ball_facet);
   wall(ftc_, p_.ball_footing);
+  // The smallest step over the balls (a minimum: exact in any order).
   double dt = std::numeric_limits<double>::infinity();
-  for (std::size_t i = 0; i < n; ++i) {
+  const std::int64_t ni = static_cast<std::int64_t>(n);
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && ni > 4096) reduction(min : dt)
+  for (std::int64_t i = 0; i < ni; ++i) {
     if (kt[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / kt[i]));
     if (kr[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.inertia[i] / kr[i]));
   }
@@ -1224,7 +1277,8 @@ double World::critical_timestep() {
     });
     if (!std::isfinite(dt)) dt = 1e-6;
   }
-  return p_.dt_safety * dt;
+  out.dt = p_.dt_safety * dt;
+  return out;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -1376,26 +1430,17 @@ double unbalanced(const Particles& pt, std::size_t i) {
 }
 }  // namespace
 
-double World::mean_contact_force() const {
-  double s = 0.0;
-  std::size_t cnt = 0;
-  for (std::size_t c = 0; c < pc_.size(); ++c) {
-    const double f = norm(pair_force(c));
-    if (f > 0.0) { s += f; ++cnt; }
-  }
-  for (const WallContacts* wc : {&plc_, &fcc_, &ftc_})
-    for (std::size_t c = 0; c < wc->size(); ++c) {
-      const double f = norm(wc->F[c]);
-      if (f > 0.0) { s += f; ++cnt; }
-    }
-  return cnt ? s / double(cnt) : 0.0;
-}
+double World::mean_contact_force() const { return contact_scan(false, true).fc; }
 
 double World::unbalanced_ratio() const {
   if (pt_.size() == 0) return 0.0;
+  return unbalanced_ratio(mean_contact_force());
+}
+
+double World::unbalanced_ratio(double fc) const {
+  if (pt_.size() == 0) return 0.0;
   double s = 0.0;
   for (std::size_t i = 0; i < pt_.size(); ++i) s += unbalanced(pt_, i);
-  const double fc = mean_contact_force();
   if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
   return (s / double(pt_.size())) / fc;
 }

@@ -21,6 +21,8 @@ struct SkeletonRatio {
   std::size_t rattlers = 0;
 };
 SkeletonRatio skeleton_ratio(const World& w);
+/// The same with the mean contact force of this state given (World::mean_contact_force()).
+SkeletonRatio skeleton_ratio(const World& w, double mean_contact_force);
 
 /// One horizontal slab of a vertical stress profile: particle-based stress (region_stress) of the
 /// balls whose centres lie in the slab, depth measured down from the block top.

@@ -251,6 +251,13 @@ class World {
   double skin() const { return skin_; }
   /// Critical-step estimate of §1.8 (without the safety factor applied: returns f_s·min).
   double critical_timestep();
+  /// The O(contacts) measurements of one state in one pass over the contacts: the critical step
+  /// (as critical_timestep()) and the mean contact force (as mean_contact_force()), each only if
+  /// asked for (the other is then 0). Same bits as the separate calls, at any thread count.
+  struct ContactScan {
+    double dt = 0.0, fc = 0.0;
+  };
+  ContactScan contact_scan(bool critical_step, bool mean_contact_force) const;
   /// Force a neighbour rebuild and a force pass with zero increments (after edits).
   void prepare();
   std::int64_t rebuild_count() const { return rebuilds_; }
@@ -314,7 +321,12 @@ class World {
   double kinetic_energy() const;
   /// PFC average ratio: mean ‖F_unb‖ over balls / mean ‖F_c‖ over active contacts (§5.11).
   double unbalanced_ratio() const;
+  /// The same ratio with the mean contact force given (mean_contact_force() of this state), for
+  /// callers that also need it elsewhere (the node's skeleton ratio): one contact loop per state.
+  double unbalanced_ratio(double mean_contact_force) const;
   double max_unbalanced_force() const;
+  /// Mean ‖F_c‖ over the contacts that carry a force (ball-ball and wall). The per-contact norms
+  /// are computed in parallel and summed in contact order: the same bits at any thread count.
   double mean_contact_force() const;
   Vec3 cell_strain_since_reset() const { return cell_strain_; }
 
@@ -327,6 +339,7 @@ class World {
   void rebuild_walls();
   bool need_rebuild() const;
   void force_pass(double dt);
+  void resize_scan_scratch(bool fc, bool dt) const;
   template <class Law, bool Periodic> void pair_pass(double dt);
   // Wall kinds as geometries of the one wall-contact set (world.cpp): candidates at a rebuild,
   // the surface point of a contact, and what the kind sums over its contacts.
@@ -370,6 +383,12 @@ class World {
   std::vector<std::vector<Vec3>> tbuf_;  // per-thread force/torque buffers [2n] (thread ≥ 1),
                                          // all zero between passes
   std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each thread's block
+  // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
+  mutable std::vector<double> scratch_norm_;       // mean_contact_force: per-contact ‖F‖
+  mutable std::vector<double> scratch_kt_, scratch_kr_;  // critical step: per-ball k_t, k_r
+  mutable std::vector<double> scratch_k_;                // critical step: per-contact k
+  mutable std::vector<double> scratch_ka_, scratch_kb_;  // critical step: rotational terms of A, B
+  mutable std::vector<std::uint8_t> scratch_live_;       // critical step: contact counted
   double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
   PhaseTimes times_;
   PairKernel kernel_ = PairKernel::kAuto;

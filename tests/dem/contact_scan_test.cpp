@@ -1,0 +1,154 @@
+// World::contact_scan (the critical step of docs/theory.md §1.8 and the mean contact force of
+// §5.11 in one pass over the contacts, issue 16 item 2). The per-contact terms are computed in
+// parallel and summed in contact order, so the result must be the bits of the serial loops it
+// replaced (written out below as the reference), at 1 and 2 threads, for every law, periodic and
+// free, after the scalar and the vector pass; and the fused call must equal the separate ones.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <random>
+#include <string>
+
+#include "demfdm/dem/world.hpp"
+
+using namespace demfdm::dem;
+
+namespace {
+
+bool same_bits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+
+// The serial loops of the mean contact force and of the critical step as they were before the
+// scan (one contact after another, sums in contact order).
+double reference_fc(const World& w) {
+  double s = 0.0;
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < w.pair_contacts().size(); ++c) {
+    const double f = norm(w.pair_force(c));
+    if (f > 0.0) { s += f; ++cnt; }
+  }
+  for (const WallContacts* wc : {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()})
+    for (std::size_t c = 0; c < wc->size(); ++c) {
+      const double f = norm(wc->F[c]);
+      if (f > 0.0) { s += f; ++cnt; }
+    }
+  return cnt ? s / double(cnt) : 0.0;
+}
+
+double reference_dt(const World& w) {
+  const Particles& pt = w.balls();
+  const PairContacts& pc = w.pair_contacts();
+  const WorldParams& p = w.params();
+  std::vector<double> kt(pt.size(), 0.0), kr(pt.size(), 0.0);
+  visit_law(p.ball_ball.model, [&](auto law) {
+    using L = decltype(law);
+    for (std::size_t c = 0; c < pc.size(); ++c) {
+      const ContactHist& h = pc.h[c];
+      const BondHist* b = pc.bond.empty() ? nullptr : &pc.bond[c];
+      if (!(h.flags & ContactHist::kActive) && !(b && bonded(b->state))) continue;
+      const std::uint32_t a = pc.a[c], bb = pc.b[c];
+      const ContactStiffness s = L::stiffness(h, b, p.ball_ball, pt.r[a], pt.r[bb]);
+      kt[a] += s.k;
+      kt[bb] += s.k;
+      kr[a] += s.krot + s.ks * pt.r[a] * pt.r[a];
+      kr[bb] += s.krot + s.ks * pt.r[bb] * pt.r[bb];
+    }
+  });
+  double dt = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < pt.size(); ++i) {
+    if (kt[i] > 0.0) dt = std::min(dt, std::sqrt(pt.m[i] / kt[i]));
+    if (kr[i] > 0.0) dt = std::min(dt, std::sqrt(pt.inertia[i] / kr[i]));
+  }
+  return p.dt_safety * dt;
+}
+
+struct Case {
+  ContactModel model;
+  bool periodic;
+  PairKernel kernel;
+  int threads;
+};
+
+std::string name(const Case& c) {
+  return std::string(law_name(c.model)) + (c.periodic ? " periodic" : " free") +
+         (c.kernel == PairKernel::kScalar ? " scalar" : " auto") + " threads " + std::to_string(c.threads);
+}
+
+// A jittered lattice of 14³ overlapping balls (above the scan's parallel threshold of 4,096
+// contacts), random velocities and spins, pulled apart so that contacts open and
+// close and (bond laws) bonds soften and break during the run.
+std::unique_ptr<World> make_world(const Case& c) {
+  const double R = 1e-4, s = 1.97 * R;
+  const int ns = 14;
+  WorldParams p;
+  p.threads = c.threads;
+  p.periodic.enabled = c.periodic;
+  p.periodic.origin = {0, 0, 0};
+  p.periodic.length = {ns * s, ns * s, ns * s};
+  p.ball_ball.model = c.model;
+  p.ball_ball.softbond.soft = 20.0;
+  p.ball_ball.pbond.ten = p.ball_ball.pbond.coh = 2e5;  // parallel bonds break within the run
+  auto w = std::make_unique<World>(p);
+  w->set_pair_kernel(c.kernel);
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int k = 0; k < ns; ++k)
+    for (int j = 0; j < ns; ++j)
+      for (int i = 0; i < ns; ++i)
+        w->add_ball({(i + 0.5) * s + 0.03 * R * u(rng), (j + 0.5) * s + 0.03 * R * u(rng), (k + 0.5) * s + 0.03 * R * u(rng)},
+                    R * (1.0 + 0.03 * u(rng)));
+  w->prepare();
+  if (law_has_bond(c.model)) w->bond_ball_ball(-1.0, 0.02 * R);
+  const Vec3 mid{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
+  for (std::size_t i = 0; i < w->num_balls(); ++i) {
+    w->balls().v[i] = 0.02 * Vec3{u(rng), u(rng), u(rng)};
+    if (!c.periodic) w->balls().v[i] += 60.0 * (w->balls().x[i] - mid);
+    w->balls().w[i] = 50.0 * Vec3{u(rng), u(rng), u(rng)};
+  }
+  if (c.periodic) w->set_strain_rate({60.0, 60.0, -30.0});
+  return w;
+}
+
+std::vector<Case> cases() {
+  std::vector<Case> out;
+  for (ContactModel m : {ContactModel::kLinear, ContactModel::kLinearPBond, ContactModel::kSoftBond, ContactModel::kHertz})
+    for (bool per : {true, false})
+      for (PairKernel k : {PairKernel::kScalar, PairKernel::kAuto})
+        for (int t : {1, 2}) out.push_back({m, per, k, t});
+  return out;
+}
+
+}  // namespace
+
+TEST(ContactScan, SameBitsAsTheSerialLoopsAtOneAndTwoThreads) {
+  for (const Case& c : cases()) {
+    auto w = make_world(c);
+    std::size_t bonded_before = 0, bonded_after = 0;
+    for (const BondHist& b : w->pair_contacts().bond) bonded_before += bonded(b.state);
+    ASSERT_GT(w->pair_contacts().size(), 4096u) << name(c);
+    for (int k = 0; k < 30; ++k) {
+      w->step();
+      if (k % 5 != 4) continue;
+      const World& cw = *w;
+      const World::ContactScan both = cw.contact_scan(true, true);
+      const std::string at = name(c) + " step " + std::to_string(k + 1);
+      ASSERT_TRUE(same_bits(both.dt, reference_dt(cw))) << at << ": critical step " << both.dt << " vs " << reference_dt(cw);
+      ASSERT_TRUE(same_bits(both.fc, reference_fc(cw))) << at << ": mean contact force " << both.fc << " vs " << reference_fc(cw);
+      ASSERT_GT(both.fc, 0.0) << at;
+      // the separate calls, and the other thread count on the same state
+      EXPECT_TRUE(same_bits(w->critical_timestep(), both.dt)) << at;
+      EXPECT_TRUE(same_bits(w->mean_contact_force(), both.fc)) << at;
+      w->mutable_params().threads = 3 - c.threads;
+      const World::ContactScan other = cw.contact_scan(true, true);
+      w->mutable_params().threads = c.threads;
+      EXPECT_TRUE(same_bits(other.dt, both.dt) && same_bits(other.fc, both.fc)) << at << ": threads " << 3 - c.threads;
+      // only what is asked for is computed
+      EXPECT_EQ(cw.contact_scan(true, false).fc, 0.0);
+      EXPECT_EQ(cw.contact_scan(false, true).dt, 0.0);
+    }
+    for (const BondHist& b : w->pair_contacts().bond) bonded_after += bonded(b.state);
+    // The run exercises what the stiffness depends on: bonds leave the intact state (bond laws).
+    if (law_has_bond(c.model)) EXPECT_LT(bonded_after, bonded_before) << name(c) << ": no bond failed";
+  }
+}
