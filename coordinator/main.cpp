@@ -578,7 +578,9 @@ int main(int argc, char** argv) {
       id << "{\"scene\": " << coord::json_string(scene.origin()) << ", \"seed\": " << scene.integer("run.seed")
          << ", \"g_level\": " << (scene.has("gravity") ? scene.real("gravity.level") : 1.0)
          << ", \"footing_diameter_m\": " << (d_f > 0 ? fmt::format("{:.17g}", d_f) : std::string("null"))
-         << ", \"threads\": " << scene.integer("run.threads") << ", \"git_commit\": " << coord::json_string(DEMFDM_GIT_COMMIT)
+         << ", \"threads\": "
+         << (scene.integer_or_word("run.threads") ? std::to_string(*scene.integer_or_word("run.threads")) : "\"auto\"")
+         << ", \"git_commit\": " << coord::json_string(DEMFDM_GIT_COMMIT)
          << ", \"build_id\": " << coord::json_string(io::default_code_version()) << "}";
       info.extra_json.push_back({"run", id.str()});
     }

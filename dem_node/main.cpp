@@ -110,6 +110,7 @@ class DemParticipant : public node::Participant {
   explicit DemParticipant(const node::Context& ctx)
       : ctx_(ctx), s_(ctx_.scene), block_(block_of(ctx.scene)), world_(world_params()), energy_jump_(ctx.scene) {
     interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
+    spdlog::info("dem: {} OpenMP threads (run.threads)", world_.params().threads);
     user_dt_ = s_.real("dem.dt_fixed");
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     kick_ = s_.reals("dem.kick");
@@ -206,7 +207,7 @@ class DemParticipant : public node::Participant {
   void restore(io::StateReader& r, const node::Restore& how) override {
     dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
-    world_.mutable_params().threads = static_cast<int>(s_.integer("run.threads"));
+    world_.mutable_params().threads = schema::run_threads(s_);
     omp_set_num_threads(world_.params().threads);
     auto sec = r.section("dem_node");
     Block saved;
@@ -550,7 +551,7 @@ class DemParticipant : public node::Participant {
     p.skin_factor = s_.real("dem.skin_factor");
     p.facet_spin = s_.boolean("dem.facet_spin");
     p.track_energy = s_.boolean("dem.track_energy");
-    p.threads = static_cast<int>(s_.integer("run.threads"));
+    p.threads = schema::run_threads(s_);
     p.gravity = false;
     p.ball_ball = family(s_, "ball_ball");
     p.ball_wall = family(s_, "ball_wall");

@@ -70,7 +70,8 @@ class FdmNode : public continuum::NodeBase {
         model_(model_params(ctx.scene)),
         energy_jump_(ctx.scene) {
     const auto& s = ctx.scene;
-    omp_set_num_threads(static_cast<int>(s.integer("run.threads")));
+    omp_set_num_threads(schema::run_threads(s));
+    spdlog::info("fdm: {} OpenMP threads (run.threads)", schema::run_threads(s));
     if (s.string("continuum.boundary") == "symmetry") setup_symmetry(s);
     if (s.has("continuum.punch")) setup_punch(s);
     spdlog::info("fdm: {} gridpoints, {} zones, {} interface points, {} interface triangles; critical dt {:.3e} s",
@@ -98,7 +99,7 @@ class FdmNode : public continuum::NodeBase {
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
     fdm::load_state_file(model_, how.dir / "continuum.model.state", how.saved_scene_hash);
-    omp_set_num_threads(static_cast<int>(ctx_.scene.integer("run.threads")));
+    omp_set_num_threads(schema::run_threads(ctx_.scene));
     auto sec = r.section("fdm_node");
     last_step_ = sec.i64();
     last_frame_ = sec.i64();

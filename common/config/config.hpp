@@ -80,9 +80,10 @@ struct ParamBuilder {
   ParamBuilder& min(double lo, bool open = false);
   ParamBuilder& max(double hi, bool open = false);
   ParamBuilder& length(std::size_t n);
-  // A number key that may instead hold `word` (e.g. "auto": a value derived from others, or
-  // "none"), never a negative sentinel; `is_default`: the word is the default. Read it with
-  // Scene::real_or_word(); Scene::real() on the word is a programming error.
+  // A number key (real or integer) that may instead hold `word` (e.g. "auto": a value derived
+  // from others, or "none"), never a negative sentinel; `is_default`: the word is the default.
+  // Read it with Scene::real_or_word() / integer_or_word(); real() / integer() on the word is a
+  // programming error.
   ParamBuilder& or_word(std::string word, bool is_default);
 };
 
@@ -239,6 +240,8 @@ class Scene {
   // A Real key declared with or_word(): the number, or nothing when it holds its word.
   std::optional<double> real_or_word(std::string_view path) const;
   std::int64_t integer(std::string_view path) const;
+  // An Int key declared with or_word(): the number, or nothing when it holds its word.
+  std::optional<std::int64_t> integer_or_word(std::string_view path) const;
   bool boolean(std::string_view path) const;
   // Also Choice and Path (Path returned resolved to an absolute path).
   const std::string& string(std::string_view path) const;

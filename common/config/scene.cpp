@@ -262,6 +262,7 @@ class Loader {
         if (!v.is_boolean()) return wrong();
         return Value(v.as_boolean()->get());
       case Kind::Int: {
+        if (v.is_string() && !p.word.empty() && v.as_string()->get() == p.word) return Value(p.word);
         if (!v.is_integer()) return wrong();
         std::int64_t x = v.as_integer()->get();
         if (!detail::in_range(p, static_cast<double>(x))) {
@@ -779,7 +780,15 @@ std::optional<double> Scene::real_or_word(std::string_view path) const {
   return std::get<double>(v);
 }
 std::int64_t Scene::integer(std::string_view path) const {
-  return std::get<std::int64_t>(value_of(path, Kind::Int, "integer"));
+  const Value& v = value_of(path, Kind::Int, "integer");
+  if (const auto* w = std::get_if<std::string>(&v))
+    throw std::logic_error("config: " + std::string(path) + " holds '" + *w + "'; read it with integer_or_word()");
+  return std::get<std::int64_t>(v);
+}
+std::optional<std::int64_t> Scene::integer_or_word(std::string_view path) const {
+  const Value& v = value_of(path, Kind::Int, "integer_or_word");
+  if (std::holds_alternative<std::string>(v)) return std::nullopt;
+  return std::get<std::int64_t>(v);
 }
 bool Scene::boolean(std::string_view path) const {
   return std::get<bool>(value_of(path, Kind::Bool, "boolean"));

@@ -222,7 +222,13 @@ void check_default(const Param& p, const std::string& path) {
                            std::to_string(*p.length));
   };
   switch (p.kind) {
-    case Kind::Int: check_num(static_cast<double>(std::get<std::int64_t>(v)), path); break;
+    case Kind::Int:
+      if (const auto* w = std::get_if<std::string>(&v)) {
+        if (*w != p.word) schema_bug(path, "default '" + *w + "' is not " + describe(p));
+      } else {
+        check_num(static_cast<double>(std::get<std::int64_t>(v)), path);
+      }
+      break;
     case Kind::Real:
       if (const auto* w = std::get_if<std::string>(&v)) {
         if (*w != p.word) schema_bug(path, "default '" + *w + "' is not " + describe(p));
@@ -260,7 +266,7 @@ void check_default(const Param& p, const std::string& path) {
 std::string describe(const Param& p) {
   switch (p.kind) {
     case Kind::Bool: return "a boolean (true or false)";
-    case Kind::Int: return numeric_phrase(p, "an integer");
+    case Kind::Int: return numeric_phrase(p, "an integer") + (p.word.empty() ? "" : " or '" + p.word + "'");
     case Kind::Real: return numeric_phrase(p, "a number") + (p.word.empty() ? "" : " or '" + p.word + "'");
     case Kind::String: return "a string";
     case Kind::Choice: {
@@ -314,7 +320,8 @@ ParamBuilder& ParamBuilder::max(double hi, bool open) {
 }
 
 ParamBuilder& ParamBuilder::or_word(std::string word, bool is_default) {
-  if (param->kind != Kind::Real) schema_bug(path, "or_word() on a parameter that is not a number");
+  if (param->kind != Kind::Real && param->kind != Kind::Int)
+    schema_bug(path, "or_word() on a parameter that is not a number");
   if (word.empty()) schema_bug(path, "or_word() with an empty word");
   param->word = std::move(word);
   if (is_default) param->def = Value(param->word);

@@ -6,7 +6,19 @@
 #include <map>
 #include <sstream>
 
+#include <sched.h>
+#include <unistd.h>
+
 namespace demfdm::schema {
+
+int run_threads(const config::Scene& s) {
+  if (auto n = s.integer_or_word("run.threads")) return static_cast<int>(*n);
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) == 0) return std::max(1, CPU_COUNT(&set));
+  return std::max(1L, sysconf(_SC_NPROCESSORS_ONLN));
+}
+
 namespace {
 
 void declare_run(config::Section& root) {
@@ -14,7 +26,11 @@ void declare_run(config::Section& root) {
   run.string("name", std::string("run"), "Short name used in the run folder name.");
   run.string("description", std::string(""), "Free text copied into the run summary.");
   run.integer("seed", "-", 1, "Seed of every random generator (same seed + same threads = same results).").min(0);
-  run.integer("threads", "-", 1, "OpenMP threads per node.").min(1).max(256);
+  run.integer("threads", "-", 1,
+              "OpenMP threads per node. \"auto\": every CPU the node's process may run on (with the serial "
+              "coupling scheme the nodes take turns, so each can use them all; the run summary reports the cores "
+              "each node kept busy). Same bits need the same count: with \"auto\", the same machine.")
+      .min(1).max(256).or_word("auto", false);
   run.integer("guard_every", "steps", 1,
               "Blow-up guard (docs/stability.md): every node scans its state for non-finite values and energy "
               "jumps after every n-th coupling step and stops the run at the first finding, writing "

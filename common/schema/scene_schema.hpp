@@ -19,6 +19,10 @@ std::vector<std::string> roles(const config::Scene& s);
 // Executable that plays a role (scene key <role>.executable).
 std::string executable(const config::Scene& s, const std::string& role);
 
+// OpenMP threads of a node process (run.threads): the number given, or for "auto" the CPUs this
+// process may run on (its affinity mask: taskset and cgroup cpusets count), at least 1.
+int run_threads(const config::Scene& s);
+
 // Stage list, read once.
 struct Stage {
   std::string name, action;

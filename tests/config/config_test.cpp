@@ -9,6 +9,9 @@
 #include <sstream>
 
 #include "config/config.hpp"
+#include "common/schema/scene_schema.hpp"
+
+#include <sched.h>
 
 namespace cfg = demfdm::config;
 namespace fs = std::filesystem;
@@ -856,4 +859,41 @@ TEST(ConfigScene, NumberOrWord) {
   cfg::Schema bad;
   EXPECT_THROW(bad.root().string("name", std::string("x"), "doc").or_word("auto", true), std::logic_error);
   EXPECT_THROW(bad.root().real("v", "", 1.0, "doc").or_word("", false), std::logic_error);
+}
+
+// The same for an integer key (run.threads = "auto", issue 16 item 2): the number or the word,
+// read with integer_or_word(); the effective TOML and overrides keep the word.
+TEST(ConfigScene, IntegerOrWord) {
+  cfg::Schema s;
+  auto& run = s.root().section("run", "run", Presence::Optional);
+  run.integer("threads", "-", 1, "threads; auto: every CPU").min(1).max(256).or_word("auto", false);
+  auto parse = [&](const std::string& text, std::vector<std::string> sets = {}) {
+    return cfg::Scene::parse(text, "t.toml", s, ".", sets);
+  };
+  EXPECT_EQ(*parse("").integer_or_word("run.threads"), 1);
+  EXPECT_EQ(parse("[run]\nthreads = 3\n").integer("run.threads"), 3);
+  const auto a = parse("[run]\nthreads = \"auto\"\n");
+  EXPECT_FALSE(a.integer_or_word("run.threads").has_value());
+  EXPECT_THROW(a.integer("run.threads"), std::logic_error);
+  EXPECT_FALSE(parse(a.effective_toml()).integer_or_word("run.threads").has_value());
+  EXPECT_FALSE(parse("[run]\nthreads = 2\n", {"run.threads=auto"}).integer_or_word("run.threads").has_value());
+  auto err = [&](const std::string& text) {
+    try {
+      parse(text);
+    } catch (const cfg::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(err("[run]\nthreads = 0\n"), "t.toml:2:11: run.threads: expected an integer in [1, 256] or 'auto', found 0");
+  EXPECT_EQ(err("[run]\nthreads = \"all\"\n"),
+            "t.toml:2:11: run.threads: expected an integer in [1, 256] or 'auto', found string 'all'");
+  // The project's key: "auto" resolves to the CPUs of this process, a number to itself.
+  const auto& sc = demfdm::schema::scene_schema();
+  const std::string stage = "[[stage]]\nname = \"s\"\naction = \"cycle\"\nnodes = [\"dem\"]\nsteps = 1\n[dem]\n";
+  EXPECT_EQ(demfdm::schema::run_threads(cfg::Scene::parse("[run]\nthreads = 3\n" + stage, "r.toml", sc)), 3);
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  ASSERT_EQ(sched_getaffinity(0, sizeof set, &set), 0);
+  EXPECT_EQ(demfdm::schema::run_threads(cfg::Scene::parse("[run]\nthreads = \"auto\"\n" + stage, "r.toml", sc)), CPU_COUNT(&set));
 }
