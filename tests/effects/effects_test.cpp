@@ -103,7 +103,7 @@ TEST_F(Effects, AbsentGravityIsNoEffectOfTheRun) {
   // The DEM reports effects (so an absent one is meaningful), and gravity is not one of them.
   EXPECT_TRUE(std::regex_search(std::regex_replace(a, std::regex("\n"), " "),
                                 std::regex("\"totals\":.*\"dem\": \\{\"compute_s\": [^,]+, \"wait_s\": [^,]+, "
-                                           "\"effects\": \\{\"")))
+                                           "\"cpu_s\": [^,]+, \"cpu_cores\": [^,]+, \"effects\": \\{\"")))
       << "the DEM reports no effects:\n" << a;
   EXPECT_EQ(a.find("\"gravity\""), std::string::npos) << a;
   EXPECT_EQ(z.find("\"gravity\""), std::string::npos) << z;
