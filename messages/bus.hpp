@@ -17,6 +17,24 @@
 //    standard LCM event log DIR/<sender>-<pid>-<n>.lcmlog, before sending, with the exact
 //    encoded bytes and the send time; DEMFDM_TRAFFIC_CHANNELS=REGEX (ECMAScript, whole channel
 //    name) limits it to the matching channels. `demfdm_log merge` joins the parts.
+//  * direct receive (udpm, a Bus that owns its LCM instance): LCM 1.3.1 receives on a thread of
+//    its own, which hands every message to the pumping thread through a pipe: two wake-ups per
+//    message. The Bus instead opens its own socket on the run's group and port (bound and
+//    joined exactly as LCM's, with the URL's recv_buf_size), reads the LCM datagrams (short
+//    "LC02" and fragmented "LC03", reassembled as LCM does) in pump() on the owning thread and
+//    uses LCM only to publish (LCM then never starts its receive thread). The wire is
+//    unchanged. While the owner computes, the heartbeat thread moves what the socket holds into
+//    the Bus's queue (drain()), so a long step cannot overflow the kernel buffer. Back to
+//    LCM's receive thread with DEMFDM_BUS_RECV=lcm;
+//  * kernel channel filter (udpm, Linux): every process's socket receives every datagram of
+//    the run's port, its own included (multicast loopback), and would wake for each one only to
+//    drop those on channels nobody here subscribed to. A Bus that owns its LCM instance attaches
+//    a classic BPF socket filter to its receive socket that keeps the short LCM datagrams of the
+//    subscribed channels and every other datagram (fragments of large messages, anything not
+//    LCM), so the kernel drops the rest before anything wakes: what the handlers see is
+//    unchanged (LCM drops the same messages later). The kernel counts the filtered datagrams
+//    as socket drops (/proc/net/udp "drops", UDP InErrors). Off with DEMFDM_BUS_FILTER=0, or
+//    when LCM's receive socket cannot be identified.
 // Only the owning thread pumps; publish() may be called from any thread (heartbeats).
 #pragma once
 
@@ -115,6 +133,17 @@ class Bus {
   Bus& operator=(const Bus&) = delete;
 
   std::int64_t run_id() const { return run_id_; }
+  // True while the kernel channel filter is attached to the receive socket (see above).
+  bool kernel_filter() const { return filter_on_; }
+  // True when this Bus reads its own socket instead of LCM's receive thread (see above).
+  bool direct_receive() const { return direct_ != nullptr; }
+  // Moves the datagrams the receive socket holds into the Bus's queue without handling them
+  // (pump() handles them, in order, before the socket). Any thread; returns at once when the
+  // owner is pumping. No-op without direct receive.
+  void drain();
+  // Datagrams the kernel dropped at the receive socket (the filter's, and any for lack of
+  // buffer space), or -1 when the socket is unknown (for tests and benchmarks).
+  std::int64_t kernel_drops() const;
   const std::string& sender() const { return sender_; }
   const std::string& url() const { return url_; }
 
@@ -159,8 +188,13 @@ class Bus {
     sub->channel = ch;
     Sub* raw = sub.get();
     subs_.push_back(std::move(sub));
-    auto* s = lcm_->subscribeFunction(ch, &Bus::trampoline, raw);
-    if (s) s->setQueueCapacity(0);  // unbounded: never drop silently
+    if (direct_) {
+      by_channel_[ch].push_back(raw);
+    } else {
+      auto* s = lcm_->subscribeFunction(ch, &Bus::trampoline, raw);
+      if (s) s->setQueueCapacity(0);  // unbounded: never drop silently
+    }
+    update_filter();
   }
 
   // Handles incoming messages for at most timeout_s (returns early after the first batch).
@@ -180,8 +214,24 @@ class Bus {
     std::string channel;
     std::function<int(const void*, int)> decode;
   };
+  // An LCM instance this Bus owns, and its udpm receive socket (-1: unknown or not udpm).
+  struct Direct;
+  struct Owned {
+    std::shared_ptr<lcm::LCM> lcm;
+    int recv_fd = -1;
+    std::unique_ptr<Direct> direct;
+  };
+  Bus(Owned owned, std::int64_t run_id, std::string sender);
+  static Owned open_owned(const std::string& url);
   static std::shared_ptr<lcm::LCM> open_lcm(const std::string& url);
+  // (Re)attaches the kernel channel filter for the channels subscribed so far.
+  void update_filter();
   static void trampoline(const lcm::ReceiveBuffer* rbuf, const std::string& channel, Sub* sub);
+  // Decodes one message for one subscription (both receive paths).
+  void deliver(Sub* sub, const void* data, std::uint32_t size, const std::string& channel);
+  // Direct receive: one datagram (whole message, or a fragment), and pump() on the own socket.
+  void on_datagram(std::uint64_t from, const std::uint8_t* p, std::size_t n);
+  bool pump_direct(int timeout_ms);
   bool accept_header(const demfdm::header_t& h);
   template <class T>
   void publish_locked(const std::string& ch, const T& msg) {
@@ -212,6 +262,12 @@ class Bus {
   // Tee (DEMFDM_TRAFFIC_DIR): the open event log (lcm_eventlog_t*, owned), its channel filter.
   struct TeeLog;
   std::unique_ptr<TeeLog> tee_;
+  // Kernel channel filter: LCM's receive socket (owned by the LCM instance), on or off.
+  int filter_fd_ = -1;
+  bool filter_on_ = false;
+  // Direct receive: the own socket, its queue and fragment buffers; subscriptions by channel.
+  std::unique_ptr<Direct> direct_;
+  std::map<std::string, std::vector<Sub*>> by_channel_;
 };
 
 }  // namespace demfdm::bus

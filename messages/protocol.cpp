@@ -100,6 +100,9 @@ Heartbeat::Heartbeat(bus::Bus& bus, double period_s, double stall_s) : bus_(bus)
       lk.unlock();
       try {
         bus_.publish(bus::channel::kHeartbeat, hb);
+        // A long computation of the owner must not overflow the kernel's receive buffer
+        // (direct receive, messages/bus.hpp): what is waiting moves to the bus's queue.
+        bus_.drain();
       } catch (...) {
       }
       lk.lock();
@@ -146,15 +149,23 @@ NodeEndpoint::NodeEndpoint(bus::Bus& bus, std::string role, std::string solver, 
     if (h.header.sender == "coordinator") on_any_from_coordinator();
   });
   bus_.subscribe<demfdm::nack_t>(bus::channel::kNack, [this](const demfdm::nack_t& n) { on_nack(n); });
-  bus_.subscribe<demfdm::iface_kin_t>(bus::channel::kIfaceKin, [this](const demfdm::iface_kin_t& m) {
-    kin_in_[m.header.step][m.chunk_index] = m;
-  });
-  bus_.subscribe<demfdm::iface_force_t>(bus::channel::kIfaceForce, [this](const demfdm::iface_force_t& m) {
-    force_in_[m.header.step][m.chunk_index] = m;
-  });
-  bus_.subscribe<demfdm::iface_mesh_t>(bus::channel::kIfaceMesh, [this](const demfdm::iface_mesh_t& m) {
-    mesh_in_[m.chunk_index] = m;
-  });
+  // Each side reads only the interface data it waits for (the DEM: mesh and kinematics; the
+  // continuum: forces): its own publications come back over multicast loopback, and a
+  // subscription to them would wake this process for every one only to drop it.
+  const bool any_role = role_ != "dem" && role_ != "continuum";
+  if (any_role || role_ == "dem") {
+    bus_.subscribe<demfdm::iface_kin_t>(bus::channel::kIfaceKin, [this](const demfdm::iface_kin_t& m) {
+      kin_in_[m.header.step][m.chunk_index] = m;
+    });
+    bus_.subscribe<demfdm::iface_mesh_t>(bus::channel::kIfaceMesh, [this](const demfdm::iface_mesh_t& m) {
+      mesh_in_[m.chunk_index] = m;
+    });
+  }
+  if (any_role || role_ == "continuum") {
+    bus_.subscribe<demfdm::iface_force_t>(bus::channel::kIfaceForce, [this](const demfdm::iface_force_t& m) {
+      force_in_[m.header.step][m.chunk_index] = m;
+    });
+  }
 }
 
 NodeEndpoint::~NodeEndpoint() { hb_.stop(); }
@@ -399,6 +410,7 @@ void NodeEndpoint::send_mesh(const InterfaceMesh& m) {
 }
 
 InterfaceMesh NodeEndpoint::wait_mesh() {
+  if (role_ == "continuum") throw std::logic_error("the continuum does not read the interface mesh");
   wait_for([this] {
     return !mesh_in_.empty() && static_cast<std::int32_t>(mesh_in_.size()) == mesh_in_.begin()->second.n_chunks;
   }, "interface-mesh", -1, demfdm::msg_types_t::MSG_IFACE_MESH, "continuum");
@@ -444,6 +456,7 @@ void NodeEndpoint::send_kin(const Kinematics& k) {
 }
 
 Kinematics NodeEndpoint::wait_kin(std::int64_t step) {
+  if (role_ == "continuum") throw std::logic_error("the continuum does not read interface kinematics");
   wait_for([&] {
     auto it = kin_in_.find(step);
     return it != kin_in_.end() && static_cast<std::int32_t>(it->second.size()) == it->second.begin()->second.n_chunks;
@@ -484,6 +497,7 @@ void NodeEndpoint::send_forces(const Forces& f) {
 }
 
 Forces NodeEndpoint::wait_forces(std::int64_t step) {
+  if (role_ == "dem") throw std::logic_error("the DEM does not read interface forces");
   wait_for([&] {
     auto it = force_in_.find(step);
     return it != force_in_.end() && static_cast<std::int32_t>(it->second.size()) == it->second.begin()->second.n_chunks;

@@ -9,10 +9,12 @@
 // every node always pairs the same interface data.
 //
 // Grant window: in coupled stages up to 'window' grants are outstanding at once (the nodes
-// are paced by their interface data, not by the coordinator's round trips). The runner always
-// fills the window before it collects the oldest report, so which grants were posted when a
-// report is read does not depend on timing: with until = "done" a stage whose criterion is met
-// at step j ends after step j + window - 1, the same in every run.
+// are paced by their interface data, not by the coordinator's round trips). The runner refills
+// the window to full whenever at least half of it has been collected (with a window of 4: two
+// grants back to back, one wake-up of each node for both), before it collects the next report,
+// so which grants were posted when a report is read does not depend on timing, and grant p is
+// always posted after grant p - window was collected: with until = "done" a stage whose
+// criterion is met at step j ends after step j + window - 1, the same in every run.
 #pragma once
 #include <chrono>
 #include <deque>

@@ -384,3 +384,100 @@ TEST(Tee, SceneChunksAreRecordedOncePerProcess) {
   EXPECT_LT(fs::file_size(parts[0]), text.size() + 20000) << "the text is in the log once";
   fs::remove_all(dir);
 }
+
+// ---- udpm on loopback (private network namespace, as root): direct receive and the kernel
+// channel filter (messages/bus.hpp) ----
+
+#include "tests/integration/process.hpp"
+
+namespace {
+std::string udpm_url(int port) {
+  return bus::resolve_url("udpm://239.255.76.67:" + std::to_string(port) + "?ttl=0");
+}
+bool pump_until(bus::Bus& b, const std::function<bool()>& done, double timeout_s = 5.0) {
+  auto t0 = std::chrono::steady_clock::now();
+  while (!done()) {
+    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > timeout_s) return false;
+    b.pump(0.05);
+  }
+  return true;
+}
+// Receives short (heartbeat) and fragmented (64 KiB of scene text: LCM sends it in fragments)
+// messages over udpm, and counts what the kernel dropped at the receiving socket.
+void udpm_delivery(bool direct) {
+  auto why = demfdm::testing::enter_private_network();
+  if (!why.empty()) GTEST_SKIP() << why;
+  const int port = 46000 + static_cast<int>(getpid() % 1000) + (direct ? 0 : 1000);
+  if (!direct) setenv("DEMFDM_BUS_RECV", "lcm", 1);
+  bus::Bus rx(udpm_url(port), 7, "rx");
+  unsetenv("DEMFDM_BUS_RECV");
+  bus::Bus tx(udpm_url(port), 7, "tx");
+  EXPECT_EQ(rx.direct_receive(), direct);
+  std::vector<std::int64_t> beats;
+  std::string text;
+  rx.subscribe<demfdm::heartbeat_t>(bus::channel::kHeartbeat,
+                                    [&](const demfdm::heartbeat_t& h) { beats.push_back(h.progress); });
+  rx.subscribe<demfdm::scene_t>(bus::channel::kScene, [&](const demfdm::scene_t& s) { text = s.text; });
+  // A channel whose name extends a subscribed one is not the subscribed one.
+  rx.subscribe<demfdm::nack_t>(bus::channel::kNack, [&](const demfdm::nack_t&) { ADD_FAILURE() << "NACKX read as NACK"; });
+  ASSERT_TRUE(rx.kernel_filter());
+  const std::int64_t drops0 = rx.kernel_drops();
+  ASSERT_GE(drops0, 0);
+  demfdm::scene_t s{};
+  s.header.step = -1;
+  s.n_chunks = 1;
+  for (int i = 0; i < 65536; ++i) s.text.push_back(static_cast<char>('a' + i % 26));
+  tx.publish(bus::channel::kScene, s);
+  // 40 reports (nobody in rx reads them) and NACKs on a longer channel name: dropped in the
+  // kernel, before any thread of rx wakes.
+  for (int i = 0; i < 40; ++i) {
+    auto r = report(i);
+    tx.publish(bus::channel::kReport, r);
+    demfdm::nack_t n{};
+    n.addressee = "rx";
+    tx.publish(bus::channel::kNack + "X", n);
+  }
+  for (int i = 0; i < 10; ++i) {
+    demfdm::heartbeat_t h{};
+    h.progress = i;
+    h.state = "x";
+    tx.publish(bus::channel::kHeartbeat, h);
+  }
+  if (direct) {
+    // What the heartbeat thread does while the owner computes: the datagrams move to the bus's
+    // queue; pump() then hands them over in order.
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    rx.drain();
+  }
+  ASSERT_TRUE(pump_until(rx, [&] { return beats.size() == 10 && !text.empty(); }));
+  EXPECT_EQ(text, s.text);
+  EXPECT_EQ(beats, (std::vector<std::int64_t>{0, 1, 2, 3, 4, 5, 6, 7, 8, 9}));
+  EXPECT_GE(rx.kernel_drops() - drops0, 80) << "reports and NACKX datagrams reached the socket";
+  EXPECT_EQ(rx.stats().accepted, 11);
+}
+}  // namespace
+
+TEST(Udpm, DirectReceiveDeliversShortAndFragmentedMessagesAndTheKernelDropsTheRest) { udpm_delivery(true); }
+TEST(Udpm, LcmReceiveThreadWithTheKernelFilterDeliversTheSame) { udpm_delivery(false); }
+
+TEST(Udpm, KernelFilterCanBeTurnedOff) {
+  auto why = demfdm::testing::enter_private_network();
+  if (!why.empty()) GTEST_SKIP() << why;
+  const int port = 48000 + static_cast<int>(getpid() % 1000);
+  setenv("DEMFDM_BUS_FILTER", "0", 1);
+  bus::Bus rx(udpm_url(port), 7, "rx");
+  unsetenv("DEMFDM_BUS_FILTER");
+  bus::Bus tx(udpm_url(port), 7, "tx");
+  int got = 0;
+  rx.subscribe<demfdm::heartbeat_t>(bus::channel::kHeartbeat, [&](const demfdm::heartbeat_t&) { ++got; });
+  EXPECT_FALSE(rx.kernel_filter());
+  for (int i = 0; i < 5; ++i) {
+    auto r = report(i);
+    tx.publish(bus::channel::kReport, r);
+  }
+  demfdm::heartbeat_t h{};
+  h.state = "x";
+  tx.publish(bus::channel::kHeartbeat, h);
+  ASSERT_TRUE(pump_until(rx, [&] { return got == 1; }));
+  EXPECT_EQ(rx.stats().received, 1);  // the reports reached the process and were dropped there
+}
