@@ -1197,32 +1197,46 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
   // its stiffnesses); the sums over them then run in contact order, the additions and their order
   // of one serial loop: the same bits at any thread count.
   resize_scan_scratch(want_fc, want_dt);
-  visit_law(p_.ball_ball.model, [&](auto law) {
+  // Raw pointers, so that the loop keeps them in registers (the stores cannot alias them), and
+  // a prefetch of the scattered radius of B a few contacts ahead.
+  const ContactHist* __restrict__ H = pc_.h.data();
+  const BondHist* __restrict__ BD = pc_.bond.empty() ? nullptr : pc_.bond.data();
+  const std::uint32_t* __restrict__ A = pc_.a.data();
+  const std::uint32_t* __restrict__ B = pc_.b.data();
+  const double* __restrict__ R = pt_.r.data();
+  double* __restrict__ SN = want_fc ? scratch_norm_.data() : nullptr;
+  double* __restrict__ SK = want_dt ? scratch_k_.data() : nullptr;
+  double* __restrict__ SKA = want_dt ? scratch_ka_.data() : nullptr;
+  double* __restrict__ SKB = want_dt ? scratch_kb_.data() : nullptr;
+  std::uint8_t* __restrict__ SL = want_dt ? scratch_live_.data() : nullptr;
+  const ContactFamilyParams& fam = p_.ball_ball;
+  visit_law(fam.model, [=, &fam](auto law) {
     using L = decltype(law);
-    const bool bb_bond = !pc_.bond.empty();
+    constexpr std::int64_t ahead = 16;
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
     for (std::int64_t c = 0; c < m; ++c) {
-      const ContactHist& h = pc_.h[c];
-      const BondHist* b = bb_bond ? &pc_.bond[c] : nullptr;
-      if (want_fc) scratch_norm_[c] = norm(L::force(h, b));
+      if (want_dt && c + ahead < m) __builtin_prefetch(R + B[c + ahead]);
+      const ContactHist& h = H[c];
+      const BondHist* b = BD ? BD + c : nullptr;
+      if (want_fc) SN[c] = norm(L::force(h, b));
       if (!want_dt) continue;
       // Each counted contact adds the stiffnesses of its law (Law::stiffness): translational to
       // both balls, rotational plus k_s R² to each.
       const bool live = (h.flags & ContactHist::kActive) || (b && bonded(b->state));
-      scratch_live_[c] = live;
+      SL[c] = live;
       if (!live) continue;
-      const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
-      const ContactStiffness s = L::stiffness(h, b, p_.ball_ball, pt_.r[a], pt_.r[bb]);
-      scratch_k_[c] = s.k;
-      scratch_ka_[c] = s.krot + s.ks * pt_.r[a] * pt_.r[a];
-      scratch_kb_[c] = s.krot + s.ks * pt_.r[bb] * pt_.r[bb];
+      const std::uint32_t a = A[c], bb = B[c];
+      const ContactStiffness s = L::stiffness(h, b, fam, R[a], R[bb]);
+      SK[c] = s.k;
+      SKA[c] = s.krot + s.ks * R[a] * R[a];
+      SKB[c] = s.krot + s.ks * R[bb] * R[bb];
     }
   });
   if (want_fc) {
     double sum = 0.0;
     std::size_t cnt = 0;
     for (std::int64_t c = 0; c < m; ++c) {
-      const double f = scratch_norm_[c];
+      const double f = SN[c];
       if (f > 0.0) { sum += f; ++cnt; }
     }
     for (const WallContacts* wc : {&plc_, &fcc_, &ftc_})
@@ -1237,13 +1251,19 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
   std::vector<double>& kr = scratch_kr_;
   kt.assign(n, 0.0);
   kr.assign(n, 0.0);
+  double* __restrict__ KT = kt.data();
+  double* __restrict__ KR = kr.data();
   for (std::int64_t c = 0; c < m; ++c) {
-    if (!scratch_live_[c]) continue;
-    const std::uint32_t a = pc_.a[c], bb = pc_.b[c];
-    kt[a] += scratch_k_[c];
-    kt[bb] += scratch_k_[c];
-    kr[a] += scratch_ka_[c];
-    kr[bb] += scratch_kb_[c];
+    if (c + 16 < m) {
+      __builtin_prefetch(KT + B[c + 16], 1);
+      __builtin_prefetch(KR + B[c + 16], 1);
+    }
+    if (!SL[c]) continue;
+    const std::uint32_t a = A[c], bb = B[c];
+    KT[a] += SK[c];
+    KT[bb] += SK[c];
+    KR[a] += SKA[c];
+    KR[bb] += SKB[c];
   }
   auto wall = [&](const WallContacts& wc, const ContactFamilyParams& fam) {
     visit_law(fam.model, [&](auto law) {
