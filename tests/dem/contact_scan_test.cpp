@@ -3,6 +3,7 @@
 // parallel and summed in contact order, so the result must be the bits of the serial loops it
 // replaced (written out below as the reference), at 1 and 2 threads, for every law, periodic and
 // free, after the scalar and the vector pass; and the fused call must equal the separate ones.
+// The same for the per-step sums over the balls (kinetic energy, unbalanced force).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -34,6 +35,28 @@ double reference_fc(const World& w) {
       if (f > 0.0) { s += f; ++cnt; }
     }
   return cnt ? s / double(cnt) : 0.0;
+}
+
+// The O(balls) sums as serial loops in row order (World::ordered_ball_sum must give their bits).
+double reference_kinetic(const World& w) {
+  const Particles& pt = w.balls();
+  double e = 0.0;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    e += 0.5 * pt.m[i] * norm2(pt.v[i]) + 0.5 * pt.inertia[i] * norm2(pt.w[i]);
+  return e;
+}
+
+double reference_unbalanced_sum(const World& w) {
+  const Particles& pt = w.balls();
+  double s = 0.0;
+  for (std::size_t i = 0; i < pt.size(); ++i) {
+    const Vec3 F = pt.f[i] + pt.fa[i];
+    double q = 0.0;
+    for (int k = 0; k < 3; ++k)
+      if (!(pt.fix[i] & (1u << k))) q += F[k] * F[k];
+    s += std::sqrt(q);
+  }
+  return s;
 }
 
 double reference_dt(const World& w) {
@@ -75,12 +98,12 @@ std::string name(const Case& c) {
          (c.kernel == PairKernel::kScalar ? " scalar" : " auto") + " threads " + std::to_string(c.threads);
 }
 
-// A jittered lattice of 14³ overlapping balls (above the scan's parallel threshold of 4,096
+// A jittered lattice of 17³ = 4,913 overlapping balls (above the parallel threshold of 4,096 balls and contacts
 // contacts), random velocities and spins, pulled apart so that contacts open and
 // close and (bond laws) bonds soften and break during the run.
 std::unique_ptr<World> make_world(const Case& c) {
   const double R = 1e-4, s = 1.97 * R;
-  const int ns = 14;
+  const int ns = 17;
   WorldParams p;
   p.threads = c.threads;
   p.periodic.enabled = c.periodic;
@@ -127,7 +150,7 @@ TEST(ContactScan, SameBitsAsTheSerialLoopsAtOneAndTwoThreads) {
     std::size_t bonded_before = 0, bonded_after = 0;
     for (const BondHist& b : w->pair_contacts().bond) bonded_before += bonded(b.state);
     ASSERT_GT(w->pair_contacts().size(), 4096u) << name(c);
-    for (int k = 0; k < 30; ++k) {
+    for (int k = 0; k < 20; ++k) {
       w->step();
       if (k % 5 != 4) continue;
       const World& cw = *w;
@@ -143,12 +166,19 @@ TEST(ContactScan, SameBitsAsTheSerialLoopsAtOneAndTwoThreads) {
       const World::ContactScan other = cw.contact_scan(true, true);
       w->mutable_params().threads = c.threads;
       EXPECT_TRUE(same_bits(other.dt, both.dt) && same_bits(other.fc, both.fc)) << at << ": threads " << 3 - c.threads;
+      // the O(balls) measurements of every step
+      EXPECT_TRUE(same_bits(w->kinetic_energy(), reference_kinetic(cw))) << at;
+      EXPECT_TRUE(same_bits(w->unbalanced_ratio(both.fc),
+                            (reference_unbalanced_sum(cw) / double(w->num_balls())) / both.fc))
+          << at;
       // only what is asked for is computed
       EXPECT_EQ(cw.contact_scan(true, false).fc, 0.0);
       EXPECT_EQ(cw.contact_scan(false, true).dt, 0.0);
     }
     for (const BondHist& b : w->pair_contacts().bond) bonded_after += bonded(b.state);
     // The run exercises what the stiffness depends on: bonds leave the intact state (bond laws).
-    if (law_has_bond(c.model)) EXPECT_LT(bonded_after, bonded_before) << name(c) << ": no bond failed";
+    if (law_has_bond(c.model)) {
+      EXPECT_LT(bonded_after, bonded_before) << name(c) << ": no bond failed";
+    }
   }
 }

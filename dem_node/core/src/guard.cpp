@@ -27,15 +27,12 @@ Vec3 min_image(const World& w, Vec3 d) {
 }
 
 // True if every component of every vector is finite: x * 0 is 0 for finite x and NaN for
-// NaN or inf, so the three sums stay 0 unless some value is non-finite (no branch per ball).
+// NaN or inf, and NaN == 0 is false. An or of flags has no order, so the loop vectorises (no
+// branch and no dependent chain of additions per ball).
 bool all_finite(const std::vector<Vec3>& a) {
-  double sx = 0, sy = 0, sz = 0;
-  for (const Vec3& v : a) {
-    sx += v.x * 0.0;
-    sy += v.y * 0.0;
-    sz += v.z * 0.0;
-  }
-  return sx + sy + sz == 0.0;
+  unsigned bad = 0;
+  for (const Vec3& v : a) bad |= !(v.x * 0.0 == 0.0) | !(v.y * 0.0 == 0.0) | !(v.z * 0.0 == 0.0);
+  return bad == 0;
 }
 
 GuardFinding finding(const World& w, std::size_t row, std::string cause, std::size_t neighbours) {

@@ -1,5 +1,7 @@
 #include "demfdm/dem/procedures.hpp"
 
+#include <omp.h>
+
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -15,21 +17,27 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   SkeletonRatio r;
   const auto& b = w.balls();
   const Vec3 g = w.gravity();
-  double sum = 0;
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    Vec3 f = b.f[i] + b.fa[i];
-    Vec3 c = f - b.m[i] * g;  // contact part of the force
-    if (c.x == 0 && c.y == 0 && c.z == 0) {
-      ++r.rattlers;
-      continue;
-    }
+  // A rattler adds +0 to the sum of non-negative terms, which leaves it unchanged: the sum over
+  // every ball is the sum over the skeleton, bit for bit.
+  auto rattler = [&](std::size_t i) {
+    const Vec3 c = (b.f[i] + b.fa[i]) - b.m[i] * g;  // contact part of the force
+    return c.x == 0 && c.y == 0 && c.z == 0;
+  };
+  const double sum = w.ordered_ball_sum([&](std::size_t i) {
+    if (rattler(i)) return 0.0;
+    const Vec3 f = b.f[i] + b.fa[i];
     double s2 = 0;
     for (int k = 0; k < 3; ++k)
       if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
-    sum += std::sqrt(s2);
-    ++n;
-  }
+    return std::sqrt(s2);
+  });
+  const std::int64_t nb = static_cast<std::int64_t>(b.size());
+  std::int64_t rattlers = 0;
+  const int nt = w.params().threads > 0 ? w.params().threads : omp_get_max_threads();
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && nb > 4096) reduction(+ : rattlers)
+  for (std::int64_t i = 0; i < nb; ++i) rattlers += rattler(static_cast<std::size_t>(i)) ? 1 : 0;
+  r.rattlers = static_cast<std::size_t>(rattlers);
+  const std::size_t n = b.size() - r.rattlers;
   r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
   return r;
 }

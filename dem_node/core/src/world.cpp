@@ -1413,10 +1413,8 @@ std::size_t World::bond_ball_ball(double lo, double hi) {
 // measurements
 
 double World::kinetic_energy() const {
-  double e = 0.0;
-  for (std::size_t i = 0; i < pt_.size(); ++i)
-    e += 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]);
-  return e;
+  return ordered_ball_sum(
+      [this](std::size_t i) { return 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]); });
 }
 
 Energy World::energy() const {
@@ -1463,8 +1461,7 @@ double World::unbalanced_ratio() const {
 
 double World::unbalanced_ratio(double fc) const {
   if (pt_.size() == 0) return 0.0;
-  double s = 0.0;
-  for (std::size_t i = 0; i < pt_.size(); ++i) s += unbalanced(pt_, i);
+  const double s = ordered_ball_sum([this](std::size_t i) { return unbalanced(pt_, i); });
   if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
   return (s / double(pt_.size())) / fc;
 }

@@ -15,6 +15,7 @@
 #pragma once
 
 #include <array>
+#include <omp.h>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -325,6 +326,25 @@ class World {
   /// callers that also need it elsewhere (the node's skeleton ratio): one contact loop per state.
   double unbalanced_ratio(double mean_contact_force) const;
   double max_unbalanced_force() const;
+  /// Σ term(i) over the balls in row order: the terms are computed in parallel (above 4,096
+  /// balls), the sum runs in row order, so the bits are those of one serial loop at any thread
+  /// count. For the O(balls) measurements of every step (kinetic energy, the ratios).
+  template <class Term>
+  double ordered_ball_sum(Term term) const {
+    const std::int64_t n = static_cast<std::int64_t>(pt_.size());
+    const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+    double s = 0.0;
+    if (nt <= 1 || n <= 4096) {
+      for (std::int64_t i = 0; i < n; ++i) s += term(static_cast<std::size_t>(i));
+      return s;
+    }
+    scratch_ball_.resize(static_cast<std::size_t>(n));
+    double* __restrict__ t = scratch_ball_.data();
+#pragma omp parallel for schedule(static) num_threads(nt)
+    for (std::int64_t i = 0; i < n; ++i) t[i] = term(static_cast<std::size_t>(i));
+    for (std::int64_t i = 0; i < n; ++i) s += t[i];
+    return s;
+  }
   /// Mean ‖F_c‖ over the contacts that carry a force (ball-ball and wall). The per-contact norms
   /// are computed in parallel and summed in contact order: the same bits at any thread count.
   double mean_contact_force() const;
@@ -385,6 +405,7 @@ class World {
   std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each thread's block
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_norm_;       // mean_contact_force: per-contact ‖F‖
+  mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
   mutable std::vector<double> scratch_kt_, scratch_kr_;  // critical step: per-ball k_t, k_r
   mutable std::vector<double> scratch_k_;                // critical step: per-contact k
   mutable std::vector<double> scratch_ka_, scratch_kb_;  // critical step: rotational terms of A, B
