@@ -817,6 +817,17 @@ TEST(ConfigDocs, Describe) {
   EXPECT_EQ(cfg::format_value(cfg::Value(std::vector<double>{0, 0, -9.81})), "[0, 0, -9.81]");
 }
 
+// The message of the config::Error that f throws, or "no error".
+template <class F>
+std::string error_of(F&& f) {
+  try {
+    f();
+  } catch (const cfg::Error& e) {
+    return std::string(e.what());
+  }
+  return std::string("no error");
+}
+
 // A "derived" value is an explicit word, never a negative number (issue 15 item 5): a number key
 // declared with or_word() holds a number in its range or the word; a negative number is refused
 // with the word named; infinity and NaN are never accepted.
@@ -842,14 +853,7 @@ TEST(ConfigScene, NumberOrWord) {
   EXPECT_EQ(c.real("specimen.sigma_v"), 5e3);
   // Overrides take the word as the file does.
   EXPECT_FALSE(parse("[specimen]\nsigma_v = 5e3\n", {"specimen.sigma_v=auto"}).real_or_word("specimen.sigma_v"));
-  auto err = [&](const std::string& text) {
-    try {
-      parse(text);
-    } catch (const cfg::Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  auto err = [&](const std::string& text) { return error_of([&] { parse(text); }); };
   EXPECT_EQ(err("[specimen]\nsigma_v = -5e3\n"), "w.toml:2:11: specimen.sigma_v: expected a number > 0 Pa or 'auto', found -5000");
   EXPECT_EQ(err("[specimen]\nsigma_v = \"derived\"\n"),
             "w.toml:2:11: specimen.sigma_v: expected a number > 0 Pa or 'auto', found string 'derived'");
@@ -877,14 +881,7 @@ TEST(ConfigScene, IntegerOrWord) {
   EXPECT_THROW(a.integer("run.threads"), std::logic_error);
   EXPECT_FALSE(parse(a.effective_toml()).integer_or_word("run.threads").has_value());
   EXPECT_FALSE(parse("[run]\nthreads = 2\n", {"run.threads=auto"}).integer_or_word("run.threads").has_value());
-  auto err = [&](const std::string& text) {
-    try {
-      parse(text);
-    } catch (const cfg::Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
+  auto err = [&](const std::string& text) { return error_of([&] { parse(text); }); };
   EXPECT_EQ(err("[run]\nthreads = 0\n"), "t.toml:2:11: run.threads: expected an integer in [1, 256] or 'auto', found 0");
   EXPECT_EQ(err("[run]\nthreads = \"all\"\n"),
             "t.toml:2:11: run.threads: expected an integer in [1, 256] or 'auto', found string 'all'");
