@@ -1,7 +1,5 @@
 #include "demfdm/dem/procedures.hpp"
 
-#include <omp.h>
-
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -31,12 +29,8 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
       if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
     return std::sqrt(s2);
   });
-  const std::int64_t nb = static_cast<std::int64_t>(b.size());
-  std::int64_t rattlers = 0;
-  const int nt = w.params().threads > 0 ? w.params().threads : omp_get_max_threads();
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && nb > 4096) reduction(+ : rattlers)
-  for (std::int64_t i = 0; i < nb; ++i) rattlers += rattler(static_cast<std::size_t>(i)) ? 1 : 0;
-  r.rattlers = static_cast<std::size_t>(rattlers);
+  // A count as a sum of ones: exact.
+  r.rattlers = static_cast<std::size_t>(w.ordered_ball_sum([&](std::size_t i) { return rattler(i) ? 1.0 : 0.0; }));
   const std::size_t n = b.size() - r.rattlers;
   r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
   return r;

@@ -329,7 +329,7 @@ void World::wall_set_pass(WallContacts& wc, const ContactFamilyParams& fam, Geom
     g.after_law(wc, c);
   };
   if constexpr (Geom::kParallel) {
-    const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+    const int nt = thread_count();
     // Each contact writes only its own records, so the split changes no bit; a few hundred
     // contacts (the interface facets of a coupled block) already pay for the fork.
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)

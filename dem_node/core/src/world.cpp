@@ -768,7 +768,7 @@ void World::pair_pass(double dt) {
   const Vec3 L = p_.periodic.length;
   const Vec3 ed = edot_;
   const double rgap = lc.rgap;
-  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+  const int nt = thread_count();
   const bool par = nt > 1 && m > 4096;
   const bool strained = ed.x != 0.0 || ed.y != 0.0 || ed.z != 0.0;
   // Vectorised blocks (pair_block.hpp) where the law has a lane kernel; bit-identical to the
@@ -1148,7 +1148,7 @@ void World::integrate(double dt) {
   const bool energy = p_.track_energy;
   const std::size_t nch = (n + kChunk - 1) / kChunk;
   chunk_e_.assign(2 * nch, 0.0);
-  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+  const int nt = thread_count();
   // One instantiation per (energy, periodic): no flag tests inside the row loop.
   auto rows = energy ? (per ? &World::integrate_rows<true, true> : &World::integrate_rows<true, false>)
                      : (per ? &World::integrate_rows<false, true> : &World::integrate_rows<false, false>);
@@ -1175,28 +1175,24 @@ void World::integrate(double dt) {
 // ------------------------------------------------------------------------------------------
 // timestep (§1.8)
 
-void World::resize_scan_scratch(bool fc, bool dt) const {
-  const std::size_t m = pc_.size();
-  if (fc) scratch_norm_.resize(m);
-  if (dt) {
-    scratch_k_.resize(m);
-    scratch_ka_.resize(m);
-    scratch_kb_.resize(m);
-    scratch_live_.resize(m);
-  }
-}
-
 double World::critical_timestep() { return contact_scan(true, false).dt; }
 
 World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
   ContactScan out;
   const std::size_t n = pt_.size();
   const std::int64_t m = static_cast<std::int64_t>(pc_.size());
-  const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+  const int nt = thread_count();
   // One parallel pass over the ball-ball contacts computes each contact's terms (its force norm,
   // its stiffnesses); the sums over them then run in contact order, the additions and their order
   // of one serial loop: the same bits at any thread count.
-  resize_scan_scratch(want_fc, want_dt);
+  const std::size_t um = pc_.size();
+  if (want_fc) scratch_norm_.resize(um);
+  if (want_dt) {
+    scratch_k_.resize(um);
+    scratch_ka_.resize(um);
+    scratch_kb_.resize(um);
+    scratch_live_.resize(um);
+  }
   // Raw pointers, so that the loop keeps them in registers (the stores cannot alias them), and
   // a prefetch of the scattered radius of B a few contacts ahead.
   const ContactHist* __restrict__ H = pc_.h.data();

@@ -332,7 +332,7 @@ class World {
   template <class Term>
   double ordered_ball_sum(Term term) const {
     const std::int64_t n = static_cast<std::int64_t>(pt_.size());
-    const int nt = p_.threads > 0 ? p_.threads : omp_get_max_threads();
+    const int nt = thread_count();
     double s = 0.0;
     if (nt <= 1 || n <= 4096) {
       for (std::int64_t i = 0; i < n; ++i) s += term(static_cast<std::size_t>(i));
@@ -359,7 +359,8 @@ class World {
   void rebuild_walls();
   bool need_rebuild() const;
   void force_pass(double dt);
-  void resize_scan_scratch(bool fc, bool dt) const;
+  /// OpenMP threads of the passes: WorldParams::threads, or the OpenMP default when 0.
+  int thread_count() const { return p_.threads > 0 ? p_.threads : omp_get_max_threads(); }
   template <class Law, bool Periodic> void pair_pass(double dt);
   // Wall kinds as geometries of the one wall-contact set (world.cpp): candidates at a rebuild,
   // the surface point of a contact, and what the kind sums over its contacts.
