@@ -193,7 +193,7 @@ double stage_speed(const config::Scene& scene, const schema::Stage& st) {
 // move its footing as asked never starts). Throws config::Error naming the stage's key.
 void check_kinematics(const config::Scene& scene) {
   for (const auto& st : schema::stages(scene)) {
-    if (st.action != "penetrate") continue;
+    if (st.kind != schema::Action::kPenetrate) continue;
     const double v = stage_speed(scene, st);
     if (!std::isfinite(v) || !(v > 0)) {
       std::ostringstream o;
@@ -225,8 +225,8 @@ coord::RateMeasures stage_rates(const config::Scene& scene, const schema::Stage&
   const double rho_b = scene.real_or_word("dem.specimen.bulk_density").value_or(0.48 * scene.real("dem.density"));
   std::optional<double> sigma_c;
   const auto& model = scene.string("dem.ball_ball.model");
-  if (model == "softbond") sigma_c = scene.real("dem.ball_ball.sb_ten");
-  if (model == "pbond") sigma_c = scene.real_or_word("dem.ball_ball.pb_ten");  // none: unbreakable
+  if (model == "softbond") sigma_c = scene.real("dem.ball_ball.softbond.ten");
+  if (model == "pbond") sigma_c = scene.real_or_word("dem.ball_ball.pbond.ten");  // none: unbreakable
   double speed = stage_speed(scene, st);
   return coord::rate_measures(speed, v.real("inertial_number"),
                               coord::ramp_time(v.real("ramp_depth_ratio"), scene.real("dem.footing.diameter"), speed),
@@ -524,10 +524,10 @@ int main(int argc, char** argv) {
     {
       auto sts = schema::stages(scene);
       for (std::size_t i = 0; i < sts.size(); ++i)
-        if (sts[i].action == "penetrate") rates[i] = stage_rates(scene, sts[i]);
+        if (sts[i].kind == schema::Action::kPenetrate) rates[i] = stage_rates(scene, sts[i]);
     }
     runner.set_kinematics([&runner, &rates, &log](const schema::Stage& st, std::int64_t, double) -> std::vector<double> {
-      if (st.action != "penetrate") return {};
+      if (st.kind != schema::Action::kPenetrate) return {};
       const auto& clock = runner.grant_clock();
       const auto& m = rates.at(static_cast<std::size_t>(clock.stage_index));
       if (clock.first_step == clock.stage_first_step) {
@@ -587,7 +587,7 @@ int main(int argc, char** argv) {
     std::string result;
     for (std::size_t i = stage_list.size(); i-- > 0;) {
       const auto& st = stage_list[i];
-      if (st.action != "penetrate" || opt.run_dir.empty() || d_f <= 0) continue;
+      if (st.kind != schema::Action::kPenetrate || opt.run_dir.empty() || d_f <= 0) continue;
       const auto path = opt.run_dir + "/history_" + std::to_string(i) + "_" + st.name + ".csv";
       if (!std::filesystem::exists(path)) break;
       try {

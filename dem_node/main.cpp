@@ -29,6 +29,7 @@
 #include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/procedures.hpp"
+#include "demfdm/dem/scene_params.hpp"
 #include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
 #include "demfdm/io/csv_series.hpp"
@@ -41,74 +42,16 @@ namespace fs = std::filesystem;
 
 namespace {
 
-dem::ContactFamilyParams family(const config::Scene& s, const std::string& name) {
-  auto k = [&](const char* key) { return "dem." + name + "." + key; };
-  dem::ContactFamilyParams f;
-  // The laws are looked up by name in the registry (laws/registry.hpp); a schema choice with no
-  // law behind it is refused here, and so at --check (every node runs its check).
-  if (!dem::law_from_name(s.string(k("model")), f.model))
-    throw std::invalid_argument("dem." + name + ".model: no contact law named '" + s.string(k("model")) + "'");
-  f.linear.emod = s.real(k("emod"));
-  f.linear.kratio = s.real(k("kratio"));
-  f.linear.fric = s.real(k("fric"));
-  f.linear.wall_length = s.string(k("wall_length")) == "diameter" ? dem::WallLength::kDiameter : dem::WallLength::kRadius;
-  const double inf = std::numeric_limits<double>::infinity();
-  auto strength = [&](const char* key) { return s.real_or_word(k(key)).value_or(inf); };
-  f.pbond.emod = s.real(k("pb_emod"));
-  f.pbond.kratio = s.real(k("pb_kratio"));
-  f.pbond.rmul = s.real(k("pb_rmul"));
-  f.pbond.mcf = s.real(k("pb_mcf"));
-  f.pbond.ten = strength("pb_ten");
-  f.pbond.coh = strength("pb_coh");
-  f.pbond.fa_deg = s.real(k("pb_fa"));
-  f.pbond.zero_linear = s.boolean(k("pb_zero_linear"));
-  auto& b = f.softbond;
-  b.rmul = s.real(k("sb_rmul"));
-  b.mcf = s.real(k("sb_mcf"));
-  b.bmul = s.real(k("sb_bmul"));
-  b.ten = s.real(k("sb_ten"));
-  b.coh = s.real(k("sb_coh"));
-  b.fa_deg = s.real(k("sb_fa"));
-  b.soft = s.real(k("sb_soft"));
-  b.cut = s.real(k("sb_cut"));
-  b.twist_factor = s.real(k("sb_twist"));
-  b.ret = s.string(k("sb_return")) == "radial" ? dem::SoftReturn::kRadial : dem::SoftReturn::kAssociated;
-  b.unload = s.string(k("sb_unload")) == "secant" ? dem::SoftUnload::kSecant : dem::SoftUnload::kElastic;
-  b.cohesion = s.string(k("sb_cohesion_softening")) == "proportional" ? dem::CohesionSoftening::kProportional
-                                                                       : dem::CohesionSoftening::kNone;
-  b.bending_in_softening = s.boolean(k("sb_bending_in_softening"));
-  b.moments = s.string(k("sb_unbonded_moments")) == "none" ? dem::UnbondedMoments::kNone : dem::UnbondedMoments::kJiang;
-  f.hertz.shear = s.real(k("hz_shear"));
-  f.hertz.poisson = s.real(k("hz_poisson"));
-  return f;
-}
+using Block = dem::scene::Block;
 
-// Geometry of the DEM block: REV cell, replication, placement.
-struct Block {
-  dem::Vec3 origin{}, cell{};
-  int nx = 1, ny = 1, nz = 1;
-  double height() const { return cell.z * nz; }
-  double z_top() const { return origin.z + height(); }
-  dem::Vec3 centre() const { return {origin.x + cell.x * nx / 2, origin.y + cell.y * ny / 2, origin.z + height() / 2}; }
-};
-
-Block block_of(const config::Scene& s) {
-  const schema::DemBlock d = schema::dem_block(s);  // one definition for the checks and this node
-  Block b;
-  b.origin = {d.origin[0], d.origin[1], d.origin[2]};
-  b.cell = {d.cell[0], d.cell[1], d.cell[2]};
-  b.nx = d.n[0];
-  b.ny = d.n[1];
-  b.nz = d.n[2];
-  return b;
-}
-
-bool is_generation(const std::string& a) { return a == "generate" || a == "servo" || a == "bond" || a == "replicate"; }
+// Specimen preparation (the stage-action table, schema::actions()): the periodic REV on its own
+// step rule, no gravity, before model time 0.
+bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind).preparation; }
 
 class DemParticipant : public node::Participant {
  public:
   explicit DemParticipant(const node::Context& ctx)
-      : ctx_(ctx), s_(ctx_.scene), block_(block_of(ctx.scene)), world_(world_params()), energy_jump_(ctx.scene) {
+      : ctx_(ctx), s_(ctx_.scene), block_(dem::scene::block(ctx.scene)), world_(world_params()), energy_jump_(ctx.scene) {
     interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
     spdlog::info("dem: {} OpenMP threads (run.threads)", world_.params().threads);
     user_dt_ = s_.real("dem.dt_fixed");
@@ -137,13 +80,13 @@ class DemParticipant : public node::Participant {
     // beginning of the first stage that is not specimen preparation. The footing's surface
     // (footing.xmf) is written when a stage places a footing.
     const auto stages = schema::stages(s_);
-    std::vector<std::string_view> actions;
+    std::vector<bool> preparation;
     for (const auto& st : stages) {
-      actions.push_back(st.action);
+      preparation.push_back(is_generation(st));
       stage_prefixes_.push_back(st.view.prefix());
-      footing_output_ = footing_output_ || st.action == "penetrate";
+      footing_output_ = footing_output_ || st.kind == schema::Action::kPenetrate;
     }
-    clock_ = io::ModelClock(actions);
+    clock_ = io::ModelClock(preparation);
   }
 
   // Result files only when the scene has [dem.output] (a scene writes only what it asks for),
@@ -309,12 +252,11 @@ class DemParticipant : public node::Participant {
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     open_outputs();
     begin_model_time(st);
-    const auto& a = st.action;
     stage_ratio_ = st.view.real("ratio");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
-    preparing_ = is_generation(a);
+    preparing_ = is_generation(st);
     {  // Step factor and local damping of this stage (docs/theory.md 1.3, 4.11). Specimen
        // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
        // dem.damping and dem.dt_fixed change nothing before the first later stage.
@@ -326,40 +268,41 @@ class DemParticipant : public node::Participant {
       safe_dt_key_ = {-1, -1, -1};  // the cached critical step holds the previous factor
     }
     if (!preparing_) check_dt_fixed(st);
-    if (!is_generation(a) && gravity_level_ > 0 && !world_.gravity_on()) {
+    if (!preparing_ && gravity_level_ > 0 && !world_.gravity_on()) {
       auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
       spdlog::info("dem: {}", r.what);
     }
-    if (!is_generation(a) && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
+    if (!preparing_ && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
     proto::Values v;
-    if (a == "generate") {
-      v = report(generate());
-    } else if (a == "servo") {
-      v = report(servo());
-    } else if (a == "bond") {
-      const double gap = s_.real_or_word("dem.specimen.bond_gap")
-                             .value_or(1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale"));
-      v = report(dem::install_bonds(world_, -std::numeric_limits<double>::infinity(), gap));
-    } else if (a == "replicate") {
-      dem::ReplicateParams p;
-      p.nx = block_.nx;
-      p.ny = block_.ny;
-      p.nz = block_.nz;
-      p.keep_periodic = false;
-      v = report(dem::replicate(world_, p));
-    } else if (a == "couple") {
-      if (!st.coupled) throw std::invalid_argument("stage '" + st.name + "': action 'couple' needs coupled = true");
-      coupling_setup_pending_ = true;  // done when the interface mesh arrives (set_interface_mesh)
-    } else if (a == "penetrate") {
-      v = place_footing();
-    } else if (a == "ucs") {
-      v = ucs(st);
-    } else if (a != "cycle" && a != "equilibrium") {
-      throw std::invalid_argument("dem_node does not support stage action '" + a + "'");
+    switch (st.kind) {
+      case schema::Action::kGenerate: v = report(generate()); break;
+      case schema::Action::kServo: v = report(servo()); break;
+      case schema::Action::kBond:
+        v = report(dem::install_bonds(world_, -std::numeric_limits<double>::infinity(), dem::scene::bond_gap(s_)));
+        break;
+      case schema::Action::kReplicate: {
+        dem::ReplicateParams p;
+        p.nx = block_.nx;
+        p.ny = block_.ny;
+        p.nz = block_.nz;
+        p.keep_periodic = false;
+        v = report(dem::replicate(world_, p));
+        break;
+      }
+      case schema::Action::kCouple:
+        if (!st.coupled) throw std::invalid_argument("stage '" + st.name + "': action 'couple' needs coupled = true");
+        coupling_setup_pending_ = true;  // done when the interface mesh arrives (set_interface_mesh)
+        break;
+      case schema::Action::kPenetrate: v = place_footing(); break;
+      case schema::Action::kUcs: v = ucs(st); break;
+      case schema::Action::kCycle:
+      case schema::Action::kEquilibrium: break;
+      case schema::Action::kGeostatic:  // the table says the DEM does not act in it (refused at --check)
+        throw std::invalid_argument("dem_node does not act in stage action '" + st.action + "'");
     }
-    penetrating_ = a == "penetrate";
+    penetrating_ = st.kind == schema::Action::kPenetrate;
     if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
-    if (!is_generation(a) && !kick_.empty() && !kicked_) kick();
+    if (!preparing_ && !kick_.empty() && !kicked_) kick();
     world_.prepare();
     if (user_dt_ > 0 && !preparing_ && world_.num_balls() > 0)
       check_dt_fixed("end of the set-up of stage '" + st.name + "'");
@@ -458,12 +401,12 @@ class DemParticipant : public node::Participant {
   }
   bool criterion_met(const schema::Stage& st) override {
     if (penetrating_) return footing_disp() >= target_disp_ * (1 - 1e-12);
-    if (st.action == "cycle") return false;
+    if (st.kind == schema::Action::kCycle) return false;
     return (world_.gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     if (out_) write_frame(last);
-    if (out_ && world_.gravity_on() && !is_generation(st.action)) write_profile(st);
+    if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
     const double crit = world_.num_balls() > 0 ? critical_dt() : 0.0;
     auto m = dem::measure(world_);
     proto::Values v{{"balls", static_cast<double>(world_.num_balls())},
@@ -476,7 +419,7 @@ class DemParticipant : public node::Participant {
     if (world_.num_facet_walls() > 0) v.push_back({"facet_fz_N", world_.facet_walls_total_force().z});
     v.push_back({"dt_s", world_.dt()});
     v.push_back({"dt_critical_s", crit});
-    if (!is_generation(st.action) && !energy_pending_) {
+    if (!is_generation(st) && !energy_pending_) {
       const auto e = world_.energy();
       const double total = total_energy(), w = work_ + dem::gravity_work(world_, x_begin_);
       const double dissipated = total - e.kinetic - e.strain - (energy_begin_ - mechanical_begin_);
@@ -512,13 +455,7 @@ class DemParticipant : public node::Participant {
       std::size_t nb = world_.bond_ball_facet(1e-3 * d_min);
       spdlog::info("dem: {} ball-facet bonds installed", nb);
       scale_with_depth();
-      dem::InterfaceBondParams ib;
-      ib.mode = s_.string("dem.specimen.interface_bond_force") == "mean_contact" ? dem::InterfaceBondForce::kMeanContact
-                                                                                 : dem::InterfaceBondForce::kTraction;
-      ib.band = s_.real("dem.specimen.d50") * s_.real("dem.specimen.scale");
-      ib.z_top = block_.z_top();
-      ib.unit_weight = weight() / (block_.cell.x * block_.nx * block_.cell.y * block_.ny * block_.height());
-      ib.k0 = s_.real("dem.specimen.k0");
+      const auto ib = dem::scene::interface_bonds(s_, block_, weight() / (block_.cell.x * block_.nx * block_.cell.y * block_.ny * block_.height()));
       spdlog::info("dem: {}", dem::assign_interface_bond_forces(world_, ib).what);
       world_.prepare();
     }
@@ -542,34 +479,8 @@ class DemParticipant : public node::Participant {
 
  private:
   dem::WorldParams world_params() {
-    dem::WorldParams p;
-    p.density = s_.real("dem.density");
-    p.local_damping = s_.real("dem.damping");
-    p.dt_safety = s_.real("dem.dt_safety");
-    p.dt_interval = static_cast<int>(s_.integer("dem.dt_interval"));
-    p.dt_fixed = 0.0;  // dem.dt_fixed is checked, then applied, at the first stage that begins with balls
-    p.skin_factor = s_.real("dem.skin_factor");
-    p.facet_spin = s_.boolean("dem.facet_spin");
-    p.track_energy = s_.boolean("dem.track_energy");
-    p.threads = schema::run_threads(s_);
-    p.gravity = false;
-    p.ball_ball = family(s_, "ball_ball");
-    p.ball_wall = family(s_, "ball_wall");
-    p.ball_facet = family(s_, "ball_facet");
-    p.ball_footing = family(s_, "ball_footing");
-    // A scene that generates its specimen starts with the REV's periodic cell.
-    for (auto& st : schema::stages(s_))
-      if (st.action == "generate") {
-        p.periodic.enabled = true;
-        p.periodic.origin = block_.origin;
-        p.periodic.length = block_.cell;
-      }
+    dem::WorldParams p = dem::scene::world(s_, block_);
     omp_set_num_threads(p.threads);
-    try {
-      dem::validate(p);
-    } catch (const std::invalid_argument& e) {
-      s_.fail("dem", "valid DEM parameters", e.what());
-    }
     return p;
   }
 
@@ -637,12 +548,8 @@ class DemParticipant : public node::Participant {
 
   // Contact and bond forces scaled with depth below the block top (docs/theory.md 4.9).
   void scale_with_depth() {
-    auto mode = s_.string("dem.specimen.depth_scaling");
-    if (mode == "none") return;
     dem::DepthScaleParams p;
-    p.mode = mode == "paper_literal" ? dem::DepthScaling::kPaperLiteral : dem::DepthScaling::kDepthRatio;
-    p.z_top = block_.z_top();
-    p.height = block_.height();
+    if (!dem::scene::depth_scaling(s_, block_, p)) return;
     spdlog::info("dem: {}", dem::depth_scale(world_, p).what);
   }
 
@@ -659,18 +566,7 @@ class DemParticipant : public node::Participant {
   }
 
   dem::StageReport generate() {
-    dem::RevParams p;
-    p.psd.d_min = s_.real("dem.specimen.d_min");
-    p.psd.d_max = s_.real("dem.specimen.d_max");
-    p.psd.scale = s_.real("dem.specimen.scale");
-    p.seed = static_cast<std::uint64_t>(s_.integer("run.seed"));
-    p.n_particles = static_cast<std::size_t>(s_.integer("dem.specimen.n_particles"));
-    p.porosity_final = s_.real("dem.specimen.porosity");
-    p.porosity_target = s_.real_or_word("dem.specimen.porosity_target").value_or(p.porosity_final);
-    p.initial_scale = s_.real("dem.specimen.initial_scale");
-    p.increments = static_cast<int>(s_.integer("dem.specimen.increments"));
-    p.ratio_tol = s_.real("dem.specimen.expansion_ratio");
-    p.increment_budget = s_.real("dem.specimen.increment_budget");
+    const dem::RevParams p = dem::scene::rev(s_);
     auto r = dem::generate_rev(world_, p);
     const double z = s_.real_or_word("dem.specimen.bond_coordination").value_or(0.0);
     if (z > 0) {  // bonds over the gaps that give Table 1's Z (docs/ucs-study.md)
@@ -683,34 +579,21 @@ class DemParticipant : public node::Participant {
     return r;
   }
 
-  // sigma_v at the bottom of the DEM block for the scene's g-level (docs/theory.md 4.5, 7.4).
-  double sigma_v() const {
-    if (const auto sv = s_.real_or_word("dem.specimen.sigma_v")) return *sv;
-    const double rho_b = s_.real_or_word("dem.specimen.bulk_density").value_or(0.48 * s_.real("dem.density"));
-    double g = s_.has("gravity") ? s_.real("gravity.level") * s_.real("gravity.g0") : 9.81;
-    return rho_b * g * block_.height();
-  }
-
   dem::StageReport servo() {
-    dem::ServoParams p;
-    double sv = sigma_v(), sh = s_.real("dem.specimen.k0") * sv;
-    p.target = {sh, sh, sv};
-    p.gain = s_.real("dem.specimen.servo_gain");
+    const auto sv = dem::scene::servo(s_, block_);
     // Compaction with low friction, then the final friction at constant stress (4.3 step 4).
     double mu = world_.params().ball_ball.linear.fric;
-    world_.mutable_params().ball_ball.linear.fric = std::min(mu, s_.real("dem.specimen.servo_fric"));
+    world_.mutable_params().ball_ball.linear.fric = std::min(mu, sv.fric);
     world_.refresh_contact_constants();
-    auto tol = s_.real("dem.specimen.servo_tol"), ratio = s_.real("dem.specimen.servo_ratio");
-    auto budget = s_.real("dem.specimen.servo_budget");
     // Hold the criterion for 160 critical steps (docs/theory.md 4.11; 200 steps at dt_safety 0.8).
-    auto r1 = dem::servo_until(world_, p, tol, ratio, 160.0, budget);
+    auto r1 = dem::servo_until(world_, sv.p, sv.tol, sv.ratio, 160.0, sv.budget);
     if (!r1.converged) return r1;
     world_.mutable_params().ball_ball.linear.fric = mu;
     world_.refresh_contact_constants();
-    auto r2 = dem::servo_until(world_, p, tol, ratio, 160.0, budget / 2);
+    auto r2 = dem::servo_until(world_, sv.p, sv.tol, sv.ratio, 160.0, sv.budget / 2);
     r2.steps += r1.steps;
-    r2.what = "servo to sigma_v " + std::to_string(sv) + " Pa, sigma_h " + std::to_string(sh) + " Pa: " + r1.what +
-              "; at final friction: " + r2.what;
+    r2.what = "servo to sigma_v " + std::to_string(sv.p.target.z) + " Pa, sigma_h " + std::to_string(sv.p.target.x) +
+              " Pa: " + r1.what + "; at final friction: " + r2.what;
     return r2;
   }
 
@@ -739,13 +622,8 @@ class DemParticipant : public node::Participant {
   }
 
   proto::Values place_footing() {
-    dem::FootingParams f;
-    f.diameter = s_.real("dem.footing.diameter");
-    f.height = s_.real("dem.footing.height");
-    auto c = s_.reals("dem.footing.centre");
-    dem::Vec3 axis = block_.centre();
-    if (c.size() == 2) axis = {c[0], c[1], 0};
-    f.bottom_centre = axis;
+    dem::FootingParams f = dem::scene::footing(s_, block_);
+    const dem::Vec3 axis = f.bottom_centre;
     const double best = dem::place_footing_at_first_contact(world_, f);
     footing_z0_ = best;
     spdlog::info("dem: footing D {} m at ({}, {}), bottom z {} m", f.diameter, axis.x, axis.y, best);
@@ -756,9 +634,7 @@ class DemParticipant : public node::Participant {
   }
 
   proto::Values ucs(const schema::Stage& st) {
-    dem::UcsParams p;
-    p.strain_rate = st.view.real("strain_rate");
-    p.max_strain = st.view.real("max_strain");
+    const dem::UcsParams p = dem::scene::ucs(st.view);
     const auto m0 = dem::measure(world_);
     const double cpu0 = static_cast<double>(std::clock()) / CLOCKS_PER_SEC;
     const auto t0 = std::chrono::steady_clock::now();
@@ -779,13 +655,16 @@ class DemParticipant : public node::Participant {
     spdlog::info("dem: UCS {:.4e} Pa, E50 {:.4e} Pa ({} samples, {} steps, wall {:.1f} s, cpu {:.1f} s, {:.3e} s/step)",
                  r.peak, r.e50, r.curve.size(), r.report.steps, wall, cpu, steps > 0 ? wall / steps : 0.0);
     if (!dir_.empty()) {
-      std::ofstream f(dir_ / "ucs_result.csv");
-      f << "ucs_Pa,e50_Pa,peak_strain_unit,balls_unit,coordination_unit,bonds_unit,bonds_broken_tension_unit,"
-           "bonds_broken_shear_unit,ucs_steps_unit,ucs_wall_s,ucs_cpu_s,settle_steps_unit,peak_reached_unit\n";
-      f << std::setprecision(10) << r.peak << ',' << r.e50 << ',' << r.peak_strain << ',' << world_.num_balls() << ','
-        << m0.coord.z << ',' << (m0.bonds.intact + m0.bonds.softening) << ',' << m1.bonds.broken_tension << ','
-        << m1.bonds.broken_shear << ',' << r.report.steps << ',' << wall << ',' << cpu << ',' << r.settle.steps << ','
-        << (r.report.converged ? 1 : 0) << '\n';
+      auto res = io::CsvSeries::create(
+          dir_ / "ucs_result.csv",
+          {"ucs_Pa", "e50_Pa", "peak_strain_unit", "balls_unit", "coordination_unit", "bonds_unit",
+           "bonds_broken_tension_unit", "bonds_broken_shear_unit", "ucs_steps_unit", "ucs_wall_s", "ucs_cpu_s",
+           "settle_steps_unit", "peak_reached_unit"});
+      res.append({r.peak, r.e50, r.peak_strain, static_cast<double>(world_.num_balls()), m0.coord.z,
+                  static_cast<double>(m0.bonds.intact + m0.bonds.softening), static_cast<double>(m1.bonds.broken_tension),
+                  static_cast<double>(m1.bonds.broken_shear), static_cast<double>(r.report.steps), wall, cpu,
+                  static_cast<double>(r.settle.steps), r.report.converged ? 1.0 : 0.0});
+      res.close();
     }
     return {{"ucs_Pa", r.peak},
             {"e50_Pa", r.e50},

@@ -16,12 +16,12 @@ NodeBase::NodeBase(const node::Context& ctx, Names names) : ctx_(ctx), names_(st
   // Frame times: the model time, 0 at the beginning of the first stage that is not specimen
   // preparation (docs/output.md "Time").
   const auto stages = schema::stages(s);
-  std::vector<std::string_view> actions;
+  std::vector<bool> preparation;
   for (const auto& st : stages) {
-    actions.push_back(st.action);
+    preparation.push_back(schema::action_info(st.kind).preparation);
     stage_prefixes_.push_back(st.view.prefix());
   }
-  clock_ = io::ModelClock(actions);
+  clock_ = io::ModelClock(preparation);
 }
 
 bool NodeBase::writes_outputs() const {
@@ -53,13 +53,13 @@ bool NodeBase::begin_model_time(const schema::Stage& st, double node_time) {
 }
 
 void NodeBase::require_action(const schema::Stage& st) const {
-  const auto& a = st.action;
-  if (a != "cycle" && a != "equilibrium" && a != "geostatic" && a != "couple" && a != "penetrate")
-    throw std::invalid_argument(names_.solver + " does not support stage action '" + a + "'");
+  // The stage-action table says where a continuum acts (refused at --check elsewhere).
+  if (!schema::action_info(st.kind).continuum)
+    throw std::invalid_argument(names_.solver + " does not act in stage action '" + st.action + "'");
 }
 
 proto::Values NodeBase::begin_stage(const schema::Stage& st) {
-  if (st.action == "geostatic" || st.action == "couple") {
+  if (st.kind == schema::Action::kGeostatic || st.kind == schema::Action::kCouple) {
     const auto k0_in = st.view.real_or_word("k0");  // "auto": nu/(1-nu) of each zone
     const double k0 = k0_in ? *k0_in : -1.0;
     set_geostatic_stress(k0 < 0 ? fdm::kNaN : k0);
@@ -102,12 +102,16 @@ void NodeBase::add_coupling_values(proto::Values& v) const {
 }
 
 bool NodeBase::criterion_met(const schema::Stage& st) {
-  const auto& a = st.action;
-  if (a == "equilibrium" || a == "geostatic" || a == "couple") {
-    const auto r = equilibrium_ratio();
-    return r && *r < st.view.real("ratio");
+  switch (st.kind) {
+    case schema::Action::kEquilibrium:
+    case schema::Action::kGeostatic:
+    case schema::Action::kCouple: {
+      const auto r = equilibrium_ratio();
+      return r && *r < st.view.real("ratio");
+    }
+    case schema::Action::kPenetrate: return true;
+    default: return false;  // cycle; the DEM's actions (not run here: require_action)
   }
-  return a == "penetrate";
 }
 
 void NodeBase::finish() {

@@ -43,8 +43,10 @@ enum class Kind { Bool, Int, Real, String, Choice, Path, RealList, IntList, Stri
 
 // Optional section absent => the effect it configures is off (Scene::has() is false);
 // present => its params get their defaults. Required section absent => error.
+// Defaults: a table of settings whose absence means every key at its default (a contact
+// family, a law's table); it loads as Optional, only the documentation differs.
 // For an array of tables ([[name]]) Required means "at least one element".
-enum class Presence { Required, Optional };
+enum class Presence { Required, Optional, Defaults };
 
 // Value of one parameter. Alternatives by Kind: Bool->bool, Int->int64_t,
 // Real->double, String/Choice/Path->string, RealList->vector<double>,
@@ -122,6 +124,11 @@ class Section {
   // [[name]] array of tables; the returned Section is the element schema.
   Section& array(std::string name, std::string doc, Presence p = Presence::Optional);
 
+  // A key that no longer exists under this name: a scene that writes it is refused with
+  // "unknown key; it moved: <hint>" (for example "write [dem.ball_ball.softbond] ten").
+  void moved(std::string old_name, std::string hint);
+  const std::string* moved_hint(std::string_view old_name) const;
+
   // Introspection (used by the loader, help_text() and markdown()).
   struct Member {  // exactly one of param / section is set
     Param* param = nullptr;
@@ -146,6 +153,7 @@ class Section {
   std::vector<Member> members_;
   std::vector<std::unique_ptr<Param>> params_;      // stable addresses for ParamBuilder
   std::vector<std::unique_ptr<Section>> sections_;  // stable addresses for Section&
+  std::vector<std::pair<std::string, std::string>> moved_;  // old name, hint
 };
 
 // Passed to cross-field checks; fail() throws config::Error at the key's position.

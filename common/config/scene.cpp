@@ -154,8 +154,12 @@ class Loader {
       if (sec.find(k.str())) continue;
       bool is_section = v.is_table() || v.is_array_of_tables();
       std::string tail = is_section ? "unknown section" : "unknown key";
-      std::string best = detail::suggest(k.str(), names);
-      if (!best.empty()) tail += "; did you mean " + quote(best) + "?";
+      if (const std::string* hint = sec.moved_hint(k.str())) {
+        tail += "; it moved: " + *hint;
+      } else {
+        std::string best = detail::suggest(k.str(), names);
+        if (!best.empty()) tail += "; did you mean " + quote(best) + "?";
+      }
       issue(pos_of(k.source()), join_path(node.path, k.str()), tail);
     }
   }
@@ -480,8 +484,12 @@ std::string apply_override(toml::table& root, const Schema& schema, const std::s
       std::vector<std::string> names;
       for (const auto& mm : sec->members()) names.push_back(mm.param ? mm.param->name : mm.section->name());
       std::string tail = std::string(path.empty() ? "unknown section " : "unknown key ") + quote(here);
-      std::string best = detail::suggest(seg, names);
-      if (!best.empty()) tail += "; did you mean " + quote(join_path(path, best)) + "?";
+      if (const std::string* hint = sec->moved_hint(seg)) {
+        tail += "; it moved: " + *hint;
+      } else {
+        std::string best = detail::suggest(seg, names);
+        if (!best.empty()) tail += "; did you mean " + quote(join_path(path, best)) + "?";
+      }
       set_error(text, tail);
     }
     if (idx && !(m->section && m->section->is_array()))

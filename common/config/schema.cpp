@@ -344,6 +344,14 @@ Section::Section(std::string name, std::string path, std::string doc, Presence p
     : name_(std::move(name)), path_(std::move(path)), doc_(std::move(doc)),
       presence_(presence), is_array_(is_array) {}
 
+void Section::moved(std::string old_name, std::string hint) { moved_.emplace_back(std::move(old_name), std::move(hint)); }
+
+const std::string* Section::moved_hint(std::string_view old_name) const {
+  for (const auto& [name, hint] : moved_)
+    if (name == old_name) return &hint;
+  return nullptr;
+}
+
 const Section::Member* Section::find(std::string_view name) const {
   for (const auto& m : members_) {
     const std::string& n = m.param ? m.param->name : m.section->name();
@@ -469,6 +477,7 @@ std::string presence_of(const Section& s) {
   if (s.is_array())
     return s.presence() == Presence::Required ? "array of tables, at least one required"
                                               : "array of tables, optional";
+  if (s.presence() == Presence::Defaults) return "optional section: absent = every key at its default";
   return s.presence() == Presence::Required ? "required section"
                                             : "optional section: absent = off";
 }

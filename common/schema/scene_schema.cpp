@@ -1,5 +1,8 @@
 #include "common/schema/scene_schema.hpp"
 
+#include "demfdm/dem/laws/registry.hpp"
+#include "demfdm/dem/params.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <iomanip>
@@ -185,72 +188,92 @@ void declare_continuum(config::Section& root) {
   out.integer("history_every", "steps", 1, "fdm_history.csv row every n coupling steps; 0: none.").min(0);
 }
 
-struct FamilyDefaults {
-  const char* model;
-  double fric;
-  bool zero_linear;
-  const char* doc;
+// Declares the keys of a parameter table (dem_node/core params.hpp) in a schema section: unit,
+// range, doc, and as default the field's initial value.
+struct SchemaDecl {
+  config::Section& sec;
+  static void bounds(config::ParamBuilder b, const dem::ParamRange& r) {
+    if (r.has_lo()) b.min(r.lo, r.lo_open);
+    if (r.has_hi()) b.max(r.hi, r.hi_open);
+  }
+  void real(const char* key, const char* unit, double& field, const dem::ParamRange& r, const char* doc) {
+    bounds(sec.real(key, unit, field, doc), r);
+  }
+  void real_or_word(const char* key, const char* unit, double& field, const dem::ParamRange& r, const char* word,
+                    double, const char* doc) {
+    auto b = sec.real(key, unit, field, doc);
+    bounds(b, r);
+    b.or_word(word, false);
+  }
+  void flag(const char* key, bool& field, const char* doc) { sec.boolean(key, field, doc); }
+  void integer(const char* key, const char* unit, int& field, int lo, int hi, const char* doc) {
+    sec.integer(key, unit, field, doc).min(lo).max(hi);
+  }
+  template <class E>
+  void choice(const char* key, E& field, std::initializer_list<dem::ParamOption<E>> options, const char* doc) {
+    std::vector<std::string> names;
+    std::string def;
+    for (const auto& o : options) {
+      names.emplace_back(o.name);
+      if (o.value == field) def = o.name;
+    }
+    sec.choice(key, names, def, doc);
+  }
 };
 
-void declare_family(config::Section& dem, const char* name, const FamilyDefaults& d) {
-  auto& f = dem.section(name, d.doc, config::Presence::Optional);
-  f.choice("model", {"linear", "pbond", "softbond", "hertz"}, std::string(d.model),
-           "Contact model: linear (1.7), linear parallel bond (2), soft bond (3), Hertz-Mindlin without bond (1.9).");
-  f.real("emod", "Pa", 2.8e9, "Deformability modulus E* of the linear part (soft bond: its only stiffness).").min(0.0);
-  f.real("kratio", "-", 2.4, "Normal-to-shear stiffness ratio kappa*.").min(0.0, true);
-  f.real("fric", "-", d.fric, "Friction coefficient mu of unbonded contacts.").min(0.0);
-  f.choice("wall_length", {"radius", "diameter"}, std::string("radius"),
-           "Deformability length L of ball-wall contacts: R_ball (default) or 2 R_ball (U6).");
-  f.real("pb_emod", "Pa", 2.8e9, "Parallel bond modulus E-bar*.").min(0.0);
-  f.real("pb_kratio", "-", 2.4, "Parallel bond stiffness ratio.").min(0.0, true);
-  f.real("pb_rmul", "-", 1.0, "Parallel bond radius multiplier lambda-bar.").min(0.0, true);
-  f.real("pb_mcf", "-", 1.0, "Parallel bond moment contribution factor beta-bar.").min(0.0).max(1.0);
-  f.real("pb_ten", "Pa", 0.45e6, "Parallel bond tensile strength; \"unbreakable\": no tensile failure.")
-      .min(0.0)
-      .or_word("unbreakable", false);
-  f.real("pb_coh", "Pa", 0.45e6, "Parallel bond cohesion; \"unbreakable\": no shear failure.")
-      .min(0.0)
-      .or_word("unbreakable", false);
-  f.real("pb_fa", "deg", 32.0, "Parallel bond friction angle.").min(0.0).max(90.0, true);
-  f.boolean("pb_zero_linear", d.zero_linear,
-            "Give the linear part zero stiffness when bonding (interface bonds: no repulsion from initial "
-            "overlaps, docs/theory.md 2.6).");
-  f.real("sb_rmul", "-", 1.0, "Soft bond radius multiplier lambda.").min(0.0, true);
-  f.real("sb_mcf", "-", 1.0, "Soft bond moment contribution factor beta.").min(0.0, true).max(1.0);
-  f.real("sb_bmul", "-", 1.0, "Soft bond bending-friction multiplier lambda_b.").min(0.0);
-  f.real("sb_ten", "Pa", 0.45e6, "Soft bond tensile strength sigma_c.").min(0.0);
-  f.real("sb_coh", "Pa", 0.45e6, "Soft bond cohesion c.").min(0.0);
-  f.real("sb_fa", "deg", 32.0, "Soft bond friction angle phi.").min(0.0).max(90.0, true);
-  f.real("sb_soft", "-", 100.0, "Softening factor zeta: softening slope -k_n/zeta (0: brittle).").min(0.0);
-  f.real("sb_cut", "-", 0.05, "Softening tensile-strength factor gamma: break at gamma sigma_c.").min(0.0);
-  f.real("sb_twist", "-", 2.0 / 3.0, "Unbonded twisting limit factor: |M_t| <= f mu F_n R (3.5, U3).").min(0.0);
-  f.choice("sb_return", {"associated", "radial"}, std::string("associated"),
-           "Soft bond return while softening (3.3; reconstruction, default associated).");
-  f.choice("sb_unload", {"elastic", "secant"}, std::string("elastic"),
-           "Unloading from the softening branch (3.3, U1; default elastic with plastic offset).");
-  f.choice("sb_cohesion_softening", {"none", "proportional"}, std::string("none"),
-           "Cohesion while softening in tension (3.4; default untouched).");
-  f.boolean("sb_bending_in_softening", true,
-            "Bending drives softening with the normal opening (PFC); false: normal only (Ma & Huang).");
-  f.choice("sb_unbonded_moments", {"jiang", "none"}, std::string("jiang"),
-           "Moment limits of unbonded soft-bond contacts (3.5, U3).");
-  f.real("hz_shear", "Pa", 1.0e9, "Hertz-Mindlin: shear modulus G of the grain material (1.9).").min(0.0, true);
-  f.real("hz_poisson", "-", 0.25, "Hertz-Mindlin: Poisson ratio nu of the grain material (1.9).").min(0.0).max(0.5, true);
+// Records a law key's earlier prefixed name (sb_ten, pb_ten, hz_shear) as moved to its table.
+struct MovedKeys {
+  config::Section& fam;
+  std::string prefix, table;
+  void add(const char* key) { fam.moved(prefix + key, std::string("write [") + fam.path() + "." + table + "] " + key); }
+  void real(const char* key, const char*, double&, const dem::ParamRange&, const char*) { add(key); }
+  void real_or_word(const char* key, const char*, double&, const dem::ParamRange&, const char*, double, const char*) {
+    add(key);
+  }
+  void flag(const char* key, bool&, const char*) { add(key); }
+  template <class E>
+  void choice(const char* key, E&, std::initializer_list<dem::ParamOption<E>>, const char*) { add(key); }
+};
+
+// A contact family [dem.<name>]: its law (the registry's names), its family-wide keys, and one
+// table per law with keys of its own, [dem.<name>.<law>]. The keys of the prefixed form of
+// earlier versions (sb_ten, pb_ten, hz_shear, ...) are refused with the new place.
+void declare_family(config::Section& dem_sec, const dem::FamilyInfo& info) {
+  auto& f = dem_sec.section(info.name, info.doc, config::Presence::Defaults);
+  dem::ContactFamilyParams defaults = info.defaults();
+  std::vector<std::string> names;
+  std::string doc = "Contact law (one of the registered laws, dem_node/core laws/registry.hpp):";
+  dem::for_each_law([&](auto law) {
+    names.emplace_back(decltype(law)::kName);
+    doc += std::string(names.size() > 1 ? ";" : "") + " " + decltype(law)::kName + " = " + decltype(law)::kTitle;
+  });
+  f.choice("model", names, std::string(dem::law_name(info.model)), doc + ".");
+  SchemaDecl family_keys{f};
+  dem::describe_family(family_keys, defaults);
+  dem::for_each_law([&](auto law) {
+    using Law = decltype(law);
+    if constexpr (Law::kHasParams) {
+      auto& t = f.section(Law::kName,
+                          std::string("Keys of the ") + Law::kName + " law (" + Law::kTitle + "), read when model = \"" +
+                              Law::kName + "\"; in a family of another law they are refused.",
+                          config::Presence::Defaults);
+      SchemaDecl law_keys{t};
+      Law::params(law_keys, defaults);
+      // Earlier versions wrote these keys in the family table with a prefix.
+      const std::string prefix = std::string(Law::kName) == "pbond" ? "pb_" : std::string(Law::kName) == "softbond" ? "sb_" : "hz_";
+      MovedKeys moved{f, prefix, Law::kName};
+      Law::params(moved, defaults);
+    }
+  });
 }
 
 void declare_dem(config::Section& root) {
   auto& d = *root.find("dem")->section;
-  d.real("density", "kg/m^3", 2650.0, "Grain density rho_s.").min(0.0, true);
-  d.real("damping", "-", 0.7, "Local (non-viscous) damping alpha (docs/theory.md 1.3).").min(0.0).max(1.0, true);
-  d.real("dt_safety", "-", 0.8, "Time step = safety * critical step (1.8).").min(0.0, true).max(1.0);
-  d.integer("dt_interval", "steps", 100, "Recompute the critical step every n steps.").min(1);
-  d.real("dt_fixed", "s", 0.0,
-         "Fixed time step instead of the automatic one (0: automatic); checked against the critical step "
-         "once balls exist (see dt_above_critical); specimen generation always uses the automatic one.")
-      .min(0.0);
-  d.real("skin_factor", "-", 0.15, "Verlet skin as a fraction of d_min (1.4).").min(0.0, true);
-  d.boolean("facet_spin", true, "Kinematic facet spin for ball-facet contacts (6.2).");
-  d.boolean("track_energy", true, "Accumulate dissipated energies (damping, friction, softening).");
+  {  // the world's keys, declared beside WorldParams (dem_node/core params.hpp)
+    dem::WorldParams defaults;
+    SchemaDecl world_keys{d};
+    dem::describe(world_keys, defaults);
+  }
   d.choice("dt_above_critical", {"error", "reduce"}, std::string("error"),
            "A dt_fixed above the critical step (1.8, without dt_safety) at a stage begin: error stops the run "
            "naming both values; reduce uses dt_safety x critical instead, with a warning (docs/stability.md).");
@@ -261,11 +284,7 @@ void declare_dem(config::Section& root) {
   d.reals("kick", "m/s", std::vector<double>{},
           "Stability studies: velocity [vx, vy, vz] given to the highest ball at the first stage that is not "
           "a specimen-generation stage; empty: none.");
-  declare_family(d, "ball_ball", {"softbond", 0.6248693519093275, false, "Ball-ball contacts."});
-  declare_family(d, "ball_wall", {"linear", 0.0, false, "Ball-platen contacts (UCS test, boxes)."});
-  declare_family(d, "ball_facet", {"pbond", 0.6248693519093275, true,
-                                   "Ball-interface facet contacts (DEM-continuum coupling, docs/theory.md 6.3)."});
-  declare_family(d, "ball_footing", {"linear", 0.5, false, "Ball-footing contacts (docs/theory.md 0.3: mu = 0.5)."});
+  for (const auto& fam : dem::kFamilies) declare_family(d, fam);
   auto& sp = d.section("specimen", "Specimen generation (docs/theory.md 0.4, 4).", config::Presence::Optional);
   sp.real("d_min", "m", 0.0655e-3, "Smallest particle diameter (before upscaling).").min(0.0, true);
   sp.real("d_max", "m", 0.181e-3, "Largest particle diameter (before upscaling).").min(0.0, true);
@@ -386,17 +405,13 @@ void declare_stages(config::Section& root) {
   auto& st = root.array("stage", "The run's stages, in order (staged initialisation, loading).",
                         config::Presence::Required);
   st.string("name", std::nullopt, "Stage name (logs, summary).");
-  st.choice("action",
-            {"cycle", "equilibrium", "geostatic", "generate", "servo", "bond", "replicate", "couple", "penetrate", "ucs"},
-            std::string("cycle"),
-            "What the nodes do in this stage (docs/stages.md). cycle: step the models as they are; equilibrium: "
-            "step until the unbalanced-force ratio is below 'ratio' (use until = \"done\"); geostatic: "
-            "(continuum) assign sigma_v = rho N g depth, sigma_h = K0 sigma_v, then as equilibrium. DEM "
-            "generation: generate (REV in a periodic cell), servo (compress the REV to sigma_v, sigma_h), bond "
-            "(install bonds), replicate (stack copies, open the boundaries). couple: interface set-up (facets from "
-            "the continuum's mesh, ball-facet bonds, depth scaling, facet bond forces; continuum: geostatic "
-            "stresses), gravity on, then as equilibrium. penetrate: the footing moves down at the rate of the "
-            "inertial number; the stage ends at 'depth'. ucs: unconfined compression between platens.");
+  std::vector<std::string> names;
+  std::string doc = "What the nodes do in this stage (docs/stages.md; [d] the DEM acts, [c] a continuum acts).";
+  for (const auto& a : actions()) {
+    names.emplace_back(a.name);
+    doc += std::string(" ") + a.name + " [" + (a.dem ? "d" : "") + (a.continuum ? "c" : "") + "]: " + a.doc;
+  }
+  st.choice("action", names, std::string("cycle"), doc);
   st.real("ratio", "-", 1e-5, "Equilibrium criterion: unbalanced-force ratio (FLAC3D ratio-average, docs/theory.md 5.11).")
       .min(0.0, true);
   st.real("k0", "-", std::nullopt, "K0 for 'geostatic' and 'couple'; \"auto\": nu/(1-nu) of each zone's material.")
@@ -462,16 +477,37 @@ void declare_stages(config::Section& root) {
       .max(1000000);
 }
 
-// Stage keys read by one group of actions only.
-const char* const kActionKeys[] = {"inertial_number", "plastic_zone_ratio", "mean_stress", "depth_ratio",
-                                   "speed_factor",    "ramp_depth_ratio",   "quasi_static_limit", "rock_young",
-                                   "strain_rate",     "max_strain",         "k0"};
-
 std::string num(double v) {
   std::ostringstream o;
   o << std::setprecision(6) << v;
   return o.str();
 }
+
+// Refuses a key of a law table set to a value other than its default in a family of another
+// law (the table has no effect there).
+struct OtherLawKeys {
+  const config::Scene& sc;
+  config::CheckContext& ctx;
+  std::string table, model;
+  void refuse_if(bool differs, const char* key) {
+    const std::string path = table + "." + key;
+    if (differs && sc.explicitly_set(path))
+      ctx.fail(path, "a key of the family's own law only (model = '" + model + "'; this table has no effect)",
+               "it set while model = '" + model + "'");
+  }
+  void real(const char* key, const char*, double& def, const dem::ParamRange&, const char*) {
+    refuse_if(sc.real(table + "." + key) != def, key);
+  }
+  void real_or_word(const char* key, const char*, double& def, const dem::ParamRange&, const char*, double, const char*) {
+    refuse_if(sc.real_or_word(table + "." + key) != std::optional<double>(def), key);
+  }
+  void flag(const char* key, bool& def, const char*) { refuse_if(sc.boolean(table + "." + key) != def, key); }
+  template <class E>
+  void choice(const char* key, E& def, std::initializer_list<dem::ParamOption<E>> options, const char*) {
+    for (const auto& o : options)
+      if (o.value == def) refuse_if(sc.string(table + "." + key) != o.name, key);
+  }
+};
 
 // Cross-field checks of the DEM part (the ranges of single keys are declared with the keys).
 void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
@@ -490,11 +526,26 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
     if (sc.string(f + ".model") == "softbond" && !(sc.real(f + ".emod") > 0))
       ctx.fail(f + ".emod", "a modulus > 0 Pa for the soft bond (its only stiffness set)", num(sc.real(f + ".emod")) + " Pa");
   }
+  // A law table of a family whose model is another law has no effect: refused when it sets a
+  // value other than the default (the effective scene of a run writes every key).
+  for (const auto& info : dem::kFamilies) {
+    const std::string fam = std::string("dem.") + info.name;
+    dem::ContactFamilyParams defaults = info.defaults();
+    const std::string model = sc.string(fam + ".model");
+    dem::for_each_law([&](auto law) {
+      using Law = decltype(law);
+      if constexpr (Law::kHasParams) {
+        if (model == Law::kName) return;
+        OtherLawKeys check{sc, ctx, fam + "." + Law::kName, model};
+        Law::params(check, defaults);
+      }
+    });
+  }
   const bool bonds = has_action("bond") || (has_action("generate") && sc.real_or_word("dem.specimen.bond_coordination"));
-  // Laws with a bond: pbond and softbond (dem_node/core laws/registry.hpp, kBond).
+  // Laws with a bond (laws/registry.hpp, kBond).
   auto can_bond = [&](const std::string& key) {
-    const std::string m = sc.string(key);
-    return m == "pbond" || m == "softbond";
+    dem::ContactModel m;
+    return dem::law_from_name(sc.string(key), m) && dem::law_has_bond(m);
   };
   if (bonds && !can_bond("dem.ball_ball.model"))
     ctx.fail("dem.ball_ball.model", "'pbond' or 'softbond' (the scene bonds the specimen: a bond stage, or "
@@ -571,14 +622,22 @@ config::Schema build() {
   declare_chain(root);
   declare_stages(root);
 
-  // Defaults of the action keys: the effective scene of a run (config::Scene::effective_toml)
-  // writes every key of every stage, so only a value other than the default is refused.
-  std::map<std::string, std::optional<double>> action_key_default;  // nothing: the key's word ("auto")
-  for (const char* key : kActionKeys) {
-    const config::Value& def = *root.find("stage")->section->find(key)->param->def;
-    action_key_default[key] = std::holds_alternative<double>(def) ? std::optional<double>(std::get<double>(def)) : std::nullopt;
-  }
-  s.check([action_key_default](const config::Scene& sc, config::CheckContext& ctx) {
+  // The keys only some actions read, with those actions and the key's default: the effective
+  // scene of a run (config::Scene::effective_toml) writes every key of every stage, so only a
+  // value other than the default is refused.
+  struct ActionKey {
+    std::vector<std::string> actions;
+    std::optional<double> def;  // nothing: the key's word ("auto")
+  };
+  std::map<std::string, ActionKey> action_keys;
+  for (const auto& a : actions())
+    for (const auto& key : a.keys) {
+      auto& k = action_keys[key];
+      k.actions.emplace_back(a.name);
+      const config::Value& def = *root.find("stage")->section->find(key)->param->def;
+      k.def = std::holds_alternative<double>(def) ? std::optional<double>(std::get<double>(def)) : std::nullopt;
+    }
+  s.check([action_keys](const config::Scene& sc, config::CheckContext& ctx) {
     if (!sc.has("dem") && !sc.has("continuum"))
       ctx.fail("dem", "a [dem] or a [continuum] section (a scene needs at least one node)", "neither");
     if (sc.has("coupling") && !(sc.has("dem") && sc.has("continuum")))
@@ -611,17 +670,32 @@ config::Schema build() {
       auto e = sc.at("stage", i);
       std::string p = "stage[" + std::to_string(i) + "]";
       const std::string act = e.string("action");
-      for (const char* key : kActionKeys) {
-        const auto* acts = stage_key_actions(key);
-        if (e.explicitly_set(key) && e.real_or_word(key) != action_key_default.at(key) &&
-            std::find(acts->begin(), acts->end(), act) == acts->end()) {
+      for (const auto& [key, k] : action_keys) {
+        if (e.explicitly_set(key) && e.real_or_word(key) != k.def &&
+            std::find(k.actions.begin(), k.actions.end(), act) == k.actions.end()) {
           std::string list;
-          for (auto& a : *acts) list += (list.empty() ? "'" : "' or '") + a;
+          for (auto& a : k.actions) list += (list.empty() ? "'" : "' or '") + a;
           ctx.fail(p + "." + key, "a key of a " + list + "' stage only (it has no effect in a '" + act + "' stage)",
                    "it in a '" + act + "' stage");
         }
       }
       auto nodes = e.strings("nodes");
+      // Every role that takes part must act in the action (a continuum cannot generate a specimen).
+      {
+        const ActionInfo* info = nullptr;
+        for (const auto& a : actions())
+          if (act == a.name) info = &a;
+        const std::vector<std::string>& taking = nodes.empty() ? present : nodes;
+        for (const auto& r : taking) {
+          const bool acts = r == "dem" ? info->dem : info->continuum;
+          if (acts || std::find(present.begin(), present.end(), r) == present.end()) continue;
+          std::string can;
+          if (info->dem) can += "'dem'";
+          if (info->continuum) can += std::string(can.empty() ? "" : ", ") + "'continuum'";
+          ctx.fail(p + ".nodes", "roles that act in a '" + act + "' stage (" + can + ")",
+                   "'" + r + "'" + (nodes.empty() ? " (an empty list: all of the scene's roles)" : ""));
+        }
+      }
       for (std::size_t j = 0; j < nodes.size(); ++j)
         if (std::find(present.begin(), present.end(), nodes[j]) == present.end()) {
           std::string have;
@@ -666,13 +740,39 @@ DemBlock dem_block(const config::Scene& s) {
   return b;
 }
 
-const std::vector<std::string>* stage_key_actions(const std::string& key) {
-  static const std::vector<std::string> penetrate{"penetrate"}, ucs{"ucs"}, geostatic{"geostatic", "couple"};
-  if (key == "strain_rate" || key == "max_strain") return &ucs;
-  if (key == "k0") return &geostatic;
-  for (const char* k : kActionKeys)
-    if (key == k) return &penetrate;
-  return nullptr;
+const std::vector<ActionInfo>& actions() {
+  static const std::vector<ActionInfo> table{
+      {Action::kCycle, "cycle", "step the models as they are.", false, true, true, {}},
+      {Action::kEquilibrium, "equilibrium",
+       "step until the unbalanced-force ratio is below 'ratio' (use until = \"done\").", false, true, true, {}},
+      {Action::kGeostatic, "geostatic",
+       "(continuum) assign sigma_v = rho N g depth, sigma_h = K0 sigma_v, then as equilibrium.", false, false, true,
+       {"k0"}},
+      {Action::kGenerate, "generate", "DEM generation: the REV in a periodic cell by radius expansion.", true, true,
+       false, {}},
+      {Action::kServo, "servo", "DEM generation: compress the REV to sigma_v, sigma_h.", true, true, false, {}},
+      {Action::kBond, "bond", "DEM generation: install bonds.", true, true, false, {}},
+      {Action::kReplicate, "replicate", "DEM generation: stack copies of the REV, open the boundaries.", true, true,
+       false, {}},
+      {Action::kCouple, "couple",
+       "interface set-up (facets from the continuum's mesh, ball-facet bonds, depth scaling, facet bond forces; "
+       "continuum: geostatic stresses), gravity on, then as equilibrium.",
+       false, true, true, {"k0"}},
+      {Action::kPenetrate, "penetrate",
+       "the footing moves down at the rate of the inertial number; the stage ends at 'depth_ratio'.", false, true,
+       true,
+       {"inertial_number", "plastic_zone_ratio", "mean_stress", "depth_ratio", "speed_factor", "ramp_depth_ratio",
+        "quasi_static_limit", "rock_young"}},
+      {Action::kUcs, "ucs", "unconfined compression between platens (DEM).", false, true, false,
+       {"strain_rate", "max_strain"}},
+  };
+  return table;
+}
+
+const ActionInfo& action_info(Action a) {
+  for (const auto& info : actions())
+    if (info.id == a) return info;
+  throw std::logic_error("stage action without a row in schema::actions()");
 }
 
 const config::Schema& scene_schema() {
@@ -699,6 +799,8 @@ std::vector<Stage> stages(const config::Scene& s) {
     Stage st;
     st.name = e.string("name");
     st.action = e.string("action");
+    for (const auto& a : actions())  // the schema admits only the table's names
+      if (st.action == a.name) st.kind = a.id;
     st.nodes = e.strings("nodes");
     if (st.nodes.empty()) st.nodes = all;
     st.steps = e.integer("steps");

@@ -5,6 +5,7 @@
 // A section that is absent switches its effect off and costs nothing: no [dem] -> no DEM node,
 // no [continuum] -> no continuum node, no [coupling] -> no interface exchange, and so on.
 #pragma once
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -23,9 +24,38 @@ std::string executable(const config::Scene& s, const std::string& role);
 // process may run on (its affinity mask: taskset and cgroup cpusets count), at least 1.
 int run_threads(const config::Scene& s);
 
+// The stage actions (docs/stages.md): the one table of what a [[stage]] may do. The schema's
+// `action` choice, its doc, the keys each action reads and which roles act in it come from
+// here; the nodes switch on Action, so a new action is one row here plus its case in each node
+// that acts in it (the compiler names a node's switch that misses it).
+enum class Action : std::uint8_t {
+  kCycle,
+  kEquilibrium,
+  kGeostatic,
+  kGenerate,
+  kServo,
+  kBond,
+  kReplicate,
+  kCouple,
+  kPenetrate,
+  kUcs,
+};
+struct ActionInfo {
+  Action id;
+  const char* name;
+  const char* doc;
+  bool preparation;  // DEM specimen preparation: periodic REV, own step rule, no gravity, before model time 0
+  bool dem;          // the DEM node acts in it
+  bool continuum;    // a continuum node acts in it
+  std::vector<std::string> keys;  // [[stage]] keys read by this action only (and others that list them)
+};
+const std::vector<ActionInfo>& actions();
+const ActionInfo& action_info(Action a);
+
 // Stage list, read once.
 struct Stage {
   std::string name, action;
+  Action kind = Action::kCycle;    // the action, as the nodes switch on it
   std::vector<std::string> nodes;  // roles that take part
   std::int64_t steps = 0;          // step budget (coupling steps)
   bool until_done = false;         // stop when every node reports its criterion met
@@ -50,9 +80,5 @@ struct DemBlock {
 };
 DemBlock dem_block(const config::Scene& s);
 
-// Stage keys that only one group of actions reads (docs/stages.md); the checks refuse such a key
-// written in a stage of another action. Returns the actions of `key`, or nothing for a key that
-// every action reads.
-const std::vector<std::string>* stage_key_actions(const std::string& key);
 
 }  // namespace demfdm::schema

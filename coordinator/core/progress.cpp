@@ -63,7 +63,7 @@ std::optional<std::string> Progress::observe(const schema::Stage& st, std::int64
   double eta = std::numeric_limits<double>::quiet_NaN();
   bool bound = false;
   const double disp = value(reps, "dem", "footing_disp_m");
-  if (st.action == "penetrate" && std::isfinite(disp) && d_f_ > 0) {
+  if (st.kind == schema::Action::kPenetrate && std::isfinite(disp) && d_f_ > 0) {
     const double target = st.view.real("depth_ratio") * d_f_;
     line += " | settlement " + num("%.3g", disp / d_f_) + " D_f of " + num("%.3g", target / d_f_) + " (" +
             num("%.0f", 100.0 * disp / target) + " %)";

@@ -66,9 +66,10 @@ def bond_strength(scene):
     bb = scene.get("dem", {}).get("ball_ball", {})
     model = bb.get("model", "softbond")  # the scene schema's default (docs/scene-reference.md)
     if model == "softbond":
-        return float(bb.get("sb_ten", 4.5e5)), "dem.ball_ball.sb_ten"
-    if model == "pbond" and bb.get("pb_ten", 4.5e5) != "unbreakable":
-        return float(bb.get("pb_ten", 4.5e5)), "dem.ball_ball.pb_ten"
+        return float(bb.get("softbond", {}).get("ten", 4.5e5)), "dem.ball_ball.softbond.ten"
+    pb_ten = bb.get("pbond", {}).get("ten", 4.5e5)
+    if model == "pbond" and pb_ten != "unbreakable":
+        return float(pb_ten), "dem.ball_ball.pbond.ten"
     return None, None
 
 

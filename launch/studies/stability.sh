@@ -67,7 +67,7 @@ cases = {
     "soft_continuum": lambda: young(lambda e: e / 100),
     "stiff_continuum": lambda: young(lambda e: e * 100),
     "fast_footing": lambda: [penetration_stage() + ".speed_factor=10"],
-    "bond_cascade": lambda: ["dem.ball_ball.sb_ten=4.5e3", "dem.ball_ball.sb_coh=4.5e3"],
+    "bond_cascade": lambda: ["dem.ball_ball.softbond.ten=4.5e3", "dem.ball_ball.softbond.coh=4.5e3"],
     "undamped": lambda: ["dem.damping=0.0", 'dem.specimen.depth_scaling="none"'],
     "dt_09": lambda: [f"dem.dt_fixed={0.9 * lo:.6e}"],
     "dt_above": lambda: [f"dem.dt_fixed={3 * hi:.6e}"],

@@ -894,3 +894,33 @@ TEST(ConfigScene, IntegerOrWord) {
   ASSERT_EQ(sched_getaffinity(0, sizeof set, &set), 0);
   EXPECT_EQ(demfdm::schema::run_threads(cfg::Scene::parse("[run]\nthreads = \"auto\"\n" + stage, "r.toml", sc)), CPU_COUNT(&set));
 }
+
+// The stage-action table (schema::actions()) is the one list of actions: the schema's choice
+// holds its names in order, each row's own keys are declared stage keys, preparation is the
+// DEM's specimen generation, and a read stage carries the row's Action.
+TEST(SceneSchema, StageActionsAreOneTable) {
+  namespace sch = demfdm::schema;
+  const auto& sc = sch::scene_schema();
+  const auto* stage = sc.root().find("stage")->section;
+  const auto* action = stage->find("action")->param;
+  ASSERT_EQ(action->choices.size(), sch::actions().size());
+  std::vector<std::string> preparation;
+  for (std::size_t i = 0; i < sch::actions().size(); ++i) {
+    const auto& a = sch::actions()[i];
+    EXPECT_EQ(action->choices[i], a.name);
+    EXPECT_EQ(&sch::action_info(a.id), &a);
+    EXPECT_TRUE(a.dem || a.continuum) << a.name;
+    for (const auto& key : a.keys) EXPECT_NE(stage->find(key), nullptr) << a.name << "." << key;
+    if (a.preparation) {
+      preparation.emplace_back(a.name);
+      EXPECT_FALSE(a.continuum) << a.name << ": preparation is the DEM's alone";
+    }
+  }
+  EXPECT_EQ(preparation, (std::vector<std::string>{"generate", "servo", "bond", "replicate"}));
+  std::string text = "[dem]\n";
+  for (const char* a : {"generate", "cycle", "ucs", "bond"})
+    text += std::string("[[stage]]\nname = \"") + a + "\"\naction = \"" + a + "\"\nsteps = 1\n";
+  const auto stages = sch::stages(cfg::Scene::parse(text, "a.toml", sc));
+  ASSERT_EQ(stages.size(), 4u);
+  for (const auto& st : stages) EXPECT_EQ(st.name, sch::action_info(st.kind).name);
+}

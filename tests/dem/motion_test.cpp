@@ -144,7 +144,7 @@ TEST(Motion, InclineSliding) {
   std::printf("sliding: a/ref-1 = %.2e spin/ref-1 = %.2e\n", a / ref - 1, std::abs(spin) / spin_ref - 1);
 }
 
-// Bad parameters are rejected with a sentence naming the field.
+// Bad parameters are rejected with a sentence naming the field by its scene key.
 TEST(Params, RejectsBadDamping) {
   WorldParams p;
   p.local_damping = 1.5;
@@ -152,7 +152,7 @@ TEST(Params, RejectsBadDamping) {
     World w(p);
     FAIL() << "expected std::invalid_argument";
   } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("local_damping"), std::string::npos);
+    EXPECT_NE(std::string(e.what()).find("'dem.damping'"), std::string::npos) << e.what();
   }
 }
 

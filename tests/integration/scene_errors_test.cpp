@@ -167,7 +167,7 @@ TEST(SceneErrors, CrossFieldAndNodeChecksRefuseAtCheck) {
     const char* key;  // the key the line must name
   };
   const Bad cases[] = {
-      {"dem.ball_ball.sb_mcf=0", "dem.ball_ball.sb_mcf"},           // the engine refused it only at start
+      {"dem.ball_ball.softbond.mcf=0", "dem.ball_ball.softbond.mcf"},           // the engine refused it only at start
       {"dem.ball_ball.emod=inf", "dem.ball_ball.emod"},             // no key accepts infinity
       {"continuum.mesh.size_near=inf", "continuum.mesh.size_near"},
       {"dem.ball_ball.emod=0", "dem.ball_ball.emod"},               // soft bond: its only stiffness
@@ -184,6 +184,8 @@ TEST(SceneErrors, CrossFieldAndNodeChecksRefuseAtCheck) {
       {"dem.ball_facet.model=linear", "dem.ball_facet.model"},      // the couple stage bonds to the facets
       {"continuum.mesh.size_near=5e-3", "continuum.mesh.size_near"},  // zones larger than size_far
       {"dem.dt_fixed=1e-3", "dem.dt_fixed"},                        // above any critical step (dem_node --check)
+      {"dem.ball_ball.pbond.ten=1e6", "dem.ball_ball.pbond.ten"},   // a table of another law (model softbond)
+      {"stage.generate.nodes=[\"dem\", \"continuum\"]", "stage.generate.nodes"},  // a continuum cannot generate
   };
   const auto dir = scratch("demfdm-crossfield-" + std::to_string(getpid()));
   fs::create_directories(dir);

@@ -76,7 +76,7 @@ class Plot(unittest.TestCase):
         np.testing.assert_allclose(line.get_ydata(), f, rtol=0, atol=1e-15)
         self.assertEqual(raw.get_xlabel(), "settlement at model scale [mm]")
         self.assertEqual(raw.get_ylabel(), "footing load at model scale [N]")
-        # The scene gives sb_ten but no model: the default softbond, so q / sigma_c is drawn.
+        # The scene gives softbond.ten but no model: the default softbond, so q / sigma_c is drawn.
         self.assertIn("q / sigma_c", norm.get_ylabel())
         q = f / (math.pi * mk.D_F ** 2 / 4)
         np.testing.assert_allclose(norm.lines[0].get_xdata(), s / mk.D_F, rtol=1e-15)

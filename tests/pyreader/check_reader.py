@@ -65,7 +65,7 @@ class Synthetic(unittest.TestCase):
         self.assertTrue(math.isnan(d.wall_s))
         self.assertEqual(d.stages, ["gravity", "penetrate"])  # from the history files
         self.assertEqual(d.penetration_stage(), "penetrate")   # from the scene's actions
-        self.assertEqual(d.bond_strength, 0.45e6)              # scene: default softbond, default sb_ten
+        self.assertEqual(d.bond_strength, 0.45e6)              # scene: default softbond, default softbond.ten
 
     def test_stages(self):
         self.assertEqual(self.a.stages, ["generate", "servo", "bond", "gravity", "penetrate"])

@@ -89,7 +89,7 @@ def penetrate_columns(scale=1.0, offset=0.0, rows=41, first=0):
 
 
 def make_run(root, name="run-a", scale=1.0, offset=0.0, rows=41, first=0, with_result=True, h5=True,
-             ball_ball='[dem.ball_ball]\nsb_ten = %r\n' % SIGMA_C, wall_s=12.5, summary_file=True):
+             ball_ball='[dem.ball_ball.softbond]\nten = %r\n' % SIGMA_C, wall_s=12.5, summary_file=True):
     """Writes a run folder and returns its path. Run A: the defaults."""
     run = os.path.join(root, name)
     os.makedirs(run)

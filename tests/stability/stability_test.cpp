@@ -159,7 +159,7 @@ INSTANTIATE_TEST_SUITE_P(
         // 10 x the inertial-number rule's footing speed.
         Case{"fast_footing", {{"mean_stress = 1e6", "mean_stress = 1e6\nspeed_factor = 10"}}},
         // Soft bonds 100 x weaker than Table 1: most break under the footing.
-        Case{"bond_cascade", {{"[dem.specimen]", "[dem.ball_ball]\nsb_ten = 4.5e3\nsb_coh = 4.5e3\n\n[dem.specimen]"}}}),
+        Case{"bond_cascade", {{"[dem.specimen]", "[dem.ball_ball.softbond]\nten = 4.5e3\ncoh = 4.5e3\n\n[dem.specimen]"}}}),
     [](const auto& info) { return std::string(info.param.name); });
 
 // Undamped DEM (dem.damping = 0, depth scaling off so that every contact force derives from

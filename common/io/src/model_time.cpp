@@ -3,13 +3,9 @@
 
 namespace demfdm::io {
 
-bool is_preparation_action(std::string_view a) {
-  return a == "generate" || a == "servo" || a == "bond" || a == "replicate";
-}
-
-ModelClock::ModelClock(const std::vector<std::string_view>& actions) : first_(actions.size()) {
-  for (std::size_t i = 0; i < actions.size(); ++i)
-    if (!is_preparation_action(actions[i])) {
+ModelClock::ModelClock(const std::vector<bool>& preparation) : first_(preparation.size()) {
+  for (std::size_t i = 0; i < preparation.size(); ++i)
+    if (!preparation[i]) {
       first_ = i;
       break;
     }

@@ -1,6 +1,7 @@
 // Parameter validation: every error names the field, the expected range and the value.
 #include "demfdm/dem/params.hpp"
 
+#include <cmath>
 #include <sstream>
 
 #include "demfdm/dem/laws/registry.hpp"
@@ -30,47 +31,66 @@ void require(bool ok, const std::string& field, const char* range, double value)
 }
 }  // namespace
 
-void validate(const ContactFamilyParams& p, const std::string& w) {
-  require(p.linear.emod >= 0.0, w + ".linear.emod", ">= 0 Pa", p.linear.emod);
-  require(p.linear.kratio > 0.0, w + ".linear.kratio", "> 0", p.linear.kratio);
-  require(p.linear.fric >= 0.0, w + ".linear.fric", ">= 0", p.linear.fric);
-  require(p.linear.kn_fixed >= 0.0, w + ".linear.kn_fixed", ">= 0 N/m", p.linear.kn_fixed);
-  require(p.pbond.emod >= 0.0, w + ".pbond.emod", ">= 0 Pa", p.pbond.emod);
-  require(p.pbond.kratio > 0.0, w + ".pbond.kratio", "> 0", p.pbond.kratio);
-  require(p.pbond.rmul > 0.0, w + ".pbond.rmul", "> 0", p.pbond.rmul);
-  require(p.pbond.mcf >= 0.0 && p.pbond.mcf <= 1.0, w + ".pbond.mcf", "in [0, 1]", p.pbond.mcf);
-  require(p.pbond.ten >= 0.0, w + ".pbond.ten", ">= 0 Pa", p.pbond.ten);
-  require(p.pbond.coh >= 0.0, w + ".pbond.coh", ">= 0 Pa", p.pbond.coh);
-  require(p.pbond.fa_deg >= 0.0 && p.pbond.fa_deg < 90.0, w + ".pbond.fa_deg", "in [0, 90) deg",
-          p.pbond.fa_deg);
-  const auto& s = p.softbond;
-  require(s.rmul > 0.0, w + ".softbond.rmul", "> 0", s.rmul);
-  require(s.mcf > 0.0 && s.mcf <= 1.0, w + ".softbond.mcf", "in (0, 1]", s.mcf);
-  require(s.bmul >= 0.0, w + ".softbond.bmul", ">= 0", s.bmul);
-  require(s.ten >= 0.0, w + ".softbond.ten", ">= 0 Pa", s.ten);
-  require(s.coh >= 0.0, w + ".softbond.coh", ">= 0 Pa", s.coh);
-  require(s.fa_deg >= 0.0 && s.fa_deg < 90.0, w + ".softbond.fa_deg", "in [0, 90) deg", s.fa_deg);
-  require(s.soft >= 0.0, w + ".softbond.soft (zeta)", ">= 0", s.soft);
-  require(s.cut >= 0.0, w + ".softbond.cut (gamma)", ">= 0", s.cut);
-  require(s.twist_factor >= 0.0, w + ".softbond.twist_factor", ">= 0", s.twist_factor);
-  require(p.hertz.shear > 0.0 && std::isfinite(p.hertz.shear), w + ".hertz.shear", "> 0 Pa and finite", p.hertz.shear);
-  require(p.hertz.poisson >= 0.0 && p.hertz.poisson < 0.5, w + ".hertz.poisson", "in [0, 0.5)", p.hertz.poisson);
+namespace {
+// The range checks of a parameter table (params.hpp): each key against its declared range,
+// named as the scene names it.
+struct RangeCheck {
+  std::string prefix;  // "dem.ball_ball." or "dem.ball_ball.softbond."
+  static std::string text(const ParamRange& r) {
+    std::ostringstream s;
+    if (r.has_lo() && r.has_hi())
+      s << "in " << (r.lo_open ? "(" : "[") << r.lo << ", " << r.hi << (r.hi_open ? ")" : "]");
+    else if (r.has_lo())
+      s << (r.lo_open ? "> " : ">= ") << r.lo << " and finite";
+    else if (r.has_hi())
+      s << (r.hi_open ? "< " : "<= ") << r.hi;
+    else
+      s << "finite";
+    return s.str();
+  }
+  void real(const char* key, const char* unit, const double& v, const ParamRange& r, const char*) {
+    if (r.contains(v)) return;
+    const std::string range = text(r) + (std::string(unit) == "-" ? "" : std::string(" ") + unit);
+    require(false, prefix + key, range.c_str(), v);
+  }
+  void real_or_word(const char* key, const char* unit, const double& v, const ParamRange& r, const char*,
+                    double word_value, const char* doc) {
+    if (v == word_value || (std::isnan(v) && std::isnan(word_value))) return;
+    real(key, unit, v, r, doc);
+  }
+  void flag(const char*, const bool&, const char*) {}
+  void integer(const char* key, const char*, const int& v, int lo, int hi, const char*) {
+    const std::string range = "in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
+    require(v >= lo && v <= hi, prefix + key, range.c_str(), v);
+  }
+  template <class E>
+  void choice(const char*, const E&, std::initializer_list<ParamOption<E>>, const char*) {}
+};
+}  // namespace
+
+void validate(const ContactFamilyParams& p, const std::string& family) {
+  auto& f = const_cast<ContactFamilyParams&>(p);  // the tables bind fields; RangeCheck only reads
+  RangeCheck family_keys{"dem." + family + "."};
+  describe_family(family_keys, f);
+  for_each_law([&](auto law) {
+    RangeCheck law_keys{"dem." + family + "." + decltype(law)::kName + "."};
+    decltype(law)::params(law_keys, f);
+  });
+  // Not scene keys: benchmarks' fixed stiffness.
+  require(p.linear.kn_fixed >= 0.0, "dem." + family + " kn_fixed", ">= 0 N/m", p.linear.kn_fixed);
+  // Cross-field: the soft bond's only stiffness set is the linear part.
   if (p.model == ContactModel::kSoftBond)
-    require(p.linear.emod > 0.0 || p.linear.kn_fixed > 0.0, w + ".linear.emod",
+    require(p.linear.emod > 0.0 || p.linear.kn_fixed > 0.0, "dem." + family + ".emod",
             "> 0 for the soft bond (its only stiffness set)", p.linear.emod);
 }
 
 void validate(const WorldParams& p) {
-  require(p.density > 0.0, "density", "> 0 kg/m^3", p.density);
-  require(p.local_damping >= 0.0 && p.local_damping < 1.0, "local_damping", "in [0, 1)",
-          p.local_damping);
+  RangeCheck world_keys{"dem."};
+  describe(world_keys, const_cast<WorldParams&>(p));  // the table binds fields; RangeCheck only reads
+  // Not scene keys here (gravity comes from [gravity], the skin from skin_factor).
   require(p.g0 >= 0.0, "g0", ">= 0 m/s^2", p.g0);
   require(p.g_level >= 0.0, "g_level", ">= 0", p.g_level);
-  require(p.dt_safety > 0.0 && p.dt_safety <= 1.0, "dt_safety", "in (0, 1]", p.dt_safety);
-  require(p.dt_interval >= 1, "dt_interval", ">= 1 step", p.dt_interval);
-  require(p.dt_fixed >= 0.0, "dt_fixed", ">= 0 s", p.dt_fixed);
   require(p.skin >= 0.0, "skin", ">= 0 m", p.skin);
-  require(p.skin_factor > 0.0, "skin_factor", "> 0", p.skin_factor);
   require(p.threads >= 0, "threads", ">= 0", p.threads);
   if (p.periodic.enabled) {
     for (int k = 0; k < 3; ++k)

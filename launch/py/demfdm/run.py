@@ -120,8 +120,8 @@ class Run:
     def bond_strength(self):
         """sigma_c [Pa], the ball-ball bond's tensile strength: summary.json's centrifuge ground
         sigma_c_Pa, else a penetration stage's footing_rate bond_strength_Pa, else the scene
-        (dem.ball_ball: model softbond by default, sb_ten 0.45 MPa by default; pbond: pb_ten when
-        >= 0); None for a run without bonds or DEM."""
+        (dem.ball_ball: model softbond by default, softbond.ten 0.45 MPa by default; pbond:
+        pbond.ten unless "unbreakable"); None for a run without bonds or DEM."""
         v = (self.centrifuge or {}).get("ground", {}).get("sigma_c_Pa")
         if v is None:
             for st in reversed(self.summary.get("stages", [])):
@@ -135,9 +135,10 @@ class Run:
         bb = self.scene["dem"].get("ball_ball", {})
         model = bb.get("model", DEFAULT_BALL_BALL_MODEL)
         if model == "softbond":
-            return float(bb.get("sb_ten", 0.45e6))
-        if model == "pbond" and bb.get("pb_ten", 0.45e6) != "unbreakable":
-            return float(bb.get("pb_ten", 0.45e6))
+            return float(bb.get("softbond", {}).get("ten", 0.45e6))
+        pb_ten = bb.get("pbond", {}).get("ten", 0.45e6)
+        if model == "pbond" and pb_ten != "unbreakable":
+            return float(pb_ten)
         return None
 
     @property

@@ -2,8 +2,8 @@
 // "Time").
 //
 // Rule: model time t = 0 at the beginning of the run's first stage that is not specimen
-// preparation (actions generate, servo, bond, replicate: the specimen-generation stages of
-// dem_node, docs/stages.md). Every node writes frame time = node time - node time at that
+// preparation (the actions the stage-action table marks so, schema::actions(): generate, servo,
+// bond, replicate, the specimen-generation stages of dem_node, docs/stages.md). Every node writes frame time = node time - node time at that
 // moment, so DEM and continuum frames of the same step carry the same time and ParaView's
 // time slider lines them up. DEM frames written during the preparation get negative times
 // (still strictly increasing); they are written before the origin is known and are given
@@ -22,19 +22,16 @@
 #pragma once
 
 #include <cstddef>
-#include <string_view>
 #include <vector>
 
 namespace demfdm::io {
 
-/// A specimen-preparation stage action: generate, servo, bond, replicate.
-bool is_preparation_action(std::string_view action);
-
 class ModelClock {
  public:
   ModelClock() = default;
-  /// `actions`: the action of every [[stage]] of the scene, in order.
-  explicit ModelClock(const std::vector<std::string_view>& actions);
+  /// `preparation`: for every [[stage]] of the scene, in order, whether its action is specimen
+  /// preparation.
+  explicit ModelClock(const std::vector<bool>& preparation);
 
   /// Index of the first stage that is not preparation (the number of stages when all are).
   std::size_t first_model_stage() const noexcept { return first_; }

@@ -100,6 +100,9 @@ struct LawDefaults {
   static constexpr bool kBond = false;             // per-contact BondHist storage
   static constexpr bool kNeedsReff = false;        // Kin::reff read by update()
   static constexpr bool kStiffnessVaries = false;  // stiffness grows with the overlap: step rechecked every step
+  static constexpr bool kHasParams = false;        // own scene keys, table [dem.<family>.<kName>]
+  /// The law's own scene keys (params.hpp "Parameter tables"); none by default.
+  template <class V> static void params(V& /*v*/, ContactFamilyParams& /*f*/) {}
 };
 
 /// Select without a branch (a vector blend inside `omp simd` loops).

@@ -103,6 +103,101 @@ struct HertzParams {
   double poisson = 0.25;  // [-] ν, Poisson ratio of the grain material, in [0, 0.5)
 };
 
+// ---------------------------------------------------------------------------------------------
+// Parameter tables: each scene key of a contact family is declared once, beside its field, by
+// a describe() function that names the key, its unit, its range and its doc, and binds the
+// field. The same table drives the scene schema (common/schema: unit, default = the field's
+// initial value, range, doc, --help-scene), the read of a scene into these structs
+// (dem_node/core scene_params.cpp) and the range checks of validate() below, which name the
+// scene key. A visitor V supplies:
+//   v.real(key, unit, double& field, ParamRange, doc)
+//   v.real_or_word(key, unit, double& field, ParamRange, word, double word_value, doc)
+//       (the key may hold `word` instead of a number; the field then holds word_value)
+//   v.flag(key, bool& field, doc)
+//   v.integer(key, unit, int& field, lo, hi, doc)          (closed range [lo, hi])
+//   v.choice(key, E& field, {{"name", E::kValue}, ...}, doc)
+// The family-wide keys (the linear part) are declared by describe_family(); each law's own keys
+// by its law type's params() (laws/*.hpp), in the scene table [dem.<family>.<law name>].
+
+/// Range of a declared real: lower and upper bounds, each closed or open; none = unbounded.
+struct ParamRange {
+  double lo = -INFINITY, hi = INFINITY;
+  bool lo_open = true, hi_open = true;
+  static constexpr ParamRange ge(double a) { return {a, INFINITY, false, true}; }
+  static constexpr ParamRange gt(double a) { return {a, INFINITY, true, true}; }
+  constexpr ParamRange le(double b) const { return {lo, b, lo_open, false}; }
+  constexpr ParamRange lt(double b) const { return {lo, b, lo_open, true}; }
+  bool has_lo() const { return std::isfinite(lo); }
+  bool has_hi() const { return std::isfinite(hi); }
+  bool contains(double v) const {
+    return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi) && std::isfinite(v);
+  }
+};
+
+/// One named value of an enum key.
+template <class E>
+struct ParamOption {
+  const char* name;
+  E value;
+};
+
+template <class V>
+void describe(V& v, LinearParams& p) {
+  v.real("emod", "Pa", p.emod, ParamRange::ge(0.0),
+         "Deformability modulus E* of the linear part (soft bond: its only stiffness; docs/theory.md 1.7).");
+  v.real("kratio", "-", p.kratio, ParamRange::gt(0.0), "Normal-to-shear stiffness ratio kappa* (1.7).");
+  v.real("fric", "-", p.fric, ParamRange::ge(0.0), "Friction coefficient mu of unbonded contacts (1.7).");
+  v.choice("wall_length", p.wall_length, {{"radius", WallLength::kRadius}, {"diameter", WallLength::kDiameter}},
+           "Deformability length L of ball-wall contacts: R_ball (default) or 2 R_ball (1.7, U6).");
+}
+
+template <class V>
+void describe(V& v, ParallelBondParams& p) {
+  v.real("emod", "Pa", p.emod, ParamRange::ge(0.0), "Parallel bond modulus E-bar* (2.2).");
+  v.real("kratio", "-", p.kratio, ParamRange::gt(0.0), "Parallel bond stiffness ratio kappa-bar* (2.2).");
+  v.real("rmul", "-", p.rmul, ParamRange::gt(0.0), "Parallel bond radius multiplier lambda-bar (2.2).");
+  v.real("mcf", "-", p.mcf, ParamRange::ge(0.0).le(1.0), "Parallel bond moment contribution factor beta-bar (2.5).");
+  v.real_or_word("ten", "Pa", p.ten, ParamRange::ge(0.0), "unbreakable", INFINITY,
+                 "Parallel bond tensile strength sigma-bar_c (2.5); \"unbreakable\": no tensile failure.");
+  v.real_or_word("coh", "Pa", p.coh, ParamRange::ge(0.0), "unbreakable", INFINITY,
+                 "Parallel bond cohesion c-bar (2.5); \"unbreakable\": no shear failure.");
+  v.real("fa", "deg", p.fa_deg, ParamRange::ge(0.0).lt(90.0), "Parallel bond friction angle phi-bar (2.5).");
+  v.flag("zero_linear", p.zero_linear,
+         "Give the linear part zero stiffness when bonding (interface bonds: no repulsion from initial overlaps, "
+         "docs/theory.md 2.6).");
+}
+
+template <class V>
+void describe(V& v, SoftBondParams& p) {
+  v.real("rmul", "-", p.rmul, ParamRange::gt(0.0), "Soft bond radius multiplier lambda (3.3).");
+  v.real("mcf", "-", p.mcf, ParamRange::gt(0.0).le(1.0), "Soft bond moment contribution factor beta (3.3).");
+  v.real("bmul", "-", p.bmul, ParamRange::ge(0.0), "Soft bond bending-friction multiplier lambda_b (3.5).");
+  v.real("ten", "Pa", p.ten, ParamRange::ge(0.0), "Soft bond tensile strength sigma_c (3.2).");
+  v.real("coh", "Pa", p.coh, ParamRange::ge(0.0), "Soft bond cohesion c (3.2).");
+  v.real("fa", "deg", p.fa_deg, ParamRange::ge(0.0).lt(90.0), "Soft bond friction angle phi (3.2).");
+  v.real("soft", "-", p.soft, ParamRange::ge(0.0), "Softening factor zeta: softening slope -k_n/zeta (3.3; 0: brittle).");
+  v.real("cut", "-", p.cut, ParamRange::ge(0.0), "Softening tensile-strength factor gamma: break at gamma sigma_c (3.3).");
+  v.real("twist", "-", p.twist_factor, ParamRange::ge(0.0),
+         "Unbonded twisting limit factor: |M_t| <= f mu F_n R (3.5, U3).");
+  v.choice("return", p.ret, {{"associated", SoftReturn::kAssociated}, {"radial", SoftReturn::kRadial}},
+           "Return while softening (3.3; a reconstruction, default associated).");
+  v.choice("unload", p.unload, {{"elastic", SoftUnload::kElastic}, {"secant", SoftUnload::kSecant}},
+           "Unloading from the softening branch (3.3, U1; default elastic with plastic offset).");
+  v.choice("cohesion_softening", p.cohesion,
+           {{"none", CohesionSoftening::kNone}, {"proportional", CohesionSoftening::kProportional}},
+           "Cohesion while softening in tension (3.4; default untouched).");
+  v.flag("bending_in_softening", p.bending_in_softening,
+         "Bending drives softening with the normal opening (PFC); false: normal only (Ma & Huang; 3.3).");
+  v.choice("unbonded_moments", p.moments, {{"jiang", UnbondedMoments::kJiang}, {"none", UnbondedMoments::kNone}},
+           "Moment limits of unbonded soft-bond contacts (3.5, U3).");
+}
+
+template <class V>
+void describe(V& v, HertzParams& p) {
+  v.real("shear", "Pa", p.shear, ParamRange::gt(0.0), "Shear modulus G of the grain material (1.9).");
+  v.real("poisson", "-", p.poisson, ParamRange::ge(0.0).lt(0.5), "Poisson ratio nu of the grain material (1.9).");
+}
+
 /// Everything that defines the law of one contact family (ball–ball, ball–wall, …).
 struct ContactFamilyParams {
   ContactModel model = ContactModel::kLinear;  // [-] model of the family
@@ -111,6 +206,13 @@ struct ContactFamilyParams {
   SoftBondParams softbond;                     // used when model == kSoftBond
   HertzParams hertz;                           // used when model == kHertz
 };
+
+/// The family-wide scene keys of a family: its linear part (the law's name, `model`, is declared
+/// from the registry, laws/registry.hpp).
+template <class V>
+void describe_family(V& v, ContactFamilyParams& f) {
+  describe(v, f.linear);
+}
 
 /// Axis-aligned periodic cell (§4.2).
 struct PeriodicParams {
@@ -142,6 +244,51 @@ struct WorldParams {
   ContactFamilyParams ball_footing;  // family ball–footing (§0.3: μ = 0.5)
 };
 
+/// The world's own scene keys, [dem] (the families have their tables above; run.threads, the
+/// periodic cell and gravity come from elsewhere in the scene). dt_fixed is the scene's fixed
+/// step, which the DEM node checks and applies only from the first stage after preparation.
+template <class V>
+void describe(V& v, WorldParams& p) {
+  v.real("density", "kg/m^3", p.density, ParamRange::gt(0.0), "Grain density rho_s (docs/theory.md 0.3).");
+  v.real("damping", "-", p.local_damping, ParamRange::ge(0.0).lt(1.0),
+         "Local (non-viscous) damping alpha (docs/theory.md 1.3).");
+  v.real("dt_safety", "-", p.dt_safety, ParamRange::gt(0.0).le(1.0), "Time step = safety * critical step (1.8).");
+  v.integer("dt_interval", "steps", p.dt_interval, 1, 1000000000, "Recompute the critical step every n steps (1.8).");
+  v.real("dt_fixed", "s", p.dt_fixed, ParamRange::ge(0.0),
+         "Fixed time step instead of the automatic one (0: automatic); checked against the critical step once "
+         "balls exist (see dt_above_critical); specimen generation always uses the automatic one.");
+  v.real("skin_factor", "-", p.skin_factor, ParamRange::gt(0.0), "Verlet skin as a fraction of d_min (1.4).");
+  v.flag("facet_spin", p.facet_spin, "Kinematic facet spin for ball-facet contacts (6.2).");
+  v.flag("track_energy", p.track_energy, "Accumulate dissipated energies (damping, friction, softening).");
+}
+
+/// The contact families of a scene ([dem.<name>]): their WorldParams member and the scene's
+/// defaults, which differ from a default-constructed ContactFamilyParams in the model, the
+/// friction and the interface bonds' zero_linear (docs/theory.md 0.3, 2.6).
+struct FamilyInfo {
+  const char* name;
+  const char* doc;
+  ContactFamilyParams WorldParams::*member;
+  ContactModel model;
+  double fric;
+  bool zero_linear;
+  ContactFamilyParams defaults() const {
+    ContactFamilyParams f;
+    f.model = model;
+    f.linear.fric = fric;
+    f.pbond.zero_linear = zero_linear;
+    return f;
+  }
+};
+inline constexpr FamilyInfo kFamilies[] = {
+    {"ball_ball", "Ball-ball contacts.", &WorldParams::ball_ball, ContactModel::kSoftBond, 0.6248693519093275, false},
+    {"ball_wall", "Ball-platen contacts (UCS test, boxes).", &WorldParams::ball_wall, ContactModel::kLinear, 0.0, false},
+    {"ball_facet", "Ball-interface facet contacts (DEM-continuum coupling, docs/theory.md 6.3).",
+     &WorldParams::ball_facet, ContactModel::kLinearPBond, 0.6248693519093275, true},
+    {"ball_footing", "Ball-footing contacts (docs/theory.md 0.3: mu = 0.5).", &WorldParams::ball_footing,
+     ContactModel::kLinear, 0.5, false},
+};
+
 /// Map the bond state to PFC-like integers for output (§2.5: 0 none, 1 tension, 2 shear,
 /// 3 bonded; softening = 4 has no PFC equivalent).
 constexpr std::uint8_t pfc_state_code(BondState s) {
@@ -158,8 +305,10 @@ constexpr std::uint8_t pfc_state_code(BondState s) {
 const char* to_string(ContactModel m);
 const char* to_string(BondState s);
 
-/// Throws std::invalid_argument naming the field (prefixed by `where`) on a bad value.
-void validate(const ContactFamilyParams& p, const std::string& where);
+/// Throws std::invalid_argument naming the scene key (dem.<family>.<key>, or
+/// dem.<family>.<law>.<key> for a law's own key) on a value outside its declared range, or on a
+/// broken cross-field invariant.
+void validate(const ContactFamilyParams& p, const std::string& family);
 void validate(const WorldParams& p);
 
 }  // namespace demfdm::dem

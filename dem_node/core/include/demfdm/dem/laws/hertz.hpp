@@ -47,6 +47,10 @@ struct HertzStep {
 struct HertzLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kHertz;
   static constexpr const char* kName = "hertz";
+  static constexpr const char* kTitle = "Hertz-Mindlin without bond (docs/theory.md 1.9)";
+  static constexpr bool kHasParams = true;
+  /// Its scene keys, [dem.<family>.hertz] (params.hpp).
+  template <class V> static void params(V& v, ContactFamilyParams& f) { describe(v, f.hertz); }
   static constexpr bool kNeedsReff = true;
   static constexpr bool kStiffnessVaries = true;
   /// √(δ_ref/R*): the critical step counts every contact at least at the overlap δ_ref = 0.1 % of R*

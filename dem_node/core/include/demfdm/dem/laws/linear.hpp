@@ -125,6 +125,7 @@ inline void deformability_springs(double rbar, double L, const LinearParams& lp,
 struct LinearLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kLinear;
   static constexpr const char* kName = "linear";
+  static constexpr const char* kTitle = "linear springs, no tension, Coulomb friction (docs/theory.md 1.7)";
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
     LawConst c;

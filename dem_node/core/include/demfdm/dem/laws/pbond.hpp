@@ -48,6 +48,10 @@ namespace demfdm::dem {
 struct PBondLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kLinearPBond;
   static constexpr const char* kName = "pbond";
+  static constexpr const char* kTitle = "linear contact with a linear parallel bond (docs/theory.md 2)";
+  static constexpr bool kHasParams = true;
+  /// Its scene keys, [dem.<family>.pbond] (params.hpp).
+  template <class V> static void params(V& v, ContactFamilyParams& f) { describe(v, f.pbond); }
   static constexpr bool kBond = true;
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {

@@ -5,7 +5,8 @@
 // creation, the update of one contact, the idle test, the stiffness for the critical step,
 // the stored energy, the force and moment for output, bond installation and its lane kernel.
 // World instantiates its passes on the law type through visit_law, so no contact loop
-// branches on the model. Adding a law: its header, a row here, an enum value in params.hpp.
+// branches on the model. Adding a law: its header, a row here, an enum value in params.hpp; its own
+// scene keys are its params() table (params.hpp "Parameter tables").
 #pragma once
 
 #include <string_view>
@@ -39,6 +40,12 @@ template <> struct LawOf<ContactModel::kHertz> { using type = HertzLaw; };
 /// Every registered model, in enum order.
 inline constexpr ContactModel kAllModels[] = {ContactModel::kLinear, ContactModel::kLinearPBond,
                                               ContactModel::kSoftBond, ContactModel::kHertz};
+
+/// Call f(Law{}) with every registered law type, in enum order.
+template <class F>
+void for_each_law(F&& f) {
+  for (ContactModel m : kAllModels) visit_law(m, f);
+}
 
 /// The scene name of a model ("linear", "pbond", "softbond", "hertz").
 inline const char* law_name(ContactModel m) {

@@ -197,6 +197,10 @@ inline double softbond_plastic_elongation(const BondHist& b, const LawConst& c) 
 struct SoftBondLaw : LawDefaults {
   static constexpr ContactModel kModel = ContactModel::kSoftBond;
   static constexpr const char* kName = "softbond";
+  static constexpr const char* kTitle = "soft bond: one spring set, softening in tension (docs/theory.md 3)";
+  static constexpr bool kHasParams = true;
+  /// Its scene keys, [dem.<family>.softbond] (params.hpp).
+  template <class V> static void params(V& v, ContactFamilyParams& f) { describe(v, f.softbond); }
   static constexpr bool kBond = true;
 
   static LawConst constants(const ContactFamilyParams& f, bool rescale, bool /*wall*/) {
