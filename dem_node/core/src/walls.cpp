@@ -220,11 +220,9 @@ void World::rebuild_walls() {
   auto merge = [&](WallContacts& old, std::vector<WallCand>& cands, const ContactFamilyParams& fam,
                    auto wall_id) {
     const bool has_bond = law_has_bond(fam.model);
-    std::vector<Key> keys(old.size());
-    for (std::size_t c = 0; c < old.size(); ++c)
-      keys[c] = {pt_.id[old.ball[c]], wall_id(old.wall[c]), static_cast<std::uint32_t>(c)};
-    std::sort(keys.begin(), keys.end());
-    std::vector<char> used(old.size(), 0);
+    detail::HistoryCarry carry(old.size(), false, [&](std::size_t c) {
+      return std::make_pair(std::uint64_t(pt_.id[old.ball[c]]), std::uint64_t(wall_id(old.wall[c])));
+    });
     std::sort(cands.begin(), cands.end(), [](const WallCand& x, const WallCand& y) {
       return std::tie(x.ball, x.wall, x.facet) < std::tie(y.ball, y.wall, y.facet);
     });
@@ -239,13 +237,12 @@ void World::rebuild_walls() {
       for (; k2 < cands.size() && cands[k2].ball == e.ball && cands[k2].wall == e.wall; ++k2)
         q.cand.push_back(static_cast<std::uint32_t>(cands[k2].facet));
       q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
-      Key key{pt_.id[e.ball], wall_id(e.wall), 0};
-      auto it = std::lower_bound(keys.begin(), keys.end(), key);
-      if (it != keys.end() && it->lo == key.lo && it->hi == key.hi) {
-        used[it->idx] = 1;
-        q.h.push_back(old.h[it->idx]);
-        if (has_bond) q.bond.push_back(old.bond[it->idx]);
-        if (!old.facet.empty()) keep_facet = old.facet[it->idx];
+      const std::int64_t found = carry.take(pt_.id[e.ball], wall_id(e.wall));
+      if (found >= 0) {
+        const auto oc = static_cast<std::size_t>(found);
+        q.h.push_back(old.h[oc]);
+        if (has_bond) q.bond.push_back(old.bond[oc]);
+        if (!old.facet.empty()) keep_facet = old.facet[oc];
       } else {
         q.h.push_back({});
         if (has_bond) q.bond.push_back({});
@@ -255,21 +252,18 @@ void World::rebuild_walls() {
       k = k2;
     }
     // bonded wall contacts never disappear: keep them with their last facet as candidate
-    for (std::size_t c = 0; c < old.size(); ++c) {
-      if (used[c]) continue;
-      if (has_bond && bonded(old.bond[c].state)) {
-        q.ball.push_back(old.ball[c]);
-        q.wall.push_back(old.wall[c]);
-        q.cand.push_back(static_cast<std::uint32_t>(old.facet.empty() ? 0 : old.facet[c]));
-        q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
-        q.facet.push_back(old.facet.empty() ? 0 : old.facet[c]);
-        q.h.push_back(old.h[c]);
-        q.bond.push_back(old.bond[c]);
-      } else {
-        e_slip_dead_ += old.h[c].e_slip;
-        if (has_bond) e_soft_dead_ += old.bond[c].e_soft;
-      }
-    }
+    carry.rest(
+        old.h, old.bond, has_bond,
+        [&](std::size_t c) {
+          q.ball.push_back(old.ball[c]);
+          q.wall.push_back(old.wall[c]);
+          q.cand.push_back(static_cast<std::uint32_t>(old.facet.empty() ? 0 : old.facet[c]));
+          q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
+          q.facet.push_back(old.facet.empty() ? 0 : old.facet[c]);
+          q.h.push_back(old.h[c]);
+          q.bond.push_back(old.bond[c]);
+        },
+        e_slip_dead_, e_soft_dead_);
     const std::size_t m = q.ball.size();
     q.F.assign(m, {});
     q.M.assign(m, {});

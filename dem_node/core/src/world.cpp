@@ -644,28 +644,18 @@ void World::rebuild() {
   bool sorted = true;
   for (std::size_t c = 0; c < mo && sorted; ++c)
     sorted = pc_.a[c] < pc_.b[c] && (c == 0 || row_key(pc_.a[c - 1], pc_.b[c - 1]) < row_key(pc_.a[c], pc_.b[c]));
-  std::vector<Key> keys;
-  if (!sorted) {
-    keys.resize(mo);
-    for (std::size_t c = 0; c < mo; ++c) {
-      const std::uint64_t ia = pt_.id[pc_.a[c]], ib = pt_.id[pc_.b[c]];
-      keys[c] = {std::min(ia, ib), std::max(ia, ib), static_cast<std::uint32_t>(c)};
-    }
-    std::sort(keys.begin(), keys.end());
-  }
-  std::vector<char> used(mo, 0);
-  std::size_t cursor = 0;  // linear merge
-  auto find_old = [&](std::uint32_t a, std::uint32_t b) -> std::int64_t {
-    if (sorted) {
-      const std::uint64_t k = row_key(a, b);
-      while (cursor < mo && row_key(pc_.a[cursor], pc_.b[cursor]) < k) ++cursor;
-      return cursor < mo && row_key(pc_.a[cursor], pc_.b[cursor]) == k ? static_cast<std::int64_t>(cursor) : -1;
-    }
+  // Keys: rows (a, b) for the linear merge, ids (lower, higher) otherwise.
+  auto id_key = [&](std::uint32_t a, std::uint32_t b) {
     const std::uint64_t ia = pt_.id[a], ib = pt_.id[b];
-    Key k{std::min(ia, ib), std::max(ia, ib), 0};
-    auto it = std::lower_bound(keys.begin(), keys.end(), k);
-    if (it != keys.end() && it->lo == k.lo && it->hi == k.hi && !used[it->idx]) return it->idx;
-    return -1;
+    return std::make_pair(std::min(ia, ib), std::max(ia, ib));
+  };
+  auto old_key = [&](std::size_t c) {
+    return sorted ? std::make_pair(std::uint64_t(pc_.a[c]), std::uint64_t(pc_.b[c])) : id_key(pc_.a[c], pc_.b[c]);
+  };
+  detail::HistoryCarry carry(mo, sorted, old_key);
+  auto find_old = [&](std::uint32_t a, std::uint32_t b) -> std::int64_t {
+    const auto k = sorted ? std::make_pair(std::uint64_t(a), std::uint64_t(b)) : id_key(a, b);
+    return carry.take(k.first, k.second);
   };
   PairContacts q;
   q.a.reserve(np.size());
@@ -681,7 +671,6 @@ void World::rebuild() {
     const std::int64_t found = find_old(a, b);
     if (found >= 0) {
       const std::uint32_t oc = static_cast<std::uint32_t>(found);
-      used[oc] = 1;
       q.h.push_back(pc_.h[oc]);
       if (has_bond) q.bond.push_back(pc_.bond[oc]);
       if (pt_.id[pc_.a[oc]] != ia) flip(q.h.back(), has_bond ? &q.bond.back() : nullptr);
@@ -694,28 +683,25 @@ void World::rebuild() {
   for (const auto& e : np) push(e.a, e.b, e.s);
   // bonded contacts beyond the cut-off are kept (a bond never disappears in a rebuild)
   bool appended = false;
-  for (std::size_t c = 0; c < pc_.size(); ++c) {
-    if (used[c]) continue;
-    if (has_bond && bonded(pc_.bond[c].state)) {
-      std::uint32_t a = pc_.a[c], b = pc_.b[c];
-      Vec3 d = pt_.x[b] - pt_.x[a];
-      std::array<std::int8_t, 4> s{0, 0, 0, 0};
-      if (per)
-        for (int k = 0; k < 3; ++k) {
-          const double sh = -std::round(d[k] / L[k]);
-          s[k] = static_cast<std::int8_t>(sh);
-        }
-      q.a.push_back(a);
-      q.b.push_back(b);
-      q.shift.push_back(s);
-      q.h.push_back(pc_.h[c]);
-      q.bond.push_back(pc_.bond[c]);
-      appended = true;
-    } else {
-      e_slip_dead_ += pc_.h[c].e_slip;
-      if (has_bond) e_soft_dead_ += pc_.bond[c].e_soft;
-    }
-  }
+  carry.rest(
+      pc_.h, pc_.bond, has_bond,
+      [&](std::size_t c) {
+        std::uint32_t a = pc_.a[c], b = pc_.b[c];
+        Vec3 d = pt_.x[b] - pt_.x[a];
+        std::array<std::int8_t, 4> s{0, 0, 0, 0};
+        if (per)
+          for (int k = 0; k < 3; ++k) {
+            const double sh = -std::round(d[k] / L[k]);
+            s[k] = static_cast<std::int8_t>(sh);
+          }
+        q.a.push_back(a);
+        q.b.push_back(b);
+        q.shift.push_back(s);
+        q.h.push_back(pc_.h[c]);
+        q.bond.push_back(pc_.bond[c]);
+        appended = true;
+      },
+      e_slip_dead_, e_soft_dead_);
   if (appended) {  // restore the (a, b) order
     std::vector<std::uint32_t> perm(q.a.size());
     std::iota(perm.begin(), perm.end(), 0u);
