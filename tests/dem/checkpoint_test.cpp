@@ -254,12 +254,12 @@ std::unique_ptr<World> free_block(const FreeBlock& b) {
   w->add_plane(plane({0, 0, 0}, {1, 0, 0}));
   w->add_plane(plane({0, 0, 0}, {0, 1, 0}));
   w->add_plane(plane({0, W, 0}, {0, -1, 0}));
-  PlaneWallParams servo = plane({L, 0, 0}, {-1, 0, 0});
-  servo.servo = true;
-  servo.servo_stress = 2e4;
-  servo.servo_area = W * H;
-  servo.servo_vmax = 0.05;
-  w->add_plane(servo);
+  PlatenServoParams servo;
+  servo.wall = w->add_plane(plane({L, 0, 0}, {-1, 0, 0}));
+  servo.stress = 2e4;
+  servo.area = W * H;
+  servo.vmax = 0.05;
+  w->add_effect(std::make_unique<PlatenServo>(servo));
   const double e = 2.0 * s;
   const std::vector<double> v{-e, -e, 0, L + e, -e, 0, L + e, W + e, 0, -e, W + e, 0};
   w->add_facet_wall(v, std::vector<std::int32_t>{0, 1, 2, 0, 2, 3});
@@ -424,6 +424,40 @@ TEST(DemCheckpoint, FreeBlockTwoThreadsResumesBitExact) {
     ASSERT_GT(probe->num_balls(), 2048u) << "the law of motion must run in more than one chunk";
   }
   EXPECT_EQ(resume_check([&] { return free_block(b); }, 111, 120, "free block 2 threads"), "");
+}
+
+// The platen servo is an effect (kKinematics) that travels with the checkpoint: a platen
+// servoed onto a small column, saved while it regulates (its speed below the limit), loaded into
+// an empty World, keeps being servoed, bit for bit.
+TEST(DemCheckpoint, PlatenServoTravelsWithTheCheckpoint) {
+  WorldParams p;
+  p.ball_ball.model = ContactModel::kLinear;
+  World a(p);
+  const double r = 1e-4, s = 2 * r;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 2; ++j)
+      for (int i = 0; i < 2; ++i) a.add_ball({i * s, j * s, r + k * s}, r);
+  PlaneWallParams bot;
+  bot.point = {0.5 * s, 0.5 * s, 0};
+  a.add_plane(bot);
+  PlaneWallParams top = bot;
+  top.point.z = 3 * s;
+  top.normal = {0, 0, -1};
+  PlatenServoParams servo;
+  servo.wall = a.add_plane(top);
+  servo.stress = 1e5;
+  servo.area = 4 * s * s;
+  servo.vmax = 1e-3;
+  a.add_effect(std::make_unique<PlatenServo>(servo));
+  run(a, 480);  // the servo regulates from about step 450 to 900 (below its speed limit)
+  World b{WorldParams{}};
+  load_state_bytes(b, state_bytes(a, {kSceneHash, "test"}), kSceneHash, "platen");
+  const double v0 = a.plane(1).p.velocity.z;
+  EXPECT_LT(std::abs(v0), servo.vmax) << "saved while the servo regulates";
+  run(a, 200);
+  run(b, 200);
+  EXPECT_NE(a.plane(1).p.velocity.z, v0) << "the servo changes the platen's speed in this window";
+  EXPECT_EQ(first_difference(a, b), "");
 }
 
 // ---- the comparison can fail ---------------------------------------------------------------

@@ -195,17 +195,19 @@ TEST(Walls, PlatenStressServo) {
   PlaneWallParams top = bot;
   top.point.z = nz * a;
   top.normal = {0, 0, -1};
-  top.servo = true;
-  top.servo_stress = 1e5;
-  top.servo_area = nx * nx * a * a;
-  top.servo_vmax = 1e-3;
   const int it = w.add_plane(top);
+  PlatenServoParams servo;
+  servo.wall = it;
+  servo.stress = 1e5;
+  servo.area = nx * nx * a * a;
+  servo.vmax = 1e-3;
+  w.add_effect(std::make_unique<PlatenServo>(servo));
   double over = 0;
   for (int k = 0; k < 40000; ++k) {
     w.step();
-    over = std::max(over, w.plane(it).reaction.z / (top.servo_stress * top.servo_area) - 1.0);
+    over = std::max(over, w.plane(it).reaction.z / (servo.stress * servo.area) - 1.0);
   }
-  const double s = w.plane(it).reaction.z / top.servo_area;
+  const double s = w.plane(it).reaction.z / servo.area;
   EXPECT_NEAR(s / 1e5, 1.0, 1e-2);
   EXPECT_LE(over, 0.2);
   const double Kn = kPi * R * R * p.ball_ball.linear.emod / (2 * R);

@@ -148,7 +148,7 @@ TEST(StateFile, LayoutIsTheDocumentedOne) {
   // + section (name 4+1, length 8, data 4) + checksum 8
   ASSERT_EQ(b.size(), 8u + 4 + 8 + 7 + 5 + 8 + 4 + 5 + 8 + 4 + 8);
   EXPECT_EQ(b.substr(0, 8), "DEMFDMST");
-  EXPECT_EQ(b.substr(8, 4), std::string("\x02\x00\x00\x00", 4));  // format version 2 (docs/checkpoint-format.md)
+  EXPECT_EQ(b.substr(8, 4), std::string("\x03\x00\x00\x00", 4));  // format version 3 (docs/checkpoint-format.md)
   EXPECT_EQ(static_cast<unsigned char>(b[12]), b.size());  // total length, little-endian
   EXPECT_EQ(b.substr(20, 7), std::string("\x03\x00\x00\x00" "fdm", 7));
   EXPECT_EQ(b.substr(32, 8), std::string("\x88\x77\x66\x55\x44\x33\x22\x11", 8));

@@ -1,6 +1,8 @@
 // Bit-exact DEM state save/load: see checkpoint.hpp and docs/checkpoint-format.md.
 #include "demfdm/dem/checkpoint.hpp"
 
+#include "demfdm/dem/specimen.hpp"
+
 #include <istream>
 #include <iterator>
 #include <memory>
@@ -23,14 +25,14 @@ static_assert(sizeof(SoftBondParams) == 80, "SoftBondParams changed: update the 
 static_assert(sizeof(HertzParams) == 16, "HertzParams changed: update the checkpoint");
 static_assert(sizeof(ContactFamilyParams) == 224, "ContactFamilyParams changed: update the checkpoint");
 static_assert(sizeof(WorldParams) == 1040, "WorldParams changed: update the checkpoint");
-static_assert(sizeof(PlaneWallParams) == 152, "PlaneWallParams changed: update the checkpoint");
-static_assert(sizeof(PlaneWall) == 240, "PlaneWall changed: update the checkpoint");
+static_assert(sizeof(PlaneWallParams) == 112, "PlaneWallParams changed: update the checkpoint");
+static_assert(sizeof(PlaneWall) == 200, "PlaneWall changed: update the checkpoint");
 static_assert(sizeof(FacetWall) == 224, "FacetWall changed: update the checkpoint");
 static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
 static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
 static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
-static_assert(sizeof(World) == 3200, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state)
+static_assert(sizeof(World) == 3224, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state)
 #endif
 
 namespace {
@@ -167,11 +169,6 @@ void put(io::StateWriter& o, const PlaneWall& w) {
   o.f64(p.half1);
   o.f64(p.half2);
   put(o, p.velocity);
-  o.b(p.servo);
-  o.f64(p.servo_stress);
-  o.f64(p.servo_area);
-  o.f64(p.servo_gain);
-  o.f64(p.servo_vmax);
   put(o, w.axis2);
   put(o, w.disp);
   put(o, w.reaction);
@@ -355,11 +352,6 @@ PlaneWall get_plane(io::SectionReader& in) {
   p.half1 = in.f64();
   p.half2 = in.f64();
   p.velocity = get_vec(in);
-  p.servo = in.b();
-  p.servo_stress = in.f64();
-  p.servo_area = in.f64();
-  p.servo_gain = in.f64();
-  p.servo_vmax = in.f64();
   w.axis2 = get_vec(in);
   w.disp = get_vec(in);
   w.reaction = get_vec(in);
@@ -434,12 +426,17 @@ void check_wall_contacts(io::SectionReader& in, const WallContacts& wc, std::siz
 // Private-state access of World for the checkpoint (friend of World).
 struct CheckpointAccess {
   static void save(const World& w, io::StateWriter& o) {
-    for (const auto& e : w.effects_)
-      if (e.get() != w.gravity_) {
-        throw std::invalid_argument(std::string("save_state: the world has the effect '") + e->name() +
-                                    "', which a checkpoint cannot hold (only gravity is saved; docs/checkpoint-format.md). "
-                                    "Remove it before saving and add it again after loading.");
+    std::vector<PlatenServoParams> platens;  // in the order they were added
+    for (const auto& e : w.effects_) {
+      if (e.get() == w.gravity_) continue;
+      if (const auto* ps = dynamic_cast<const PlatenServo*>(e.get())) {
+        platens.push_back(ps->params());
+        continue;
       }
+      throw std::invalid_argument(std::string("save_state: the world has the effect '") + e->name() +
+                                  "', which a checkpoint cannot hold (only gravity and platen servos are saved; "
+                                  "docs/checkpoint-format.md). Remove it before saving and add it again after loading.");
+    }
     o.begin("params");
     put(o, w.p_);
     o.end();
@@ -468,6 +465,14 @@ struct CheckpointAccess {
     o.begin("effects");
     o.b(w.gravity_ != nullptr);
     put(o, w.gravity());
+    o.u64(platens.size());
+    for (const PlatenServoParams& p : platens) {
+      o.i32(p.wall);
+      o.f64(p.stress);
+      o.f64(p.area);
+      o.f64(p.gain);
+      o.f64(p.vmax);
+    }
     o.end();
 
     o.begin("balls");
@@ -567,10 +572,19 @@ struct CheckpointAccess {
     }
     bool gravity_on;
     Vec3 g;
+    std::vector<PlatenServoParams> platens;
     {
       auto in = r.section("effects");
       gravity_on = in.b();
       g = get_vec(in);
+      platens.resize(in.count(36));  // wall i32 + 4 f64
+      for (PlatenServoParams& p : platens) {
+        p.wall = in.i32();
+        p.stress = in.f64();
+        p.area = in.f64();
+        p.gain = in.f64();
+        p.vmax = in.f64();
+      }
       in.done();
     }
     Particles pt;
@@ -690,6 +704,16 @@ struct CheckpointAccess {
     w.row_hi_.clear();
     if (w.gravity_) w.remove_effect(w.gravity_);
     if (gravity_on) w.gravity_ = w.add_effect(std::make_unique<GravityEffect>(g));
+    // The saved platen servos replace the target's.
+    for (const PlatenServoParams& p : platens)
+      if (p.wall < 0 || static_cast<std::size_t>(p.wall) >= w.planes_.size())
+        throw std::runtime_error("load_state: a platen servo of wall " + std::to_string(p.wall) + " in a world of " +
+                                 std::to_string(w.planes_.size()) + " planes");
+    std::vector<const Effect*> old;
+    for (const auto& e : w.effects_)
+      if (dynamic_cast<const PlatenServo*>(e.get())) old.push_back(e.get());
+    for (const Effect* e : old) w.remove_effect(e);
+    for (const PlatenServoParams& p : platens) w.add_effect(std::make_unique<PlatenServo>(p));
   }
 };
 

@@ -195,6 +195,17 @@ StageReport generate_rev(World& w, const RevParams& p) {
 // whose diagonal is U15's (1/V)Σ(ℓ·e_a)²[K_n(n̂·e_a)² + K_s(1−(n̂·e_a)²)]. With `coupled` the
 // 3×3 system is solved (the lateral servo anticipates the Poisson effect of the vertical
 // one); otherwise only the diagonal is used. A rate above the limit scales the whole vector.
+// The platen stress servo (kKinematics, after the step length is fixed): close a fraction α_s
+// of the normal force error per step with the wall's contact stiffness, speed-limited.
+void PlatenServo::apply(World& w, Phase) {
+  PlaneWall& pw = w.plane(p_.wall);
+  const double area = p_.area > 0.0 ? p_.area : 4.0 * pw.p.half1 * pw.p.half2;
+  const double err = p_.stress * area - (-dot(pw.reaction, pw.p.normal));
+  double vn = pw.k_sum > 0.0 ? p_.gain * err / (pw.k_sum * w.dt()) : (err > 0.0 ? p_.vmax : -p_.vmax);
+  vn = std::clamp(vn, -p_.vmax, p_.vmax);
+  pw.p.velocity = vn * pw.p.normal;
+}
+
 void PeriodicServo::apply(World& w, Phase) {
   stress_ = cell_stress(w);
   const double V = w.cell_volume();
@@ -653,13 +664,17 @@ UcsResult unconfined_compression(World& w, const UcsParams& p) {
   top.point = {bot.point.x, bot.point.y, hi.z};
   top.normal = {0, 0, -1};
   top.velocity = {0, 0, -v};
-  for (PlaneWallParams* q : {&bot, &top}) {
-    q->servo = seat;
-    q->servo_stress = p.seat_stress;
-    q->servo_area = area;
-    q->servo_vmax = p.seat_speed * v;
-  }
   const int ib = w.add_plane(bot), it = w.add_plane(top);
+  std::vector<Effect*> seating;
+  if (seat)
+    for (int i : {ib, it}) {
+      PlatenServoParams sp;
+      sp.wall = i;
+      sp.stress = p.seat_stress;
+      sp.area = area;
+      sp.vmax = p.seat_speed * v;
+      seating.push_back(w.add_effect(std::make_unique<PlatenServo>(sp)));
+    }
   auto platen_stress = [&] { return 0.5 * (-w.plane(ib).reaction.z + w.plane(it).reaction.z) / area; };
   if (seat) {
     // Seating: both platens servo onto the rough ends until each carries seat_stress within 5 %
@@ -679,7 +694,7 @@ UcsResult unconfined_compression(World& w, const UcsParams& p) {
     s << "platens seated at " << platen_stress() << " Pa in " << res.seat.steps << " steps"
       << (res.seat.converged ? "" : " (budget spent)");
     res.seat.what = s.str();
-    for (int i : {ib, it}) w.plane(i).p.servo = false;
+    for (Effect* e : seating) w.remove_effect(e);
     w.plane(ib).p.velocity = {0, 0, v};
     w.plane(it).p.velocity = {0, 0, -v};
     H0 = w.plane(it).p.point.z - w.plane(ib).p.point.z;

@@ -379,12 +379,13 @@ Effect* World::add_effect(std::unique_ptr<Effect> e) {
   std::size_t slot = 0;  // the timer entry of this effect's name (shared by equal names)
   while (slot < times_.effect.size() && times_.effect[slot].first != raw->name()) ++slot;
   if (slot == times_.effect.size()) times_.effect.emplace_back(raw->name(), 0.0);
-  for (int k = 0; k < 3; ++k)
+  for (int k = 0; k < 4; ++k)
     if (ph & (1u << k)) by_phase_[k].push_back({raw, slot});
   return raw;
 }
 
-// Effects of one phase (0 pre-step, 1 force, 2 end-of-step), in order of addition, each timed.
+// Effects of one phase (0 pre-step, 1 force, 2 end-of-step, 3 kinematics), in order of addition,
+// each timed.
 void World::run_effects(int phase) {
   if (by_phase_[phase].empty()) return;
   Lap lap;
@@ -1331,17 +1332,10 @@ void World::step() {
     last_dt_step_ = step_;
   }
   integrate(dt_);
+  lap(times_.motion);
+  run_effects(3);  // kinematics: wall servos (PlatenServo)
+  Lap lap_walls;
   for (auto& pw : planes_) {
-    if (pw.p.servo) {
-      // Platen stress servo along the normal: close a fraction α_s of the force error per
-      // step with the wall's contact stiffness (same form as §4.5), speed-limited.
-      const double area = pw.p.servo_area > 0.0 ? pw.p.servo_area : 4.0 * pw.p.half1 * pw.p.half2;
-      const double err = pw.p.servo_stress * area - (-dot(pw.reaction, pw.p.normal));
-      double vn = pw.k_sum > 0.0 ? pw.p.servo_gain * err / (pw.k_sum * dt_)
-                                 : (err > 0.0 ? pw.p.servo_vmax : -pw.p.servo_vmax);
-      vn = std::clamp(vn, -pw.p.servo_vmax, pw.p.servo_vmax);
-      pw.p.velocity = vn * pw.p.normal;
-    }
     pw.p.point += dt_ * pw.p.velocity;
     pw.disp += dt_ * pw.p.velocity;
   }
@@ -1351,9 +1345,9 @@ void World::step() {
   }
   time_ += dt_;
   ++step_;
-  lap(times_.motion);
+  lap_walls(times_.motion);
   if (need_rebuild()) rebuild();
-  lap(times_.rebuild);
+  lap_walls(times_.rebuild);
   force_pass(dt_);
   run_effects(2);
   ++times_.steps;

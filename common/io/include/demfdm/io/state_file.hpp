@@ -36,7 +36,7 @@ class StateFileError : public std::runtime_error {
 };
 
 inline constexpr char kStateMagic[8] = {'D', 'E', 'M', 'F', 'D', 'M', 'S', 'T'};
-inline constexpr std::uint32_t kStateFormatVersion = 2;
+inline constexpr std::uint32_t kStateFormatVersion = 3;
 
 /// "demfdm <project version> gcc <compiler version>": the code version written by default
 /// (the same text as the build id the nodes announce on the bus).

@@ -28,11 +28,12 @@
 // buffers (per-thread force buffers are zero between passes). The World holds no random-number
 // state: the generator of generate_rev() lives only inside that call.
 //
-// Effects: only GravityEffect is saved. save_state() throws std::invalid_argument naming any
-// other effect present (e.g. "periodic_servo", which exists only inside servo_until(), so a
-// checkpoint between steps of a coupled stage never sees it; "measurement_recorder" is an
-// observer whose samples belong to the caller). load_state() replaces the target's gravity
-// effect and keeps its other effects (observers the caller added).
+// Effects: GravityEffect and the platen servos (PlatenServo) are saved. save_state() throws
+// std::invalid_argument naming any other effect present (e.g. "periodic_servo", which exists
+// only inside servo_until(), so a checkpoint between steps of a coupled stage never sees it;
+// "measurement_recorder" is an observer whose samples belong to the caller). load_state()
+// replaces the target's gravity effect and platen servos and keeps its other effects
+// (observers the caller added).
 //
 // Threads: WorldParams::threads is restored too (the ball–ball sums are associated per thread
 // block, so the same count is needed for the same bits; with threads = 0 the OpenMP default

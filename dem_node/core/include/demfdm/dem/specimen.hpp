@@ -107,6 +107,28 @@ class PeriodicServo final : public Effect {
   Mat3 stress_{};
 };
 
+/// Stress servo of a planar wall along its normal (a platen, as in the UCS test's seating):
+/// every step, once the step length is fixed, the wall's velocity closes a fraction `gain` of
+/// the force error with the stiffness of its active contacts (the form of §4.5), limited to
+/// `vmax`. An effect next to PeriodicServo (kKinematics): a world without it pays nothing.
+struct PlatenServoParams {
+  int wall = -1;        // [-] index of the planar wall (World::add_plane)
+  double stress = 0.0;  // [Pa] target compressive stress
+  double area = 0.0;    // [m^2] area the stress acts on (0 → 4 half1 half2 of the wall)
+  double gain = 0.3;    // [-] under-relaxation α_s (cf. §4.5)
+  double vmax = 1.0;    // [m/s] speed limit
+};
+class PlatenServo final : public Effect {
+ public:
+  explicit PlatenServo(const PlatenServoParams& p) : p_(p) {}
+  unsigned phases() const override { return kKinematics; }
+  void apply(World& w, Phase) override;
+  const char* name() const override { return "platen_servo"; }
+  const PlatenServoParams& params() const { return p_; }
+ private:
+  PlatenServoParams p_;
+};
+
 /// Servo until |s − s*| ≤ stress_tol·s* on active axes and ratio < ratio_tol for `hold` critical
 /// steps in a row (checked every 8 t_c), or `budget` critical steps are spent (steps_for; the world
 /// must step on the automatic step).

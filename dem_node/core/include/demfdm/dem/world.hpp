@@ -1,7 +1,7 @@
 // DEM world: particle store (SoA), contact families, walls, effects and the PFC cycle.
 //
 // Cycle (docs/theory.md §1.2, PFC order): pre-step effects → timestep → law of motion with
-// local damping → wall motion → time advance → neighbour check/rebuild → force–displacement
+// local damping → kinematics effects (wall servos) → wall motion → time advance → neighbour check/rebuild → force–displacement
 // for every contact family → fixed-order sums onto balls (thread buffers, then wall contacts) → force effects (gravity) →
 // end-of-step effects.
 //
@@ -82,12 +82,7 @@ struct PlaneWallParams {
   Vec3 axis1{1, 0, 0};   // [-] first in-plane axis (orthogonalised against normal)
   double half1 = 0.0;    // [m] rectangle half-extent along axis1; 0 = infinite
   double half2 = 0.0;    // [m] rectangle half-extent along axis2 = normal × axis1; 0 = infinite
-  Vec3 velocity{};       // [m/s] prescribed velocity (ignored while servo is on)
-  bool servo = false;    // [-] stress servo along the normal (platen)
-  double servo_stress = 0.0;  // [Pa] target compressive stress
-  double servo_area = 0.0;    // [m^2] area used for the stress (0 → 4 half1 half2)
-  double servo_gain = 0.3;    // [-] under-relaxation α_s of the servo (cf. §4.5)
-  double servo_vmax = 1.0;    // [m/s] speed limit of the servo
+  Vec3 velocity{};       // [m/s] prescribed velocity (a PlatenServo effect sets it every step)
 };
 
 struct PlaneWall {
@@ -95,7 +90,7 @@ struct PlaneWall {
   Vec3 axis2{};
   Vec3 disp{};      // [m] displacement since the last rebuild
   Vec3 reaction{};  // [N] total force of the balls on the wall (last pass)
-  double k_sum = 0.0;  // [N/m] Σ K_n of active contacts (servo gain)
+  double k_sum = 0.0;  // [N/m] Σ K_n of active contacts (the PlatenServo's gain)
   std::uint64_t id = 0;
 };
 
@@ -141,7 +136,10 @@ class World;
 /// built when effects are added; an absent effect costs nothing.
 class Effect {
  public:
-  enum Phase : unsigned { kPreStep = 1, kForce = 2, kEndOfStep = 4 };
+  /// kPreStep: before the step length is fixed; kForce: after the force passes (gravity);
+  /// kEndOfStep: last; kKinematics: after the step length is fixed and the balls have moved,
+  /// before the walls move (wall servos set the step's wall velocities).
+  enum Phase : unsigned { kPreStep = 1, kForce = 2, kEndOfStep = 4, kKinematics = 8 };
   virtual ~Effect() = default;
   virtual unsigned phases() const = 0;
   virtual void apply(World& w, Phase ph) = 0;
@@ -390,7 +388,7 @@ class World {
     Effect* e;
     std::size_t slot;  // index into times_.effect
   };
-  std::vector<EffectSlot> by_phase_[3];
+  std::vector<EffectSlot> by_phase_[4];
   void run_effects(int phase);
   Effect* gravity_ = nullptr;
   double time_ = 0.0, dt_ = 0.0, skin_ = 0.0;
