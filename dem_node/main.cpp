@@ -134,10 +134,11 @@ class DemParticipant : public node::Participant {
     w.i32(wall_);
     w.u64(n_iface_);
     for (bool b : {coupling_setup_pending_, penetrating_, box_done_, preparing_, kicked_, energy_pending_}) w.b(b);
-    for (double v : {footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_, energy_begin_, mechanical_begin_, work_})
+    for (double v : {footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_, energy_.total_begin,
+                     energy_.mechanical_begin, energy_.work})
       w.f64(v);
-    w.u64(x_begin_.size());
-    for (const auto& x : x_begin_) w.f64(x.x), w.f64(x.y), w.f64(x.z);
+    w.u64(energy_.x_begin.size());
+    for (const auto& x : energy_.x_begin) w.f64(x.x), w.f64(x.y), w.f64(x.z);
     energy_jump_.save(w);
     // specimen_stages.csv bytes, then the result writers and the frames' model time.
     const auto stages_csv = dir_ / "specimen_stages.csv";
@@ -168,10 +169,11 @@ class DemParticipant : public node::Participant {
     wall_ = sec.i32();
     n_iface_ = sec.u64();
     for (bool* b : {&coupling_setup_pending_, &penetrating_, &box_done_, &preparing_, &kicked_, &energy_pending_}) *b = sec.b();
-    for (double* v : {&footing_z0_, &target_disp_, &weight_, &stage_ratio_, &user_dt_, &energy_begin_, &mechanical_begin_, &work_})
+    for (double* v : {&footing_z0_, &target_disp_, &weight_, &stage_ratio_, &user_dt_, &energy_.total_begin,
+                      &energy_.mechanical_begin, &energy_.work})
       *v = sec.f64();
-    x_begin_.resize(sec.count(24));
-    for (auto& x : x_begin_) x = {sec.f64(), sec.f64(), sec.f64()};
+    energy_.x_begin.resize(sec.count(24));
+    for (auto& x : energy_.x_begin) x = {sec.f64(), sec.f64(), sec.f64()};
     energy_jump_.load(sec);
     const auto stages_bytes = sec.u64();
     io::ModelClock::State c;
@@ -348,11 +350,7 @@ class DemParticipant : public node::Participant {
       // Energy balance of the stage (docs/stability.md) from the state before its first step,
       // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN).
       energy_pending_ = false;
-      energy_begin_ = total_energy();
-      const auto e0 = world_.energy();
-      mechanical_begin_ = e0.kinetic + e0.strain;
-      x_begin_ = world_.balls().x;
-      work_ = 0;
+      energy_.begin(world_);
     }
     // A user dt_fixed must stay below the critical step as contacts change (O(contacts) per
     // step, only when dem.dt_fixed is set).
@@ -362,7 +360,7 @@ class DemParticipant : public node::Participant {
     const double node_before = world_.time();
     world_.step(interval_);  // its phases are reported by add_phase_times()
     clock_.advanced(node_before, dt, world_.time());
-    work_ += dem::boundary_power(world_) * world_.dt() * static_cast<double>(interval_);
+    energy_.add_work(world_, interval_);
     if (history_ && history_every_ > 0 && step % history_every_ == 0) {
       node::Timed t(effect_s_["output.history"]);
       auto fz = world_.has_footing() ? world_.footing_reaction().z : 0.0;
@@ -420,16 +418,12 @@ class DemParticipant : public node::Participant {
     v.push_back({"dt_s", world_.dt()});
     v.push_back({"dt_critical_s", crit});
     if (!is_generation(st) && !energy_pending_) {
-      const auto e = world_.energy();
-      const double total = total_energy(), w = work_ + dem::gravity_work(world_, x_begin_);
-      const double dissipated = total - e.kinetic - e.strain - (energy_begin_ - mechanical_begin_);
-      // Relative to the largest energy flow of the stage.
-      const double scale = std::max({std::abs(w), mechanical_begin_, e.kinetic + e.strain, std::abs(dissipated), 1e-300});
-      v.push_back({"energy_kinetic_J", e.kinetic});
-      v.push_back({"energy_strain_J", e.strain});
-      v.push_back({"energy_dissipated_J", dissipated});
-      v.push_back({"energy_work_J", w});
-      v.push_back({"energy_balance_error", (total - energy_begin_ - w) / scale});
+      const auto b = energy_.balance(world_);
+      v.push_back({"energy_kinetic_J", b.kinetic});
+      v.push_back({"energy_strain_J", b.strain});
+      v.push_back({"energy_dissipated_J", b.dissipated});
+      v.push_back({"energy_work_J", b.work});
+      v.push_back({"energy_balance_error", b.error});
     }
     add_phase_times();
     for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
@@ -524,11 +518,6 @@ class DemParticipant : public node::Participant {
     for (auto& [name, sec] : t.effect) effect_s_[name] = sec;
   }
 
-  // Kinetic + strain + dissipated energy of the DEM [J] (docs/theory.md 8.18).
-  double total_energy() const {
-    const auto e = world_.energy();
-    return e.kinetic + e.strain + e.damping + e.friction + e.softening;
-  }
   // Box the balls must stay in: the continuum's pocket if coupled, else the DEM block.
   std::pair<dem::Vec3, dem::Vec3> domain() const {
     dem::Vec3 lo = block_.origin;
@@ -811,9 +800,8 @@ class DemParticipant : public node::Participant {
   std::map<std::string, double> effect_s_;
   mutable std::array<std::int64_t, 3> safe_dt_key_{-1, -1, -1};
   mutable double safe_dt_ = 0;
-  double energy_begin_ = 0, mechanical_begin_ = 0, work_ = 0;
-  bool energy_pending_ = false;
-  std::vector<dem::Vec3> x_begin_;  // [s] wall time of each effect in the current stage
+  dem::StageEnergy energy_;  // the stage's energy balance (docs/stability.md)
+  bool energy_pending_ = false;  // [s] wall time of each effect in the current stage
 };
 
 }  // namespace

@@ -2,6 +2,8 @@
 // demfdm/dem/procedures.hpp), each against an analytic answer or a stated invariant.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+
 #include <cmath>
 #include <stdexcept>
 
@@ -141,6 +143,43 @@ TEST(Procedures, BoundaryPowerAndGravityWork) {
   w.set_gravity(true, 2.0);
   w.balls().x[0].z -= 1e-4;
   EXPECT_NEAR(gravity_work(w, x0), w.balls().m[0] * 2.0 * 9.81 * 1e-4, 1e-15);
+}
+
+// A stage's energy balance: a 3x3x3 column under gravity on a fixed floor, pushed by the
+// footing, with local damping and friction: the change of the total energy equals the footing's
+// and gravity's work to a small fraction of the energy that flowed; leaving the footing's work
+// out breaks the balance.
+TEST(Procedures, StageEnergyBalancesTheFootingsAndGravitysWork) {
+  WorldParams p = plain();
+  p.local_damping = 0.3;
+  World w(p);
+  const double R = 1e-3;
+  for (int k = 0; k < 3; ++k)
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) w.add_ball({2 * R * i, 2 * R * j, R + 2 * R * k}, R);
+  PlaneWallParams floor;
+  w.add_plane(floor);
+  w.set_gravity(true, 10.0);
+  FootingParams f;
+  f.diameter = 3 * R;
+  f.bottom_centre = {2 * R, 2 * R, 0};
+  place_footing_at_first_contact(w, f);
+  w.set_footing_velocity({0, 0, -0.02});
+  w.prepare();
+  StageEnergy e, no_footing_work;
+  e.begin(w);
+  no_footing_work.begin(w);
+  for (int s = 0; s < 3000; ++s) {
+    w.step();
+    e.add_work(w, 1);
+  }
+  const auto b = e.balance(w), bad = no_footing_work.balance(w);
+  EXPECT_GT(b.work, 0.0);
+  EXPECT_GT(b.dissipated, 0.0);
+  EXPECT_LT(std::abs(b.error), 1e-2) << "work " << b.work << " J, dissipated " << b.dissipated << " J";
+  EXPECT_GT(std::abs(bad.error), 0.1) << "the footing's work must matter in this test";
+  std::printf("stage energy: work %.4e J, dissipated %.4e J, error %.2e (without the footing's work %.2e)\n", b.work,
+              b.dissipated, b.error, bad.error);
 }
 
 TEST(Procedures, KickGivesTheHighestTopItsVelocity) {

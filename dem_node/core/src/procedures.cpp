@@ -1,5 +1,6 @@
 #include "demfdm/dem/procedures.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -130,6 +131,28 @@ double gravity_work(const World& w, const std::vector<Vec3>& x_begin) {
   double work = 0;
   for (std::size_t i = 0; i < b.size() && i < x_begin.size(); ++i) work += b.m[i] * dot(g, b.x[i] - x_begin[i]);
   return work;
+}
+
+double total_energy(const World& w) {
+  const auto e = w.energy();
+  return e.kinetic + e.strain + e.damping + e.friction + e.softening;
+}
+
+void StageEnergy::begin(const World& w) {
+  total_begin = total_energy(w);
+  const auto e0 = w.energy();
+  mechanical_begin = e0.kinetic + e0.strain;
+  x_begin = w.balls().x;
+  work = 0;
+}
+
+StageEnergy::Balance StageEnergy::balance(const World& w) const {
+  const auto e = w.energy();
+  const double total = total_energy(w), wk = work + gravity_work(w, x_begin);
+  const double dissipated = total - e.kinetic - e.strain - (total_begin - mechanical_begin);
+  // Relative to the largest energy flow of the stage.
+  const double scale = std::max({std::abs(wk), mechanical_begin, e.kinetic + e.strain, std::abs(dissipated), 1e-300});
+  return {e.kinetic, e.strain, dissipated, wk, (total - total_begin - wk) / scale};
 }
 
 std::size_t kick_highest_ball(World& w, const Vec3& v) {

@@ -60,6 +60,30 @@ double boundary_power(const World& w);
 /// Work of gravity on the balls since positions `x_begin` [J] (0 without gravity).
 double gravity_work(const World& w, const std::vector<Vec3>& x_begin);
 
+/// The DEM's total energy [J]: kinetic + strain + dissipated (damping, friction, softening;
+/// docs/theory.md 8.18).
+double total_energy(const World& w);
+
+/// Energy balance of a stage (docs/stability.md, docs/theory.md 8.18): the change of the total
+/// energy equals the work of the moving boundaries (boundary_power) and of gravity. begin()
+/// before the stage's first step (after its set-up), add_work() after every block of `steps`
+/// steps, balance() at the end. The fields are the state a checkpoint carries.
+struct StageEnergy {
+  double total_begin = 0.0;       // [J] total_energy at begin()
+  double mechanical_begin = 0.0;  // [J] kinetic + strain at begin()
+  double work = 0.0;              // [J] boundary work since begin()
+  std::vector<Vec3> x_begin;      // [m] ball positions at begin() (gravity's work)
+  void begin(const World& w);
+  void add_work(const World& w, std::int64_t steps) {
+    work += boundary_power(w) * w.dt() * static_cast<double>(steps);
+  }
+  struct Balance {
+    double kinetic, strain, dissipated, work;  // [J] now; dissipated in the stage; boundary + gravity work
+    double error;  // (change of the total energy - work) / the largest energy flow of the stage
+  };
+  Balance balance(const World& w) const;
+};
+
 /// The ball whose top (z + r) is highest gets velocity `v` (stability studies); returns its row.
 /// Throws std::invalid_argument without balls.
 std::size_t kick_highest_ball(World& w, const Vec3& v);
