@@ -58,14 +58,15 @@ class DemParticipant : public node::Participant {
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     kick_ = s_.reals("dem.kick");
     if (!kick_.empty() && kick_.size() != 3) s_.fail("dem.kick", "an empty list or [vx, vy, vz] in m/s", std::to_string(kick_.size()) + " numbers");
-    // dem.dt_fixed against the largest critical step any packing of this PSD can have (at
-    // --check, before any ball exists; every stage begin checks the real one).
+    // dem.dt_fixed against the largest critical step a packing of this PSD that holds a ball of
+    // the smallest size can have (at --check, before any ball exists; every stage begin checks
+    // the real one).
     if (user_dt_ > 0 && s_.string("dem.dt_above_critical") == "error") {
       const double bound = largest_critical_step();
       if (user_dt_ > bound) {
         std::ostringstream os;
         os.precision(6);
-        os << "a step <= " << bound << " s, the largest critical step of any packing of this PSD (docs/theory.md "
+        os << "a step <= " << bound << " s, the largest critical step of a packing of this PSD (docs/theory.md "
            << "1.8: the smallest ball with a single contact; more contacts or bonds only lower it)";
         std::ostringstream found;
         found << user_dt_ << " s";
@@ -227,25 +228,12 @@ class DemParticipant : public node::Participant {
   std::array<std::int64_t, 3> safe_dt_key() const {
     return {world_.step_count(), world_.rebuild_count(), static_cast<std::int64_t>(world_.num_balls())};
   }
-  // Upper bound of the critical step of 1.8 [s] for any packing of the scene's PSD: the smallest
-  // upscaled ball with one linear contact, to a ball of the smallest or of the largest size (the
-  // larger of the two); every further contact or bond adds stiffness and lowers the step.
+  // Upper bound of the critical step of 1.8 [s] for a packing of the scene's PSD (upscaled) that
+  // holds a ball of the smallest size (dem::largest_critical_step).
   double largest_critical_step() const {
-    dem::WorldParams p = world_.params();
-    p.periodic.enabled = false;
-    p.dt_safety = 1.0;
-    p.threads = 1;
     const double sc = s_.real("dem.specimen.scale");
-    const double rmin = 0.5 * sc * s_.real("dem.specimen.d_min"), rmax = 0.5 * sc * s_.real("dem.specimen.d_max");
-    double best = 0.0;
-    for (double rp : {rmin, rmax}) {
-      dem::World w(p);
-      w.add_ball({0, 0, 0}, rmin);
-      w.add_ball({(rmin + rp) * (1 - 1e-9), 0, 0}, rp);  // a slight overlap: one active contact
-      w.prepare();
-      best = std::max(best, w.critical_timestep());
-    }
-    return best;
+    return dem::largest_critical_step(world_.params(), 0.5 * sc * s_.real("dem.specimen.d_min"),
+                                      0.5 * sc * s_.real("dem.specimen.d_max"));
   }
   // Critical step of 1.8 without the safety factor [s].
   double critical_dt() const { return safe_dt() / world_.params().dt_safety; }

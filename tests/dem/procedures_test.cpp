@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <random>
 
 #include <cmath>
 #include <stdexcept>
@@ -180,6 +181,45 @@ TEST(Procedures, StageEnergyBalancesTheFootingsAndGravitysWork) {
   EXPECT_GT(std::abs(bad.error), 0.1) << "the footing's work must matter in this test";
   std::printf("stage energy: work %.4e J, dissipated %.4e J, error %.2e (without the footing's work %.2e)\n", b.work,
               b.dissipated, b.error, bad.error);
+}
+
+// The bound of dem.dt_fixed's check: no cluster of balls from the PSD that holds a ball of the
+// smallest size, in contact, has a larger critical step (random clusters of 2 to 8 balls, linear
+// and soft-bond families). A cluster of large balls alone can: the step grows with the radius.
+TEST(Procedures, NoPackingOfThePsdHasALargerCriticalStepThanTheBound) {
+  const double rmin = 0.05e-3, rmax = 0.14e-3;
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  for (ContactModel m : {ContactModel::kLinear, ContactModel::kSoftBond}) {
+    WorldParams p = plain();
+    p.ball_ball.model = m;
+    const double bound = largest_critical_step(p, rmin, rmax);
+    double largest = 0.0;
+    for (int trial = 0; trial < 200; ++trial) {
+      p.dt_safety = 1.0;
+      World w(p);
+      const int n = 2 + static_cast<int>(u(rng) * 7);
+      w.add_ball({0, 0, 0}, rmin);  // the PSD's smallest ball; ball 1 touches it
+      for (int i = 1; i < n; ++i) {  // each new ball overlaps a random earlier one slightly
+        const auto& b = w.balls();
+        const std::size_t j = static_cast<std::size_t>(u(rng) * i);
+        const double r = rmin + (rmax - rmin) * u(rng);
+        Vec3 d{u(rng) - 0.5, u(rng) - 0.5, u(rng) - 0.5};
+        d = d * (1.0 / norm(d));
+        w.add_ball(b.x[j] + (b.r[j] + r) * (1 - 1e-6) * d, r);
+      }
+      w.prepare();
+      largest = std::max(largest, w.critical_timestep());
+    }
+    EXPECT_LE(largest, bound) << to_string(m);
+    EXPECT_GT(largest, 0.5 * bound) << "the clusters come near the bound";
+    // Two balls of the largest size only: above the bound.
+    World big(p);
+    big.add_ball({0, 0, 0}, rmax);
+    big.add_ball({2 * rmax * (1 - 1e-6), 0, 0}, rmax);
+    big.prepare();
+    EXPECT_GT(big.critical_timestep(), bound) << to_string(m);
+  }
 }
 
 TEST(Procedures, KickGivesTheHighestTopItsVelocity) {

@@ -133,6 +133,21 @@ double gravity_work(const World& w, const std::vector<Vec3>& x_begin) {
   return work;
 }
 
+double largest_critical_step(WorldParams p, double r_min, double r_max) {
+  p.periodic.enabled = false;
+  p.dt_safety = 1.0;
+  p.threads = 1;
+  double best = 0.0;
+  for (double rp : {r_min, r_max}) {
+    World w(p);
+    w.add_ball({0, 0, 0}, r_min);
+    w.add_ball({(r_min + rp) * (1 - 1e-9), 0, 0}, rp);  // a slight overlap: one active contact
+    w.prepare();
+    best = std::max(best, w.critical_timestep());
+  }
+  return best;
+}
+
 double total_energy(const World& w) {
   const auto e = w.energy();
   return e.kinetic + e.strain + e.damping + e.friction + e.softening;

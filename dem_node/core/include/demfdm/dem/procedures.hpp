@@ -60,6 +60,13 @@ double boundary_power(const World& w);
 /// Work of gravity on the balls since positions `x_begin` [J] (0 without gravity).
 double gravity_work(const World& w, const std::vector<Vec3>& x_begin);
 
+/// Upper bound of the critical step of docs/theory.md 1.8 [s] (without dt_safety) for a packing
+/// of balls with radii in [r_min, r_max] under the ball-ball family of `p` that holds a ball of
+/// radius r_min: that ball with one contact, to a ball of the smallest or of the largest size
+/// (the larger of the two); every further contact or bond adds stiffness and lowers the step.
+/// (Packings of larger balls only can have a larger step: it grows with the radius.)
+double largest_critical_step(WorldParams p, double r_min, double r_max);
+
 /// The DEM's total energy [J]: kinetic + strain + dissipated (damping, friction, softening;
 /// docs/theory.md 8.18).
 double total_energy(const World& w);
