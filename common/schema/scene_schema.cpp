@@ -255,14 +255,17 @@ void declare_family(config::Section& dem_sec, const dem::FamilyInfo& info) {
     if constexpr (Law::kHasParams) {
       auto& t = f.section(Law::kName,
                           std::string("Keys of the ") + Law::kName + " law (" + Law::kTitle + "), read when model = \"" +
-                              Law::kName + "\"; in a family of another law they are refused.",
+                              Law::kName + "\"; in a family of another law a value other than the default is refused.",
                           config::Presence::Defaults);
       SchemaDecl law_keys{t};
       Law::params(law_keys, defaults);
-      // Earlier versions wrote these keys in the family table with a prefix.
-      const std::string prefix = std::string(Law::kName) == "pbond" ? "pb_" : std::string(Law::kName) == "softbond" ? "sb_" : "hz_";
-      MovedKeys moved{f, prefix, Law::kName};
-      Law::params(moved, defaults);
+      // Earlier versions wrote the keys of these three laws in the family table with a prefix.
+      const std::string name = Law::kName;
+      const std::string prefix = name == "pbond" ? "pb_" : name == "softbond" ? "sb_" : name == "hertz" ? "hz_" : "";
+      if (!prefix.empty()) {
+        MovedKeys moved{f, prefix, Law::kName};
+        Law::params(moved, defaults);
+      }
     }
   });
 }
