@@ -509,7 +509,7 @@ class DemParticipant : public node::Participant {
   // Box the balls must stay in: the continuum's pocket if coupled, else the DEM block.
   std::pair<dem::Vec3, dem::Vec3> domain() const {
     dem::Vec3 lo = block_.origin;
-    dem::Vec3 hi{lo.x + block_.cell.x * block_.nx, lo.y + block_.cell.y * block_.ny, block_.z_top()};
+    dem::Vec3 hi{lo.x + block_.width_x(), lo.y + block_.width_y(), block_.z_top()};
     return {lo, hi};
   }
 
@@ -701,7 +701,7 @@ class DemParticipant : public node::Participant {
     const double h = block_.height();
     const double d_max = s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     const int n = std::max(4, static_cast<int>(std::lround(h / (1.5 * d_max))));
-    const double lx = block_.cell.x * block_.nx, ly = block_.cell.y * block_.ny;
+    const double lx = block_.width_x(), ly = block_.width_y();
     const double g = std::abs(world_.gravity().z);
     const double rho_b = g > 0 ? weight() / g / (lx * ly * h) : 0.0;
     auto csv = io::CsvSeries::create(dir_ / ("dem_profile_" + st.name + ".csv"),
@@ -789,7 +789,7 @@ class DemParticipant : public node::Participant {
   mutable std::array<std::int64_t, 3> safe_dt_key_{-1, -1, -1};
   mutable double safe_dt_ = 0;
   dem::StageEnergy energy_;  // the stage's energy balance (docs/stability.md)
-  bool energy_pending_ = false;  // [s] wall time of each effect in the current stage
+  bool energy_pending_ = false;  // the balance begins at the stage's first step (after its set-up)
 };
 
 }  // namespace

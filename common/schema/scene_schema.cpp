@@ -480,6 +480,13 @@ void declare_stages(config::Section& root) {
       .max(1000000);
 }
 
+// The row of an action name (nullptr for a name the schema does not admit).
+const ActionInfo* action_named(std::string_view name) {
+  for (const auto& a : actions())
+    if (name == a.name) return &a;
+  return nullptr;
+}
+
 std::string num(double v) {
   std::ostringstream o;
   o << std::setprecision(6) << v;
@@ -685,9 +692,7 @@ config::Schema build() {
       auto nodes = e.strings("nodes");
       // Every role that takes part must act in the action (a continuum cannot generate a specimen).
       {
-        const ActionInfo* info = nullptr;
-        for (const auto& a : actions())
-          if (act == a.name) info = &a;
+        const ActionInfo* info = action_named(act);
         const std::vector<std::string>& taking = nodes.empty() ? present : nodes;
         for (const auto& r : taking) {
           const bool acts = r == "dem" ? info->dem : info->continuum;
@@ -802,8 +807,7 @@ std::vector<Stage> stages(const config::Scene& s) {
     Stage st;
     st.name = e.string("name");
     st.action = e.string("action");
-    for (const auto& a : actions())  // the schema admits only the table's names
-      if (st.action == a.name) st.kind = a.id;
+    st.kind = action_named(st.action)->id;  // the schema admits only the table's names
     st.nodes = e.strings("nodes");
     if (st.nodes.empty()) st.nodes = all;
     st.steps = e.integer("steps");

@@ -148,14 +148,13 @@ double largest_critical_step(WorldParams p, double r_min, double r_max) {
   return best;
 }
 
-double total_energy(const World& w) {
-  const auto e = w.energy();
-  return e.kinetic + e.strain + e.damping + e.friction + e.softening;
-}
+double total_energy(const Energy& e) { return e.kinetic + e.strain + e.damping + e.friction + e.softening; }
+double total_energy(const World& w) { return total_energy(w.energy()); }
 
+// One World::energy() (a pass over every contact) per call.
 void StageEnergy::begin(const World& w) {
-  total_begin = total_energy(w);
   const auto e0 = w.energy();
+  total_begin = total_energy(e0);
   mechanical_begin = e0.kinetic + e0.strain;
   x_begin = w.balls().x;
   work = 0;
@@ -163,7 +162,7 @@ void StageEnergy::begin(const World& w) {
 
 StageEnergy::Balance StageEnergy::balance(const World& w) const {
   const auto e = w.energy();
-  const double total = total_energy(w), wk = work + gravity_work(w, x_begin);
+  const double total = total_energy(e), wk = work + gravity_work(w, x_begin);
   const double dissipated = total - e.kinetic - e.strain - (total_begin - mechanical_begin);
   // Relative to the largest energy flow of the stage.
   const double scale = std::max({std::abs(wk), mechanical_begin, e.kinetic + e.strain, std::abs(dissipated), 1e-300});

@@ -17,7 +17,6 @@
 namespace demfdm::dem {
 
 using detail::facet_distance;
-using detail::Key;
 using detail::plane_distance;
 using detail::WallCand;
 

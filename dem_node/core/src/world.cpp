@@ -23,7 +23,6 @@
 namespace demfdm::dem {
 
 namespace {
-using detail::Key;
 using detail::Lap;
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::size_t kChunk = 2048;  // fixed chunking: reductions independent of threads

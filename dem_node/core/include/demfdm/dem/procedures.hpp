@@ -70,6 +70,8 @@ double largest_critical_step(WorldParams p, double r_min, double r_max);
 /// The DEM's total energy [J]: kinetic + strain + dissipated (damping, friction, softening;
 /// docs/theory.md 8.18).
 double total_energy(const World& w);
+/// The same from energies already measured (World::energy()).
+double total_energy(const Energy& e);
 
 /// Energy balance of a stage (docs/stability.md, docs/theory.md 8.18): the change of the total
 /// energy equals the work of the moving boundaries (boundary_power) and of gravity. begin()
