@@ -109,7 +109,7 @@ const char* isa_name(pairblock::Isa i) {
   return "?";
 }
 
-// The instruction set the ball–ball pass runs with for a kernel choice (World::pair_pass: the
+// The instruction set the ball–ball pass runs with for a kernel choice (PairSet::pass_law: the
 // block kernels for the linear and soft-bond models with the default rescale and unloading).
 const char* kernel_isa(PairKernel k) {
   switch (k) {
@@ -195,7 +195,7 @@ double working_set_bytes(const World& w) {
   return ball * double(w.num_balls()) + entry * double(pc.size());
 }
 
-// Operations of the linear pass per live contact, counted from World::pair_pass (stage 1:
+// Operations of the linear pass per live contact, counted from PairSet::pass_law (stage 1:
 // branch vector, ‖d‖², idle test; stage 3: the four ball sums) and the linear lane loop of
 // dem_node/core/src/pair_block_body.inc (lane_kin 42, rotate_lane 72, linear law 39, lane_out 15);
 // + − × only (no compares or selects), and per idle list entry stage 1 alone. Recount when

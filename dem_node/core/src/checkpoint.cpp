@@ -2,6 +2,8 @@
 #include "demfdm/dem/checkpoint.hpp"
 
 #include "demfdm/dem/specimen.hpp"
+#include "pair_set.hpp"
+#include "wall_set.hpp"
 
 #include <istream>
 #include <iterator>
@@ -32,7 +34,12 @@ static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
 static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
 static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
-static_assert(sizeof(World) == 3224, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state)
+static_assert(sizeof(World) == 1936, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state)
+// The contact sets: vtable, phase, contacts, the kind's walls (PairSet: + pass and measurement scratch, not state).
+static_assert(sizeof(PairSet) == 336, "PairSet changed: is the new member state? update the checkpoint");
+static_assert(sizeof(WallSet<PlaneKind>) == 328, "WallSet<PlaneKind> changed: update the checkpoint");
+static_assert(sizeof(WallSet<FacetKind>) == 336, "WallSet<FacetKind> changed: update the checkpoint");  // + restore_linear (per pass)
+static_assert(sizeof(WallSet<FootingKind>) == 432, "WallSet<FootingKind> changed: update the checkpoint");
 #endif
 
 namespace {
@@ -493,7 +500,7 @@ struct CheckpointAccess {
     o.end();
 
     o.begin("pairs");
-    const PairContacts& pc = w.pc_;
+    const PairContacts& pc = w.pairs_->contacts;
     o.u32s(pc.a);
     o.u32s(pc.b);
     o.u64(pc.shift.size());
@@ -503,27 +510,27 @@ struct CheckpointAccess {
     o.end();
 
     o.begin("plane_contacts");
-    put(o, w.plc_);
+    put(o, w.planes_->contacts);
     o.end();
     o.begin("facet_contacts");
-    put(o, w.fcc_);
+    put(o, w.facets_->contacts);
     o.end();
     o.begin("footing_contacts");
-    put(o, w.ftc_);
+    put(o, w.footing_->contacts);
     o.end();
 
     o.begin("planes");
-    o.u64(w.planes_.size());
-    for (const PlaneWall& p : w.planes_) put(o, p);
+    o.u64(w.planes_->kind.walls.size());
+    for (const PlaneWall& p : w.planes_->kind.walls) put(o, p);
     o.end();
 
     o.begin("facet_walls");
-    o.u64(w.fwalls_.size());
-    for (const FacetWall& fw : w.fwalls_) put(o, fw);
+    o.u64(w.facets_->kind.walls.size());
+    for (const FacetWall& fw : w.facets_->kind.walls) put(o, fw);
     o.end();
 
     o.begin("footing");
-    put(o, w.footing_);
+    put(o, w.footing_->kind.ft);
     o.end();
   }
 
@@ -690,25 +697,22 @@ struct CheckpointAccess {
     w.e_slip_dead_ = k.e_slip_dead;
     w.e_soft_dead_ = k.e_soft_dead;
     w.pt_ = std::move(pt);
-    w.pc_ = std::move(pc);
-    w.plc_ = std::move(plc);
-    w.fcc_ = std::move(fcc);
-    w.ftc_ = std::move(ftc);
-    w.planes_ = std::move(planes);
-    w.fwalls_ = std::move(fwalls);
-    w.footing_ = footing;
-    // Scratch: per-thread force buffers are re-created (all zero) by the next pass.
-    w.tbuf_.clear();
+    // Scratch: the pair set's per-thread force buffers are re-created (all zero) by the next pass.
+    w.pairs_->reset(std::move(pc));
+    w.planes_->contacts = std::move(plc);
+    w.facets_->contacts = std::move(fcc);
+    w.footing_->contacts = std::move(ftc);
+    w.planes_->kind.walls = std::move(planes);
+    w.facets_->kind.walls = std::move(fwalls);
+    w.footing_->kind.ft = footing;
     w.chunk_e_.clear();
-    w.row_lo_.clear();
-    w.row_hi_.clear();
     if (w.gravity_) w.remove_effect(w.gravity_);
     if (gravity_on) w.gravity_ = w.add_effect(std::make_unique<GravityEffect>(g));
     // The saved platen servos replace the target's.
     for (const PlatenServoParams& p : platens)
-      if (p.wall < 0 || static_cast<std::size_t>(p.wall) >= w.planes_.size())
+      if (p.wall < 0 || p.wall >= w.num_planes())
         throw std::runtime_error("load_state: a platen servo of wall " + std::to_string(p.wall) + " in a world of " +
-                                 std::to_string(w.planes_.size()) + " planes");
+                                 std::to_string(w.num_planes()) + " planes");
     std::vector<const Effect*> old;
     for (const auto& e : w.effects_)
       if (dynamic_cast<const PlatenServo*>(e.get())) old.push_back(e.get());

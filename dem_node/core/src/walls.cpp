@@ -1,17 +1,20 @@
-// The one wall-contact set of World (docs/theory.md 1.4, 6.2-6.5): wall kinds as geometries,
-// their candidate search and history merge at a rebuild, the per-contact law and the pass over
-// a kind's contacts, and the bonding of balls to interface facets (§2.6).
+// The wall-contact set of World (wall_set.hpp; docs/theory.md 1.4, 6.2-6.5): the wall kinds as
+// geometries, their candidate search and history merge at a rebuild, the per-contact law and
+// the pass over a kind's contacts, the bonding of balls to interface facets (2.6), and World's
+// wall API.
 #include <omp.h>
 
 #include <algorithm>
 #include <array>
 #include <limits>
 #include <numeric>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
 #include "demfdm/dem/geometry.hpp"
 #include "demfdm/dem/world.hpp"
+#include "wall_set.hpp"
 #include "world_detail.hpp"
 
 namespace demfdm::dem {
@@ -20,266 +23,318 @@ using detail::facet_distance;
 using detail::plane_distance;
 using detail::WallCand;
 
-// The one wall-contact set (docs/theory.md 1.4): every wall kind's contacts go through the same
-// law (wall_contact), history merge (rebuild_walls) and bookkeeping. A kind is a geometry:
-//   begin()             reset what the kind sums over its contacts;
-//   surface(x, wc, c)   the contact's surface point: distance from the ball centre, normal
-//                       towards the wall, wall velocity and spin there, the facet and its
-//                       barycentric weights (facet walls);
-//   after_law(wc, c)    a per-contact rule after the law (may run in parallel);
-//   add(wc, c)          sum the contact's results, serially in contact order;
-//   end(wc)             what the kind derives from all its contacts;
-//   candidates(cands)   the (ball, wall, facet) pairs within reach at a rebuild; wall_id(w).
-struct WallSurface {
-  double dist = 0.0;
-  Vec3 n{}, v{}, w{}, bary{};
-  std::int32_t facet = 0;
-};
+// ------------------------------------------------------------------------------------------
+// planes
 
-// Planar walls (platens, boxes): one-sided inside their rectangle; reaction and the sum of the
-// active contacts' K_n (servo gain) per wall.
-struct World::PlaneGeometry {
-  World& wd;
-  static constexpr bool kParallel = false;
-  void begin() {
-    for (auto& pw : wd.planes_) { pw.reaction = Vec3{}; pw.k_sum = 0.0; }
+void PlaneKind::begin(const SetContext&, const WallContacts&) {
+  for (auto& pw : walls) { pw.reaction = Vec3{}; pw.k_sum = 0.0; }
+}
+
+WallSurface PlaneKind::surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
+  const PlaneWall& pw = walls[wc.wall[c]];
+  WallSurface s;
+  s.dist = plane_distance(x, pw, s.n);
+  s.v = pw.p.velocity;
+  s.facet = wc.facet[c];
+  s.bary = wc.bary[c];
+  return s;
+}
+
+void PlaneKind::add(const WallContacts& wc, std::int64_t c) {
+  PlaneWall& pw = walls[wc.wall[c]];
+  pw.reaction += wc.F[c];
+  if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
+}
+
+void PlaneKind::candidates(const SetContext& cx, std::vector<WallCand>& cands) {
+  const auto& pt = cx.pt;
+  for (std::size_t w = 0; w < walls.size(); ++w) {
+    for (std::size_t i = 0; i < pt.size(); ++i) {
+      Vec3 nn;
+      const double d = plane_distance(pt.x[i], walls[w], nn);
+      if (d - pt.r[i] < cx.skin + cx.p.ball_wall.linear.rgap)
+        cands.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(w), 0});
+    }
+    walls[w].disp = Vec3{};
   }
-  WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
-    const PlaneWall& pw = wd.planes_[wc.wall[c]];
-    WallSurface s;
-    s.dist = plane_distance(x, pw, s.n);
-    s.v = pw.p.velocity;
-    s.facet = wc.facet[c];
-    s.bary = wc.bary[c];
-    return s;
+}
+
+void PlaneKind::move(double dt) {
+  for (auto& pw : walls) {
+    pw.p.point += dt * pw.p.velocity;
+    pw.disp += dt * pw.p.velocity;
   }
-  void after_law(WallContacts&, std::int64_t) const {}
-  void add(const WallContacts& wc, std::int64_t c) {
-    PlaneWall& pw = wd.planes_[wc.wall[c]];
-    pw.reaction += wc.F[c];
-    if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
+}
+
+double PlaneKind::travel() const {
+  double dw = 0.0;
+  for (const auto& pw : walls) dw = std::max(dw, norm(pw.disp));
+  return dw;
+}
+
+// ------------------------------------------------------------------------------------------
+// interface facets
+
+void FacetKind::begin(const SetContext& cx, const WallContacts& wc) {
+  restore_linear = cx.p.ball_facet.model == ContactModel::kLinearPBond && cx.p.ball_facet.pbond.zero_linear &&
+                   !wc.bond.empty();
+}
+
+WallSurface FacetKind::surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
+  const FacetWall& fw = walls[wc.wall[c]];
+  WallSurface s;
+  double best = std::numeric_limits<double>::infinity();
+  std::int32_t ft = wc.facet[c];
+  for (std::uint32_t k = wc.cand_off[c]; k < wc.cand_off[c + 1]; ++k) {
+    Vec3 nn, ww;
+    const double d = facet_distance(x, fw, wc.cand[k], nn, ww);
+    if (d < best) { best = d; s.n = nn; s.bary = ww; ft = static_cast<std::int32_t>(wc.cand[k]); }
   }
-  void end(WallContacts&) {}
-  void candidates(std::vector<WallCand>& cands) {
-    const auto& pt = wd.pt_;
-    for (std::size_t w = 0; w < wd.planes_.size(); ++w) {
-      for (std::size_t i = 0; i < pt.size(); ++i) {
-        Vec3 nn;
-        const double d = plane_distance(pt.x[i], wd.planes_[w], nn);
-        if (d - pt.r[i] < wd.skin_ + wd.p_.ball_wall.linear.rgap)
-          cands.push_back({static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(w), 0});
+  s.dist = best;
+  s.facet = ft;
+  const auto& tr = fw.tri[static_cast<std::size_t>(ft)];
+  const Vec3& w = s.bary;
+  s.v = w.x * fw.vel[tr[0]] + w.y * fw.vel[tr[1]] + w.z * fw.vel[tr[2]];
+  s.w = fw.tri_spin[static_cast<std::size_t>(ft)];
+  return s;
+}
+
+// §2.6, §6.3: a bonded interface contact has no linear part (zero_linear); once its bond
+// breaks it is an ordinary linear contact again, from the configuration at the break (its
+// force starts at 0 and grows with further overlap), so the ball cannot cross the wall.
+void FacetKind::after_law(const SetContext& cx, WallContacts& wc, std::int64_t c) const {
+  if (restore_linear && wc.h[c].kn == 0.0 &&
+      (wc.bond[c].state == BondState::kBrokenTension || wc.bond[c].state == BondState::kBrokenShear))
+    detail::init_contact(cx.pt, wc.ball[c], 0, wc.h[c], &wc.bond[c], cx.p.ball_facet, true);
+}
+
+// §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order
+void FacetKind::end(const SetContext& cx, WallContacts& wc) {
+  for (auto& fw : walls) {
+    std::fill(fw.vforce.begin(), fw.vforce.end(), Vec3{});
+    std::fill(fw.vstiff.begin(), fw.vstiff.end(), 0.0);
+    fw.total_force = Vec3{};
+  }
+  const std::int64_t m = static_cast<std::int64_t>(wc.size());
+  for (std::int64_t c = 0; c < m; ++c) {
+    FacetWall& fw = walls[wc.wall[c]];
+    const auto& tr = fw.tri[static_cast<std::size_t>(wc.facet[c])];
+    const bool bd = !wc.bond.empty() && bonded(wc.bond[c].state);
+    const bool act = (wc.h[c].flags & ContactHist::kActive) || bd;
+    if (!act) continue;
+    if (norm2(wc.F[c]) > 0.0 || norm2(wc.M[c]) > 0.0) {
+      std::array<Vec3, 3> f;
+      facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, wc.xc[c], wc.F[c], wc.M[c], f);
+      for (int v = 0; v < 3; ++v) fw.vforce[tr[v]] += f[v];
+      fw.total_force += wc.F[c];
+    }
+    double K = wc.h[c].kn + wc.h[c].ks;
+    if (bd && cx.p.ball_facet.model == ContactModel::kLinearPBond)
+      K += wc.bond[c].kn * (1.0 + 1.0 / cx.p.ball_facet.pbond.kratio) * wc.bond[c].area();
+    const Vec3& w = wc.bary[c];
+    for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += w[v] * K;
+  }
+}
+
+// every facet against every ball near its bounding box (sorted by x for a cheap sweep);
+// candidates within R + skin
+void FacetKind::candidates(const SetContext& cx, std::vector<WallCand>& cands) {
+  if (walls.empty()) return;
+  const auto& pt = cx.pt;
+  const std::size_t n = pt.size();
+  std::vector<std::uint32_t> order(n);
+  std::iota(order.begin(), order.end(), 0u);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return pt.x[a].x < pt.x[b].x; });
+  std::vector<double> xs(n);
+  for (std::size_t k = 0; k < n; ++k) xs[k] = pt.x[order[k]].x;
+  double rmax = 0.0;
+  for (double r : pt.r) rmax = std::max(rmax, r);
+  const double reach = rmax + cx.skin + cx.p.ball_facet.linear.rgap;
+  for (std::size_t w = 0; w < walls.size(); ++w) {
+    const auto& fw = walls[w];
+    for (std::size_t t = 0; t < fw.tri.size(); ++t) {
+      Vec3 lo = fw.pos[fw.tri[t][0]], hi = lo;
+      for (int v = 1; v < 3; ++v)
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = std::min(lo[k], fw.pos[fw.tri[t][v]][k]);
+          hi[k] = std::max(hi[k], fw.pos[fw.tri[t][v]][k]);
+        }
+      auto it0 = std::lower_bound(xs.begin(), xs.end(), lo.x - reach);
+      auto it1 = std::upper_bound(xs.begin(), xs.end(), hi.x + reach);
+      for (auto it = it0; it != it1; ++it) {
+        const std::uint32_t i = order[static_cast<std::size_t>(it - xs.begin())];
+        const Vec3& x = pt.x[i];
+        if (x.y < lo.y - reach || x.y > hi.y + reach || x.z < lo.z - reach || x.z > hi.z + reach) continue;
+        Vec3 nn, ww;
+        const double d = facet_distance(x, fw, t, nn, ww);
+        if (d - pt.r[i] < cx.skin + cx.p.ball_facet.linear.rgap)
+          cands.push_back({i, static_cast<std::uint32_t>(w), static_cast<std::int32_t>(t)});
       }
-      wd.planes_[w].disp = Vec3{};
     }
   }
-  std::uint64_t wall_id(std::uint32_t w) const { return wd.planes_[w].id; }
-};
+  for (auto& fw : walls) fw.pos_ref = fw.pos;
+}
 
-// Interface facet walls (§6.2-6.5): the nearest candidate facet of each contact (the history
-// stays with the (ball, wall) contact, §1.4); equivalent vertex forces and vertex stiffness.
-struct World::FacetGeometry {
-  World& wd;
-  bool restore_linear = false;
-  static constexpr bool kParallel = true;
-  void begin() {
-    const WallContacts& wc = wd.fcc_;
-    restore_linear = wd.p_.ball_facet.model == ContactModel::kLinearPBond && wd.p_.ball_facet.pbond.zero_linear &&
-                     !wc.bond.empty();
+double FacetKind::travel() const {
+  double dw = 0.0;
+  for (const auto& fw : walls)
+    for (std::size_t i = 0; i < fw.pos.size(); ++i) dw = std::max(dw, norm(fw.pos[i] - fw.pos_ref[i]));
+  return dw;
+}
+
+// §6.2 facet normal and kinematic spin ω_f = ω_⊥ + ω_n n̂ from the vertex velocities.
+void FacetKind::update_spin(FacetWall& fw, bool spin) {
+  for (std::size_t t = 0; t < fw.tri.size(); ++t) {
+    const auto& tr = fw.tri[t];
+    const Vec3 e1 = fw.pos[tr[1]] - fw.pos[tr[0]], e2 = fw.pos[tr[2]] - fw.pos[tr[0]];
+    Vec3 n = cross(e1, e2);
+    const double nn = norm(n);
+    if (!(nn > 0.0)) throw std::invalid_argument("facet wall: degenerate triangle (zero area).");
+    n *= 1.0 / nn;
+    fw.tri_normal[t] = n;
+    if (!spin) { fw.tri_spin[t] = Vec3{}; continue; }
+    const Vec3 d1 = fw.vel[tr[1]] - fw.vel[tr[0]], d2 = fw.vel[tr[2]] - fw.vel[tr[0]];
+    // L_s = Ė (EᵀE)⁻¹ Eᵀ
+    const double g11 = dot(e1, e1), g12 = dot(e1, e2), g22 = dot(e2, e2);
+    const double det = g11 * g22 - g12 * g12;
+    const double i11 = g22 / det, i12 = -g12 / det, i22 = g11 / det;
+    auto Ls = [&](const Vec3& x) {  // L_s x
+      const double a1 = dot(e1, x), a2 = dot(e2, x);
+      const double c1 = i11 * a1 + i12 * a2, c2 = i12 * a1 + i22 * a2;
+      return c1 * d1 + c2 * d2;
+    };
+    auto LsT = [&](const Vec3& y) {  // L_sᵀ y = E (EᵀE)⁻¹ Ėᵀ y
+      const double b1 = dot(d1, y), b2 = dot(d2, y);
+      const double c1 = i11 * b1 + i12 * b2, c2 = i12 * b1 + i22 * b2;
+      return c1 * e1 + c2 * e2;
+    };
+    Vec3 nd = -LsT(n);
+    nd -= dot(nd, n) * n;
+    const Vec3 t1 = e1 * (1.0 / norm(e1));
+    const Vec3 t2 = cross(n, t1);
+    const double wn = 0.5 * (dot(t2, Ls(t1)) - dot(t1, Ls(t2)));
+    fw.tri_spin[t] = cross(n, nd) + wn * n;
   }
-  WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
-    const FacetWall& fw = wd.fwalls_[wc.wall[c]];
-    WallSurface s;
+}
+
+std::size_t FacetKind::bond(const SetContext& cx, WallContacts& wc, double hi) const {
+  std::size_t cnt = 0;
+  for (std::size_t c = 0; c < wc.size(); ++c) {
+    BondHist& b = wc.bond[c];
+    if (b.state != BondState::kNeverBonded) continue;
+    const FacetWall& fw = walls[wc.wall[c]];
     double best = std::numeric_limits<double>::infinity();
-    std::int32_t ft = wc.facet[c];
+    Vec3 n{};
     for (std::uint32_t k = wc.cand_off[c]; k < wc.cand_off[c + 1]; ++k) {
       Vec3 nn, ww;
-      const double d = facet_distance(x, fw, wc.cand[k], nn, ww);
-      if (d < best) { best = d; s.n = nn; s.bary = ww; ft = static_cast<std::int32_t>(wc.cand[k]); }
+      const double d = facet_distance(cx.pt.x[wc.ball[c]], fw, wc.cand[k], nn, ww);
+      if (d < best) { best = d; n = nn; }
     }
-    s.dist = best;
-    s.facet = ft;
-    const auto& tr = fw.tri[static_cast<std::size_t>(ft)];
-    const Vec3& w = s.bary;
-    s.v = w.x * fw.vel[tr[0]] + w.y * fw.vel[tr[1]] + w.z * fw.vel[tr[2]];
-    s.w = fw.tri_spin[static_cast<std::size_t>(ft)];
-    return s;
+    if (best - cx.pt.r[wc.ball[c]] > hi) continue;
+    b.state = BondState::kIntact;
+    ContactHist& h = wc.h[c];
+    h.flags |= ContactHist::kIncremental | ContactHist::kHasNormal;
+    h.n_old = n;
+    visit_law(cx.p.ball_facet.model, [&](auto law) { decltype(law)::install_bond(h, b, cx.p.ball_facet); });
+    ++cnt;
   }
-  // §2.6, §6.3: a bonded interface contact has no linear part (zero_linear); once its bond
-  // breaks it is an ordinary linear contact again, from the configuration at the break (its
-  // force starts at 0 and grows with further overlap), so the ball cannot cross the wall.
-  void after_law(WallContacts& wc, std::int64_t c) const {
-    if (restore_linear && wc.h[c].kn == 0.0 &&
-        (wc.bond[c].state == BondState::kBrokenTension || wc.bond[c].state == BondState::kBrokenShear))
-      wd.init_contact(wc.ball[c], 0, wc.h[c], &wc.bond[c], wd.p_.ball_facet, true);
-  }
-  void add(const WallContacts&, std::int64_t) {}
-  // §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order
-  void end(WallContacts& wc) {
-    for (auto& fw : wd.fwalls_) {
-      std::fill(fw.vforce.begin(), fw.vforce.end(), Vec3{});
-      std::fill(fw.vstiff.begin(), fw.vstiff.end(), 0.0);
-      fw.total_force = Vec3{};
-    }
-    const std::int64_t m = static_cast<std::int64_t>(wc.size());
-    for (std::int64_t c = 0; c < m; ++c) {
-      FacetWall& fw = wd.fwalls_[wc.wall[c]];
-      const auto& tr = fw.tri[static_cast<std::size_t>(wc.facet[c])];
-      const bool bd = !wc.bond.empty() && bonded(wc.bond[c].state);
-      const bool act = (wc.h[c].flags & ContactHist::kActive) || bd;
-      if (!act) continue;
-      if (norm2(wc.F[c]) > 0.0 || norm2(wc.M[c]) > 0.0) {
-        std::array<Vec3, 3> f;
-        facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, wc.xc[c], wc.F[c], wc.M[c], f);
-        for (int v = 0; v < 3; ++v) fw.vforce[tr[v]] += f[v];
-        fw.total_force += wc.F[c];
-      }
-      double K = wc.h[c].kn + wc.h[c].ks;
-      if (bd && wd.p_.ball_facet.model == ContactModel::kLinearPBond)
-        K += wc.bond[c].kn * (1.0 + 1.0 / wd.p_.ball_facet.pbond.kratio) * wc.bond[c].area();
-      const Vec3& w = wc.bary[c];
-      for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += w[v] * K;
-    }
-  }
-  // every facet against every ball near its bounding box (sorted by x for a cheap sweep);
-  // candidates within R + skin
-  void candidates(std::vector<WallCand>& cands) {
-    if (wd.fwalls_.empty()) return;
-    const auto& pt = wd.pt_;
-    const std::size_t n = pt.size();
-    std::vector<std::uint32_t> order(n);
-    std::iota(order.begin(), order.end(), 0u);
-    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) { return pt.x[a].x < pt.x[b].x; });
-    std::vector<double> xs(n);
-    for (std::size_t k = 0; k < n; ++k) xs[k] = pt.x[order[k]].x;
-    double rmax = 0.0;
-    for (double r : pt.r) rmax = std::max(rmax, r);
-    const double reach = rmax + wd.skin_ + wd.p_.ball_facet.linear.rgap;
-    for (std::size_t w = 0; w < wd.fwalls_.size(); ++w) {
-      const auto& fw = wd.fwalls_[w];
-      for (std::size_t t = 0; t < fw.tri.size(); ++t) {
-        Vec3 lo = fw.pos[fw.tri[t][0]], hi = lo;
-        for (int v = 1; v < 3; ++v)
-          for (int k = 0; k < 3; ++k) {
-            lo[k] = std::min(lo[k], fw.pos[fw.tri[t][v]][k]);
-            hi[k] = std::max(hi[k], fw.pos[fw.tri[t][v]][k]);
-          }
-        auto it0 = std::lower_bound(xs.begin(), xs.end(), lo.x - reach);
-        auto it1 = std::upper_bound(xs.begin(), xs.end(), hi.x + reach);
-        for (auto it = it0; it != it1; ++it) {
-          const std::uint32_t i = order[static_cast<std::size_t>(it - xs.begin())];
-          const Vec3& x = pt.x[i];
-          if (x.y < lo.y - reach || x.y > hi.y + reach || x.z < lo.z - reach || x.z > hi.z + reach) continue;
-          Vec3 nn, ww;
-          const double d = facet_distance(x, fw, t, nn, ww);
-          if (d - pt.r[i] < wd.skin_ + wd.p_.ball_facet.linear.rgap)
-            cands.push_back({i, static_cast<std::uint32_t>(w), static_cast<std::int32_t>(t)});
-        }
-      }
-    }
-    for (auto& fw : wd.fwalls_) fw.pos_ref = fw.pos;
-  }
-  std::uint64_t wall_id(std::uint32_t w) const { return wd.fwalls_[w].id; }
-};
+  return cnt;
+}
 
-// The rigid cylindrical footing (§0.3): its reaction.
-struct World::FootingGeometry {
-  World& wd;
-  static constexpr bool kParallel = false;
-  void begin() { wd.footing_.reaction = Vec3{}; }
-  WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
-    const Footing& ft = wd.footing_;
-    WallSurface s;
-    Vec3 q;
-    s.dist = closest_point_cylinder(x, ft.p.bottom_centre, 0.5 * ft.p.diameter, ft.p.height, q, s.n);
-    s.v = ft.p.velocity;
-    s.facet = wc.facet[c];
-    s.bary = wc.bary[c];
-    return s;
-  }
-  void after_law(WallContacts&, std::int64_t) const {}
-  void add(const WallContacts& wc, std::int64_t c) { wd.footing_.reaction += wc.F[c]; }
-  void end(WallContacts&) {}
-  void candidates(std::vector<WallCand>& cands) {
-    Footing& ft = wd.footing_;
-    if (!ft.enabled) return;
-    const auto& pt = wd.pt_;
-    const double R = 0.5 * ft.p.diameter;
-    for (std::size_t i = 0; i < pt.size(); ++i) {
-      Vec3 q, nn;
-      const double d = closest_point_cylinder(pt.x[i], ft.p.bottom_centre, R, ft.p.height, q, nn);
-      if (d - pt.r[i] < wd.skin_ + wd.p_.ball_footing.linear.rgap) cands.push_back({static_cast<std::uint32_t>(i), 0, 0});
-    }
-    ft.disp = Vec3{};
-  }
-  std::uint64_t wall_id(std::uint32_t) const { return wd.footing_.id; }
-};
+// ------------------------------------------------------------------------------------------
+// footing
 
+WallSurface FootingKind::surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
+  WallSurface s;
+  Vec3 q;
+  s.dist = closest_point_cylinder(x, ft.p.bottom_centre, 0.5 * ft.p.diameter, ft.p.height, q, s.n);
+  s.v = ft.p.velocity;
+  s.facet = wc.facet[c];
+  s.bary = wc.bary[c];
+  return s;
+}
 
-void World::rebuild_walls() {
-  auto merge = [&](WallContacts& old, std::vector<WallCand>& cands, const ContactFamilyParams& fam,
-                   auto wall_id) {
-    const bool has_bond = law_has_bond(fam.model);
-    detail::HistoryCarry carry(old.size(), false, [&](std::size_t c) {
-      return std::make_pair(std::uint64_t(pt_.id[old.ball[c]]), std::uint64_t(wall_id(old.wall[c])));
-    });
-    std::sort(cands.begin(), cands.end(), [](const WallCand& x, const WallCand& y) {
-      return std::tie(x.ball, x.wall, x.facet) < std::tie(y.ball, y.wall, y.facet);
-    });
-    WallContacts q;
-    q.cand_off.push_back(0);
-    for (std::size_t k = 0; k < cands.size();) {
-      const auto& e = cands[k];
-      q.ball.push_back(e.ball);
-      q.wall.push_back(e.wall);
-      std::int32_t keep_facet = e.facet;
-      std::size_t k2 = k;
-      for (; k2 < cands.size() && cands[k2].ball == e.ball && cands[k2].wall == e.wall; ++k2)
-        q.cand.push_back(static_cast<std::uint32_t>(cands[k2].facet));
-      q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
-      const std::int64_t found = carry.take(pt_.id[e.ball], wall_id(e.wall));
-      if (found >= 0) {
-        const auto oc = static_cast<std::size_t>(found);
-        q.h.push_back(old.h[oc]);
-        if (has_bond) q.bond.push_back(old.bond[oc]);
-        if (!old.facet.empty()) keep_facet = old.facet[oc];
-      } else {
-        q.h.push_back({});
-        if (has_bond) q.bond.push_back({});
-        init_contact(e.ball, 0, q.h.back(), has_bond ? &q.bond.back() : nullptr, fam, true);
-      }
-      q.facet.push_back(keep_facet);
-      k = k2;
+void FootingKind::candidates(const SetContext& cx, std::vector<WallCand>& cands) {
+  if (!ft.enabled) return;
+  const auto& pt = cx.pt;
+  const double R = 0.5 * ft.p.diameter;
+  for (std::size_t i = 0; i < pt.size(); ++i) {
+    Vec3 q, nn;
+    const double d = closest_point_cylinder(pt.x[i], ft.p.bottom_centre, R, ft.p.height, q, nn);
+    if (d - pt.r[i] < cx.skin + cx.p.ball_footing.linear.rgap) cands.push_back({static_cast<std::uint32_t>(i), 0, 0});
+  }
+  ft.disp = Vec3{};
+}
+
+void FootingKind::move(double dt) {
+  if (!ft.enabled) return;
+  ft.p.bottom_centre += dt * ft.p.velocity;
+  ft.disp += dt * ft.p.velocity;
+}
+
+double FootingKind::travel() const { return ft.enabled ? norm(ft.disp) : 0.0; }
+
+// ------------------------------------------------------------------------------------------
+// the set: one template for every kind
+
+template <class Kind>
+void WallSet<Kind>::rebuild(SetContext& cx) {
+  std::vector<WallCand> cands;
+  kind.candidates(cx, cands);
+  const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
+  WallContacts& old = contacts;
+  const bool has_bond = law_has_bond(fam.model);
+  detail::HistoryCarry carry(old.size(), false, [&](std::size_t c) {
+    return std::make_pair(std::uint64_t(cx.pt.id[old.ball[c]]), std::uint64_t(kind.wall_id(old.wall[c])));
+  });
+  std::sort(cands.begin(), cands.end(), [](const WallCand& x, const WallCand& y) {
+    return std::tie(x.ball, x.wall, x.facet) < std::tie(y.ball, y.wall, y.facet);
+  });
+  WallContacts q;
+  q.cand_off.push_back(0);
+  for (std::size_t k = 0; k < cands.size();) {
+    const auto& e = cands[k];
+    q.ball.push_back(e.ball);
+    q.wall.push_back(e.wall);
+    std::int32_t keep_facet = e.facet;
+    std::size_t k2 = k;
+    for (; k2 < cands.size() && cands[k2].ball == e.ball && cands[k2].wall == e.wall; ++k2)
+      q.cand.push_back(static_cast<std::uint32_t>(cands[k2].facet));
+    q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
+    const std::int64_t found = carry.take(cx.pt.id[e.ball], kind.wall_id(e.wall));
+    if (found >= 0) {
+      const auto oc = static_cast<std::size_t>(found);
+      q.h.push_back(old.h[oc]);
+      if (has_bond) q.bond.push_back(old.bond[oc]);
+      if (!old.facet.empty()) keep_facet = old.facet[oc];
+    } else {
+      q.h.push_back({});
+      if (has_bond) q.bond.push_back({});
+      detail::init_contact(cx.pt, e.ball, 0, q.h.back(), has_bond ? &q.bond.back() : nullptr, fam, true);
     }
-    // bonded wall contacts never disappear: keep them with their last facet as candidate
-    carry.rest(
-        old.h, old.bond, has_bond,
-        [&](std::size_t c) {
-          q.ball.push_back(old.ball[c]);
-          q.wall.push_back(old.wall[c]);
-          q.cand.push_back(static_cast<std::uint32_t>(old.facet.empty() ? 0 : old.facet[c]));
-          q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
-          q.facet.push_back(old.facet.empty() ? 0 : old.facet[c]);
-          q.h.push_back(old.h[c]);
-          q.bond.push_back(old.bond[c]);
-        },
-        e_slip_dead_, e_soft_dead_);
-    const std::size_t m = q.ball.size();
-    q.F.assign(m, {});
-    q.M.assign(m, {});
-    q.TA.assign(m, {});
-    q.xc.assign(m, {});
-    q.bary.assign(m, {});
-    old = std::move(q);
-  };
-  // every wall kind: its candidates, merged into its contact set
-  auto kind = [&](WallContacts& wc, const ContactFamilyParams& fam, auto geometry) {
-    std::vector<WallCand> cands;
-    geometry.candidates(cands);
-    merge(wc, cands, fam, [&](std::uint32_t w) { return geometry.wall_id(w); });
-  };
-  kind(plc_, p_.ball_wall, PlaneGeometry{*this});
-  kind(fcc_, p_.ball_facet, FacetGeometry{*this});
-  kind(ftc_, p_.ball_footing, FootingGeometry{*this});
+    q.facet.push_back(keep_facet);
+    k = k2;
+  }
+  // bonded wall contacts never disappear: keep them with their last facet as candidate
+  carry.rest(
+      old.h, old.bond, has_bond,
+      [&](std::size_t c) {
+        q.ball.push_back(old.ball[c]);
+        q.wall.push_back(old.wall[c]);
+        q.cand.push_back(static_cast<std::uint32_t>(old.facet.empty() ? 0 : old.facet[c]));
+        q.cand_off.push_back(static_cast<std::uint32_t>(q.cand.size()));
+        q.facet.push_back(old.facet.empty() ? 0 : old.facet[c]);
+        q.h.push_back(old.h[c]);
+        q.bond.push_back(old.bond[c]);
+      },
+      cx.e_slip_dead, cx.e_soft_dead);
+  const std::size_t m = q.ball.size();
+  q.F.assign(m, {});
+  q.M.assign(m, {});
+  q.TA.assign(m, {});
+  q.xc.assign(m, {});
+  q.bary.assign(m, {});
+  old = std::move(q);
 }
 
 // One ball against a wall (platen, footing or facet) whose surface point moves at v_wall and
@@ -309,20 +364,28 @@ Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const V
   return F;
 }
 
-template <class Law, class Geom>
-void World::wall_set_pass(WallContacts& wc, const ContactFamilyParams& fam, Geom& g, double dt) {
-  const LawConst lc = law_const(fam, true);
+template <class Kind>
+void WallSet<Kind>::pass(SetContext& cx, double dt) {
+  const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
+  visit_law(fam.model, [&](auto law) { pass_law<decltype(law)>(cx, fam, dt); });
+}
+
+template <class Kind>
+template <class Law>
+void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, double dt) {
+  const LawConst lc = detail::law_const(fam, cx.p.rescale_shear, true);
+  WallContacts& wc = contacts;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
-  g.begin();
+  kind.begin(cx, wc);
   auto one = [&](std::int64_t c) {
-    const WallSurface s = g.surface(pt_.x[wc.ball[c]], wc, c);
+    const WallSurface s = kind.surface(cx.pt.x[wc.ball[c]], wc, c);
     wc.facet[c] = s.facet;
     wc.bary[c] = s.bary;
-    wall_contact<Law>(pt_, wc, c, s.n, s.dist, s.v, s.w, lc, dt);
-    g.after_law(wc, c);
+    wall_contact<Law>(cx.pt, wc, c, s.n, s.dist, s.v, s.w, lc, dt);
+    kind.after_law(cx, wc, c);
   };
-  if constexpr (Geom::kParallel) {
-    const int nt = thread_count();
+  if constexpr (Kind::kParallel) {
+    const int nt = cx.threads;
     // Each contact writes only its own records, so the split changes no bit; a few hundred
     // contacts (the interface facets of a coupled block) already pay for the fork.
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)
@@ -330,31 +393,195 @@ void World::wall_set_pass(WallContacts& wc, const ContactFamilyParams& fam, Geom
   } else {
     for (std::int64_t c = 0; c < m; ++c) one(c);
   }
-  for (std::int64_t c = 0; c < m; ++c) g.add(wc, c);
-  g.end(wc);
+  for (std::int64_t c = 0; c < m; ++c) kind.add(wc, c);
+  kind.end(cx, wc);
 }
 
-// The wall kinds of the force pass, each timed in its phase (World::phase_times).
-void World::wall_passes(double dt) {
-  detail::Lap lap;
-  if (!planes_.empty()) {
-    PlaneGeometry g{*this};
-    visit_law(p_.ball_wall.model, [&](auto law) { wall_set_pass<decltype(law)>(plc_, p_.ball_wall, g, dt); });
-    lap(times_.plane);
-  }
-  if (!fwalls_.empty()) {
-    FacetGeometry g{*this};
-    visit_law(p_.ball_facet.model, [&](auto law) { wall_set_pass<decltype(law)>(fcc_, p_.ball_facet, g, dt); });
-    lap(times_.facet);
-  }
-  if (footing_.enabled) {
-    FootingGeometry g{*this};
-    visit_law(p_.ball_footing.model, [&](auto law) { wall_set_pass<decltype(law)>(ftc_, p_.ball_footing, g, dt); });
-    lap(times_.footing);
-  } else {
-    footing_.reaction = Vec3{};
+// Wall contacts act on balls after the ball–ball pass, serially in contact order.
+template <class Kind>
+void WallSet<Kind>::gather(Particles& pt) const {
+  Vec3* f = pt.f.data();
+  Vec3* t = pt.t.data();
+  const WallContacts& wc = contacts;
+  for (std::size_t c = 0; c < wc.size(); ++c) {
+    f[wc.ball[c]] -= wc.F[c];
+    t[wc.ball[c]] += wc.TA[c];
   }
 }
+
+template <class Kind>
+void WallSet<Kind>::add_force_norms(double& sum, std::size_t& count) const {
+  for (std::size_t c = 0; c < contacts.size(); ++c) {
+    const double f = norm(contacts.F[c]);
+    if (f > 0.0) { sum += f; ++count; }
+  }
+}
+
+template <class Kind>
+void WallSet<Kind>::add_stiffness(const SetContext& cx, double* kt, double* kr) const {
+  const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
+  const WallContacts& wc = contacts;
+  visit_law(fam.model, [&](auto law) {
+    using L = decltype(law);
+    for (std::size_t c = 0; c < wc.size(); ++c) {
+      const ContactHist& h = wc.h[c];
+      const BondHist* b = wc.bond.empty() ? nullptr : &wc.bond[c];
+      if (!(h.flags & ContactHist::kActive) && !(b && bonded(b->state))) continue;
+      const std::uint32_t i = wc.ball[c];
+      const ContactStiffness s = L::stiffness(h, b, fam, cx.pt.r[i], 0.0);
+      kt[i] += s.k;
+      kr[i] += s.krot + s.ks * cx.pt.r[i] * cx.pt.r[i];
+    }
+  });
+}
+
+template <class Kind>
+void WallSet<Kind>::add_energy(Energy& e, const WorldParams& p) const {
+  detail::add_contact_energy(e, contacts.h, contacts.bond, p.*Kind::kFamily);
+}
+
+template <class Kind>
+void WallSet<Kind>::remap(const std::vector<std::uint32_t>& new_row) {
+  for (auto& b : contacts.ball) b = new_row[b];
+}
+
+template <class Kind>
+void WallSet<Kind>::refresh(const SetContext& cx) {
+  const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
+  const bool bd = law_has_bond(fam.model);
+  WallContacts& wc = contacts;
+  for (std::size_t c = 0; c < wc.size(); ++c)
+    detail::init_contact(cx.pt, wc.ball[c], 0, wc.h[c], bd ? &wc.bond[c] : nullptr, fam, true);
+}
+
+template class WallSet<PlaneKind>;
+template class WallSet<FacetKind>;
+template class WallSet<FootingKind>;
+
+// ------------------------------------------------------------------------------------------
+// World's wall API
+
+int World::add_plane(const PlaneWallParams& p) {
+  PlaneWall w;
+  w.p = p;
+  const double nn = norm(p.normal);
+  if (!(nn > 0.0)) throw std::invalid_argument("add_plane: 'normal' must be a non-zero vector.");
+  w.p.normal = p.normal * (1.0 / nn);
+  Vec3 a1 = p.axis1 - dot(p.axis1, w.p.normal) * w.p.normal;
+  if (norm(a1) < 1e-12) a1 = std::abs(w.p.normal.x) < 0.9 ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+  a1 = a1 - dot(a1, w.p.normal) * w.p.normal;
+  w.p.axis1 = a1 * (1.0 / norm(a1));
+  w.axis2 = cross(w.p.normal, w.p.axis1);
+  if (p.half1 < 0.0 || p.half2 < 0.0)
+    throw std::invalid_argument("add_plane: 'half1' and 'half2' must be >= 0 m (0 = infinite).");
+  w.id = next_wall_id_++;
+  planes_->kind.walls.push_back(w);
+  dirty_ = true;
+  return num_planes() - 1;
+}
+
+PlaneWall& World::plane(int i) { return planes_->kind.walls[static_cast<std::size_t>(i)]; }
+int World::num_planes() const { return static_cast<int>(planes_->kind.walls.size()); }
+
+int World::add_facet_wall(std::span<const double> vertices, std::span<const std::int32_t> triangles) {
+  if (vertices.size() % 3 != 0 || triangles.size() % 3 != 0 || triangles.empty()) {
+    std::ostringstream s;
+    s << "add_facet_wall: 'vertices' and 'triangles' must be non-empty flat [n,3] arrays, found "
+      << vertices.size() << " and " << triangles.size() << " values.";
+    throw std::invalid_argument(s.str());
+  }
+  FacetWall fw;
+  const std::size_t nv = vertices.size() / 3;
+  for (std::size_t i = 0; i < nv; ++i)
+    fw.pos.push_back({vertices[3 * i], vertices[3 * i + 1], vertices[3 * i + 2]});
+  fw.vel.assign(nv, Vec3{});
+  for (std::size_t t = 0; t < triangles.size() / 3; ++t) {
+    std::array<std::int32_t, 3> tr{triangles[3 * t], triangles[3 * t + 1], triangles[3 * t + 2]};
+    for (auto v : tr)
+      if (v < 0 || static_cast<std::size_t>(v) >= nv) {
+        std::ostringstream s;
+        s << "add_facet_wall: triangle " << t << " has vertex index " << v << ", expected [0, "
+          << nv << ").";
+        throw std::invalid_argument(s.str());
+      }
+    fw.tri.push_back(tr);
+  }
+  fw.pos_ref = fw.pos;
+  fw.vforce.assign(nv, Vec3{});
+  fw.vstiff.assign(nv, 0.0);
+  fw.tri_normal.resize(fw.tri.size());
+  fw.tri_spin.assign(fw.tri.size(), Vec3{});
+  fw.id = next_wall_id_++;
+  auto& walls = facets_->kind.walls;
+  walls.push_back(std::move(fw));
+  FacetKind::update_spin(walls.back(), p_.facet_spin);
+  dirty_ = true;
+  return static_cast<int>(walls.size()) - 1;
+}
+
+void World::set_vertex_kinematics(int wall, std::span<const double> pos, std::span<const double> vel) {
+  if (wall < 0 || wall >= num_facet_walls())
+    throw std::invalid_argument("set_vertex_kinematics: 'wall' index out of range.");
+  FacetWall& fw = facet_wall(wall);
+  if (pos.size() != 3 * fw.pos.size() || vel.size() != 3 * fw.pos.size()) {
+    std::ostringstream s;
+    s << "set_vertex_kinematics: 'pos' and 'vel' must hold " << 3 * fw.pos.size()
+      << " values (nv*3), found " << pos.size() << " and " << vel.size() << ".";
+    throw std::invalid_argument(s.str());
+  }
+  for (std::size_t i = 0; i < fw.pos.size(); ++i) {
+    fw.pos[i] = {pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]};
+    fw.vel[i] = {vel[3 * i], vel[3 * i + 1], vel[3 * i + 2]};
+  }
+  FacetKind::update_spin(fw, p_.facet_spin);
+}
+
+std::span<const double> World::vertex_forces(int wall) const {
+  const auto& fw = facets_->kind.walls.at(static_cast<std::size_t>(wall));
+  return {reinterpret_cast<const double*>(fw.vforce.data()), 3 * fw.vforce.size()};
+}
+std::span<const double> World::vertex_stiffness(int wall) const {
+  const auto& fw = facets_->kind.walls.at(static_cast<std::size_t>(wall));
+  return {fw.vstiff.data(), fw.vstiff.size()};
+}
+Vec3 World::facet_wall_force(int wall) const {
+  return facets_->kind.walls.at(static_cast<std::size_t>(wall)).total_force;
+}
+Vec3 World::facet_walls_total_force() const {
+  Vec3 s{};
+  for (const auto& fw : facets_->kind.walls) s += fw.total_force;
+  return s;
+}
+FacetWall& World::facet_wall(int i) { return facets_->kind.walls[static_cast<std::size_t>(i)]; }
+const FacetWall& World::facet_wall(int i) const { return facets_->kind.walls[static_cast<std::size_t>(i)]; }
+int World::num_facet_walls() const { return static_cast<int>(facets_->kind.walls.size()); }
+
+void World::set_footing(const FootingParams& p) {
+  if (!(p.diameter > 0.0) || !(p.height > 0.0)) {
+    std::ostringstream s;
+    s << "set_footing: 'diameter' and 'height' must be > 0 m, found " << p.diameter << " and "
+      << p.height << ".";
+    throw std::invalid_argument(s.str());
+  }
+  Footing& ft = footing_->kind.ft;
+  ft.p = p;
+  if (!ft.enabled) ft.id = next_wall_id_++;
+  ft.enabled = true;
+  dirty_ = true;
+}
+void World::remove_footing() {
+  footing_->kind.ft.enabled = false;
+  dirty_ = true;
+}
+void World::set_footing_position(const Vec3& c) {
+  Footing& ft = footing_->kind.ft;
+  ft.disp += c - ft.p.bottom_centre;
+  ft.p.bottom_centre = c;
+}
+bool World::has_footing() const { return footing_->kind.ft.enabled; }
+void World::set_footing_velocity(const Vec3& v) { footing_->kind.ft.p.velocity = v; }
+const Footing& World::footing() const { return footing_->kind.ft; }
+Vec3 World::footing_reaction() const { return footing_->kind.ft.reaction; }
 
 std::size_t World::bond_ball_facet(double hi) {
   if (!law_has_bond(p_.ball_facet.model))
@@ -362,26 +589,8 @@ std::size_t World::bond_ball_facet(double hi) {
                                 law_name(p_.ball_facet.model) +
                                 "', which cannot bond; set ball_facet.model to 'pbond' (the paper's interface, §2.6).");
   if (!prepared_) prepare();
-  std::size_t cnt = 0;
-  for (std::size_t c = 0; c < fcc_.size(); ++c) {
-    BondHist& b = fcc_.bond[c];
-    if (b.state != BondState::kNeverBonded) continue;
-    const FacetWall& fw = fwalls_[fcc_.wall[c]];
-    double best = std::numeric_limits<double>::infinity();
-    Vec3 n{};
-    for (std::uint32_t k = fcc_.cand_off[c]; k < fcc_.cand_off[c + 1]; ++k) {
-      Vec3 nn, ww;
-      const double d = facet_distance(pt_.x[fcc_.ball[c]], fw, fcc_.cand[k], nn, ww);
-      if (d < best) { best = d; n = nn; }
-    }
-    if (best - pt_.r[fcc_.ball[c]] > hi) continue;
-    b.state = BondState::kIntact;
-    ContactHist& h = fcc_.h[c];
-    h.flags |= ContactHist::kIncremental | ContactHist::kHasNormal;
-    h.n_old = n;
-    visit_law(p_.ball_facet.model, [&](auto law) { decltype(law)::install_bond(h, b, p_.ball_facet); });
-    ++cnt;
-  }
+  SetContext cx = context();
+  const std::size_t cnt = facets_->kind.bond(cx, facets_->contacts, hi);
   last_dt_step_ = -1;
   return cnt;
 }

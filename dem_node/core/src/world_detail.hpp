@@ -1,4 +1,4 @@
-// Internals shared by world.cpp and walls.cpp (not installed): the history key of a contact and
+// Internals shared by world.cpp, pair_set.cpp and walls.cpp (not installed): the history key of a contact and
 // the one routine that carries history across a rebuild, the phase lap timer, the ball-wall candidate record and the wall distance functions.
 #pragma once
 

@@ -1,7 +1,7 @@
 // Vectorised ball–ball pass and law of motion (issue 3 item 12): the contact law evaluated
 // for a block of kLanes live contacts at a time, the law of motion for kLanes rows at a time.
 //
-// Stage 1 (World::pair_pass, scalar, contact order): idle test, branch vector d, lane list.
+// Stage 1 (PairSet::pass_law, scalar, contact order): idle test, branch vector d, lane list.
 // Stage 2 (here, one lane loop compiled for the baseline ISA, AVX2 and AVX-512, chosen at run
 // time): kinematics and the law for all lanes with branch-free selects. Every lane calls the
 // formula functions of the scalar law (laws/*.hpp: linear_core, softbond_predict, hertz_core,
@@ -11,7 +11,7 @@
 // breakage, shear break; unbonded soft-bond contacts; a plane rotation large enough to need
 // the exact rescale √(m2/k2)) set `scalar` and are redone by the scalar law in stage 3, which
 // starts from the untouched history.
-// Stage 3 (World::pair_pass, scalar, contact order): histories written back, forces and
+// Stage 3 (PairSet::pass_law, scalar, contact order): histories written back, forces and
 // torques added onto the balls in the order of the scalar pass.
 // Measured on bench/dem (results_2core_kvm.csv): see the figures there.
 #pragma once
@@ -94,7 +94,7 @@ bool isa_available(Isa isa);
 /// The best instruction set of this CPU.
 Isa best_isa();
 /// Stage 2 kernels. Linear: every lane. Soft bond: requires SoftUnload::kElastic and
-/// rescale (World::pair_pass falls back to the scalar pass otherwise).
+/// rescale (PairSet::pass_law falls back to the scalar pass otherwise).
 Fn linear_kernel(Isa isa);
 Fn softbond_kernel(Isa isa);
 Fn hertz_kernel(Isa isa);

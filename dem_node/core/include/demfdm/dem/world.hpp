@@ -1,4 +1,9 @@
-// DEM world: particle store (SoA), contact families, walls, effects and the PFC cycle.
+// DEM world: the PFC cycle over its units. The balls are a Particles store (particles.hpp); the
+// ball-ball contacts and each wall kind (planes, interface facets, the footing) are contact sets
+// behind one interface (src/contact_set.hpp: rebuild, force pass, gather, stiffness for the
+// critical step, energy, reorder), the pairs found by the neighbour grid (neighbour_grid.hpp),
+// the wall kinds as geometries of one wall-contact set (src/wall_set.hpp); effects (gravity,
+// servos) plug into declared phases.
 //
 // Cycle (docs/theory.md §1.2, PFC order): pre-step effects → timestep → law of motion with
 // local damping → kinematics effects (wall servos) → wall motion → time advance → neighbour check/rebuild → force–displacement
@@ -25,33 +30,10 @@
 
 #include "demfdm/dem/contact_kernels.hpp"
 #include "demfdm/dem/params.hpp"
+#include "demfdm/dem/particles.hpp"
 #include "demfdm/dem/vec3.hpp"
 
 namespace demfdm::dem {
-
-/// Degree-of-freedom fixity bits (§1.2: a fixed component keeps its prescribed velocity).
-enum Fix : std::uint8_t {
-  kFixVx = 1, kFixVy = 2, kFixVz = 4, kFixWx = 8, kFixWy = 16, kFixWz = 32,
-  kFixVel = 7, kFixRot = 56, kFixAll = 63,
-};
-
-/// SoA particle store. Every array has one row per ball; Vec3 arrays are flat [n,3].
-struct Particles {
-  std::vector<Vec3> x;    // [m] position
-  std::vector<Vec3> v;    // [m/s] velocity (half step)
-  std::vector<Vec3> w;    // [rad/s] angular velocity (half step)
-  std::vector<Vec3> f;    // [N] contact + body force of the last force pass
-  std::vector<Vec3> t;    // [N m] contact torque of the last force pass
-  std::vector<Vec3> fa;   // [N] applied force (user)
-  std::vector<Vec3> ta;   // [N m] applied moment (user)
-  std::vector<Vec3> x_ref;  // [m] position at the last neighbour rebuild
-  std::vector<double> r;  // [m] radius
-  std::vector<double> m;  // [kg] mass
-  std::vector<double> inertia;  // [kg m^2] moment of inertia (2/5) m R²
-  std::vector<std::uint64_t> id;  // stable id
-  std::vector<std::uint8_t> fix;  // Fix bits
-  std::size_t size() const { return x.size(); }
-};
 
 /// Ball–ball contacts (half list, A = lower index). Hot arrays first.
 struct PairContacts {
@@ -131,6 +113,16 @@ struct Footing {
 enum class PairKernel : std::uint8_t { kAuto, kScalar, kBlockBaseline, kBlockAvx2, kBlockAvx512 };
 
 class World;
+// The contact sets the cycle drives (one interface, src/contact_set.hpp): the ball-ball pairs and
+// one wall-contact set per wall kind (src/wall_set.hpp).
+class ContactSet;
+class PairSet;
+template <class Kind>
+class WallSet;
+struct PlaneKind;
+struct FacetKind;
+struct FootingKind;
+struct SetContext;
 
 /// Optional effect with declared phases (a registry of sub-models, as LAMMPS's granular models). Lists per phase are
 /// built when effects are added; an absent effect costs nothing.
@@ -208,8 +200,8 @@ class World {
 
   // ---- walls ----
   int add_plane(const PlaneWallParams& p);
-  PlaneWall& plane(int i) { return planes_[static_cast<std::size_t>(i)]; }
-  int num_planes() const { return static_cast<int>(planes_.size()); }
+  PlaneWall& plane(int i);
+  int num_planes() const;
   /// Interface wall from vertex positions [nv*3] and triangles [nt*3].
   int add_facet_wall(std::span<const double> vertices, std::span<const std::int32_t> triangles);
   /// Set the vertex positions and velocities [nv*3] of a facet wall (positions at t+Δt).
@@ -221,17 +213,17 @@ class World {
   /// Total force the DEM applied to the facets of one wall, and to all facet walls.
   Vec3 facet_wall_force(int wall) const;
   Vec3 facet_walls_total_force() const;
-  FacetWall& facet_wall(int i) { return fwalls_[static_cast<std::size_t>(i)]; }
-  const FacetWall& facet_wall(int i) const { return fwalls_[static_cast<std::size_t>(i)]; }
-  int num_facet_walls() const { return static_cast<int>(fwalls_.size()); }
+  FacetWall& facet_wall(int i);
+  const FacetWall& facet_wall(int i) const;
+  int num_facet_walls() const;
 
   void set_footing(const FootingParams& p);
   void remove_footing();
-  bool has_footing() const { return footing_.enabled; }
-  void set_footing_velocity(const Vec3& v) { footing_.p.velocity = v; }
+  bool has_footing() const;
+  void set_footing_velocity(const Vec3& v);
   void set_footing_position(const Vec3& bottom_centre);
-  const Footing& footing() const { return footing_; }
-  Vec3 footing_reaction() const { return footing_.reaction; }
+  const Footing& footing() const;
+  Vec3 footing_reaction() const;
 
   // ---- effects ----
   Effect* add_effect(std::unique_ptr<Effect> e);
@@ -293,14 +285,14 @@ class World {
   /// Bond ball–footing / ball–plane contacts are not provided (no use in the paper).
 
   // ---- contacts (expert access for specimen operations and measurements) ----
-  PairContacts& pair_contacts() { return pc_; }
-  const PairContacts& pair_contacts() const { return pc_; }
-  WallContacts& plane_contacts() { return plc_; }
-  WallContacts& facet_contacts() { return fcc_; }
-  WallContacts& footing_contacts() { return ftc_; }
-  const WallContacts& plane_contacts() const { return plc_; }
-  const WallContacts& facet_contacts() const { return fcc_; }
-  const WallContacts& footing_contacts() const { return ftc_; }
+  PairContacts& pair_contacts();
+  const PairContacts& pair_contacts() const;
+  WallContacts& plane_contacts();
+  WallContacts& facet_contacts();
+  WallContacts& footing_contacts();
+  const WallContacts& plane_contacts() const;
+  const WallContacts& facet_contacts() const;
+  const WallContacts& footing_contacts() const;
   /// Force on B of ball–ball contact c after the last pass, rebuilt from the history
   /// (F = F_n n̂ + F_s, plus −N̄ n̂ + F̄_s for a parallel bond): nothing is stored per step.
   Vec3 pair_force(std::size_t c) const;
@@ -351,38 +343,28 @@ class World {
  private:
   friend class GravityEffect;
   friend struct CheckpointAccess;  // state save/load (checkpoint.cpp, docs/checkpoint-format.md)
-  void init_contact(std::uint32_t a, std::uint32_t b, ContactHist& h, BondHist* bond,
-                    const ContactFamilyParams& fam, bool wall) const;
   void rebuild();
-  void rebuild_walls();
   bool need_rebuild() const;
   void force_pass(double dt);
   /// OpenMP threads of the passes: WorldParams::threads, or the OpenMP default when 0.
   int thread_count() const { return p_.threads > 0 ? p_.threads : omp_get_max_threads(); }
-  template <class Law, bool Periodic> void pair_pass(double dt);
-  // Wall kinds as geometries of the one wall-contact set (world.cpp): candidates at a rebuild,
-  // the surface point of a contact, and what the kind sums over its contacts.
-  struct PlaneGeometry;
-  struct FacetGeometry;
-  struct FootingGeometry;
-  template <class Law, class Geom>
-  void wall_set_pass(WallContacts& wc, const ContactFamilyParams& fam, Geom& g, double dt);
-  void wall_passes(double dt);  // every wall kind's pass (walls.cpp)
-  void gather();  // add the wall-contact forces to the balls (serial, contact order)
+  /// What the contact sets see of this world for one call.
+  SetContext context();
+  void gather();  // add the wall-contact forces to the balls (serial, set and contact order)
   void integrate(double dt);
   template <bool Energy, bool Periodic>
   void integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3& sc, double& ed, double& dmax);
-  void update_facet_spin(FacetWall& fw);
-  LawConst law_const(const ContactFamilyParams& f, bool wall) const;
   std::int64_t dt_interval() const;  // steps between recomputations of the critical step
 
   WorldParams p_;
   Particles pt_;
-  PairContacts pc_;
-  WallContacts plc_, fcc_, ftc_;
-  std::vector<PlaneWall> planes_;
-  std::vector<FacetWall> fwalls_;
-  Footing footing_;
+  // The contact sets, each the owner of its contacts (and walls); sets_ holds them in the
+  // cycle's order (pairs, planes, facets, footing), which fixes the order of every sum over them.
+  std::unique_ptr<PairSet> pairs_;
+  std::unique_ptr<WallSet<PlaneKind>> planes_;
+  std::unique_ptr<WallSet<FacetKind>> facets_;
+  std::unique_ptr<WallSet<FootingKind>> footing_;
+  std::array<ContactSet*, 4> sets_{};
   std::vector<std::unique_ptr<Effect>> effects_;
   struct EffectSlot {
     Effect* e;
@@ -399,16 +381,9 @@ class World {
   double e_damp_ = 0.0;
   std::vector<double> chunk_e_;
   double max_disp2_ = 0.0;
-  std::vector<std::vector<Vec3>> tbuf_;  // per-thread force/torque buffers [2n] (thread ≥ 1),
-                                         // all zero between passes
-  std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each thread's block
-  // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
-  mutable std::vector<double> scratch_norm_;       // mean_contact_force: per-contact ‖F‖
+  // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
   mutable std::vector<double> scratch_kt_, scratch_kr_;  // critical step: per-ball k_t, k_r
-  mutable std::vector<double> scratch_k_;                // critical step: per-contact k
-  mutable std::vector<double> scratch_ka_, scratch_kb_;  // critical step: rotational terms of A, B
-  mutable std::vector<std::uint8_t> scratch_live_;       // critical step: contact counted
   double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
   PhaseTimes times_;
   PairKernel kernel_ = PairKernel::kAuto;

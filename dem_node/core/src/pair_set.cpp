@@ -1,0 +1,615 @@
+// The ball-ball contact set (pair_set.hpp).
+#include "pair_set.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numeric>
+#include <tuple>
+
+#include "demfdm/dem/neighbour_grid.hpp"
+#include "demfdm/dem/pair_block.hpp"
+#include "world_detail.hpp"
+
+namespace demfdm::dem {
+
+namespace {
+
+
+
+// Force and torque sums of a run of ball–ball contacts onto the balls, in contact order. The
+// list is sorted by A: the sums on A are kept in registers for the run of contacts that share
+// it and flushed when A changes (fixed order, hence deterministic). The scalar pass calls at()
+// for every contact, the block pass for live ones only: the sums are the same, since idle
+// contacts add nothing and flushing a zero sum cannot change a ball's sum (the sums start at
+// +0 and never become −0).
+struct BallSums {
+  Vec3* __restrict__ f;
+  Vec3* __restrict__ t;
+  std::uint32_t cur;
+  Vec3 fa{}, ta{};
+  // Contact with A = a next: flush the sums of the previous A.
+  [[gnu::always_inline]] void at(std::uint32_t a) {
+    if (a != cur) {
+      f[cur] += fa;
+      t[cur] += ta;
+      fa = Vec3{};
+      ta = Vec3{};
+      cur = a;
+    }
+  }
+  [[gnu::always_inline]] void add(std::uint32_t b, const Vec3& F, const Vec3& TA, const Vec3& TB) {
+    fa -= F;
+    f[b] += F;
+    ta += TA;
+    t[b] += TB;
+  }
+  void flush() {
+    f[cur] += fa;
+    t[cur] += ta;
+  }
+};}  // namespace
+
+// ------------------------------------------------------------------------------------------
+// neighbour rebuild: the candidates of the grid search, history merged by key
+
+void PairSet::rebuild(SetContext& cx) {
+  const Particles& pt = cx.pt;
+  const std::size_t n = pt.size();
+  const bool per = cx.p.periodic.enabled;
+  const Vec3 L = cx.p.periodic.length;
+  PairContacts& pc = contacts;
+  const std::vector<PairCandidate> np = find_pair_candidates(pt.x, pt.r, cx.skin, cx.p.periodic, pc.size() + n * 4);
+  // merge the history keyed by (id_A, id_B): a contact's history follows the pair
+  const bool has_bond = law_has_bond(cx.p.ball_ball.model);
+  // The old list's rows are current (remap keeps them so). A rebuild leaves it sorted by
+  // (a, b) with a < b, like the new one: then one linear merge finds each old contact. A
+  // reorder or appended pairs break the order: then the history is found by its id key.
+  const std::size_t mo = pc.size();
+  auto row_key = [](std::uint32_t a, std::uint32_t b) { return std::uint64_t(a) << 32 | b; };
+  bool sorted = true;
+  for (std::size_t k = 0; k < mo && sorted; ++k)
+    sorted = pc.a[k] < pc.b[k] && (k == 0 || row_key(pc.a[k - 1], pc.b[k - 1]) < row_key(pc.a[k], pc.b[k]));
+  // Keys: rows (a, b) for the linear merge, ids (lower, higher) otherwise.
+  auto id_key = [&](std::uint32_t a, std::uint32_t b) {
+    const std::uint64_t ia = pt.id[a], ib = pt.id[b];
+    return std::make_pair(std::min(ia, ib), std::max(ia, ib));
+  };
+  auto old_key = [&](std::size_t k) {
+    return sorted ? std::make_pair(std::uint64_t(pc.a[k]), std::uint64_t(pc.b[k])) : id_key(pc.a[k], pc.b[k]);
+  };
+  detail::HistoryCarry carry(mo, sorted, old_key);
+  auto find_old = [&](std::uint32_t a, std::uint32_t b) -> std::int64_t {
+    const auto k = sorted ? std::make_pair(std::uint64_t(a), std::uint64_t(b)) : id_key(a, b);
+    return carry.take(k.first, k.second);
+  };
+  PairContacts q;
+  q.a.reserve(np.size());
+  q.b.reserve(np.size());
+  q.shift.reserve(np.size());
+  q.h.reserve(np.size());
+  if (has_bond) q.bond.reserve(np.size());
+  auto push = [&](std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s) {
+    q.a.push_back(a);
+    q.b.push_back(b);
+    q.shift.push_back(s);
+    const std::uint64_t ia = pt.id[a];
+    const std::int64_t found = find_old(a, b);
+    if (found >= 0) {
+      const std::uint32_t oc = static_cast<std::uint32_t>(found);
+      q.h.push_back(pc.h[oc]);
+      if (has_bond) q.bond.push_back(pc.bond[oc]);
+      if (pt.id[pc.a[oc]] != ia) detail::flip(q.h.back(), has_bond ? &q.bond.back() : nullptr);
+    } else {
+      q.h.push_back({});
+      if (has_bond) q.bond.push_back({});
+      detail::init_contact(pt, a, b, q.h.back(), has_bond ? &q.bond.back() : nullptr, cx.p.ball_ball, false);
+    }
+  };
+  for (const auto& e : np) push(e.a, e.b, e.s);
+  // bonded contacts beyond the cut-off are kept (a bond never disappears in a rebuild)
+  bool appended = false;
+  carry.rest(
+      pc.h, pc.bond, has_bond,
+      [&](std::size_t k) {
+        std::uint32_t a = pc.a[k], b = pc.b[k];
+        Vec3 d = pt.x[b] - pt.x[a];
+        std::array<std::int8_t, 4> s{0, 0, 0, 0};
+        if (per)
+          for (int ax = 0; ax < 3; ++ax) {
+            const double sh = -std::round(d[ax] / L[ax]);
+            s[ax] = static_cast<std::int8_t>(sh);
+          }
+        q.a.push_back(a);
+        q.b.push_back(b);
+        q.shift.push_back(s);
+        q.h.push_back(pc.h[k]);
+        q.bond.push_back(pc.bond[k]);
+        appended = true;
+      },
+      cx.e_slip_dead, cx.e_soft_dead);
+  if (appended) {  // restore the (a, b) order
+    std::vector<std::uint32_t> perm(q.a.size());
+    std::iota(perm.begin(), perm.end(), 0u);
+    std::sort(perm.begin(), perm.end(), [&](std::uint32_t x, std::uint32_t y) {
+      return std::tie(q.a[x], q.b[x]) < std::tie(q.a[y], q.b[y]);
+    });
+    PairContacts r;
+    for (auto k : perm) {
+      r.a.push_back(q.a[k]);
+      r.b.push_back(q.b[k]);
+      r.shift.push_back(q.shift[k]);
+      r.h.push_back(q.h[k]);
+      if (has_bond) r.bond.push_back(q.bond[k]);
+    }
+    q = std::move(r);
+  }
+  pc = std::move(q);
+}
+
+// ------------------------------------------------------------------------------------------
+// force pass (one template instantiation per law and cell kind; no model branch in the loops)
+
+namespace {
+// Software prefetch distances of the ball–ball pass (bench/dem): the B rows are scattered and
+// the history stream is not kept in flight by the hardware prefetcher alone (+20 % measured).
+constexpr std::int64_t kPrefetchB = 12;  // contacts ahead for the B rows
+constexpr std::int64_t kPrefetchH = 24;  // contacts ahead for the history records
+}  // namespace
+
+void PairSet::pass(SetContext& cx, double dt) {
+  const bool per = cx.p.periodic.enabled;
+  visit_law(cx.p.ball_ball.model, [&](auto law) {
+    using L = decltype(law);
+    per ? pass_law<L, true>(cx, dt) : pass_law<L, false>(cx, dt);
+  });
+}
+
+// Ball–ball pass. Each contact stores its force (and moment) in its own slot for the
+// measurements, and adds −F/+F and the torques into a force buffer: the particle arrays for
+// thread 0 and a private buffer for every other thread; the buffers are then summed in
+// thread order. The static partition makes the result bit-identical from run to run for a
+// given thread count (determinism: same scene, seed and thread count, same bits).
+template <class Law, bool Periodic>
+void PairSet::pass_law(SetContext& cx, double dt) {
+  const std::int64_t m = static_cast<std::int64_t>(contacts.size());
+  const std::size_t n = cx.pt.size();
+  const LawConst lc = detail::law_const(cx.p.ball_ball, cx.p.rescale_shear, false);
+  // No array aliases another (restrict lets loads be kept across the force stores).
+  const Vec3* __restrict__ X = cx.pt.x.data();
+  const Vec3* __restrict__ V = cx.pt.v.data();
+  const Vec3* __restrict__ W = cx.pt.w.data();
+  const double* __restrict__ R = cx.pt.r.data();
+  const std::uint32_t* __restrict__ A = contacts.a.data();
+  const std::uint32_t* __restrict__ B = contacts.b.data();
+  const auto* __restrict__ S = contacts.shift.data();
+  ContactHist* __restrict__ H = contacts.h.data();
+  BondHist* __restrict__ BD = contacts.bond.empty() ? nullptr : contacts.bond.data();
+  const Vec3 L = cx.p.periodic.length;
+  const Vec3 ed = cx.edot;
+  std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
+  const double rgap = lc.rgap;
+  const int nt = cx.threads;
+  const bool par = nt > 1 && m > 4096;
+  const bool strained = ed.x != 0.0 || ed.y != 0.0 || ed.z != 0.0;
+  // Vectorised blocks (pair_block.hpp) where the law has a lane kernel; bit-identical to the
+  // scalar loop below (tests/dem/simd_kernel_test.cpp).
+  pairblock::Fn kern = nullptr;
+  {
+    pairblock::Isa isa;
+    if (detail::block_isa(cx.kernel, isa)) kern = Law::lane_kernel(isa, lc);
+  }
+  const pairblock::Ctx ctx{V, W, R, H, BD, lc, dt, ed, Periodic && strained};
+  // The helpers below are forced inline: left to GCC, the soft-bond block pass measured 1.27 x
+  // slower (bench/dem/results_2core_kvm.csv).
+  // The helpers and the loop bodies capture by value: the arrays' base pointers then live in the
+  // closures as copies the loop can keep in registers, where a by-reference capture made GCC
+  // reload them through the captured locals after every store (3.2 % + 2.5 % fewer instructions
+  // in the soft-bond pass, callgrind, the same state hash).
+  // Software prefetch (see kPrefetchB/H): the scattered B rows, and the history records
+  // (96 B, plus 104 B of bond state) that the loop streams through.
+  auto prefetch = [=](std::int64_t c, std::int64_t c1, const Vec3* f, const Vec3* t) __attribute__((always_inline)) {
+    if (c + kPrefetchH < c1) {
+      __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH), 1);
+      __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH) + 64, 1);
+      if (BD) {
+        __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH), 1);
+        __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH) + 64, 1);
+      }
+    }
+    if (c + kPrefetchB < c1) {
+      const std::uint32_t bp = B[c + kPrefetchB];
+      __builtin_prefetch(X + bp);
+      __builtin_prefetch(V + bp);
+      __builtin_prefetch(W + bp);
+      __builtin_prefetch(R + bp);
+      __builtin_prefetch(f + bp, 1);
+      __builtin_prefetch(t + bp, 1);
+    }
+  };
+  // Branch vector d (periodic image) and its square.
+  auto branch_d = [=](std::int64_t c, std::uint32_t a, std::uint32_t b, Vec3& d, double& d2)
+                      __attribute__((always_inline)) {
+    d = X[b] - X[a];
+    if constexpr (Periodic) {
+      std::uint32_t any;  // most contacts lie inside the cell: skip the conversion
+      std::memcpy(&any, S[c].data(), 4);
+      if (any) d += cmul(Vec3{double(S[c][0]), double(S[c][1]), double(S[c][2])}, L);
+    }
+    d2 = norm2(d);
+  };
+  // Separated and force-free: nothing to do. F_n = 0 implies F_s = 0 (Coulomb limit
+  // μF_n = 0), so the stale n_old is never used to rotate a non-zero vector. Soft bond:
+  // the same for an unbonded contact (never bonded or broken), whose §3.5 moment limits
+  // are proportional to F_n, so M_b = M_t = 0 as well; the result of the full law
+  // would be F = M = 0 with kActive and kSlip cleared. (Bitwise & on purpose: one
+  // unpredictable branch at most.)
+  // The bond record of contact c: only laws with bond state have one (no null test per contact).
+  auto bond_at = [=](std::int64_t c) __attribute__((always_inline)) -> BondHist* {
+    if constexpr (Law::kBond) return BD + c;
+    else return nullptr;
+  };
+  auto idle = [=](std::int64_t c, std::uint32_t a, std::uint32_t b, double d2) __attribute__((always_inline)) {
+    return Law::idle(d2, R[a] + R[b] + rgap, H[c], bond_at(c));
+  };
+  constexpr std::uint8_t kActSlip = ContactHist::kActive | ContactHist::kSlip;
+  // Scalar kinematics and law of one live contact: force F on B and the torques added to A
+  // (TA) and B (TB).
+  auto law = [=](std::int64_t c, std::uint32_t a, std::uint32_t b, const Vec3& d, double d2, Vec3& F, Vec3& TA,
+                 Vec3& TB) __attribute__((always_inline)) {
+    const double dist = std::sqrt(d2);
+    const double gap = dist - R[a] - R[b];
+    const Vec3 nn = d * (1.0 / dist);
+    Kin k;
+    k.n = nn;
+    k.gap = gap;
+    // Lever arms ℓ_A = s_A n̂ and ℓ_B = −s_B n̂ (contact point mid-overlap, §1.4), so
+    // ω_B × ℓ_B − ω_A × ℓ_A = −(s_A ω_A + s_B ω_B) × n̂ and ℓ_A × (−F) = s_A F × n̂,
+    // ℓ_B × F = s_B F × n̂: one cross product each for the velocity and the torques
+    // (agrees with the two-cross form to rounding, 1e-13 of the per-ball torque sums).
+    const double sa = R[a] + 0.5 * gap, sb = R[b] + 0.5 * gap;
+    Vec3 vr = (V[b] - V[a]) - cross(sa * W[a] + sb * W[b], nn);
+    if constexpr (Periodic) {
+      if (strained) vr += cmul(ed, d);  // affine cell motion (§4.5)
+    }
+    k.du = vr * dt;
+    k.dtheta = (W[b] - W[a]) * dt;
+    k.wmean = 0.5 * (W[a] + W[b]);
+    k.dt = dt;
+    if constexpr (Law::kNeedsReff) k.reff = R[a] * R[b] / (R[a] + R[b]);
+    Vec3 Mo;
+    if constexpr (Law::kBond) {
+      // A bond leaving the intact state is rare: one compare per contact, an atomic add per event.
+      const bool was_intact = BD[c].state == BondState::kIntact;
+      F = Law::update(k, H[c], BD + c, lc, Mo);
+      if (was_intact && BD[c].state != BondState::kIntact) {
+#pragma omp atomic
+        ++*fails;
+      }
+    } else {
+      F = Law::update(k, H[c], nullptr, lc, Mo);
+    }
+    // (F_s × n̂ would drop the rounding noise of the normal part, but reloading h.fs right
+    // after the law's store measured 3 % slower than using F from registers.)
+    const Vec3 fxn = cross(F, nn);
+    if constexpr (Law::kBond) {
+      TA = sa * fxn - Mo;  // ℓ_A × (−F) − M
+      TB = sb * fxn + Mo;
+    } else {
+      TA = sa * fxn;
+      TB = sb * fxn;
+    }
+  };
+  // The same law out of line, for the rare lanes of the block pass that need it.
+  auto law_rare = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, const Vec3& d, double d2, Vec3& F, Vec3& TA,
+                      Vec3& TB) __attribute__((noinline)) { law(c, a, b, d, d2, F, TA, TB); };
+  // One contact at a time (the reference).
+  auto body = [=](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
+    BallSums sums{f, t, c0 < c1 ? A[c0] : 0u};
+    for (std::int64_t c = c0; c < c1; ++c) {
+      const std::uint32_t a = A[c], b = B[c];
+      prefetch(c, c1, f, t);
+      sums.at(a);
+      Vec3 d;
+      double d2;
+      branch_d(c, a, b, d, d2);
+      if (idle(c, a, b, d2)) {
+        if (H[c].flags & ContactHist::kActive) H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
+        continue;
+      }
+      Vec3 F, TA, TB;
+      law(c, a, b, d, d2, F, TA, TB);
+      sums.add(b, F, TA, TB);
+    }
+    if (c0 < c1) sums.flush();
+  };
+  // Blocks of kLanes live contacts: stage 1 (lane list), stage 2 (kern), stage 3 (histories
+  // and sums in contact order; lanes flagged `scalar` are redone by the scalar law from their
+  // untouched history).
+  auto body_block = [=](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
+    constexpr int K = pairblock::kLanes;
+    BallSums sums{f, t, c0 < c1 ? A[c0] : 0u};
+    pairblock::In in;
+    pairblock::Out out;
+    std::int64_t c = c0;
+    while (c < c1) {
+      int n = 0;
+      for (; c < c1 && n < K; ++c) {
+        const std::uint32_t a = A[c], b = B[c];
+        prefetch(c, c1, f, t);
+        Vec3 d;
+        double d2;
+        branch_d(c, a, b, d, d2);
+        // Branch-free: the lane is written for every contact and kept (n advances) only for a
+        // live one; an idle contact gets kActive and kSlip cleared (the same flags as `body`).
+        const bool skip = idle(c, a, b, d2);
+        const std::uint8_t fl = H[c].flags;
+        H[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
+        in.c[n] = c;
+        in.a[n] = a;
+        in.b[n] = b;
+        in.dx[n] = d.x;
+        in.dy[n] = d.y;
+        in.dz[n] = d.z;
+        in.d2[n] = d2;
+        in.hasn[n] = (fl & ContactHist::kHasNormal) != 0;
+        in.incr[n] = (fl & ContactHist::kIncremental) != 0;
+        in.scalar[n] = Law::lane_needs_scalar(bond_at(c));
+        n += !skip;
+      }
+      if (n == 0) break;
+      for (int l = n; l < K; ++l) {  // padding lanes repeat lane 0
+        in.c[l] = in.c[0]; in.a[l] = in.a[0]; in.b[l] = in.b[0];
+        in.dx[l] = in.dx[0]; in.dy[l] = in.dy[0]; in.dz[l] = in.dz[0]; in.d2[l] = in.d2[0];
+        in.hasn[l] = in.hasn[0]; in.incr[l] = in.incr[0]; in.scalar[l] = in.scalar[0];
+      }
+      kern(ctx, in, out);
+      for (int l = 0; l < n; ++l) {
+        const std::int64_t cl = in.c[l];
+        const std::uint32_t a = static_cast<std::uint32_t>(in.a[l]), b = static_cast<std::uint32_t>(in.b[l]);
+        Vec3 F, TA, TB;
+        if (out.scalar[l]) {
+          law_rare(cl, a, b, Vec3{in.dx[l], in.dy[l], in.dz[l]}, in.d2[l], F, TA, TB);
+        } else {
+          Law::store_lane(H[cl], bond_at(cl), out, l);
+          F = {out.F[0][l], out.F[1][l], out.F[2][l]};
+          TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
+          TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
+        }
+        sums.at(a);
+        sums.add(b, F, TA, TB);
+      }
+    }
+    if (c0 < c1) sums.flush();
+  };
+  auto run = [&](std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t) {
+    if (kern) body_block(c0, c1, f, t);
+    else body(c0, c1, f, t);
+  };
+  if (!par) {
+    std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
+    std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
+    run(0, m, cx.pt.f.data(), cx.pt.t.data());
+    return;
+  }
+  if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
+  // Thread buffers are all zero between passes (zeroed by the reduction that reads them), so a
+  // block only costs the rows it touches: [lo, hi) of its contacts' rows, found by a scan of
+  // its (A, B) indices. Adding zeros elsewhere is skipped; the order of the sums is unchanged.
+  for (int k = 1; k < nt; ++k) {
+    auto& tb = tbuf_[static_cast<std::size_t>(k)];
+    if (tb.size() != 2 * n) tb.assign(2 * n, Vec3{});
+  }
+  row_lo_.assign(static_cast<std::size_t>(nt), n);
+  row_hi_.assign(static_cast<std::size_t>(nt), 0);
+  // One parallel region per pass: contact blocks, a barrier, then the fixed-order
+  // reduction of the thread buffers split by particle rows (one fork/join per step).
+#pragma omp parallel num_threads(nt)
+  {
+    const int tid = omp_get_thread_num(), T = omp_get_num_threads();
+    const std::size_t ut = static_cast<std::size_t>(tid);
+    const std::int64_t c0 = m * tid / T, c1 = m * (tid + 1) / T;
+    Vec3* f = cx.pt.f.data();
+    Vec3* t = cx.pt.t.data();
+    if (tid == 0) {
+      std::fill(f, f + n, Vec3{});
+      std::fill(t, t + n, Vec3{});
+    } else {
+      f = tbuf_[ut].data();
+      t = f + n;
+      std::uint32_t lo = static_cast<std::uint32_t>(n), hi = 0;
+      for (std::int64_t c = c0; c < c1; ++c) {
+        lo = std::min(lo, std::min(A[c], B[c]));
+        hi = std::max(hi, std::max(A[c], B[c]));
+      }
+      row_lo_[ut] = lo;
+      row_hi_[ut] = c0 < c1 ? std::size_t{hi} + 1 : 0;
+    }
+    run(c0, c1, f, t);
+#pragma omp barrier
+    std::size_t rlo = n, rhi = 0;
+    for (int k = 1; k < T; ++k) {
+      rlo = std::min(rlo, row_lo_[static_cast<std::size_t>(k)]);
+      rhi = std::max(rhi, row_hi_[static_cast<std::size_t>(k)]);
+    }
+#pragma omp for schedule(static)
+    for (std::int64_t ii = static_cast<std::int64_t>(rlo); ii < static_cast<std::int64_t>(rhi); ++ii) {
+      const std::size_t i = static_cast<std::size_t>(ii);
+      for (int k = 1; k < T; ++k) {
+        const std::size_t uk = static_cast<std::size_t>(k);
+        if (i < row_lo_[uk] || i >= row_hi_[uk]) continue;
+        Vec3& bf = tbuf_[uk][i];
+        Vec3& bt = tbuf_[uk][n + i];
+        cx.pt.f[i] += bf;
+        cx.pt.t[i] += bt;
+        bf = Vec3{};
+        bt = Vec3{};
+      }
+    }
+  }
+}
+// ------------------------------------------------------------------------------------------
+// measurements: one parallel pass computes each contact's terms (its force norm, its
+// stiffnesses); the sums over them then run in contact order, the additions and their order of
+// one serial loop: the same bits at any thread count.
+
+void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
+  fc_ = want_fc;
+  dt_ = want_dt;
+  const std::int64_t m = static_cast<std::int64_t>(contacts.size());
+  const int nt = cx.threads;
+  const std::size_t um = contacts.size();
+  if (want_fc) norm_.resize(um);
+  if (want_dt) {
+    k_.resize(um);
+    ka_.resize(um);
+    kb_.resize(um);
+    live_.resize(um);
+  }
+  // Raw pointers, so that the loop keeps them in registers (the stores cannot alias them), and
+  // a prefetch of the scattered radius of B a few contacts ahead.
+  const ContactHist* __restrict__ H = contacts.h.data();
+  const BondHist* __restrict__ BD = contacts.bond.empty() ? nullptr : contacts.bond.data();
+  const std::uint32_t* __restrict__ A = contacts.a.data();
+  const std::uint32_t* __restrict__ B = contacts.b.data();
+  const double* __restrict__ R = cx.pt.r.data();
+  double* __restrict__ SN = want_fc ? norm_.data() : nullptr;
+  double* __restrict__ SK = want_dt ? k_.data() : nullptr;
+  double* __restrict__ SKA = want_dt ? ka_.data() : nullptr;
+  double* __restrict__ SKB = want_dt ? kb_.data() : nullptr;
+  std::uint8_t* __restrict__ SL = want_dt ? live_.data() : nullptr;
+  const ContactFamilyParams& fam = cx.p.ball_ball;
+  visit_law(fam.model, [=, &fam](auto law) {
+    using L = decltype(law);
+    constexpr std::int64_t ahead = 16;
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
+    for (std::int64_t c = 0; c < m; ++c) {
+      if (want_dt && c + ahead < m) __builtin_prefetch(R + B[c + ahead]);
+      const ContactHist& h = H[c];
+      const BondHist* b = BD ? BD + c : nullptr;
+      if (want_fc) SN[c] = norm(L::force(h, b));
+      if (!want_dt) continue;
+      // Each counted contact adds the stiffnesses of its law (Law::stiffness): translational to
+      // both balls, rotational plus k_s R² to each.
+      const bool live = (h.flags & ContactHist::kActive) || (b && bonded(b->state));
+      SL[c] = live;
+      if (!live) continue;
+      const std::uint32_t a = A[c], bb = B[c];
+      const ContactStiffness s = L::stiffness(h, b, fam, R[a], R[bb]);
+      SK[c] = s.k;
+      SKA[c] = s.krot + s.ks * R[a] * R[a];
+      SKB[c] = s.krot + s.ks * R[bb] * R[bb];
+    }
+  });
+}
+
+void PairSet::add_force_norms(double& sum, std::size_t& count) const {
+  const std::size_t m = contacts.size();
+  for (std::size_t c = 0; c < m; ++c) {
+    const double f = norm_[c];
+    if (f > 0.0) { sum += f; ++count; }
+  }
+}
+
+void PairSet::add_stiffness(const SetContext&, double* __restrict__ KT, double* __restrict__ KR) const {
+  const std::int64_t m = static_cast<std::int64_t>(contacts.size());
+  const std::uint32_t* __restrict__ A = contacts.a.data();
+  const std::uint32_t* __restrict__ B = contacts.b.data();
+  for (std::int64_t c = 0; c < m; ++c) {
+    if (c + 16 < m) {
+      __builtin_prefetch(KT + B[c + 16], 1);
+      __builtin_prefetch(KR + B[c + 16], 1);
+    }
+    if (!live_[c]) continue;
+    const std::uint32_t a = A[c], bb = B[c];
+    KT[a] += k_[c];
+    KT[bb] += k_[c];
+    KR[a] += ka_[c];
+    KR[bb] += kb_[c];
+  }
+}
+
+void PairSet::add_energy(Energy& e, const WorldParams& p) const {
+  detail::add_contact_energy(e, contacts.h, contacts.bond, p.ball_ball);
+}
+
+// ------------------------------------------------------------------------------------------
+// bookkeeping
+
+void PairSet::remap(const std::vector<std::uint32_t>& newrow) {
+  PairContacts& pc = contacts;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    pc.a[c] = newrow[pc.a[c]];
+    pc.b[c] = newrow[pc.b[c]];
+    if (pc.a[c] > pc.b[c]) {  // keep A = lower row: swap sides
+      std::swap(pc.a[c], pc.b[c]);
+      for (int k = 0; k < 3; ++k) pc.shift[c][k] = static_cast<std::int8_t>(-pc.shift[c][k]);
+      detail::flip(pc.h[c], pc.bond.empty() ? nullptr : &pc.bond[c]);
+    }
+  }
+}
+
+void PairSet::refresh(const SetContext& cx) {
+  const bool bb = law_has_bond(cx.p.ball_ball.model);
+  PairContacts& pc = contacts;
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    detail::init_contact(cx.pt, pc.a[c], pc.b[c], pc.h[c], bb ? &pc.bond[c] : nullptr, cx.p.ball_ball, false);
+}
+
+void PairSet::reset(PairContacts loaded) {
+  contacts = std::move(loaded);
+  tbuf_.clear();
+  row_lo_.clear();
+  row_hi_.clear();
+}
+
+Vec3 PairSet::force(std::size_t c, const ContactFamilyParams& fam) const {
+  const BondHist* b = contacts.bond.empty() ? nullptr : &contacts.bond[c];
+  return visit_law(fam.model, [&](auto law) { return decltype(law)::force(contacts.h[c], b); });
+}
+
+Vec3 PairSet::moment(std::size_t c, const ContactFamilyParams& fam) const {
+  const BondHist* b = contacts.bond.empty() ? nullptr : &contacts.bond[c];
+  return visit_law(fam.model, [&](auto law) { return decltype(law)::moment(contacts.h[c], b); });
+}
+
+Vec3 PairSet::branch(const Particles& pt, const PeriodicParams& cell, std::size_t c) const {
+  Vec3 d = pt.x[contacts.b[c]] - pt.x[contacts.a[c]];
+  if (cell.enabled) {
+    const auto& s = contacts.shift[c];
+    d += cmul(Vec3{double(s[0]), double(s[1]), double(s[2])}, cell.length);
+  }
+  return d;
+}
+
+void PairSet::append(std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s, const ContactHist& h,
+                     const BondHist* bond, bool has_bond) {
+  contacts.a.push_back(a);
+  contacts.b.push_back(b);
+  contacts.shift.push_back(s);
+  contacts.h.push_back(h);
+  if (has_bond) contacts.bond.push_back(bond ? *bond : BondHist{});
+}
+
+std::size_t PairSet::bond(const SetContext& cx, double lo, double hi) {
+  std::size_t cnt = 0;
+  PairContacts& pc = contacts;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    BondHist& b = pc.bond[c];
+    if (b.state != BondState::kNeverBonded) continue;
+    const Vec3 d = branch(cx.pt, cx.p.periodic, c);
+    const double gap = norm(d) - cx.pt.r[pc.a[c]] - cx.pt.r[pc.b[c]];
+    if (gap < lo || gap > hi) continue;
+    b.state = BondState::kIntact;
+    ContactHist& h = pc.h[c];
+    h.flags |= ContactHist::kIncremental;  // §3.1: bonding switches to incremental mode
+    if (!(h.flags & ContactHist::kHasNormal)) { h.n_old = d * (1.0 / norm(d)); h.flags |= ContactHist::kHasNormal; }
+    visit_law(cx.p.ball_ball.model, [&](auto law) { decltype(law)::install_bond(h, b, cx.p.ball_ball); });
+    ++cnt;
+  }
+  return cnt;
+}
+
+}  // namespace demfdm::dem

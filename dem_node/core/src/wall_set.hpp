@@ -1,0 +1,130 @@
+// The wall-contact set of World (not installed; docs/theory.md 1.4, 6.2-6.5): one template for
+// every wall kind, so plane walls, interface facets and the footing share the law, the history
+// merge and the bookkeeping. A kind is its walls plus their geometry:
+//   kFamily                    the contact family of its contacts (a WorldParams member);
+//   kParallel                  its per-contact work may run in parallel;
+//   present() / idle()         whether it has walls; what it resets when it has none;
+//   begin(cx, wc)              reset what the kind sums over its contacts;
+//   surface(x, wc, c)          the contact's surface point: distance from the ball centre, normal
+//                              towards the wall, wall velocity and spin there, the facet and its
+//                              barycentric weights (facet walls);
+//   after_law(cx, wc, c)       a per-contact rule after the law (may run in parallel);
+//   add(wc, c)                 sum the contact's results, serially in contact order;
+//   end(cx, wc)                what the kind derives from all its contacts;
+//   candidates(cx, cands)      the (ball, wall, facet) triples within reach at a rebuild (the
+//                              walls' travel restarts); wall_id(w);
+//   move(dt) / travel()        rigid motion with the prescribed velocity; travel since the rebuild.
+// Adding a wall kind is a kind struct here, its geometry in walls.cpp and one set in World.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "contact_set.hpp"
+#include "world_detail.hpp"
+
+namespace demfdm::dem {
+
+struct WallSurface {
+  double dist = 0.0;
+  Vec3 n{}, v{}, w{}, bary{};
+  std::int32_t facet = 0;
+};
+
+template <class Kind>
+class WallSet final : public ContactSet {
+ public:
+  explicit WallSet(double PhaseTimes::*phase) : ContactSet(phase) {}
+
+  WallContacts contacts;
+  Kind kind;  // the walls of this kind and their geometry
+
+  void rebuild(SetContext& cx) override;
+  bool present() const override { return kind.present(); }
+  void idle() override { kind.idle(); }
+  void pass(SetContext& cx, double dt) override;
+  void gather(Particles& pt) const override;
+  void move(double dt) override { kind.move(dt); }
+  double travel() const override { return kind.travel(); }
+  void add_force_norms(double& sum, std::size_t& count) const override;
+  void add_stiffness(const SetContext& cx, double* kt, double* kr) const override;
+  void add_energy(Energy& e, const WorldParams& p) const override;
+  void remap(const std::vector<std::uint32_t>& new_row) override;
+  void refresh(const SetContext& cx) override;
+  void clear() override { contacts = WallContacts{}; }
+
+ private:
+  template <class Law>
+  void pass_law(SetContext& cx, const ContactFamilyParams& fam, double dt);
+};
+
+/// Planar walls (platens, boxes): one-sided inside their rectangle; reaction and the sum of the
+/// active contacts' K_n (servo gain) per wall.
+struct PlaneKind {
+  static constexpr ContactFamilyParams WorldParams::*kFamily = &WorldParams::ball_wall;
+  static constexpr bool kParallel = false;
+  std::vector<PlaneWall> walls;
+
+  bool present() const { return !walls.empty(); }
+  void idle() {}
+  void begin(const SetContext&, const WallContacts&);
+  WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
+  void after_law(const SetContext&, WallContacts&, std::int64_t) const {}
+  void add(const WallContacts& wc, std::int64_t c);
+  void end(const SetContext&, WallContacts&) {}
+  void candidates(const SetContext& cx, std::vector<detail::WallCand>& cands);
+  std::uint64_t wall_id(std::uint32_t w) const { return walls[w].id; }
+  void move(double dt);
+  double travel() const;
+};
+
+/// Interface facet walls (docs/theory.md 6.2-6.5): the nearest candidate facet of each contact
+/// (the history stays with the (ball, wall) contact, 1.4); equivalent vertex forces and vertex
+/// stiffness.
+struct FacetKind {
+  static constexpr ContactFamilyParams WorldParams::*kFamily = &WorldParams::ball_facet;
+  static constexpr bool kParallel = true;
+  std::vector<FacetWall> walls;
+  bool restore_linear = false;  // this pass: a broken interface bond becomes a linear contact
+
+  bool present() const { return !walls.empty(); }
+  void idle() {}
+  void begin(const SetContext& cx, const WallContacts& wc);
+  WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
+  void after_law(const SetContext& cx, WallContacts& wc, std::int64_t c) const;
+  void add(const WallContacts&, std::int64_t) {}
+  void end(const SetContext& cx, WallContacts& wc);
+  void candidates(const SetContext& cx, std::vector<detail::WallCand>& cands);
+  std::uint64_t wall_id(std::uint32_t w) const { return walls[w].id; }
+  void move(double) {}  // the continuum sets the vertices (World::set_vertex_kinematics)
+  double travel() const;
+  /// Facet normals and kinematic spin from the vertex velocities (6.2); spin = false: no spin.
+  static void update_spin(FacetWall& fw, bool spin);
+  /// Bond the ball-facet contacts with gap <= hi (2.6, 4.8); returns the count.
+  std::size_t bond(const SetContext& cx, WallContacts& wc, double hi) const;
+};
+
+/// The rigid cylindrical footing (docs/theory.md 0.3): its reaction.
+struct FootingKind {
+  static constexpr ContactFamilyParams WorldParams::*kFamily = &WorldParams::ball_footing;
+  static constexpr bool kParallel = false;
+  Footing ft;
+
+  bool present() const { return ft.enabled; }
+  void idle() { ft.reaction = Vec3{}; }
+  void begin(const SetContext&, const WallContacts&) { ft.reaction = Vec3{}; }
+  WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
+  void after_law(const SetContext&, WallContacts&, std::int64_t) const {}
+  void add(const WallContacts& wc, std::int64_t c) { ft.reaction += wc.F[c]; }
+  void end(const SetContext&, WallContacts&) {}
+  void candidates(const SetContext& cx, std::vector<detail::WallCand>& cands);
+  std::uint64_t wall_id(std::uint32_t) const { return ft.id; }
+  void move(double dt);
+  double travel() const;
+};
+
+extern template class WallSet<PlaneKind>;
+extern template class WallSet<FacetKind>;
+extern template class WallSet<FootingKind>;
+
+}  // namespace demfdm::dem
