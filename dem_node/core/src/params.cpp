@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "demfdm/dem/laws/registry.hpp"
+#include "demfdm/dem/procedures.hpp"
 #include <stdexcept>
 #include <utility>
 
@@ -70,6 +71,12 @@ void validate(const WorldParams& p) {
   validate(p.ball_wall, "ball_wall");
   validate(p.ball_facet, "ball_facet");
   validate(p.ball_footing, "ball_footing");
+}
+
+void validate(const FootingParams& f) {
+  FootingParams keys = f;  // the table binds fields; the check only reads them
+  RangeCheck check = range_check("dem.footing.");
+  describe(check, keys);
 }
 
 }  // namespace demfdm::dem
