@@ -4,6 +4,7 @@
 #include "demfdm/dem/params.hpp"
 #include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/specimen.hpp"
+#include "demfdm/fdm/params.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -147,17 +148,11 @@ void declare_gravity(config::Section& root) {
 
 void declare_continuum(config::Section& root) {
   auto& c = *root.find("continuum")->section;
-  c.choice("mode", {"dynamic", "static"}, std::string("dynamic"),
-           "FDM law of motion: dynamic = real masses and the critical time step (docs/theory.md 6.6 option A); "
-           "static = mass-scaled, dt = 1 (option B, pseudo-static only).");
-  c.real("damping", "-", 0.8, "FDM local damping alpha_F (docs/theory.md 5.6).").min(0.0).max(1.0, true);
-  c.boolean("large_strain", false, "Recompute zone geometry every step with the Jaumann rate (docs/theory.md 5.8).");
-  c.choice("averaging", {"overlay", "zone"}, std::string("overlay"),
-           "Mixed-discretisation volumetric averaging over each 5-tetrahedron overlay (default) or all 10 "
-           "tetrahedra of a zone (docs/theory.md 5.3, U15).");
-  c.real("timestep_safety", "-", 0.5, "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).")
-      .min(0.0, true).max(1.0);
-  c.real("static_mass_factor", "-", 1.0, "Multiplier on the static-mode inertial masses (5.6).").min(1.0);
+  {  // the keys of fdm::ModelParams, declared beside it (fdm_node/core params.hpp)
+    fdm::ModelParams defaults;
+    SchemaDecl model_keys{c};
+    fdm::describe(model_keys, defaults);
+  }
   c.choice("linear_solver", {"auto", "cholmod", "ldlt"}, std::string("auto"),
            "fem_node only (fdm_node ignores it): sparse direct solver for the stiffness matrix, factorised once. "
            "cholmod = CHOLMOD supernodal Cholesky (fast on large meshes); ldlt = Eigen SimplicialLDLT (no "
@@ -179,31 +174,29 @@ void declare_continuum(config::Section& root) {
          "hydrostatic stress; 0: none.").min(0.0);
   auto& m = c.section("mesh", "FDM mesh: a box of hexahedra around the DEM pocket (docs/theory.md 5.1).",
                       config::Presence::Optional);
-  m.reals("size", "m", std::vector<double>{16e-3, 16e-3, 16e-3}, "Box L x W x H.").length(3).min(0.0, true);
-  m.boolean("pocket", true, "Leave the inner box open for the DEM block (its faces are the coupling interface).");
-  m.reals("inner_size", "m", std::vector<double>{4e-3, 4e-3, 10e-3},
-          "Inner box L_D x W_D x H_D (the pocket, or a refined block when pocket = false); [0,0,0]: none.")
-      .length(3).min(0.0);
-  m.reals("inner_origin", "m", std::vector<double>{},
-          "Minimum corner of the inner box; empty: centred in x and y, top flush with the surface.");
-  m.real("size_near", "m", 0.5e-3, "Zone size in and next to the inner box.").min(0.0, true);
-  m.real("size_far", "m", 2e-3, "Largest zone size towards the outer boundary.").min(0.0, true);
-  m.real("growth", "-", 1.2, "Zone-to-zone size ratio away from the inner box.").min(1.0).max(2.0);
+  {  // lists here (defaults from fdm::MeshParams), the other keys beside it (fdm_node/core mesh.hpp)
+    fdm::MeshParams defaults;
+    m.reals("size", "m", std::vector<double>{defaults.length, defaults.width, defaults.height}, "Box L x W x H.")
+        .length(3)
+        .min(0.0, true);
+    m.reals("inner_size", "m", std::vector<double>(defaults.inner_size.begin(), defaults.inner_size.end()),
+            "Inner box L_D x W_D x H_D (the pocket, or a refined block when pocket = false); [0,0,0]: none.")
+        .length(3)
+        .min(0.0);
+    m.reals("inner_origin", "m", std::vector<double>{},
+            "Minimum corner of the inner box; empty: centred in x and y, top flush with the surface.");
+    SchemaDecl mesh_keys{m};
+    fdm::describe(mesh_keys, defaults);
+  }
   auto& mat = c.array("material",
                       "Zone groups, applied in order (a later group overrides an earlier one where regions "
                       "overlap). Absent: one elastic group with the defaults below.",
                       config::Presence::Optional);
-  mat.choice("model", {"elastic", "mohr_coulomb"}, std::string("elastic"),
-             "Constitutive model (docs/theory.md 5.4).");
-  mat.real("density", "kg/m^3", 1272.0, "Bulk density rho_b = (1-n) rho_s (docs/theory.md 7.4).").min(0.0, true);
-  mat.real("young", "Pa", 2.0e9, "Young's modulus E (calibrate from the DEM UCS test).").min(0.0, true);
-  mat.real("poisson", "-", 0.25, "Poisson's ratio.").min(-1.0, true).max(0.5, true);
-  mat.real("cohesion", "Pa", 0.0, "Mohr-Coulomb cohesion c.").min(0.0);
-  mat.real("friction_deg", "deg", 30.0, "Mohr-Coulomb friction angle.").min(0.0).max(90.0, true);
-  mat.real("dilation_deg", "deg", 0.0, "Mohr-Coulomb dilation angle (<= friction).").min(0.0).max(90.0, true);
-  mat.real("tension", "Pa", std::nullopt, "Tension cut-off (tension positive); \"auto\": the apex value c/tan(phi).")
-      .min(0.0)
-      .or_word("auto", true);
+  {  // the keys of fdm::Material, declared beside it (fdm_node/core params.hpp)
+    fdm::Material defaults;
+    SchemaDecl material_keys{mat};
+    fdm::describe(material_keys, defaults);
+  }
   mat.reals("region_lo", "m", std::vector<double>{}, "Minimum corner of the group's box; empty: every zone.");
   mat.reals("region_hi", "m", std::vector<double>{}, "Maximum corner of the group's box; empty: every zone.");
   auto& punch = c.section("punch",
