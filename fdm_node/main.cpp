@@ -29,29 +29,9 @@ namespace {
 fdm::ModelParams model_params(const config::Scene& s) {
   fdm::ModelParams p;
   p.mesh = continuum::mesh_from_scene(s);
-  p.materials = continuum::material_groups<fdm::MaterialGroup>(s, [](const config::Scene& e) {
-    fdm::MaterialGroup g;
-    auto& mat = g.material;
-    mat.model = e.string("model") == "mohr_coulomb" ? fdm::Constitutive::kMohrCoulomb : fdm::Constitutive::kElastic;
-    const auto el = continuum::elastic_from_scene(e);
-    mat.density = el.density;
-    mat.young = el.young;
-    mat.poisson = el.poisson;
-    mat.cohesion = e.real("cohesion");
-    mat.friction_deg = e.real("friction_deg");
-    mat.dilation_deg = e.real("dilation_deg");
-    mat.tension = e.real_or_word("tension").value_or(fdm::kNaN);  // "auto": the apex value
-    g.region = el.region;
-    return g;
-  });
-  p.mode = s.string("continuum.mode") == "static" ? fdm::Mode::kStatic : fdm::Mode::kDynamic;
-  p.damping = s.real("continuum.damping");
+  p.materials = continuum::material_groups<fdm::MaterialGroup>(s, continuum::material_from_scene);
+  continuum::model_keys_from_scene(s, p);
   p.gravity_level = s.has("gravity") ? s.real("gravity.level") * s.real("gravity.g0") / fdm::kStandardGravity : 0.0;
-  p.large_strain = s.boolean("continuum.large_strain");
-  p.averaging = s.string("continuum.averaging") == "zone" ? fdm::VolumetricAveraging::kPerZone
-                                                          : fdm::VolumetricAveraging::kPerOverlay;
-  p.timestep_safety = s.real("continuum.timestep_safety");
-  p.static_mass_factor = s.real("continuum.static_mass_factor");
   p.strongbox_boundary = s.string("continuum.boundary") == "strongbox";
   // In a coupled run with the serial scheme the continuum steps while the DEM waits for it, so
   // its loops are on the critical path and the machine's cores are free for them: split them

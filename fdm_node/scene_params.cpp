@@ -3,6 +3,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "common/schema/scene_read.hpp"
+
 namespace demfdm::continuum {
 namespace {
 std::array<double, 3> vec3(const std::vector<double>& v) { return {v[0], v[1], v[2]}; }
@@ -14,7 +16,6 @@ fdm::MeshParams mesh_from_scene(const config::Scene& s) {
   m.length = size[0];
   m.width = size[1];
   m.height = size[2];
-  m.pocket = s.boolean("continuum.mesh.pocket");
   m.inner_size = vec3(s.reals("continuum.mesh.inner_size"));
   auto origin = s.reals("continuum.mesh.inner_origin");
   if (origin.size() == 3)
@@ -22,9 +23,7 @@ fdm::MeshParams mesh_from_scene(const config::Scene& s) {
   else if (!origin.empty())
     s.fail("continuum.mesh.inner_origin", "an empty list or 3 numbers [x, y, z] in m",
            std::to_string(origin.size()) + " numbers");
-  m.size_near = s.real("continuum.mesh.size_near");
-  m.size_far = s.real("continuum.mesh.size_far");
-  m.growth = s.real("continuum.mesh.growth");
+  schema::read_table(s, "continuum.mesh.", m);
   try {
     fdm::validate(m);
   } catch (const std::invalid_argument& e) {
@@ -42,13 +41,18 @@ std::optional<fdm::Box> region_from_scene(const config::Scene& e) {
   return std::nullopt;
 }
 
+fdm::MaterialGroup material_from_scene(const config::Scene& e) {
+  fdm::MaterialGroup g;
+  schema::read_table(e, "", g.material);
+  g.region = region_from_scene(e);
+  return g;
+}
+
+void model_keys_from_scene(const config::Scene& s, fdm::ModelParams& p) { schema::read_table(s, "continuum.", p); }
+
 ElasticMaterial elastic_from_scene(const config::Scene& e) {
-  ElasticMaterial m;
-  m.density = e.real("density");
-  m.young = e.real("young");
-  m.poisson = e.real("poisson");
-  m.region = region_from_scene(e);
-  return m;
+  const fdm::MaterialGroup g = material_from_scene(e);
+  return {g.material.density, g.material.young, g.material.poisson, g.region};
 }
 
 }  // namespace demfdm::continuum

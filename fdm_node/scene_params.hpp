@@ -1,6 +1,9 @@
 // Scene keys -> the parameters every continuum solver on the shared mesh (fdm_mesh) reads the
 // same way (fdm_node, fem_node), so that both read [continuum.mesh] and [[continuum.material]]
-// regions alike and their interfaces match. Errors are config::Error at the offending key.
+// regions alike and their interfaces match. A key with a field is read through its declaration
+// beside the struct (describe() in demfdm/fdm/mesh.hpp and params.hpp, demfdm/param_table.hpp);
+// the lists (sizes, origins, regions) are declared in the schema and read with its defaults.
+// Errors are config::Error at the offending key.
 #pragma once
 #include <cstddef>
 #include <optional>
@@ -8,6 +11,7 @@
 
 #include "common/config/config.hpp"
 #include "demfdm/fdm/mesh.hpp"
+#include "demfdm/fdm/params.hpp"  // header only: the material and model tables
 
 namespace demfdm::continuum {
 
@@ -16,8 +20,15 @@ fdm::MeshParams mesh_from_scene(const config::Scene& s);
 // region_lo / region_hi of one [[continuum.material]] element: nullopt = every zone.
 std::optional<fdm::Box> region_from_scene(const config::Scene& element);
 
+// One [[continuum.material]] element: its material (the table of fdm::Material) and region.
+fdm::MaterialGroup material_from_scene(const config::Scene& element);
+
+// The continuum's own keys with a field in fdm::ModelParams ([continuum] mode, damping,
+// large_strain, averaging, timestep_safety, static_mass_factor), read into p.
+void model_keys_from_scene(const config::Scene& s, fdm::ModelParams& p);
+
 // The keys of one [[continuum.material]] element that every solver reads: the elastic
-// constants and the region.
+// constants and the region (read as material_from_scene reads them).
 struct ElasticMaterial {
   double density = 0;  // [kg/m^3]
   double young = 0;    // [Pa]

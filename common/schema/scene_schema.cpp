@@ -2,6 +2,9 @@
 
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/params.hpp"
+#include "demfdm/dem/procedures.hpp"
+#include "demfdm/dem/specimen.hpp"
+#include "demfdm/fdm/params.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -23,6 +26,43 @@ int run_threads(const config::Scene& s) {
 }
 
 namespace {
+
+// Declares the keys of a parameter table (demfdm/param_table.hpp: the describe() tables beside
+// the engines' structs) in a schema section: unit, range, doc, and as default the field's
+// initial value.
+struct SchemaDecl {
+  config::Section& sec;
+  static void bounds(config::ParamBuilder b, const ParamRange& r) {
+    if (r.has_lo()) b.min(r.lo, r.lo_open);
+    if (r.has_hi()) b.max(r.hi, r.hi_open);
+  }
+  void real(const char* key, const char* unit, double& field, const ParamRange& r, const char* doc) {
+    bounds(sec.real(key, unit, field, doc), r);
+  }
+  // A field holding word_value makes the word the default ("auto").
+  void real_or_word(const char* key, const char* unit, double& field, const ParamRange& r, const char* word,
+                    double word_value, const char* doc) {
+    const bool word_default = field == word_value || (std::isnan(field) && std::isnan(word_value));
+    auto b = sec.real(key, unit, word_default ? std::nullopt : std::optional<double>(field), doc);
+    bounds(b, r);
+    b.or_word(word, word_default);
+  }
+  void flag(const char* key, bool& field, const char* doc) { sec.boolean(key, field, doc); }
+  template <class I>
+  void integer(const char* key, const char* unit, I& field, std::int64_t lo, std::int64_t hi, const char* doc) {
+    sec.integer(key, unit, static_cast<std::int64_t>(field), doc).min(static_cast<double>(lo)).max(static_cast<double>(hi));
+  }
+  template <class E>
+  void choice(const char* key, E& field, std::initializer_list<ParamOption<E>> options, const char* doc) {
+    std::vector<std::string> names;
+    std::string def;
+    for (const auto& o : options) {
+      names.emplace_back(o.name);
+      if (o.value == field) def = o.name;
+    }
+    sec.choice(key, names, def, doc);
+  }
+};
 
 void declare_run(config::Section& root) {
   auto& run = root.section("run", "Run identity and process settings.", config::Presence::Optional);
@@ -108,17 +148,11 @@ void declare_gravity(config::Section& root) {
 
 void declare_continuum(config::Section& root) {
   auto& c = *root.find("continuum")->section;
-  c.choice("mode", {"dynamic", "static"}, std::string("dynamic"),
-           "FDM law of motion: dynamic = real masses and the critical time step (docs/theory.md 6.6 option A); "
-           "static = mass-scaled, dt = 1 (option B, pseudo-static only).");
-  c.real("damping", "-", 0.8, "FDM local damping alpha_F (docs/theory.md 5.6).").min(0.0).max(1.0, true);
-  c.boolean("large_strain", false, "Recompute zone geometry every step with the Jaumann rate (docs/theory.md 5.8).");
-  c.choice("averaging", {"overlay", "zone"}, std::string("overlay"),
-           "Mixed-discretisation volumetric averaging over each 5-tetrahedron overlay (default) or all 10 "
-           "tetrahedra of a zone (docs/theory.md 5.3, U15).");
-  c.real("timestep_safety", "-", 0.5, "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).")
-      .min(0.0, true).max(1.0);
-  c.real("static_mass_factor", "-", 1.0, "Multiplier on the static-mode inertial masses (5.6).").min(1.0);
+  {  // the keys of fdm::ModelParams, declared beside it (fdm_node/core params.hpp)
+    fdm::ModelParams defaults;
+    SchemaDecl model_keys{c};
+    fdm::describe(model_keys, defaults);
+  }
   c.choice("linear_solver", {"auto", "cholmod", "ldlt"}, std::string("auto"),
            "fem_node only (fdm_node ignores it): sparse direct solver for the stiffness matrix, factorised once. "
            "cholmod = CHOLMOD supernodal Cholesky (fast on large meshes); ldlt = Eigen SimplicialLDLT (no "
@@ -140,31 +174,29 @@ void declare_continuum(config::Section& root) {
          "hydrostatic stress; 0: none.").min(0.0);
   auto& m = c.section("mesh", "FDM mesh: a box of hexahedra around the DEM pocket (docs/theory.md 5.1).",
                       config::Presence::Optional);
-  m.reals("size", "m", std::vector<double>{16e-3, 16e-3, 16e-3}, "Box L x W x H.").length(3).min(0.0, true);
-  m.boolean("pocket", true, "Leave the inner box open for the DEM block (its faces are the coupling interface).");
-  m.reals("inner_size", "m", std::vector<double>{4e-3, 4e-3, 10e-3},
-          "Inner box L_D x W_D x H_D (the pocket, or a refined block when pocket = false); [0,0,0]: none.")
-      .length(3).min(0.0);
-  m.reals("inner_origin", "m", std::vector<double>{},
-          "Minimum corner of the inner box; empty: centred in x and y, top flush with the surface.");
-  m.real("size_near", "m", 0.5e-3, "Zone size in and next to the inner box.").min(0.0, true);
-  m.real("size_far", "m", 2e-3, "Largest zone size towards the outer boundary.").min(0.0, true);
-  m.real("growth", "-", 1.2, "Zone-to-zone size ratio away from the inner box.").min(1.0).max(2.0);
+  {  // lists here (defaults from fdm::MeshParams), the other keys beside it (fdm_node/core mesh.hpp)
+    fdm::MeshParams defaults;
+    m.reals("size", "m", std::vector<double>{defaults.length, defaults.width, defaults.height}, "Box L x W x H.")
+        .length(3)
+        .min(0.0, true);
+    m.reals("inner_size", "m", std::vector<double>(defaults.inner_size.begin(), defaults.inner_size.end()),
+            "Inner box L_D x W_D x H_D (the pocket, or a refined block when pocket = false); [0,0,0]: none.")
+        .length(3)
+        .min(0.0);
+    m.reals("inner_origin", "m", std::vector<double>{},
+            "Minimum corner of the inner box; empty: centred in x and y, top flush with the surface.");
+    SchemaDecl mesh_keys{m};
+    fdm::describe(mesh_keys, defaults);
+  }
   auto& mat = c.array("material",
                       "Zone groups, applied in order (a later group overrides an earlier one where regions "
                       "overlap). Absent: one elastic group with the defaults below.",
                       config::Presence::Optional);
-  mat.choice("model", {"elastic", "mohr_coulomb"}, std::string("elastic"),
-             "Constitutive model (docs/theory.md 5.4).");
-  mat.real("density", "kg/m^3", 1272.0, "Bulk density rho_b = (1-n) rho_s (docs/theory.md 7.4).").min(0.0, true);
-  mat.real("young", "Pa", 2.0e9, "Young's modulus E (calibrate from the DEM UCS test).").min(0.0, true);
-  mat.real("poisson", "-", 0.25, "Poisson's ratio.").min(-1.0, true).max(0.5, true);
-  mat.real("cohesion", "Pa", 0.0, "Mohr-Coulomb cohesion c.").min(0.0);
-  mat.real("friction_deg", "deg", 30.0, "Mohr-Coulomb friction angle.").min(0.0).max(90.0, true);
-  mat.real("dilation_deg", "deg", 0.0, "Mohr-Coulomb dilation angle (<= friction).").min(0.0).max(90.0, true);
-  mat.real("tension", "Pa", std::nullopt, "Tension cut-off (tension positive); \"auto\": the apex value c/tan(phi).")
-      .min(0.0)
-      .or_word("auto", true);
+  {  // the keys of fdm::Material, declared beside it (fdm_node/core params.hpp)
+    fdm::Material defaults;
+    SchemaDecl material_keys{mat};
+    fdm::describe(material_keys, defaults);
+  }
   mat.reals("region_lo", "m", std::vector<double>{}, "Minimum corner of the group's box; empty: every zone.");
   mat.reals("region_hi", "m", std::vector<double>{}, "Maximum corner of the group's box; empty: every zone.");
   auto& punch = c.section("punch",
@@ -188,51 +220,18 @@ void declare_continuum(config::Section& root) {
   out.integer("history_every", "steps", 1, "fdm_history.csv row every n coupling steps; 0: none.").min(0);
 }
 
-// Declares the keys of a parameter table (dem_node/core params.hpp) in a schema section: unit,
-// range, doc, and as default the field's initial value.
-struct SchemaDecl {
-  config::Section& sec;
-  static void bounds(config::ParamBuilder b, const dem::ParamRange& r) {
-    if (r.has_lo()) b.min(r.lo, r.lo_open);
-    if (r.has_hi()) b.max(r.hi, r.hi_open);
-  }
-  void real(const char* key, const char* unit, double& field, const dem::ParamRange& r, const char* doc) {
-    bounds(sec.real(key, unit, field, doc), r);
-  }
-  void real_or_word(const char* key, const char* unit, double& field, const dem::ParamRange& r, const char* word,
-                    double, const char* doc) {
-    auto b = sec.real(key, unit, field, doc);
-    bounds(b, r);
-    b.or_word(word, false);
-  }
-  void flag(const char* key, bool& field, const char* doc) { sec.boolean(key, field, doc); }
-  void integer(const char* key, const char* unit, int& field, int lo, int hi, const char* doc) {
-    sec.integer(key, unit, field, doc).min(lo).max(hi);
-  }
-  template <class E>
-  void choice(const char* key, E& field, std::initializer_list<dem::ParamOption<E>> options, const char* doc) {
-    std::vector<std::string> names;
-    std::string def;
-    for (const auto& o : options) {
-      names.emplace_back(o.name);
-      if (o.value == field) def = o.name;
-    }
-    sec.choice(key, names, def, doc);
-  }
-};
-
 // Records a law key's earlier prefixed name (sb_ten, pb_ten, hz_shear) as moved to its table.
 struct MovedKeys {
   config::Section& fam;
   std::string prefix, table;
   void add(const char* key) { fam.moved(prefix + key, std::string("write [") + fam.path() + "." + table + "] " + key); }
-  void real(const char* key, const char*, double&, const dem::ParamRange&, const char*) { add(key); }
-  void real_or_word(const char* key, const char*, double&, const dem::ParamRange&, const char*, double, const char*) {
+  void real(const char* key, const char*, double&, const ParamRange&, const char*) { add(key); }
+  void real_or_word(const char* key, const char*, double&, const ParamRange&, const char*, double, const char*) {
     add(key);
   }
   void flag(const char* key, bool&, const char*) { add(key); }
   template <class E>
-  void choice(const char* key, E&, std::initializer_list<dem::ParamOption<E>>, const char*) { add(key); }
+  void choice(const char* key, E&, std::initializer_list<ParamOption<E>>, const char*) { add(key); }
 };
 
 // A contact family [dem.<name>]: its law (the registry's names), its family-wide keys, and one
@@ -289,35 +288,21 @@ void declare_dem(config::Section& root) {
           "a specimen-generation stage; empty: none.");
   for (const auto& fam : dem::kFamilies) declare_family(d, fam);
   auto& sp = d.section("specimen", "Specimen generation (docs/theory.md 0.4, 4).", config::Presence::Optional);
-  sp.real("d_min", "m", 0.0655e-3, "Smallest particle diameter (before upscaling).").min(0.0, true);
-  sp.real("d_max", "m", 0.181e-3, "Largest particle diameter (before upscaling).").min(0.0, true);
+  {  // the REV generation's keys, declared beside RevParams (dem_node/core specimen.hpp)
+    dem::RevParams defaults = dem::scene_rev_defaults();
+    SchemaDecl rev_keys{sp};
+    dem::describe(rev_keys, defaults);
+  }
   sp.real("d50", "m", 0.116e-3, "d50 quoted by the paper (inertial-number rate rule).").min(0.0, true);
-  sp.real("scale", "-", 1.5, "Particle upscaling factor (1, 1.3, 1.5 in the paper).").min(0.1).max(10.0);
   sp.reals("cell", "m", std::vector<double>{4e-3, 4e-3, 2e-3}, "REV periodic cell L_c x W_c x H_c.").length(3).min(0.0, true);
   sp.reals("origin", "m", std::vector<double>{},
            "Minimum corner of the REV (and of the replicated block); empty: the continuum's pocket if there is "
            "a [continuum], else [0, 0, 0].");
-  sp.integer("n_particles", "-", 0,
-             "Number of balls; 0: the PSD's expected count at 'porosity' in the cell (Table 1 N_p).").min(0);
-  sp.real("porosity", "-", 0.5195, "Final porosity n of the specimen (Table 1, scale 1); sets N_p.").min(0.0, true).max(1.0, true);
-  sp.real("porosity_target", "-", std::nullopt,
-          "Porosity reached by frictionless radius expansion (4.3); \"auto\": 'porosity'.")
-      .min(0.0, true)
-      .max(1.0, true)
-      .or_word("auto", true);
   sp.real("bond_coordination", "-", std::nullopt,
           "generate: after the expansion, bond every pair up to the gap that gives this bonded coordination "
           "number (Table 1: 6.82; docs/ucs-study.md); \"none\": no bonding in 'generate'.")
       .min(0.0, true)
       .or_word("none", true);
-  sp.real("initial_scale", "-", 0.6, "Initial radii = d/2 * this (4.3).").min(0.0, true).max(1.0);
-  sp.integer("increments", "-", 5, "Radius-expansion increments.").min(1);
-  sp.real("expansion_ratio", "-", 1e-3, "Unbalanced ratio to reach after each expansion increment.").min(0.0, true);
-  sp.real("increment_budget", "t_c", 16000.0,
-          "Budget of each expansion increment in critical steps t_c (docs/theory.md 4.11; 20,000 steps at "
-          "dt_safety 0.8). An increment that does not reach expansion_ratio within it stops the run.")
-      .min(0.0, true)
-      .max(1e9);
   sp.real("dt_safety", "-", 0.8,
           "Time step of specimen preparation (the generate, servo, bond and replicate stages) = this * critical "
           "step (1.8); dem.dt_safety applies from the first later stage. Preparation counts its rules in critical "
@@ -338,19 +323,11 @@ void declare_dem(config::Section& root) {
   sp.real("bulk_density", "kg/m^3", std::nullopt, "Bulk density for sigma_v; \"auto\": 0.48 rho_s.")
       .min(0.0, true)
       .or_word("auto", true);
-  sp.real("servo_tol", "-", 0.005, "Servo stress tolerance |s - s*| / s*.").min(0.0, true);
-  sp.real("servo_ratio", "-", 1e-4, "Servo unbalanced-ratio criterion.").min(0.0, true);
-  sp.real("servo_gain", "1/t_c", 0.375,
-          "Servo gain alpha_s: share of the stress error closed per critical step t_c (4.5, 4.11; 0.3 per step at "
-          "dt_safety 0.8).")
-      .min(0.0, true)
-      .max(1.0);
-  sp.real("servo_budget", "t_c", 320000.0,
-          "Budget of the servo at low friction in critical steps t_c (then half of it at the final friction; "
-          "4.11). A servo that does not reach servo_tol and servo_ratio within it stops the run.")
-      .min(0.0, true)
-      .max(1e9);
-  sp.real("servo_fric", "-", 0.1, "Friction during servo compaction (4.3 step 4: 0 to 0.1).").min(0.0);
+  {  // the REV servo's keys, declared beside ServoSettings (dem_node/core specimen.hpp)
+    dem::ServoSettings defaults;
+    SchemaDecl servo_keys{sp};
+    dem::describe(servo_keys, defaults);
+  }
   sp.real("bond_gap", "m", std::nullopt, "bond stage: bond contacts with gap <= this; \"auto\": 1e-3 d_min (4.6).")
       .or_word("auto", true);
   sp.integers("replicate", "-", std::vector<std::int64_t>{1, 1, 5}, "Copies alpha x beta x gamma (4.7).")
@@ -363,16 +340,18 @@ void declare_dem(config::Section& root) {
   sp.choice("depth_scaling", {"depth_ratio", "paper_literal", "none"}, std::string("depth_ratio"),
             "Scaling of contact and bond forces with depth (4.9, U7): depth_ratio (default) f = depth/H_D; "
             "paper_literal f = height above the block bottom / H_D; none.");
-  sp.choice("interface_bond_force", {"traction", "mean_contact"}, std::string("traction"),
-            "Initial normal force of the ball-facet bonds (4.9, a reconstruction; docs/paper-study.md): traction "
-            "(default) splits the geostatic traction n.sigma.n of each plane face of the interface (sigma_zz = "
-            "-rho_b N g0 depth, sigma_h = k0 sigma_zz, rho_b = ball mass / block volume) over the bonds on that "
-            "face, so the bonds carry the block's weight and lateral thrust from the start; mean_contact: the "
-            "mean normal force of the ball-ball contacts within d50 of the bond's height (the paper's wording).");
+  {  // the couple stage's interface-bond forces, declared beside InterfaceBondParams (specimen.hpp)
+    dem::InterfaceBondParams defaults;
+    SchemaDecl bond_keys{sp};
+    dem::describe(bond_keys, defaults);
+  }
   auto& ft = d.section("footing", "Rigid cylindrical footing (paper: D_f 1.2 mm, H_f 0.6 mm). Absent: none.",
                        config::Presence::Optional);
-  ft.real("diameter", "m", 1.2e-3, "Footing diameter D_f.").min(0.0, true);
-  ft.real("height", "m", 0.6e-3, "Footing height H_f.").min(0.0, true);
+  {  // the footing's shape, declared beside FootingParams (dem_node/core procedures.hpp)
+    dem::FootingParams defaults;
+    SchemaDecl footing_keys{ft};
+    dem::describe(footing_keys, defaults);
+  }
   ft.reals("centre", "m", std::vector<double>{}, "Axis position [x, y]; empty: the centre of the DEM block.");
   auto& o = d.section("output", "DEM results (dem.h5 + particles.xmf + bonds.xmf, dem_history.csv, dem_profile_<stage>.csv). "
                       "Without this table the DEM writes no result files.",
@@ -460,8 +439,11 @@ void declare_stages(config::Section& root) {
       .min(0.0)
       .max(0.99)
       .or_word("auto", true);
-  st.real("strain_rate", "1/s", 0.5, "ucs: platen approach rate / specimen height.").min(0.0, true);
-  st.real("max_strain", "-", 0.01, "ucs: stop at this axial strain.").min(0.0, true);
+  {  // the ucs stage's keys, declared beside UcsParams (dem_node/core specimen.hpp)
+    dem::UcsParams defaults;
+    SchemaDecl ucs_keys{st};
+    dem::describe(ucs_keys, defaults);
+  }
   st.strings("nodes", std::vector<std::string>{}, "Roles taking part ('dem', 'continuum'); empty: all of the scene's.");
   st.integer("steps", "-", std::nullopt,
              "Step budget in coupling steps (at most 1e12: a year of steps at 30 kHz; larger budgets would "
@@ -505,15 +487,15 @@ struct OtherLawKeys {
       ctx.fail(path, "a key of the family's own law only (model = '" + model + "'; this table has no effect)",
                "it set while model = '" + model + "'");
   }
-  void real(const char* key, const char*, double& def, const dem::ParamRange&, const char*) {
+  void real(const char* key, const char*, double& def, const ParamRange&, const char*) {
     refuse_if(sc.real(table + "." + key) != def, key);
   }
-  void real_or_word(const char* key, const char*, double& def, const dem::ParamRange&, const char*, double, const char*) {
+  void real_or_word(const char* key, const char*, double& def, const ParamRange&, const char*, double, const char*) {
     refuse_if(sc.real_or_word(table + "." + key) != std::optional<double>(def), key);
   }
   void flag(const char* key, bool& def, const char*) { refuse_if(sc.boolean(table + "." + key) != def, key); }
   template <class E>
-  void choice(const char* key, E& def, std::initializer_list<dem::ParamOption<E>> options, const char*) {
+  void choice(const char* key, E& def, std::initializer_list<ParamOption<E>> options, const char*) {
     for (const auto& o : options)
       if (o.value == def) refuse_if(sc.string(table + "." + key) != o.name, key);
   }

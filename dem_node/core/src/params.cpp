@@ -5,7 +5,9 @@
 #include <sstream>
 
 #include "demfdm/dem/laws/registry.hpp"
+#include "demfdm/dem/procedures.hpp"
 #include <stdexcept>
+#include <utility>
 
 namespace demfdm::dem {
 
@@ -32,48 +34,16 @@ void require(bool ok, const std::string& field, const char* range, double value)
 }  // namespace
 
 namespace {
-// The range checks of a parameter table (params.hpp): each key against its declared range,
-// named as the scene names it.
-struct RangeCheck {
-  std::string prefix;  // "dem.ball_ball." or "dem.ball_ball.softbond."
-  static std::string text(const ParamRange& r) {
-    std::ostringstream s;
-    if (r.has_lo() && r.has_hi())
-      s << "in " << (r.lo_open ? "(" : "[") << r.lo << ", " << r.hi << (r.hi_open ? ")" : "]");
-    else if (r.has_lo())
-      s << (r.lo_open ? "> " : ">= ") << r.lo << " and finite";
-    else if (r.has_hi())
-      s << (r.hi_open ? "< " : "<= ") << r.hi;
-    else
-      s << "finite";
-    return s.str();
-  }
-  void real(const char* key, const char* unit, const double& v, const ParamRange& r, const char*) {
-    if (r.contains(v)) return;
-    const std::string range = text(r) + (std::string(unit) == "-" ? "" : std::string(" ") + unit);
-    require(false, prefix + key, range.c_str(), v);
-  }
-  void real_or_word(const char* key, const char* unit, const double& v, const ParamRange& r, const char*,
-                    double word_value, const char* doc) {
-    if (v == word_value || (std::isnan(v) && std::isnan(word_value))) return;
-    real(key, unit, v, r, doc);
-  }
-  void flag(const char*, const bool&, const char*) {}
-  void integer(const char* key, const char*, const int& v, int lo, int hi, const char*) {
-    const std::string range = "in [" + std::to_string(lo) + ", " + std::to_string(hi) + "]";
-    require(v >= lo && v <= hi, prefix + key, range.c_str(), v);
-  }
-  template <class E>
-  void choice(const char*, const E&, std::initializer_list<ParamOption<E>>, const char*) {}
-};
+// The range checks of a parameter table (params.hpp), named as the scene names the key.
+RangeCheck range_check(std::string prefix) { return RangeCheck{"DEM", std::move(prefix)}; }
 }  // namespace
 
 void validate(const ContactFamilyParams& p, const std::string& family) {
   auto& f = const_cast<ContactFamilyParams&>(p);  // the tables bind fields; RangeCheck only reads
-  RangeCheck family_keys{"dem." + family + "."};
+  RangeCheck family_keys = range_check("dem." + family + ".");
   describe_family(family_keys, f);
   for_each_law([&](auto law) {
-    RangeCheck law_keys{"dem." + family + "." + decltype(law)::kName + "."};
+    RangeCheck law_keys = range_check("dem." + family + "." + decltype(law)::kName + ".");
     decltype(law)::params(law_keys, f);
   });
   // Not scene keys: benchmarks' fixed stiffness.
@@ -85,7 +55,7 @@ void validate(const ContactFamilyParams& p, const std::string& family) {
 }
 
 void validate(const WorldParams& p) {
-  RangeCheck world_keys{"dem."};
+  RangeCheck world_keys = range_check("dem.");
   describe(world_keys, const_cast<WorldParams&>(p));  // the table binds fields; RangeCheck only reads
   // Not scene keys here (gravity comes from [gravity], the skin from skin_factor).
   require(p.g0 >= 0.0, "g0", ">= 0 m/s^2", p.g0);
@@ -101,6 +71,12 @@ void validate(const WorldParams& p) {
   validate(p.ball_wall, "ball_wall");
   validate(p.ball_facet, "ball_facet");
   validate(p.ball_footing, "ball_footing");
+}
+
+void validate(const FootingParams& f) {
+  FootingParams keys = f;  // the table binds fields; the check only reads them
+  RangeCheck check = range_check("dem.footing.");
+  describe(check, keys);
 }
 
 }  // namespace demfdm::dem

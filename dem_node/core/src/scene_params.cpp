@@ -2,34 +2,27 @@
 
 #include <stdexcept>
 
+#include "common/schema/scene_read.hpp"
 #include "common/schema/scene_schema.hpp"
 #include "demfdm/dem/laws/registry.hpp"
+#include "demfdm/dem/procedures.hpp"
 
 namespace demfdm::dem::scene {
 
 namespace {
-// Reads the keys of a parameter table (params.hpp) from the scene into the bound fields.
-struct SceneRead {
-  const config::Scene& s;
-  std::string prefix;  // "dem.ball_ball." or "dem.ball_ball.softbond."
-  void real(const char* key, const char*, double& field, const ParamRange&, const char*) {
-    field = s.real(prefix + key);
+using schema::read_table;
+using schema::SceneRead;
+
+// Validates what the scene gave a struct (validate() of the table's core header); a bad value is
+// reported under `key` (its message names the scene key).
+template <class P>
+void checked(const config::Scene& s, const std::string& key, const P& p) {
+  try {
+    validate(p);
+  } catch (const std::invalid_argument& e) {
+    s.fail(key, "valid DEM parameters", e.what());
   }
-  void real_or_word(const char* key, const char*, double& field, const ParamRange&, const char*, double word_value,
-                    const char*) {
-    field = s.real_or_word(prefix + key).value_or(word_value);
-  }
-  void flag(const char* key, bool& field, const char*) { field = s.boolean(prefix + key); }
-  void integer(const char* key, const char*, int& field, int, int, const char*) {
-    field = static_cast<int>(s.integer(prefix + key));
-  }
-  template <class E>
-  void choice(const char* key, E& field, std::initializer_list<ParamOption<E>> options, const char*) {
-    const std::string name = s.string(prefix + key);  // the schema admits only the options' names
-    for (const auto& o : options)
-      if (name == o.name) field = o.value;
-  }
-};
+}
 }  // namespace
 
 Block block(const config::Scene& s) {
@@ -60,8 +53,7 @@ ContactFamilyParams family(const config::Scene& s, const FamilyInfo& info) {
 
 WorldParams world(const config::Scene& s, const Block& b) {
   WorldParams p;
-  SceneRead world_keys{s, "dem."};
-  describe(world_keys, p);
+  read_table(s, "dem.", p);
   p.dt_fixed = 0.0;  // dem.dt_fixed is checked, then applied, at the first stage that begins with balls
   p.threads = schema::run_threads(s);
   p.gravity = false;
@@ -82,18 +74,10 @@ WorldParams world(const config::Scene& s, const Block& b) {
 }
 
 RevParams rev(const config::Scene& s) {
-  RevParams p;
-  p.psd.d_min = s.real("dem.specimen.d_min");
-  p.psd.d_max = s.real("dem.specimen.d_max");
-  p.psd.scale = s.real("dem.specimen.scale");
+  RevParams p = scene_rev_defaults();
+  read_table(s, "dem.specimen.", p);
   p.seed = static_cast<std::uint64_t>(s.integer("run.seed"));
-  p.n_particles = static_cast<std::size_t>(s.integer("dem.specimen.n_particles"));
-  p.porosity_final = s.real("dem.specimen.porosity");
-  p.porosity_target = s.real_or_word("dem.specimen.porosity_target").value_or(p.porosity_final);
-  p.initial_scale = s.real("dem.specimen.initial_scale");
-  p.increments = static_cast<int>(s.integer("dem.specimen.increments"));
-  p.ratio_tol = s.real("dem.specimen.expansion_ratio");
-  p.increment_budget = s.real("dem.specimen.increment_budget");
+  checked(s, "dem.specimen", p);
   return p;
 }
 
@@ -106,13 +90,10 @@ double sigma_v(const config::Scene& s, const Block& b) {
 
 ServoSettings servo(const config::Scene& s, const Block& b) {
   ServoSettings r;
+  read_table(s, "dem.specimen.", r);
+  checked(s, "dem.specimen", r);
   const double sv = sigma_v(s, b), sh = s.real("dem.specimen.k0") * sv;
   r.p.target = {sh, sh, sv};
-  r.p.gain = s.real("dem.specimen.servo_gain");
-  r.tol = s.real("dem.specimen.servo_tol");
-  r.ratio = s.real("dem.specimen.servo_ratio");
-  r.budget = s.real("dem.specimen.servo_budget");
-  r.fric = s.real("dem.specimen.servo_fric");
   return r;
 }
 
@@ -122,8 +103,8 @@ double bond_gap(const config::Scene& s) {
 
 FootingParams footing(const config::Scene& s, const Block& b) {
   FootingParams f;
-  f.diameter = s.real("dem.footing.diameter");
-  f.height = s.real("dem.footing.height");
+  read_table(s, "dem.footing.", f);
+  checked(s, "dem.footing", f);
   const auto c = s.reals("dem.footing.centre");
   f.bottom_centre = c.size() == 2 ? Vec3{c[0], c[1], 0} : b.centre();
   return f;
@@ -131,8 +112,7 @@ FootingParams footing(const config::Scene& s, const Block& b) {
 
 InterfaceBondParams interface_bonds(const config::Scene& s, const Block& b, double unit_weight) {
   InterfaceBondParams ib;
-  ib.mode = s.string("dem.specimen.interface_bond_force") == "mean_contact" ? InterfaceBondForce::kMeanContact
-                                                                           : InterfaceBondForce::kTraction;
+  read_table(s, "dem.specimen.", ib);
   ib.band = s.real("dem.specimen.d50") * s.real("dem.specimen.scale");
   ib.z_top = b.z_top();
   ib.unit_weight = unit_weight;
@@ -151,8 +131,8 @@ bool depth_scaling(const config::Scene& s, const Block& b, DepthScaleParams& p) 
 
 UcsParams ucs(const config::Scene& stage) {
   UcsParams p;
-  p.strain_rate = stage.real("strain_rate");
-  p.max_strain = stage.real("max_strain");
+  read_table(stage, "", p);
+  checked(stage, "strain_rate", p);
   return p;
 }
 

@@ -62,6 +62,25 @@ void require_automatic_step(const World& w, const char* what) {
 }
 }  // namespace
 
+void validate(const RevParams& p) {
+  RevParams keys = p;  // the table binds fields; the check only reads them
+  RangeCheck check{"DEM", "dem.specimen."};
+  describe(check, keys);
+  if (!(p.psd.d_min < p.psd.d_max)) check.fail("d_min", "< d_max = " + std::to_string(p.psd.d_max) + " m", p.psd.d_min);
+}
+
+void validate(const ServoSettings& s) {
+  ServoSettings keys = s;
+  RangeCheck check{"DEM", "dem.specimen."};
+  describe(check, keys);
+}
+
+void validate(const UcsParams& p) {
+  UcsParams keys = p;
+  RangeCheck check{"DEM", ""};  // a stage key: the scene names it within its stage
+  describe(check, keys);
+}
+
 std::int64_t steps_for(const World& w, double tc) {
   if (!(tc > 0.0)) return 0;
   return std::max<std::int64_t>(1, std::llround(tc / w.params().dt_safety));

@@ -59,9 +59,10 @@ void validate(const MeshParams& p) {
     }
   }
   require(!(p.pocket && !any), "mesh.pocket", "false when inner_size is zero (no pocket to open)", 1.0);
-  require(p.size_near > 0.0 && std::isfinite(p.size_near), "mesh.size_near", "a finite value > 0 m", p.size_near);
-  require(p.size_far >= p.size_near && std::isfinite(p.size_far), "mesh.size_far", "a finite value >= size_near", p.size_far);
-  require(p.growth >= 1.0 && p.growth <= 2.0, "mesh.growth", "a ratio in [1, 2]", p.growth);
+  MeshParams keys = p;  // the table's ranges (mesh.hpp), named as the scene names the keys
+  RangeCheck check{"FDM", "continuum.mesh."};
+  describe(check, keys);
+  require(p.size_far >= p.size_near, "mesh.size_far", "a finite value >= size_near", p.size_far);
   // Guard against meshes that would not fit in memory by mistake (about 2e7 zones).
   const double nmax = (p.length / p.size_near + 1) * (p.width / p.size_near + 1) * (p.height / p.size_near + 1);
   require(nmax < 2e7, "mesh.size_near", "a size giving fewer than 2e7 zones", p.size_near);

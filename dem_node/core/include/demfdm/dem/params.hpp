@@ -9,6 +9,7 @@
 #include <string>
 
 #include "demfdm/dem/vec3.hpp"
+#include "demfdm/param_table.hpp"
 
 namespace demfdm::dem {
 
@@ -104,42 +105,16 @@ struct HertzParams {
 };
 
 // ---------------------------------------------------------------------------------------------
-// Parameter tables: each scene key of a contact family is declared once, beside its field, by
-// a describe() function that names the key, its unit, its range and its doc, and binds the
-// field. The same table drives the scene schema (common/schema: unit, default = the field's
-// initial value, range, doc, --help-scene), the read of a scene into these structs
+// Parameter tables (demfdm/param_table.hpp): each scene key of a contact family is declared once,
+// beside its field, by a describe() function that names the key, its unit, its range and its doc,
+// and binds the field. The same table drives the scene schema (common/schema: unit, default = the
+// field's initial value, range, doc, --help-scene), the read of a scene into these structs
 // (dem_node/core scene_params.cpp) and the range checks of validate() below, which name the
-// scene key. A visitor V supplies:
-//   v.real(key, unit, double& field, ParamRange, doc)
-//   v.real_or_word(key, unit, double& field, ParamRange, word, double word_value, doc)
-//       (the key may hold `word` instead of a number; the field then holds word_value)
-//   v.flag(key, bool& field, doc)
-//   v.integer(key, unit, int& field, lo, hi, doc)          (closed range [lo, hi])
-//   v.choice(key, E& field, {{"name", E::kValue}, ...}, doc)
-// The family-wide keys (the linear part) are declared by describe_family(); each law's own keys
-// by its law type's params() (laws/*.hpp), in the scene table [dem.<family>.<law name>].
-
-/// Range of a declared real: lower and upper bounds, each closed or open; none = unbounded.
-struct ParamRange {
-  double lo = -INFINITY, hi = INFINITY;
-  bool lo_open = true, hi_open = true;
-  static constexpr ParamRange ge(double a) { return {a, INFINITY, false, true}; }
-  static constexpr ParamRange gt(double a) { return {a, INFINITY, true, true}; }
-  constexpr ParamRange le(double b) const { return {lo, b, lo_open, false}; }
-  constexpr ParamRange lt(double b) const { return {lo, b, lo_open, true}; }
-  bool has_lo() const { return std::isfinite(lo); }
-  bool has_hi() const { return std::isfinite(hi); }
-  bool contains(double v) const {
-    return (lo_open ? v > lo : v >= lo) && (hi_open ? v < hi : v <= hi) && std::isfinite(v);
-  }
-};
-
-/// One named value of an enum key.
-template <class E>
-struct ParamOption {
-  const char* name;
-  E value;
-};
+// scene key. The family-wide keys (the linear part) are declared by describe_family(); each
+// law's own keys by its law type's params() (laws/*.hpp), in the scene table
+// [dem.<family>.<law name>].
+using demfdm::ParamOption;
+using demfdm::ParamRange;
 
 template <class V>
 void describe(V& v, LinearParams& p) {

@@ -1,7 +1,9 @@
 // The DEM part of a scene mapped onto the engine's parameter structs (library dem_scene: the
 // DEM core plus the scene reader, no bus). The DEM node and the unit tests call these; every
-// scene key of a contact family is read through its declaration in params.hpp, so the schema,
-// the read and the range check cannot disagree. Errors are config::Error naming the scene key.
+// scene key with a field is read through its declaration beside the struct (params.hpp,
+// specimen.hpp, procedures.hpp; demfdm/param_table.hpp), so the schema, the read and the range
+// check cannot disagree; the keys without a single field (lists, "auto" values derived from other
+// keys) are declared in the schema and read with its defaults. Errors are config::Error naming the scene key.
 #pragma once
 
 #include <string>
@@ -43,10 +45,7 @@ double sigma_v(const config::Scene& s, const Block& b);
 
 /// The REV servo (4.5): targets (k0 sigma_v, k0 sigma_v, sigma_v), gain, tolerances, budget and
 /// the compaction friction.
-struct ServoSettings {
-  ServoParams p;
-  double tol = 0, ratio = 0, budget = 0, fric = 0;
-};
+using dem::ServoSettings;  // specimen.hpp, beside its table
 ServoSettings servo(const config::Scene& s, const Block& b);
 
 /// Gap below which the bond stage bonds a pair [m]: dem.specimen.bond_gap, or "auto" =

@@ -68,6 +68,40 @@ struct RevParams {
   double increment_budget = 16000.0;  // [t_c] budget of each increment
   double fric = 0.0;               // [-] μ during generation (§4.3 step 2: μ = 0)
 };
+/// The scene's REV defaults, [dem.specimen]: RevParams at the paper's upscaling 1.5 (docs/theory.md
+/// §0.3; the struct's own 1 is no upscaling), as FamilyInfo::defaults() gives the families'.
+inline RevParams scene_rev_defaults() {
+  RevParams p;
+  p.psd.scale = 1.5;
+  return p;
+}
+
+/// The [dem.specimen] keys of the REV generation (§4.3), declared once (demfdm/param_table.hpp:
+/// the schema's entry, the scene read and validate() below). porosity_target "auto" leaves the
+/// field at −1, which generate_rev takes as porosity_final.
+template <class V>
+void describe(V& v, RevParams& p) {
+  v.real("d_min", "m", p.psd.d_min, ParamRange::gt(0.0), "Smallest particle diameter (before upscaling).");
+  v.real("d_max", "m", p.psd.d_max, ParamRange::gt(0.0), "Largest particle diameter (before upscaling).");
+  v.real("scale", "-", p.psd.scale, ParamRange::ge(0.1).le(10.0), "Particle upscaling factor (1, 1.3, 1.5 in the paper).");
+  v.integer("n_particles", "-", p.n_particles, 0, 1000000000,
+            "Number of balls; 0: the PSD's expected count at 'porosity' in the cell (Table 1 N_p).");
+  v.real("porosity", "-", p.porosity_final, ParamRange::gt(0.0).lt(1.0),
+         "Final porosity n of the specimen (Table 1, scale 1); sets N_p.");
+  v.real_or_word("porosity_target", "-", p.porosity_target, ParamRange::gt(0.0).lt(1.0), "auto", -1.0,
+                 "Porosity reached by frictionless radius expansion (4.3); \"auto\": 'porosity'.");
+  v.real("initial_scale", "-", p.initial_scale, ParamRange::gt(0.0).le(1.0), "Initial radii = d/2 * this (4.3).");
+  v.integer("increments", "-", p.increments, 1, 1000000, "Radius-expansion increments.");
+  v.real("expansion_ratio", "-", p.ratio_tol, ParamRange::gt(0.0),
+         "Unbalanced ratio to reach after each expansion increment.");
+  v.real("increment_budget", "t_c", p.increment_budget, ParamRange::gt(0.0).le(1e9),
+         "Budget of each expansion increment in critical steps t_c (docs/theory.md 4.11; 20,000 steps at "
+         "dt_safety 0.8). An increment that does not reach expansion_ratio within it stops the run.");
+}
+/// Throws std::invalid_argument naming the scene key (dem.specimen.<key>) on a value outside its
+/// declared range, or d_min >= d_max.
+void validate(const RevParams& p);
+
 /// Generate balls in the periodic cell of `w` (which must be empty and periodic and step on the
 /// automatic step, dt_fixed = 0). The quench interval, the check interval and the budgets are
 /// counted in critical steps (steps_for). `converged` is false when an increment ran out of its
@@ -92,6 +126,32 @@ struct ServoParams {
   double quench_every = 0.0;  // [t_c] servo_until zeroes all velocities every this many critical steps
                               // (0: never); removes the free flight that local damping cannot stop (§1.3)
 };
+
+/// The REV servo as a scene sets it ([dem.specimen] servo_*, §4.5, §4.11): the servo (its targets
+/// k0 σ_v, k0 σ_v, σ_v come from the scene reader), servo_until's tolerances and budget, and the
+/// friction of the compaction.
+struct ServoSettings {
+  ServoParams p;
+  double tol = 0.005;        // [-] |s − s*| / s* on the active axes
+  double ratio = 1e-4;       // [-] unbalanced-ratio criterion
+  double budget = 320000.0;  // [t_c] budget at low friction (then half of it at the final friction)
+  double fric = 0.1;         // [-] μ during servo compaction (§4.3 step 4: 0 to 0.1)
+};
+template <class V>
+void describe(V& v, ServoSettings& s) {
+  v.real("servo_tol", "-", s.tol, ParamRange::gt(0.0), "Servo stress tolerance |s - s*| / s*.");
+  v.real("servo_ratio", "-", s.ratio, ParamRange::gt(0.0), "Servo unbalanced-ratio criterion.");
+  v.real("servo_gain", "1/t_c", s.p.gain, ParamRange::gt(0.0).le(1.0),
+         "Servo gain alpha_s: share of the stress error closed per critical step t_c (4.5, 4.11; 0.3 per step at "
+         "dt_safety 0.8).");
+  v.real("servo_budget", "t_c", s.budget, ParamRange::gt(0.0).le(1e9),
+         "Budget of the servo at low friction in critical steps t_c (then half of it at the final friction; "
+         "4.11). A servo that does not reach servo_tol and servo_ratio within it stops the run.");
+  v.real("servo_fric", "-", s.fric, ParamRange::ge(0.0), "Friction during servo compaction (4.3 step 4: 0 to 0.1).");
+}
+/// Throws std::invalid_argument naming the scene key (dem.specimen.<key>) on a value outside its
+/// declared range.
+void validate(const ServoSettings& s);
 
 /// Effect that sets the cell strain rate each step from the last stress (kPreStep).
 class PeriodicServo final : public Effect {
@@ -193,6 +253,18 @@ struct InterfaceBondParams {
   double unit_weight = 0.0;  // [N/m^3] kTraction: γ = ρ_b N g0 of the block
   double k0 = 0.5;           // [-] kTraction: σ_h / σ_v
 };
+/// The [dem.specimen] key of the interface-bond forces (the other fields follow from the block and
+/// from dem.specimen.k0 and d50, which the scene reader maps), declared once.
+template <class V>
+void describe(V& v, InterfaceBondParams& p) {
+  v.choice("interface_bond_force", p.mode,
+           {{"traction", InterfaceBondForce::kTraction}, {"mean_contact", InterfaceBondForce::kMeanContact}},
+           "Initial normal force of the ball-facet bonds (4.9, a reconstruction; docs/paper-study.md): traction "
+           "(default) splits the geostatic traction n.sigma.n of each plane face of the interface (sigma_zz = "
+           "-rho_b N g0 depth, sigma_h = k0 sigma_zz, rho_b = ball mass / block volume) over the bonds on that "
+           "face, so the bonds carry the block's weight and lateral thrust from the start; mean_contact: the "
+           "mean normal force of the ball-ball contacts within d50 of the bond's height (the paper's wording).");
+}
 StageReport assign_interface_bond_forces(World& w, const InterfaceBondParams& p);
 /// kMeanContact with the given band.
 StageReport assign_interface_bond_forces(World& w, double band);
@@ -217,6 +289,14 @@ struct UcsParams {
   double seat_speed = 20.0;     // [-] seating speed limit / loading platen speed
   std::int64_t seat_steps = 200000;  // [steps] budget of the seating
 };
+/// The ucs stage's keys ([[stage]] strain_rate, max_strain), declared once.
+template <class V>
+void describe(V& v, UcsParams& p) {
+  v.real("strain_rate", "1/s", p.strain_rate, ParamRange::gt(0.0), "ucs: platen approach rate / specimen height.");
+  v.real("max_strain", "-", p.max_strain, ParamRange::gt(0.0), "ucs: stop at this axial strain.");
+}
+/// Throws std::invalid_argument naming the stage key on a value outside its declared range.
+void validate(const UcsParams& p);
 struct UcsSample { double strain, stress; };
 struct UcsResult {
   std::vector<UcsSample> curve;  // axial strain, axial compressive stress [Pa]

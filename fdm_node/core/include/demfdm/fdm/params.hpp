@@ -29,6 +29,23 @@ struct Material {
   double tension = kNaN;
 };
 
+// The keys of one [[continuum.material]] element with a field (its region, region_lo and
+// region_hi, are lists the scene reader maps), declared once (demfdm/param_table.hpp).
+template <class V>
+void describe(V& v, Material& m) {
+  v.choice("model", m.model, {{"elastic", Constitutive::kElastic}, {"mohr_coulomb", Constitutive::kMohrCoulomb}},
+           "Constitutive model (docs/theory.md 5.4).");
+  v.real("density", "kg/m^3", m.density, ParamRange::gt(0.0), "Bulk density rho_b = (1-n) rho_s (docs/theory.md 7.4).");
+  v.real("young", "Pa", m.young, ParamRange::gt(0.0), "Young's modulus E (calibrate from the DEM UCS test).");
+  v.real("poisson", "-", m.poisson, ParamRange::gt(-1.0).lt(0.5), "Poisson's ratio.");
+  v.real("cohesion", "Pa", m.cohesion, ParamRange::ge(0.0), "Mohr-Coulomb cohesion c.");
+  v.real("friction_deg", "deg", m.friction_deg, ParamRange::ge(0.0).lt(90.0), "Mohr-Coulomb friction angle.");
+  v.real("dilation_deg", "deg", m.dilation_deg, ParamRange::ge(0.0).lt(90.0),
+         "Mohr-Coulomb dilation angle (<= friction).");
+  v.real_or_word("tension", "Pa", m.tension, ParamRange::ge(0.0), "auto", kNaN,
+                 "Tension cut-off (tension positive); \"auto\": the apex value c/tan(phi).");
+}
+
 // A material applied to the zones whose centroid lies in `region` (all zones if empty).
 // Groups are applied in order, so a later group overrides an earlier one.
 struct MaterialGroup {
@@ -70,6 +87,26 @@ struct ModelParams {
   int parallel_threshold = 4096;
 };
 
+// The continuum's own keys ([continuum]) with a field here, declared once. The boundary
+// (strongbox_boundary, and the symmetry rollers of the node) and gravity_level (from [gravity])
+// are mapped by the scene reader.
+template <class V>
+void describe(V& v, ModelParams& p) {
+  v.choice("mode", p.mode, {{"dynamic", Mode::kDynamic}, {"static", Mode::kStatic}},
+           "FDM law of motion: dynamic = real masses and the critical time step (docs/theory.md 6.6 option A); "
+           "static = mass-scaled, dt = 1 (option B, pseudo-static only).");
+  v.real("damping", "-", p.damping, ParamRange::ge(0.0).lt(1.0), "FDM local damping alpha_F (docs/theory.md 5.6).");
+  v.flag("large_strain", p.large_strain, "Recompute zone geometry every step with the Jaumann rate (docs/theory.md 5.8).");
+  v.choice("averaging", p.averaging,
+           {{"overlay", VolumetricAveraging::kPerOverlay}, {"zone", VolumetricAveraging::kPerZone}},
+           "Mixed-discretisation volumetric averaging over each 5-tetrahedron overlay (default) or all 10 "
+           "tetrahedra of a zone (docs/theory.md 5.3, U15).");
+  v.real("timestep_safety", "-", p.timestep_safety, ParamRange::gt(0.0).le(1.0),
+         "FDM time step = safety * min tetrahedron height / P-wave speed (5.7).");
+  v.real("static_mass_factor", "-", p.static_mass_factor, ParamRange::ge(1.0),
+         "Multiplier on the static-mode inertial masses (5.6).");
+}
+
 // Geostatic initial stress (docs/theory.md 4.10, 5.9): sigma_zz = -rho N g0 (z_top - z_c),
 // sigma_xx = sigma_yy = K0 sigma_zz, no shear (tension positive).
 struct GeostaticStress {
@@ -77,7 +114,8 @@ struct GeostaticStress {
   double k0 = kNaN;     // [-] K0; NaN: nu/(1-nu) of each zone's material
 };
 
-// Throws std::invalid_argument naming the first bad field.
+// Throw std::invalid_argument naming the first bad field: a table key by its scene key
+// (continuum.<key>, continuum.material.<key>), with the table's range; then the cross-field rules.
 void validate(const Material& m);
 void validate(const ModelParams& p);
 

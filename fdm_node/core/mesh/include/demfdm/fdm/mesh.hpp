@@ -21,6 +21,8 @@
 #include <limits>
 #include <vector>
 
+#include "demfdm/param_table.hpp"
+
 namespace demfdm::fdm {
 
 inline constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
@@ -70,6 +72,18 @@ struct MeshParams {
     return p;
   }
 };
+
+// The [continuum.mesh] keys with a field of their own, declared once (demfdm/param_table.hpp:
+// the schema's entry, the scene read, validate()'s range checks). The box and inner-box sizes and
+// the inner origin are lists, which the scene reader maps onto length, width, height, inner_size
+// and inner_origin (their defaults are these fields' initial values).
+template <class V>
+void describe(V& v, MeshParams& p) {
+  v.flag("pocket", p.pocket, "Leave the inner box open for the DEM block (its faces are the coupling interface).");
+  v.real("size_near", "m", p.size_near, ParamRange::gt(0.0), "Zone size in and next to the inner box.");
+  v.real("size_far", "m", p.size_far, ParamRange::gt(0.0), "Largest zone size towards the outer boundary.");
+  v.real("growth", "-", p.growth, ParamRange::ge(1.0).le(2.0), "Zone-to-zone size ratio away from the inner box.");
+}
 
 // Pocket / box side identifiers, in interface order.
 enum class Side : std::int8_t { kMinusZ = 0, kMinusX = 1, kPlusX = 2, kMinusY = 3, kPlusY = 4, kPlusZ = 5 };
