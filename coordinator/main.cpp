@@ -22,7 +22,6 @@
 #include <filesystem>
 #include <csignal>
 #include <fstream>
-#include <iomanip>
 #include <iostream>
 #include <map>
 #include <optional>
@@ -34,6 +33,7 @@
 #include "git_commit.hpp"
 #include "coordinator/core/centrifuge.hpp"
 #include "coordinator/core/checkpoint.hpp"
+#include "coordinator/core/history.hpp"
 #include "coordinator/core/node_check.hpp"
 #include "coordinator/core/progress.hpp"
 #include "coordinator/core/quasi_static.hpp"
@@ -86,74 +86,6 @@ class BusDriver : public coord::Driver {
 
  private:
   proto::CoordinatorEndpoint& ep_;
-};
-
-// Per-stage history of every value the nodes report, one CSV per stage, one row per grant.
-class History {
- public:
-  explicit History(std::string dir) : dir_(std::move(dir)) {}
-  // Position for a checkpoint (every row written so far is flushed).
-  coord::HistoryState state() const {
-    coord::HistoryState h;
-    h.index = index_;
-    h.current = current_;
-    h.file = file_;
-    h.cols = cols_;
-    h.bytes = file_.empty() ? 0 : std::filesystem::file_size(std::filesystem::path(dir_) / file_);
-    return h;
-  }
-  // Resume: the open file is cut back to its size at the checkpoint and continued.
-  void restore(const coord::HistoryState& h) {
-    index_ = h.index;
-    current_ = h.current;
-    file_ = h.file;
-    cols_ = h.cols;
-    if (dir_.empty() || file_.empty()) return;
-    const auto path = std::filesystem::path(dir_) / file_;
-    if (!std::filesystem::exists(path) || std::filesystem::file_size(path) < h.bytes)
-      throw coord::CheckpointError(path.string() + " is missing or shorter than its checkpoint says (" +
-                                   std::to_string(h.bytes) + " bytes)");
-    std::filesystem::resize_file(path, h.bytes);
-    out_.open(path, std::ios::app);
-  }
-  // Branch: a new run folder; the history files are numbered on from the saved run's.
-  void continue_numbering(const coord::HistoryState& h) { index_ = h.index; }
-  void record(const schema::Stage& st, std::int64_t step, const std::map<std::string, coord::NodeReport>& reps) {
-    if (dir_.empty()) return;
-    if (st.name != current_) {
-      current_ = st.name;
-      out_.close();
-      cols_.clear();
-      for (auto& [role, r] : reps)
-        for (auto& [k, v] : r.values) cols_.push_back({role, k});
-      file_ = "history_" + std::to_string(index_++) + "_" + st.name + ".csv";
-      out_.open(dir_ + "/" + file_);
-      out_ << "step";
-      for (auto& [role, r] : reps) out_ << "," << role << ".time_s";
-      for (auto& [role, k] : cols_) out_ << "," << role << "." << k;
-      out_ << "\n";
-    }
-    out_ << step;
-    out_ << std::setprecision(17);
-    for (auto& [role, r] : reps) out_ << "," << r.time;
-    for (auto& [role, k] : cols_) {
-      auto it = reps.find(role);
-      double v = std::nan("");
-      if (it != reps.end()) {
-        auto jt = it->second.values.find(k);
-        if (jt != it->second.values.end()) v = jt->second;
-      }
-      out_ << "," << v;
-    }
-    out_ << "\n";
-    out_.flush();
-  }
-
- private:
-  std::string dir_, current_, file_;
-  int index_ = 0;
-  std::ofstream out_;
-  std::vector<std::pair<std::string, std::string>> cols_;
 };
 
 void on_signal(int s) { proto::request_interrupt(s); }
@@ -454,7 +386,7 @@ int main(int argc, char** argv) {
       log->info("hello from {}: {} pid {} on {} ({})", r, n.solver, n.pid, n.host, n.build_id);
     }
     const auto stage_list = schema::stages(scene);
-    History hist(opt.run_dir);
+    coord::StageHistory hist(opt.run_dir);  // history_<i>_<stage>.csv
     if (start) {
       // Every node that took part in a stage gets its saved state back; the others start
       // fresh (they have done nothing yet; a branch may even play them with another solver).

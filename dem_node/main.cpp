@@ -16,8 +16,6 @@
 #include <array>
 #include <cmath>
 #include <filesystem>
-#include <fstream>
-#include <iomanip>
 #include <limits>
 #include <map>
 #include <optional>
@@ -104,6 +102,19 @@ class DemParticipant : public node::Participant {
     if (clock_.known()) out_->h5().set_attribute("/", "model_time_origin", clock_.origin());
     if (history_every_ > 0) history_.emplace(io::CsvSeries::create(dir_ / "dem_history.csv", history_columns()));
   }
+  // specimen_stages.csv: one row per staged operation, for the studies (docs/ucs-study.md), in
+  // the bytes its readers and the golden data know (docs/output.md "CSV files": 10 digits, the
+  // operation's sentence in a text column). Written whenever the run has a folder.
+  static std::vector<std::string> stage_columns() {
+    return {"balls_unit", "steps_unit", "ratio_unit", "porosity_unit", "coordination_unit", "coordination_no_rattlers_unit",
+            "sxx_Pa", "syy_Pa", "szz_Pa", "converged_unit", "what"};
+  }
+  static io::CsvFormat stage_format() {
+    io::CsvFormat f;
+    f.digits = 10;
+    f.text_columns = {"what"};
+    return f;
+  }
   std::vector<std::string> surface_sets() const {
     return footing_output_ ? std::vector<std::string>{"footing"} : std::vector<std::string>{};
   }
@@ -125,25 +136,23 @@ class DemParticipant : public node::Participant {
   // Checkpoints (docs/checkpoint-format.md): the World in dem.world.state, this adapter's
   // fields and its result writers' positions in the node file's section "dem_node".
   bool can_checkpoint() const override { return true; }
+  // The adapter's own fields in that section, after the DEM block, in their order there: one
+  // list for save() and restore().
+  template <class F>
+  void adapter_fields(F&& f) {
+    f(has_frame_, last_frame_time_, wall_, n_iface_, coupling_setup_pending_, penetrating_, box_done_, preparing_,
+      kicked_, energy_pending_, footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_);
+  }
   void save(const fs::path& dir, io::StateWriter& w, const io::StateMeta& meta) override {
     dem::save_state_file(world_, dir / "dem.world.state", meta);
     w.begin("dem_node");
     for (double v : {block_.origin.x, block_.origin.y, block_.origin.z, block_.cell.x, block_.cell.y, block_.cell.z}) w.f64(v);
     for (int n : {block_.nx, block_.ny, block_.nz}) w.i32(n);
-    w.b(has_frame_);
-    w.f64(last_frame_time_);
-    w.i32(wall_);
-    w.u64(n_iface_);
-    for (bool b : {coupling_setup_pending_, penetrating_, box_done_, preparing_, kicked_, energy_pending_}) w.b(b);
-    for (double v : {footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_, energy_.total_begin,
-                     energy_.mechanical_begin, energy_.work})
-      w.f64(v);
-    w.u64(energy_.x_begin.size());
-    for (const auto& x : energy_.x_begin) w.f64(x.x), w.f64(x.y), w.f64(x.z);
+    adapter_fields([&](auto&... v) { io::save_fields(w, v...); });
+    energy_.save(w);
     energy_jump_.save(w);
     // specimen_stages.csv bytes, then the result writers and the frames' model time.
-    const auto stages_csv = dir_ / "specimen_stages.csv";
-    w.u64(!dir_.empty() && fs::exists(stages_csv) ? fs::file_size(stages_csv) : 0);
+    w.u64(stages_ ? stages_->bytes() : 0);
     node::OutputCheckpoint{outputs_open_, out_ ? out_->h5().frame_count() : 0, history_ ? history_->bytes() : 0,
                            history_ ? history_->rows() : 0}
         .save(w, clock_.state());
@@ -165,16 +174,8 @@ class DemParticipant : public node::Participant {
       s_.fail("dem.specimen.origin", "the DEM block of the saved state (origin " + fmt::format("({}, {}, {})", saved.origin.x, saved.origin.y, saved.origin.z) +
                                          " m; it follows dem.specimen.cell, replicate, origin and continuum.mesh.size)",
               fmt::format("origin ({}, {}, {}) m", block_.origin.x, block_.origin.y, block_.origin.z));
-    has_frame_ = sec.b();
-    last_frame_time_ = sec.f64();
-    wall_ = sec.i32();
-    n_iface_ = sec.u64();
-    for (bool* b : {&coupling_setup_pending_, &penetrating_, &box_done_, &preparing_, &kicked_, &energy_pending_}) *b = sec.b();
-    for (double* v : {&footing_z0_, &target_disp_, &weight_, &stage_ratio_, &user_dt_, &energy_.total_begin,
-                      &energy_.mechanical_begin, &energy_.work})
-      *v = sec.f64();
-    energy_.x_begin.resize(sec.count(24));
-    for (auto& x : energy_.x_begin) x = {sec.f64(), sec.f64(), sec.f64()};
+    adapter_fields([&](auto&... v) { io::load_fields(sec, v...); });
+    energy_.load(sec);
     energy_jump_.load(sec);
     const auto stages_bytes = sec.u64();
     io::ModelClock::State c;
@@ -199,15 +200,12 @@ class DemParticipant : public node::Participant {
                                               "dem.h5", surface_sets()));
       if (history_every_ > 0) history_.emplace(io::CsvSeries::resume(dir_ / "dem_history.csv", history_columns(), bytes, rows));
     }
+    // The checkpoint has the bytes of specimen_stages.csv, not its rows: they are counted.
     const auto stages_csv = dir_ / "specimen_stages.csv";
-    if (!dir_.empty() && fs::exists(stages_csv)) {
-      if (stages_bytes == 0)
-        fs::remove(stages_csv);
-      else if (fs::file_size(stages_csv) < stages_bytes)
-        throw std::runtime_error(stages_csv.string() + " is shorter than its checkpoint says (" + std::to_string(stages_bytes) + " bytes)");
-      else
-        fs::resize_file(stages_csv, stages_bytes);
-    }
+    if (!dir_.empty() && stages_bytes > 0)
+      stages_.emplace(io::CsvSeries::resume(stages_csv, stage_columns(), stages_bytes, std::nullopt, stage_format()));
+    else if (!dir_.empty())
+      fs::remove(stages_csv);  // written after the checkpoint
   }
 
   // A user dt_fixed (checked against the critical step at every stage begin) is the node's
@@ -311,18 +309,8 @@ class DemParticipant : public node::Participant {
     }
     const double ke = world_.kinetic_energy();
     if (auto jump = energy_jump_.check(ke)) {
-      // Name the ball with the largest kinetic energy and its neighbourhood.
-      const auto& b = world_.balls();
-      std::size_t worst = 0;
-      double e_worst = -1;
-      for (std::size_t i = 0; i < b.size(); ++i) {
-        double e = 0.5 * (b.m[i] * dem::dot(b.v[i], b.v[i]) + b.inertia[i] * dem::dot(b.w[i], b.w[i]));
-        if (e > e_worst) e_worst = e, worst = i;
-      }
-      return node::HealthReport{
-          "DEM " + *jump + "; fastest ball id " + std::to_string(b.id[worst]),
-          "ball with the largest kinetic energy (" + std::to_string(e_worst) + " J): " + dem::describe_ball(world_, worst) +
-              "\n10 nearest balls:\n" + dem::neighbourhood(world_, worst, 10)};
+      const auto f = dem::energy_jump_finding(world_, *jump);
+      return node::HealthReport{f.cause, f.detail};
     }
     return std::nullopt;
   }
@@ -422,6 +410,7 @@ class DemParticipant : public node::Participant {
   }
   void finish() override {
     if (history_) history_->close();
+    if (stages_) stages_->close();
   }
 
   // Coupling (DEM role).
@@ -543,51 +532,26 @@ class DemParticipant : public node::Participant {
   }
 
   dem::StageReport generate() {
-    const dem::RevParams p = dem::scene::rev(s_);
-    auto r = dem::generate_rev(world_, p);
+    // Bonds over the gaps that give Table 1's Z (docs/ucs-study.md), at least 1e-3 d_min apart.
     const double z = s_.real_or_word("dem.specimen.bond_coordination").value_or(0.0);
-    if (z > 0) {  // bonds over the gaps that give Table 1's Z (docs/ucs-study.md)
-      auto floor = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
-      auto z0 = dem::coordination(world_).z;  // touching contacts only
-      auto b = dem::install_bonds_to_coordination(world_, z, floor);
-      r.what += "; " + b.what + fmt::format("; Z {:.3f} (touching before bonding: {:.3f})", dem::coordination(world_).z, z0);
-      r.count = world_.num_balls();
-    }
-    return r;
+    return dem::generate_specimen(world_, dem::scene::rev(s_), z,
+                                  1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale"));
   }
 
   dem::StageReport servo() {
     const auto sv = dem::scene::servo(s_, block_);
-    // Compaction with low friction, then the final friction at constant stress (4.3 step 4).
-    double mu = world_.params().ball_ball.linear.fric;
-    world_.mutable_params().ball_ball.linear.fric = std::min(mu, sv.fric);
-    world_.refresh_contact_constants();
     // Hold the criterion for 160 critical steps (docs/theory.md 4.11; 200 steps at dt_safety 0.8).
-    auto r1 = dem::servo_until(world_, sv.p, sv.tol, sv.ratio, 160.0, sv.budget);
-    if (!r1.converged) return r1;
-    world_.mutable_params().ball_ball.linear.fric = mu;
-    world_.refresh_contact_constants();
-    auto r2 = dem::servo_until(world_, sv.p, sv.tol, sv.ratio, 160.0, sv.budget / 2);
-    r2.steps += r1.steps;
-    r2.what = "servo to sigma_v " + std::to_string(sv.p.target.z) + " Pa, sigma_h " + std::to_string(sv.p.target.x) +
-              " Pa: " + r1.what + "; at final friction: " + r2.what;
-    return r2;
+    return dem::servo_specimen(world_, sv.p, sv.tol, sv.ratio, 160.0, sv.budget, sv.fric);
   }
 
   proto::Values report(const dem::StageReport& r) {
     spdlog::info("dem: {} ({} steps, ratio {:.3e}, porosity {:.4f}, count {}, converged {})", r.what, r.steps, r.ratio,
                  r.porosity, r.count, r.converged);
-    if (!dir_.empty()) {  // one row per staged operation, for the studies (docs/ucs-study.md)
-      const auto path = dir_ / "specimen_stages.csv";
-      const bool fresh = !fs::exists(path);
-      std::ofstream f(path, std::ios::app);
+    if (!dir_.empty()) {
+      if (!stages_) stages_.emplace(io::CsvSeries::create(dir_ / "specimen_stages.csv", stage_columns(), stage_format()));
       const auto c = dem::coordination(world_);
-      if (fresh)
-        f << "balls_unit,steps_unit,ratio_unit,porosity_unit,coordination_unit,coordination_no_rattlers_unit,"
-             "sxx_Pa,syy_Pa,szz_Pa,converged_unit,what\n";
-      f << std::setprecision(10) << world_.num_balls() << ',' << r.steps << ',' << r.ratio << ',' << r.porosity << ','
-        << c.z << ',' << c.z_no_rattlers << ',' << r.stress[0] << ',' << r.stress[4] << ',' << r.stress[8] << ','
-        << (r.converged ? 1 : 0) << ",\"" << r.what << "\"\n";
+      stages_->append_cells({world_.num_balls(), r.steps, r.ratio, r.porosity, c.z, c.z_no_rattlers, r.stress[0],
+                             r.stress[4], r.stress[8], r.converged ? 1 : 0, r.what});
     }
     // A preparation procedure that misses its criterion stops the run (docs/theory.md 4.11): the
     // specimen would otherwise depend on the budget, not on the rock.
@@ -685,11 +649,7 @@ class DemParticipant : public node::Participant {
 
   // Weight of the balls [N] under the current gravity (constant while no ball is added).
   double weight() {
-    if (weight_ < 0) {
-      double m = 0;
-      for (double mi : world_.balls().m) m += mi;
-      weight_ = m * std::abs(world_.gravity().z);
-    }
+    if (weight_ < 0) weight_ = dem::ball_weight(world_);
     return weight_;
   }
 
@@ -763,6 +723,7 @@ class DemParticipant : public node::Participant {
   fs::path dir_;
   std::optional<io::ParticleOutput> out_;
   std::optional<io::CsvSeries> history_;
+  std::optional<io::CsvSeries> stages_;  // specimen_stages.csv, from its first row on
   bool outputs_open_ = false;
   bool has_frame_ = false;
   double last_frame_time_ = 0;           // DEM (node) time of the last frame

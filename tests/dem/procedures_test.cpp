@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <memory>
 #include <random>
 
 #include <cmath>
@@ -231,4 +232,149 @@ TEST(Procedures, KickGivesTheHighestTopItsVelocity) {
   EXPECT_EQ(w.balls().v[1].z, 0.0);
   World empty(plain());
   EXPECT_THROW(kick_highest_ball(empty, {0, 0, 1}), std::invalid_argument);
+}
+
+namespace {
+// A periodic cell for the specimen procedures (as tests/dem/specimen_generation_test.cpp), small
+// enough for a unit test: about 90 balls at scale 1.5.
+WorldParams cell(ContactModel model) {
+  WorldParams p;
+  p.periodic.enabled = true;
+  p.periodic.length = {0.8e-3, 0.8e-3, 0.8e-3};
+  p.local_damping = 0.7;
+  p.threads = 1;
+  p.skin_factor = 0.8;
+  p.ball_ball.model = model;
+  return p;
+}
+RevParams small_rev() {
+  RevParams g;
+  g.psd.scale = 1.5;
+  g.seed = 11;
+  g.porosity_final = 0.5195;
+  return g;
+}
+std::string fixed3(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3f", v);
+  return b;
+}
+}  // namespace
+
+// generate_specimen: without a coordination it is generate_rev; with one, the bonded specimen
+// reaches it, and the report names the coordination before and after bonding.
+TEST(Procedures, GenerateSpecimenBondsToTheCoordination) {
+  World plain_rev(cell(ContactModel::kSoftBond)), unbonded(cell(ContactModel::kSoftBond));
+  const StageReport r0 = generate_rev(plain_rev, small_rev());
+  const StageReport r1 = generate_specimen(unbonded, small_rev(), 0.0, 1e-7);
+  EXPECT_EQ(r1.what, r0.what);
+  EXPECT_EQ(r1.count, r0.count);
+  EXPECT_EQ(bond_counts(unbonded).intact, 0u);
+
+  World bonded(cell(ContactModel::kSoftBond));
+  const StageReport r = generate_specimen(bonded, small_rev(), 6.82, 1e-7);
+  ASSERT_TRUE(r.converged) << r.what;
+  const double z = coordination(bonded).z;
+  EXPECT_GE(z, 6.82);
+  EXPECT_GT(bond_counts(bonded).intact, 0u);
+  EXPECT_EQ(r.count, bonded.num_balls());
+  EXPECT_EQ(r.what.rfind(r0.what + "; ", 0), 0u) << r.what;
+  // The touching coordination before bonding is the plain REV's.
+  const std::string tail = "; Z " + fixed3(z) + " (touching before bonding: " + fixed3(coordination(plain_rev).z) + ")";
+  ASSERT_GE(r.what.size(), tail.size());
+  EXPECT_EQ(r.what.substr(r.what.size() - tail.size()), tail);
+}
+
+// servo_specimen: the servo reaches its targets and leaves the final friction in place; a
+// compaction that misses its criterion is returned as it is.
+TEST(Procedures, ServoSpecimenEndsAtTheTargetsWithTheFinalFriction) {
+  auto rev = [] {
+    auto w = std::make_unique<World>(cell(ContactModel::kSoftBond));
+    w->mutable_params().ball_ball.linear.fric = 0.5;
+    w->refresh_contact_constants();
+    EXPECT_TRUE(generate_specimen(*w, small_rev(), 6.82, 1e-7).converged);
+    return w;
+  };
+  auto wp = rev(), missed_p = rev();
+  World &w = *wp, &missed = *missed_p;
+  ServoParams s;
+  s.target = {6.25e3, 6.25e3, 12.5e3};
+  const StageReport r = servo_specimen(w, s, 0.005, 1e-4, 160, 16000, 0.1);
+  ASSERT_TRUE(r.converged) << r.what;
+  EXPECT_EQ(w.params().ball_ball.linear.fric, 0.5);
+  for (int a = 0; a < 3; ++a) EXPECT_NEAR(-r.stress[4 * a] / s.target[a], 1.0, 0.005 + 1e-12) << "axis " << a;
+  EXPECT_LT(r.ratio, 1e-4);
+  EXPECT_EQ(r.what.rfind("servo to sigma_v 12500.000000 Pa, sigma_h 6250.000000 Pa: ", 0), 0u) << r.what;
+  EXPECT_NE(r.what.find("; at final friction: "), std::string::npos) << r.what;
+
+  const StageReport m = servo_specimen(missed, s, 0.005, 1e-4, 160, 1, 0.1);  // one critical step
+  EXPECT_FALSE(m.converged);
+  EXPECT_EQ(missed.params().ball_ball.linear.fric, 0.1) << "the compaction's friction, the run stops";
+  EXPECT_EQ(m.what.find("at final friction"), std::string::npos);
+}
+
+// ball_weight: sum of 4/3 pi r^3 rho_s times |g| (g-level N g0), 0 without gravity.
+TEST(Procedures, BallWeightIsTheMassTimesG) {
+  World w(plain());
+  w.add_ball({0, 0, 0}, 1e-3);
+  w.add_ball({1, 0, 0}, 2e-3);
+  EXPECT_EQ(ball_weight(w), 0.0);
+  w.set_gravity(true, 50.0);
+  const double pi = 3.14159265358979323846;
+  const double m = 4.0 / 3.0 * pi * (1e-9 + 8e-9) * w.params().density;
+  EXPECT_NEAR(ball_weight(w), m * 50.0 * w.params().g0, 1e-12 * m * 50 * 9.81);
+}
+
+// energy_jump_finding names the ball with the largest kinetic energy, spin included.
+TEST(Procedures, EnergyJumpFindingNamesTheMostEnergeticBall) {
+  World w(plain());
+  w.add_ball({0, 0, 0}, 1e-3);
+  w.add_ball({1, 0, 0}, 1e-3);
+  w.add_ball({2, 0, 0}, 1e-3);
+  auto& b = w.balls();
+  b.v[0] = {0.1, 0, 0};   // 0.5 m 0.01
+  b.v[1] = {0, 0.2, 0};   // 0.5 m 0.04
+  b.w[2] = {0, 0, 400.0};  // 0.5 (0.4 m r^2) 160000 = 0.5 m 0.064 with r = 1 mm
+  const GuardFinding f = energy_jump_finding(w, "kinetic energy jumped 10x");
+  EXPECT_EQ(f.row, 2u);
+  EXPECT_EQ(f.id, b.id[2]);
+  EXPECT_EQ(f.cause, "DEM kinetic energy jumped 10x; fastest ball id " + std::to_string(b.id[2]));
+  EXPECT_NE(f.detail.find("10 nearest balls:"), std::string::npos);
+  b.w[2] = {0, 0, 0};
+  EXPECT_EQ(energy_jump_finding(w, "x").row, 1u);
+  World empty(plain());
+  EXPECT_THROW(energy_jump_finding(empty, "x"), std::invalid_argument);
+}
+
+// StageEnergy's checkpoint: the fields of docs/checkpoint-format.md (3 doubles, count, x y z per
+// ball) and the same balance after a load.
+TEST(Procedures, StageEnergySavesAndLoadsItsState) {
+  World w(plain());
+  w.add_ball({0, 0, 0.5}, 1e-3);
+  w.add_ball({0.01, 0, 0.5}, 1e-3);
+  w.set_gravity(true, 1.0);
+  w.prepare();
+  StageEnergy e;
+  e.begin(w);
+  w.balls().x[0].z -= 0.01;  // gravity's work in the balance
+  e.work = 0.25;
+  demfdm::io::StateWriter out("dem", "test", 1);
+  out.begin("e");
+  e.save(out);
+  out.end();
+  demfdm::io::StateReader in(out.bytes(), "mem", "dem", 1);
+  auto sec = in.section("e");
+  EXPECT_EQ(sec.remaining(), 3 * 8 + 8 + 2 * 24u);
+  StageEnergy back;
+  back.load(sec);
+  sec.done();
+  EXPECT_EQ(back.total_begin, e.total_begin);
+  EXPECT_EQ(back.mechanical_begin, e.mechanical_begin);
+  EXPECT_EQ(back.work, 0.25);
+  ASSERT_EQ(back.x_begin.size(), 2u);
+  EXPECT_EQ(back.x_begin[1].x, 0.01);
+  EXPECT_EQ(back.x_begin[1].z, 0.5);
+  const auto a = e.balance(w), c = back.balance(w);
+  EXPECT_EQ(a.error, c.error);
+  EXPECT_EQ(a.work, c.work);
 }

@@ -3,7 +3,9 @@
 #include "demfdm/io/csv_series.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
+#include <random>
 #include <limits>
 #include <sstream>
 
@@ -160,6 +162,110 @@ TEST(CsvSeries, ResumeRefusesFilesThatDoNotMatchTheCheckpoint) {
   CsvSeries csv = CsvSeries::resume(file, cols, header, 0);
   csv.append({5.0, 6.0});
   EXPECT_EQ(test::slurp(file), "time_s,load_N\n5,6\n");
+}
+
+// CsvFormat::digits: the text of printf "%.<d>g" (what a std::ostream with setprecision(d)
+// writes), for the files whose readers and golden data fix it (docs/output.md "CSV files").
+TEST(CsvSeries, FixedDigitsWriteWhatPrintfWrites) {
+  ScratchDir dir;
+  std::vector<double> values{0.0, -0.0, 0.1, 1.0 / 3.0, -2.5e-7, 1e300, 5e-324, 123456789012345678.0, 38075.0,
+                             1e17, 1e16, 2.9800340176287996e-05, std::numeric_limits<double>::infinity(),
+                             -std::numeric_limits<double>::infinity(), std::nan(""), -std::nan("")};
+  std::mt19937_64 gen(7);
+  std::uniform_real_distribution<double> mant(-10.0, 10.0);
+  std::uniform_int_distribution<int> exp10(-320, 300);
+  for (int i = 0; i < 2000; ++i) values.push_back(mant(gen) * std::pow(10.0, exp10(gen)));
+  for (int digits : {17, 10, 1}) {
+    const auto file = dir / ("d" + std::to_string(digits) + ".csv");
+    {
+      CsvSeries csv = CsvSeries::create(file, {"value_1"}, CsvFormat{digits});
+      for (double v : values) csv.append({v});
+    }
+    const auto ls = lines(test::slurp(file));
+    ASSERT_EQ(ls.size(), values.size() + 1);
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      char want[64];
+      std::snprintf(want, sizeof want, "%.*g", digits, values[i]);
+      ASSERT_EQ(ls[i + 1], want) << "digits " << digits << ", value " << i;
+    }
+  }
+  EXPECT_THROW(CsvSeries::create(dir / "bad.csv", {"value_1"}, CsvFormat{18}), std::invalid_argument);
+  EXPECT_THROW(CsvSeries::create(dir / "bad.csv", {"value_1"}, CsvFormat{-1}), std::invalid_argument);
+}
+
+// Text columns (no unit, quoted, a quote doubled) and integer cells (exact, whatever the digits).
+TEST(CsvSeries, TextColumnsAndIntegerCells) {
+  ScratchDir dir;
+  const auto file = dir / "stages.csv";
+  CsvFormat f;
+  f.digits = 10;
+  f.text_columns = {"what"};
+  {
+    CsvSeries csv = CsvSeries::create(file, {"balls_unit", "ratio_unit", "what"}, f);
+    csv.append_cells({std::size_t{38075}, 0.23572080394, "replicated 7615 balls; 8004 dropped"});
+    csv.append_cells({std::int64_t{123456789012345678}, 1.0 / 3.0, std::string("say \"done\", twice")});
+    EXPECT_THROW(csv.append_cells({1, 2.0, 3.0}), std::invalid_argument) << "a number in the text column";
+    EXPECT_THROW(csv.append_cells({"one", 2.0, "x"}), std::invalid_argument) << "a text in a number column";
+    EXPECT_THROW(csv.append_cells({1, 2.0}), std::invalid_argument);
+    EXPECT_THROW(csv.append_cells({1, 2.0, "two\nlines"}), std::invalid_argument);
+    EXPECT_THROW(csv.append({1.0, 2.0, 3.0}), std::invalid_argument) << "the all-number row of a series with text";
+    EXPECT_EQ(csv.rows(), 2u);
+  }
+  EXPECT_EQ(test::slurp(file),
+            "balls_unit,ratio_unit,what\n"
+            "38075,0.2357208039,\"replicated 7615 balls; 8004 dropped\"\n"
+            "123456789012345678,0.3333333333,\"say \"\"done\"\", twice\"\n")
+      << "nothing of a refused row is written";
+  CsvFormat g;
+  g.text_columns = {"note"};
+  EXPECT_THROW(CsvSeries::create(dir / "bad.csv", {"time_s"}, g), std::invalid_argument) << "not a column";
+  g.text_columns = {"no te"};
+  EXPECT_THROW(CsvSeries::create(dir / "bad.csv", {"time_s", "no te"}, g), std::invalid_argument);
+}
+
+// unit_suffix = false: names given by others (the coordinator's "step", "dem.ratio") are taken
+// as they are; only what breaks a CSV line is refused.
+TEST(CsvSeries, NamesTakenAsGiven) {
+  ScratchDir dir;
+  CsvFormat f;
+  f.digits = 17;
+  f.unit_suffix = false;
+  {
+    CsvSeries csv = CsvSeries::create(dir / "h.csv", {"step", "dem.time_s", "dem.ratio", "fdm.ratio (max)"}, f);
+    csv.append_cells({std::int64_t{12}, 0.1, std::nan(""), 2.0});
+  }
+  EXPECT_EQ(test::slurp(dir / "h.csv"), "step,dem.time_s,dem.ratio,fdm.ratio (max)\n12,0.10000000000000001,nan,2\n");
+  for (const std::vector<std::string>& cols : std::vector<std::vector<std::string>>{
+           {""}, {"a,b"}, {"say \"x\""}, {"two\nlines"}, {"step", "step"}})
+    EXPECT_THROW(CsvSeries::create(dir / "bad.csv", cols, f), std::invalid_argument);
+  EXPECT_THROW(CsvSeries::create(dir / "bad.csv", {"step"}), std::invalid_argument) << "the convention needs a unit";
+  EXPECT_FALSE(std::filesystem::exists(dir / "bad.csv"));
+}
+
+// A checkpoint that recorded the bytes only: the kept part's rows are counted.
+TEST(CsvSeries, ResumeCountsTheRowsWhenTheCheckpointHasNone) {
+  ScratchDir dir;
+  const auto file = dir / "s.csv";
+  CsvFormat f;
+  f.digits = 10;
+  f.text_columns = {"what"};
+  const std::vector<std::string> cols{"steps_unit", "what"};
+  std::uint64_t bytes = 0;
+  {
+    CsvSeries csv = CsvSeries::create(file, cols, f);
+    csv.append_cells({1, "a, b"});
+    csv.append_cells({2, "c"});
+    bytes = csv.bytes();
+    csv.append_cells({3, "after the checkpoint"});
+  }
+  EXPECT_THROW(CsvSeries::resume(file, cols, bytes - 1, std::nullopt, f), IoError) << "a partial line";
+  EXPECT_THROW(CsvSeries::resume(file, {"count_unit", "what"}, bytes, std::nullopt, f), IoError) << "header";
+  CsvSeries csv = CsvSeries::resume(file, cols, bytes, std::nullopt, f);
+  EXPECT_EQ(csv.rows(), 2u);
+  csv.append_cells({4, "d"});
+  csv.close();
+  EXPECT_EQ(test::slurp(file), "steps_unit,what\n1,\"a, b\"\n2,\"c\"\n4,\"d\"\n");
+  EXPECT_EQ(csv.rows(), 3u);
 }
 
 }  // namespace

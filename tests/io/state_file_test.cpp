@@ -137,6 +137,45 @@ TEST(StateFile, EveryTypeRoundTripsBitExactly) {
   r.finish();
 }
 
+// save_fields / load_fields: one list of fields, each written as its type's put would write it,
+// read back into fields of the same types.
+TEST(StateFile, FieldListsWriteEachFieldByItsType) {
+  const bool b = true;
+  const std::int32_t i = -7;
+  const std::int64_t l = -9000000000LL;
+  const std::uint64_t u = 0xfedcba9876543210ULL;
+  const double d = -0.0;
+  StateWriter listed("dem", "demfdm test", kHash), by_hand("dem", "demfdm test", kHash);
+  listed.begin("s");
+  save_fields(listed, b, i, l, u, d, i);
+  listed.end();
+  by_hand.begin("s");
+  by_hand.b(b);
+  by_hand.i32(i);
+  by_hand.i64(l);
+  by_hand.u64(u);
+  by_hand.f64(d);
+  by_hand.i32(i);
+  by_hand.end();
+  const std::string bytes = listed.bytes();
+  EXPECT_EQ(bytes, by_hand.bytes());
+  StateReader r(bytes, "mem", "dem", kHash);
+  auto s = r.section("s");
+  bool b2 = false;
+  std::int32_t i2 = 0, i3 = 0;
+  std::int64_t l2 = 0;
+  std::uint64_t u2 = 0;
+  double d2 = 1.0;
+  load_fields(s, b2, i2, l2, u2, d2, i3);
+  s.done();
+  EXPECT_EQ(b2, b);
+  EXPECT_EQ(i2, i);
+  EXPECT_EQ(l2, l);
+  EXPECT_EQ(u2, u);
+  EXPECT_EQ(std::bit_cast<std::uint64_t>(d2), std::bit_cast<std::uint64_t>(d));
+  EXPECT_EQ(i3, i);
+}
+
 // The layout of docs/checkpoint-format.md, byte by byte at the start and the end.
 TEST(StateFile, LayoutIsTheDocumentedOne) {
   StateWriter w("fdm", "v", 0x1122334455667788ULL);

@@ -22,28 +22,44 @@ namespace {
   throw IoError(msg);
 }
 
-void check_column(const std::string& c) {
+// `convention`: the characters of the project's names (letters, digits, _ . / % ^ -), else
+// only what breaks a CSV line is refused; `unit`: a "_<unit>" suffix is required.
+void check_column(const std::string& c, bool convention, bool unit) {
   const auto bad = [&](const std::string& why) {
     throw std::invalid_argument("CsvSeries column '" + c + "': " + why +
-                                " (expected name_unit, e.g. time_s, load_N, broken_ratio_1)");
+                                (unit ? " (expected name_unit, e.g. time_s, load_N, broken_ratio_1)" : ""));
   };
   if (c.empty()) bad("empty name");
   for (char ch : c) {
-    const bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '_' ||
-                    ch == '.' || ch == '/' || ch == '%' || ch == '^' || ch == '-';
+    const bool ok = convention ? (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') ||
+                                     ch == '_' || ch == '.' || ch == '/' || ch == '%' || ch == '^' || ch == '-'
+                               : ch != ',' && ch != '"' && ch != '\n' && ch != '\r';
     if (!ok) bad(std::string("character '") + ch + "' is not allowed");
   }
+  if (!unit) return;
   const auto us = c.rfind('_');
   if (us == std::string::npos || us == 0 || us + 1 == c.size()) bad("no unit suffix after the last '_'");
 }
 
-void check_columns(const std::vector<std::string>& columns) {
+// Which columns hold text (CsvFormat::text_columns); checks every name and the format.
+std::vector<bool> check_columns(const std::vector<std::string>& columns, const CsvFormat& format) {
   if (columns.empty()) throw std::invalid_argument("CsvSeries: at least one column is needed");
+  if (format.digits < 0 || format.digits > 17)
+    throw std::invalid_argument("CsvSeries: digits must be 0 (shortest round trip) to 17, found " +
+                                std::to_string(format.digits));
+  std::vector<bool> text(columns.size(), false);
+  for (const auto& t : format.text_columns) {
+    const auto at = std::find(columns.begin(), columns.end(), t);
+    if (at == columns.end()) throw std::invalid_argument("CsvSeries: text column '" + t + "' is not a column");
+    text[static_cast<std::size_t>(at - columns.begin())] = true;
+  }
   for (std::size_t i = 0; i < columns.size(); ++i) {
-    check_column(columns[i]);
+    // A text has no unit; its name keeps the characters of the convention.
+    check_column(columns[i], format.unit_suffix, format.unit_suffix && !text[i]);
     for (std::size_t j = 0; j < i; ++j)
       if (columns[j] == columns[i]) throw std::invalid_argument("CsvSeries: column '" + columns[i] + "' is given twice");
   }
+  return text;
 }
 
 std::string header_line(const std::vector<std::string>& columns) {
@@ -66,8 +82,14 @@ std::string shown(std::string s) {
 }  // namespace
 
 CsvSeries CsvSeries::create(const std::filesystem::path& file, std::vector<std::string> columns, bool fsync_each_row) {
-  check_columns(columns);
+  return create(file, std::move(columns), CsvFormat{}, fsync_each_row);
+}
+
+CsvSeries CsvSeries::create(const std::filesystem::path& file, std::vector<std::string> columns, const CsvFormat& format,
+                            bool fsync_each_row) {
   CsvSeries s;
+  s.text_ = check_columns(columns, format);
+  s.format_ = format;
   s.path_ = std::filesystem::absolute(file).lexically_normal();
   s.columns_ = std::move(columns);
   s.fsync_ = fsync_each_row;
@@ -87,8 +109,14 @@ CsvSeries CsvSeries::create(const std::filesystem::path& file, std::vector<std::
 
 CsvSeries CsvSeries::resume(const std::filesystem::path& file, std::vector<std::string> columns, std::uint64_t bytes,
                             std::size_t rows, bool fsync_each_row) {
-  check_columns(columns);
+  return resume(file, std::move(columns), bytes, std::optional<std::size_t>(rows), CsvFormat{}, fsync_each_row);
+}
+
+CsvSeries CsvSeries::resume(const std::filesystem::path& file, std::vector<std::string> columns, std::uint64_t bytes,
+                            std::optional<std::size_t> rows, const CsvFormat& format, bool fsync_each_row) {
   CsvSeries s;
+  s.text_ = check_columns(columns, format);
+  s.format_ = format;
   s.path_ = std::filesystem::absolute(file).lexically_normal();
   s.columns_ = std::move(columns);
   s.fsync_ = fsync_each_row;
@@ -137,10 +165,11 @@ CsvSeries CsvSeries::resume(const std::filesystem::path& file, std::vector<std::
       last = buf[got - 1];
       left -= got;
     }
-    if (last != '\n' || lines != rows)
+    if (last != '\n' || (rows && lines != *rows))
       throw IoError("CsvSeries::resume: '" + name + "' holds " + std::to_string(lines) + " data line(s)" +
-                    (last != '\n' ? " and a partial one" : "") + " in its first " + std::to_string(bytes) +
-                    " bytes, the checkpoint says " + std::to_string(rows) + " rows");
+                    (last != '\n' ? " and a partial one" : "") + " in its first " + std::to_string(bytes) + " bytes" +
+                    (rows ? ", the checkpoint says " + std::to_string(*rows) + " rows" : ""));
+    rows = lines;
   }
 
   // Drop what the crashed run appended after the checkpoint, then append after the kept part.
@@ -153,7 +182,7 @@ CsvSeries CsvSeries::resume(const std::filesystem::path& file, std::vector<std::
   // The cut must be durable too, or a machine crash could bring the dropped rows back
   // below the rows appended from now on.
   if (s.fsync_ && ::fsync(::fileno(s.f_)) != 0) fail("fsync", name, errno);
-  s.rows_ = rows;
+  s.rows_ = *rows;
   s.bytes_ = bytes;
   return s;
 }
@@ -161,6 +190,8 @@ CsvSeries CsvSeries::resume(const std::filesystem::path& file, std::vector<std::
 CsvSeries::CsvSeries(CsvSeries&& o) noexcept
     : path_(std::move(o.path_)),
       columns_(std::move(o.columns_)),
+      format_(std::move(o.format_)),
+      text_(std::move(o.text_)),
       f_(std::exchange(o.f_, nullptr)),
       fsync_(o.fsync_),
       rows_(o.rows_),
@@ -172,6 +203,8 @@ CsvSeries& CsvSeries::operator=(CsvSeries&& o) noexcept {
     if (f_ != nullptr) std::fclose(f_);
     path_ = std::move(o.path_);
     columns_ = std::move(o.columns_);
+    format_ = std::move(o.format_);
+    text_ = std::move(o.text_);
     f_ = std::exchange(o.f_, nullptr);
     fsync_ = o.fsync_;
     rows_ = o.rows_;
@@ -185,26 +218,74 @@ CsvSeries::~CsvSeries() {
   if (f_ != nullptr) std::fclose(f_);  // every row is already flushed
 }
 
-void CsvSeries::append(std::span<const double> row) {
-  if (f_ == nullptr) throw std::logic_error("CsvSeries::append on closed series '" + path_.string() + "'");
-  if (row.size() != columns_.size())
-    throw std::invalid_argument("CsvSeries::append: row has " + std::to_string(row.size()) + " values, '" +
-                                path_.string() + "' has " + std::to_string(columns_.size()) + " columns");
-  line_.clear();
+void CsvSeries::put_number(double v) {
+  // Shortest round-trip text, or printf's "%.<digits>g" (C locale); nan and inf come out as
+  // "nan", "inf", "-inf", which numpy.genfromtxt and pandas read back.
   char buf[32];
-  for (std::size_t i = 0; i < row.size(); ++i) {
-    if (i) line_ += ',';
-    // Shortest round-trip text; nan and inf come out as "nan", "inf", "-inf", which
-    // numpy.genfromtxt and pandas read back.
-    auto res = std::to_chars(buf, buf + sizeof buf, row[i]);
-    line_.append(buf, res.ptr);
-  }
+  const auto res = format_.digits == 0
+                       ? std::to_chars(buf, buf + sizeof buf, v)
+                       : std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, format_.digits);
+  line_.append(buf, res.ptr);
+}
+
+void CsvSeries::write_line() {
   line_ += '\n';
   if (std::fwrite(line_.data(), 1, line_.size(), f_) != line_.size()) fail("fwrite", path_.string(), errno);
   if (std::fflush(f_) != 0) fail("fflush", path_.string(), errno);
   if (fsync_ && ::fsync(::fileno(f_)) != 0) fail("fsync", path_.string(), errno);
   ++rows_;
   bytes_ += line_.size();
+}
+
+void CsvSeries::append(std::span<const double> row) {
+  if (f_ == nullptr) throw std::logic_error("CsvSeries::append on closed series '" + path_.string() + "'");
+  if (row.size() != columns_.size())
+    throw std::invalid_argument("CsvSeries::append: row has " + std::to_string(row.size()) + " values, '" +
+                                path_.string() + "' has " + std::to_string(columns_.size()) + " columns");
+  if (!format_.text_columns.empty())
+    throw std::invalid_argument("CsvSeries::append: '" + path_.string() + "' has text columns (append_cells)");
+  line_.clear();
+  for (std::size_t i = 0; i < row.size(); ++i) {
+    if (i) line_ += ',';
+    put_number(row[i]);
+  }
+  write_line();
+}
+
+void CsvSeries::append_cells(std::span<const CsvCell> row) {
+  if (f_ == nullptr) throw std::logic_error("CsvSeries::append_cells on closed series '" + path_.string() + "'");
+  if (row.size() != columns_.size())
+    throw std::invalid_argument("CsvSeries::append_cells: row has " + std::to_string(row.size()) + " values, '" +
+                                path_.string() + "' has " + std::to_string(columns_.size()) + " columns");
+  for (std::size_t i = 0; i < row.size(); ++i) {
+    const bool text = row[i].kind() == CsvCell::Kind::kText;
+    if (text != text_[i])
+      throw std::invalid_argument("CsvSeries::append_cells: column '" + columns_[i] + "' of '" + path_.string() +
+                                  "' holds " + (text_[i] ? "text" : "numbers") + ", the row gives " +
+                                  (text ? "a text" : "a number"));
+    if (text && row[i].text().find_first_of("\r\n") != std::string_view::npos)
+      throw std::invalid_argument("CsvSeries::append_cells: the text of column '" + columns_[i] + "' of '" +
+                                  path_.string() + "' holds a line break (one row is one line)");
+  }
+  line_.clear();
+  char buf[32];
+  for (std::size_t i = 0; i < row.size(); ++i) {
+    if (i) line_ += ',';
+    const CsvCell& c = row[i];
+    switch (c.kind()) {
+      case CsvCell::Kind::kNumber: put_number(c.number()); break;
+      case CsvCell::Kind::kInteger: line_.append(buf, std::to_chars(buf, buf + sizeof buf, c.integer()).ptr); break;
+      case CsvCell::Kind::kText:
+        line_ += '"';
+        for (char ch : c.text()) {
+          if (ch == '"') line_ += '"';  // RFC 4180: a quote inside a quoted field is doubled
+          line_ += ch;
+        }
+        line_ += '"';
+        break;
+    }
+  }
+  write_line();
 }
 
 void CsvSeries::close() {

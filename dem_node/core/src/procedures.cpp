@@ -169,6 +169,75 @@ StageEnergy::Balance StageEnergy::balance(const World& w) const {
   return {e.kinetic, e.strain, dissipated, wk, (total - total_begin - wk) / scale};
 }
 
+void StageEnergy::save(io::StateWriter& w) const {
+  io::save_fields(w, total_begin, mechanical_begin, work);
+  w.u64(x_begin.size());
+  for (const auto& x : x_begin) io::save_fields(w, x.x, x.y, x.z);
+}
+
+void StageEnergy::load(io::SectionReader& r) {
+  io::load_fields(r, total_begin, mechanical_begin, work);
+  x_begin.resize(r.count(24));
+  for (auto& x : x_begin) io::load_fields(r, x.x, x.y, x.z);
+}
+
+StageReport generate_specimen(World& w, const RevParams& p, double bond_coordination, double gap_floor) {
+  auto r = generate_rev(w, p);
+  if (bond_coordination > 0) {
+    const double z0 = coordination(w).z;  // touching contacts only
+    const auto b = install_bonds_to_coordination(w, bond_coordination, gap_floor);
+    std::ostringstream z;
+    z.setf(std::ios::fixed);
+    z.precision(3);
+    z << "; Z " << coordination(w).z << " (touching before bonding: ";
+    z << z0 << ")";
+    r.what += "; " + b.what + z.str();
+    r.count = w.num_balls();
+  }
+  return r;
+}
+
+StageReport servo_specimen(World& w, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                           double budget, double compaction_fric) {
+  auto& fric = w.mutable_params().ball_ball.linear.fric;
+  const double mu = fric;
+  fric = std::min(mu, compaction_fric);
+  w.refresh_contact_constants();
+  auto r1 = servo_until(w, p, stress_tol, ratio_tol, hold, budget);
+  if (!r1.converged) return r1;
+  w.mutable_params().ball_ball.linear.fric = mu;
+  w.refresh_contact_constants();
+  auto r2 = servo_until(w, p, stress_tol, ratio_tol, hold, budget / 2);
+  r2.steps += r1.steps;
+  r2.what = "servo to sigma_v " + std::to_string(p.target.z) + " Pa, sigma_h " + std::to_string(p.target.x) +
+            " Pa: " + r1.what + "; at final friction: " + r2.what;
+  return r2;
+}
+
+double ball_weight(const World& w) {
+  double m = 0;
+  for (double mi : w.balls().m) m += mi;
+  return m * std::abs(w.gravity().z);
+}
+
+GuardFinding energy_jump_finding(const World& w, const std::string& jump) {
+  const auto& b = w.balls();
+  if (b.size() == 0) throw std::invalid_argument("energy_jump_finding: the world has no balls");
+  std::size_t worst = 0;
+  double e_worst = -1;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double e = 0.5 * (b.m[i] * dot(b.v[i], b.v[i]) + b.inertia[i] * dot(b.w[i], b.w[i]));
+    if (e > e_worst) e_worst = e, worst = i;
+  }
+  GuardFinding f;
+  f.cause = "DEM " + jump + "; fastest ball id " + std::to_string(b.id[worst]);
+  f.detail = "ball with the largest kinetic energy (" + std::to_string(e_worst) + " J): " + describe_ball(w, worst) +
+             "\n10 nearest balls:\n" + neighbourhood(w, worst, 10);
+  f.row = worst;
+  f.id = b.id[worst];
+  return f;
+}
+
 std::size_t kick_highest_ball(World& w, const Vec3& v) {
   const auto& b = w.balls();
   if (b.size() == 0) throw std::invalid_argument("kick: the world has no balls");

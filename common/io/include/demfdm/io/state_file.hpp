@@ -17,6 +17,7 @@
 #pragma once
 
 #include <bit>
+#include <concepts>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
@@ -197,6 +198,37 @@ struct StateMeta {
   std::uint64_t scene_hash = 0;                       // the caller's hash of the scene
   std::string code_version = default_code_version();  // recorded, not checked on load
 };
+
+/// A section's fields declared once for both directions: save_fields(w, a, b, ...) writes them
+/// in the order given, each by its type (bool: b, int32: i32, int64: i64, uint64: u64, double:
+/// f64), and load_fields(r, a, b, ...) reads the same list back, so that what a checkpoint
+/// writes and what it reads cannot drift apart.
+template <class T>
+void save_field(StateWriter& w, const T& v) {
+  if constexpr (std::same_as<T, bool>) w.b(v);
+  else if constexpr (std::same_as<T, std::int32_t>) w.i32(v);
+  else if constexpr (std::same_as<T, std::int64_t>) w.i64(v);
+  else if constexpr (std::same_as<T, std::uint64_t>) w.u64(v);
+  else if constexpr (std::same_as<T, double>) w.f64(v);
+  else static_assert(sizeof(T) == 0, "save_fields: bool, int32, int64, uint64 or double");
+}
+template <class T>
+void load_field(SectionReader& r, T& v) {
+  if constexpr (std::same_as<T, bool>) v = r.b();
+  else if constexpr (std::same_as<T, std::int32_t>) v = r.i32();
+  else if constexpr (std::same_as<T, std::int64_t>) v = r.i64();
+  else if constexpr (std::same_as<T, std::uint64_t>) v = r.u64();
+  else if constexpr (std::same_as<T, double>) v = r.f64();
+  else static_assert(sizeof(T) == 0, "load_fields: bool, int32, int64, uint64 or double");
+}
+template <class... T>
+void save_fields(StateWriter& w, const T&... v) {
+  (save_field(w, v), ...);
+}
+template <class... T>
+void load_fields(SectionReader& r, T&... v) {
+  (load_field(r, v), ...);
+}
 
 /// The memory, stream and file front ends every core's checkpoint shares: `Access` has
 /// static save(const Obj&, StateWriter&) and load(Obj&, StateReader&); `kind` names the core.

@@ -4,9 +4,13 @@
 #pragma once
 
 #include <cstddef>
+#include <string>
 #include <vector>
 
+#include "demfdm/dem/guard.hpp"
+#include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
+#include "demfdm/io/state_file.hpp"
 
 namespace demfdm::dem {
 
@@ -102,10 +106,39 @@ struct StageEnergy {
     double error;  // (change of the total energy - work) / the largest energy flow of the stage
   };
   Balance balance(const World& w) const;
+  /// Checkpoint (docs/checkpoint-format.md, section dem_node): total_begin, mechanical_begin,
+  /// work (f64), then x_begin (u64 count, x y z f64 each). load() reads what save() wrote.
+  void save(io::StateWriter& w) const;
+  void load(io::SectionReader& r);
 };
 
 /// The ball whose top (z + r) is highest gets velocity `v` (stability studies); returns its row.
 /// Throws std::invalid_argument without balls.
 std::size_t kick_highest_ball(World& w, const Vec3& v);
+
+/// The generate stage (docs/theory.md 4.3, 4.6): the REV (generate_rev), then, when
+/// `bond_coordination` > 0, bonds over the gaps that give that coordination number
+/// (install_bonds_to_coordination, gaps at least `gap_floor`; docs/ucs-study.md). The report is
+/// the generation's, the bonding and the coordination (of the touching contacts before it, of
+/// every active contact after it) appended to `what`, `count` the balls.
+StageReport generate_specimen(World& w, const RevParams& p, double bond_coordination, double gap_floor);
+
+/// The servo stage of the REV (docs/theory.md 4.5, 4.3 step 4): compaction with the ball-ball
+/// friction lowered to min(mu, compaction_fric), then at the final friction mu (the linear law's,
+/// restored) at constant stress, each until the criterion of servo_until holds for `hold` critical
+/// steps, the first within `budget` critical steps, the second within budget / 2. A compaction
+/// that misses its criterion is returned as it is (friction still lowered: the node stops the
+/// run). `steps` counts both phases.
+StageReport servo_specimen(World& w, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                           double budget, double compaction_fric);
+
+/// Weight of the balls [N]: their total mass times |g_z| of the world's gravity (0 without).
+double ball_weight(const World& w);
+
+/// The blow-up guard's report of a kinetic-energy jump (docs/stability.md): `jump` (what the
+/// jump detector said) and the ball with the largest kinetic energy, translational plus
+/// rotational, with its neighbourhood (the 10 nearest balls). Throws std::invalid_argument
+/// without balls.
+GuardFinding energy_jump_finding(const World& w, const std::string& jump);
 
 }  // namespace demfdm::dem
