@@ -2,8 +2,8 @@
 
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/params.hpp"
-#include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/specimen.hpp"
+#include "demfdm/dem/world.hpp"
 #include "demfdm/fdm/params.hpp"
 
 #include <algorithm>
@@ -347,7 +347,7 @@ void declare_dem(config::Section& root) {
   }
   auto& ft = d.section("footing", "Rigid cylindrical footing (paper: D_f 1.2 mm, H_f 0.6 mm). Absent: none.",
                        config::Presence::Optional);
-  {  // the footing's shape, declared beside FootingParams (dem_node/core procedures.hpp)
+  {  // the footing's shape, declared beside FootingParams (dem_node/core world.hpp)
     dem::FootingParams defaults;
     SchemaDecl footing_keys{ft};
     dem::describe(footing_keys, defaults);

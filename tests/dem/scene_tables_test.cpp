@@ -1,5 +1,5 @@
 // The DEM's specimen, servo, footing, interface-bond and ucs-stage tables (specimen.hpp,
-// procedures.hpp; issue 15 item 5: every parameter declared once): each key reads from a scene
+// world.hpp; issue 15 item 5: every parameter declared once): each key reads from a scene
 // into its own field only, and the schema and the engine's validate() refuse the same
 // out-of-range value under the same scene key (tests/dem/table_walk.hpp walks the tables).
 #include <gtest/gtest.h>

@@ -50,17 +50,6 @@ std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, i
 /// has no ball. Returns the bounding box of the ball surfaces [lo, hi].
 std::pair<Vec3, Vec3> add_box_walls(World& w);
 
-/// The [dem.footing] keys of the footing's shape (its axis, dem.footing.centre, is a list the
-/// scene reader maps), declared once (demfdm/param_table.hpp).
-template <class V>
-void describe(V& v, FootingParams& f) {
-  v.real("diameter", "m", f.diameter, ParamRange::gt(0.0), "Footing diameter D_f.");
-  v.real("height", "m", f.height, ParamRange::gt(0.0), "Footing height H_f.");
-}
-/// Throws std::invalid_argument naming the scene key (dem.footing.<key>) on a value outside its
-/// declared range.
-void validate(const FootingParams& f);
-
 /// Places the footing `f` (its bottom_centre x and y give the axis; z is ignored) at first
 /// contact: the highest point where a ball touches its flat bottom (a ball within the footprint,
 /// at its top z + r) or its bottom rim (a ball whose axis distance rho is in (r_f, r_f + r), at

@@ -96,6 +96,16 @@ struct FootingParams {
   Vec3 bottom_centre{};      // [m] centre of the bottom disc
   Vec3 velocity{};           // [m/s] prescribed velocity
 };
+/// The [dem.footing] keys of the footing's shape (its axis, dem.footing.centre, is a list the
+/// scene reader maps), declared once (demfdm/param_table.hpp).
+template <class V>
+void describe(V& v, FootingParams& f) {
+  v.real("diameter", "m", f.diameter, ParamRange::gt(0.0), "Footing diameter D_f.");
+  v.real("height", "m", f.height, ParamRange::gt(0.0), "Footing height H_f.");
+}
+/// Throws std::invalid_argument naming the scene key (dem.footing.<key>) on a value outside its
+/// declared range.
+void validate(const FootingParams& f);
 
 struct Footing {
   FootingParams p;
