@@ -12,6 +12,7 @@
 #include "common/schema/scene_schema.hpp"
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/scene_params.hpp"
+#include "table_walk.hpp"
 
 using namespace demfdm;
 
@@ -29,89 +30,19 @@ config::Scene parse(const std::vector<std::string>& sets) {
   return config::Scene::parse(kScene, "t.toml", schema::scene_schema(), ".", sets);
 }
 
-std::string exact(double v) {
-  char b[40];
-  std::snprintf(b, sizeof b, "%.17g", v);
-  return b;
-}
+using table_walk::Collect;
+using table_walk::Count;
+using table_walk::exact;
+using table_walk::Mutate;
 
-// Every bound field's value, in table order (enums and flags as numbers).
-struct Collect {
-  std::vector<double> v;
-  void real(const char*, const char*, double& f, const dem::ParamRange&, const char*) { v.push_back(f); }
-  void real_or_word(const char*, const char*, double& f, const dem::ParamRange&, const char*, double, const char*) {
-    v.push_back(f);
-  }
-  void flag(const char*, bool& f, const char*) { v.push_back(f ? 1 : 0); }
-  template <class E>
-  void choice(const char*, E& f, std::initializer_list<dem::ParamOption<E>>, const char*) {
-    v.push_back(static_cast<double>(f));
-  }
-};
-
-std::vector<double> all_fields(dem::ContactFamilyParams f) {
+// Every bound field's value of a family and its laws' tables, in table order (the model first).
+std::vector<std::string> all_fields(dem::ContactFamilyParams f) {
   Collect c;
-  c.v.push_back(static_cast<double>(f.model));
+  c.v.push_back(std::to_string(static_cast<int>(f.model)));
   dem::describe_family(c, f);
   dem::for_each_law([&](auto law) { decltype(law)::params(c, f); });
   return c.v;
 }
-
-// Changes the key with index `target` (in table order) to another admissible value and writes
-// its override text "key=value".
-struct Mutate {
-  int target, at = 0;
-  std::string key, text;
-  bool hit() { return at++ == target; }
-  void real(const char* k, const char*, double& f, const dem::ParamRange& r, const char*) {
-    if (!hit()) return;
-    double n = f == 0 ? 0.25 : 0.75 * f;
-    if (!r.contains(n)) n = 0.5 * (f + (r.has_lo() ? r.lo : 0.0));
-    ASSERT_TRUE(r.contains(n)) << k;
-    ASSERT_NE(n, f) << k;
-    f = n;
-    key = k;
-    text = exact(n);
-  }
-  void real_or_word(const char* k, const char* u, double& f, const dem::ParamRange& r, const char* word, double wv,
-                    const char* d) {
-    if (at == target && f != wv) {  // the word itself
-      ++at;
-      f = wv;
-      key = k;
-      text = std::string("\"") + word + "\"";
-      return;
-    }
-    real(k, u, f, r, d);
-  }
-  void flag(const char* k, bool& f, const char*) {
-    if (!hit()) return;
-    f = !f;
-    key = k;
-    text = f ? "true" : "false";
-  }
-  template <class E>
-  void choice(const char* k, E& f, std::initializer_list<dem::ParamOption<E>> options, const char*) {
-    if (!hit()) return;
-    for (const auto& o : options)
-      if (o.value != f) {
-        f = o.value;
-        key = k;
-        text = std::string("\"") + o.name + "\"";
-        return;
-      }
-  }
-};
-
-// Number of keys of a table.
-struct Count {
-  int n = 0;
-  void real(const char*, const char*, double&, const dem::ParamRange&, const char*) { ++n; }
-  void real_or_word(const char*, const char*, double&, const dem::ParamRange&, const char*, double, const char*) { ++n; }
-  void flag(const char*, bool&, const char*) { ++n; }
-  template <class E>
-  void choice(const char*, E&, std::initializer_list<dem::ParamOption<E>>, const char*) { ++n; }
-};
 
 // The real keys of a table with their ranges, named "<key>" or "<law>.<key>".
 struct Bounds {
@@ -171,7 +102,8 @@ TEST(SceneParams, EveryKeyReadsIntoItsOwnFieldOnly) {
       dem::describe_family(c, d);
       for (int i = 0; i < c.n; ++i) {
         auto expected = info.defaults();
-        Mutate m{i};
+        Mutate m;
+        m.target = i;
         dem::describe_family(m, expected);
         const std::string set = fam + "." + m.key + "=" + m.text;
         SCOPED_TRACE(set);
@@ -187,7 +119,8 @@ TEST(SceneParams, EveryKeyReadsIntoItsOwnFieldOnly) {
       for (int i = 0; i < c.n; ++i) {
         auto expected = info.defaults();
         expected.model = Law::kModel;
-        Mutate m{i};
+        Mutate m;
+        m.target = i;
         Law::params(m, expected);
         const std::string set = fam + "." + Law::kName + "." + m.key + "=" + m.text;
         SCOPED_TRACE(set);
