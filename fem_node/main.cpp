@@ -46,6 +46,10 @@ fem::Params fem_params(const config::Scene& s) {
     const auto el = continuum::elastic_from_scene(e);
     return fem::ElasticGroup{el.density, el.young, el.poisson, el.region};
   });
+  if (s.count("continuum.material") == 0) {  // the scene's material defaults, declared beside fdm::Material
+    const fdm::Material rock;
+    p.materials = {fem::ElasticGroup{rock.density, rock.young, rock.poisson, std::nullopt}};
+  }
   if (s.boolean("continuum.large_strain"))
     s.fail("continuum.large_strain", "false (fem_node is a small-strain solver)", "true");
   if (s.string("continuum.boundary") != "strongbox")
