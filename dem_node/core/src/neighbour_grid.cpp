@@ -1,4 +1,14 @@
 // Ball-ball neighbour search (neighbour_grid.hpp; docs/theory.md 1.4).
+//
+// The balls are copied into cell order as separate x, y, z, R and row arrays (structure of
+// arrays). The three cells of an x-row of a ball's 3 x 3 x 3 stencil are then one contiguous
+// range (two when a periodic wrap splits the row), so a ball tests 9 ranges straight through,
+// with no search for the first j > i: every candidate gets the branch-free test
+// (j > i) & (d2 < rc^2), four at a time where AVX2 is available, and the rare hits are taken
+// from the lane mask (docs/speed.md, issue 16 item 3). The arithmetic of the test is the same
+// sequence of operations in every build (no fused multiply-add: the project compiles with
+// -ffp-contract=off and the AVX2 region uses separate multiplies and adds), so every build
+// finds the same pairs as a brute-force test of every pair (tests/dem/neighbour_grid_test.cpp).
 #include "demfdm/dem/neighbour_grid.hpp"
 
 #include <algorithm>
@@ -6,10 +16,173 @@
 #include <sstream>
 #include <stdexcept>
 
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#define DEMFDM_GRID_X86 1
+#endif
+
 namespace demfdm::dem {
+
+namespace {
+
+// A contiguous run of the cell-ordered arrays: the cells first .. first + count - 1 of one
+// x-row of the stencil (consecutive cell numbers).
+struct Run {
+  std::uint32_t first, count;
+};
+
+// The cell-ordered copy of the balls and what a ball's row of pairs needs from it.
+struct Sorted {
+  // x, y, z, R and the row number (as a double: exact below 2^53, compared in the same lanes)
+  // in cell order, 4 padding entries at the end (row -1: never j > i) so that a block of four
+  // may run past a range's end; the lanes past it are masked.
+  std::vector<double> x, y, z, r, row;
+  std::vector<std::uint32_t> cell_start;  // cell c holds sorted entries [cell_start[c], cell_start[c+1])
+  std::vector<std::uint32_t> cell_last;   // the largest row in cell c (0 for an empty cell)
+};
+
+// One ball's row: the hits (i < j) of the runs, appended to np in the order found.
+struct RowArgs {
+  const Sorted* s;
+  const Run* runs;
+  int nruns;
+  std::uint32_t i;
+  Vec3 xi;
+  double ri;  // R_i + skin
+  Vec3 L, halfL;
+  const std::vector<Vec3>* pos;
+};
+
+// The image shift of a hit, as the scalar search has always worked it out.
+inline std::array<std::int8_t, 4> image_shift(const Vec3& pj, const Vec3& xi, const Vec3& halfL) {
+  std::array<std::int8_t, 4> s{0, 0, 0, 0};
+  for (int a = 0; a < 3; ++a) {
+    const double e = pj[a] - xi[a];
+    s[a] = static_cast<std::int8_t>(e > halfL[a] ? -1 : (e < -halfL[a] ? 1 : 0));
+  }
+  return s;
+}
+
+// The range [begin, end) of the cell-ordered arrays a run covers for ball i: cells at the ends
+// of the run whose balls all come before i (or that are empty) are left out.
+inline bool trim(const Sorted& s, const Run& run, std::uint32_t i, std::uint32_t& begin, std::uint32_t& end) {
+  std::uint32_t c0 = run.first, c1 = run.first + run.count;
+  while (c0 < c1 && s.cell_last[c0] <= i) ++c0;
+  while (c1 > c0 && s.cell_last[c1 - 1] <= i) --c1;
+  begin = s.cell_start[c0];
+  end = s.cell_start[c1];
+  return begin < end;
+}
+
+// Baseline: one candidate at a time, the same operations as the vector lanes.
+template <bool Per>
+void row_scalar(const RowArgs& a, std::vector<PairCandidate>& np) {
+  const Sorted& s = *a.s;
+  const double fi = static_cast<double>(a.i);
+  for (int q = 0; q < a.nruns; ++q) {
+    std::uint32_t b, e;
+    if (!trim(s, a.runs[q], a.i, b, e)) continue;
+    for (std::uint32_t k = b; k < e; ++k) {
+      double dx = s.x[k] - a.xi.x, dy = s.y[k] - a.xi.y, dz = s.z[k] - a.xi.z;
+      // minimum image as selects
+      if constexpr (Per) {
+        dx = dx > a.halfL.x ? dx - a.L.x : (dx < -a.halfL.x ? dx + a.L.x : dx);
+        dy = dy > a.halfL.y ? dy - a.L.y : (dy < -a.halfL.y ? dy + a.L.y : dy);
+        dz = dz > a.halfL.z ? dz - a.L.z : (dz < -a.halfL.z ? dz + a.L.z : dz);
+      }
+      const double d2 = dx * dx + dy * dy + dz * dz;
+      const double rc = a.ri + s.r[k];
+      if ((s.row[k] > fi) & (d2 < rc * rc)) {
+        const auto j = static_cast<std::uint32_t>(s.row[k]);
+        np.push_back({a.i, j, Per ? image_shift((*a.pos)[j], a.xi, a.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}});
+      }
+    }
+  }
+}
+
+#ifdef DEMFDM_GRID_X86
+#pragma GCC push_options
+#pragma GCC target("avx2")
+// The minimum image as selects: d > h ? d - L : (d < -h ? d + L : d).
+[[gnu::always_inline]] inline __m256d image(__m256d d, __m256d L, __m256d h, __m256d mh) {
+  const __m256d over = _mm256_cmp_pd(d, h, _CMP_GT_OQ), under = _mm256_cmp_pd(d, mh, _CMP_LT_OQ);
+  const __m256d low = _mm256_blendv_pd(d, _mm256_add_pd(d, L), under);
+  return _mm256_blendv_pd(low, _mm256_sub_pd(d, L), over);
+}
+
+// AVX2: four candidates per block. Multiplies and adds are separate instructions (no FMA is
+// enabled here), in the order of the scalar test: ((dx dx + dy dy) + dz dz) < (ri + R_j)^2.
+template <bool Per>
+void row_avx2(const RowArgs& a, std::vector<PairCandidate>& np) {
+  const Sorted& s = *a.s;
+  const __m256d xi = _mm256_set1_pd(a.xi.x), yi = _mm256_set1_pd(a.xi.y), zi = _mm256_set1_pd(a.xi.z);
+  const __m256d ri = _mm256_set1_pd(a.ri), fi = _mm256_set1_pd(static_cast<double>(a.i));
+  const __m256d Lx = _mm256_set1_pd(a.L.x), Ly = _mm256_set1_pd(a.L.y), Lz = _mm256_set1_pd(a.L.z);
+  const __m256d hx = _mm256_set1_pd(a.halfL.x), hy = _mm256_set1_pd(a.halfL.y), hz = _mm256_set1_pd(a.halfL.z);
+  const __m256d mhx = _mm256_set1_pd(-a.halfL.x), mhy = _mm256_set1_pd(-a.halfL.y),
+                mhz = _mm256_set1_pd(-a.halfL.z);
+  const __m256d lane = _mm256_set_pd(3.0, 2.0, 1.0, 0.0);
+  const double* px = s.x.data();
+  const double* py = s.y.data();
+  const double* pz = s.z.data();
+  const double* pr = s.r.data();
+  const double* pj = s.row.data();
+  for (int q = 0; q < a.nruns; ++q) {
+    std::uint32_t b, e;
+    if (!trim(s, a.runs[q], a.i, b, e)) continue;
+    for (std::uint32_t k = b; k < e; k += 4) {
+      __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(px + k), xi);
+      __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(py + k), yi);
+      __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(pz + k), zi);
+      if constexpr (Per) {
+        dx = image(dx, Lx, hx, mhx);
+        dy = image(dy, Ly, hy, mhy);
+        dz = image(dz, Lz, hz, mhz);
+      }
+      const __m256d d2 =
+          _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
+      const __m256d rc = _mm256_add_pd(ri, _mm256_loadu_pd(pr + k));
+      const __m256d jv = _mm256_loadu_pd(pj + k);
+      __m256d hit = _mm256_and_pd(_mm256_cmp_pd(jv, fi, _CMP_GT_OQ), _mm256_cmp_pd(d2, _mm256_mul_pd(rc, rc), _CMP_LT_OQ));
+      // lanes past the range's end belong to the next cells (or the padding): not candidates here
+      hit = _mm256_and_pd(hit, _mm256_cmp_pd(lane, _mm256_set1_pd(static_cast<double>(e - k)), _CMP_LT_OQ));
+      unsigned m = static_cast<unsigned>(_mm256_movemask_pd(hit));
+      while (m != 0) {
+        const unsigned l = static_cast<unsigned>(__builtin_ctz(m));
+        m &= m - 1;
+        const auto j = static_cast<std::uint32_t>(pj[k + l]);
+        np.push_back({a.i, j, Per ? image_shift((*a.pos)[j], a.xi, a.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}});
+      }
+    }
+  }
+}
+#pragma GCC pop_options
+#endif
+
+bool use_avx2(SearchIsa isa) {
+#ifdef DEMFDM_GRID_X86
+  static const bool has = __builtin_cpu_supports("avx2");
+  return isa != SearchIsa::kBaseline && has;
+#else
+  (void)isa;
+  return false;
+#endif
+}
+
+}  // namespace
+
+bool search_isa_available(SearchIsa isa) {
+  return isa == SearchIsa::kBaseline || use_avx2(isa);
+}
 
 std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, const std::vector<double>& rad,
                                                 double skin, const PeriodicParams& periodic, std::size_t reserve) {
+  return find_pair_candidates(pos, rad, skin, periodic, reserve, SearchIsa::kBest);
+}
+
+std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, const std::vector<double>& rad,
+                                                double skin, const PeriodicParams& periodic, std::size_t reserve,
+                                                SearchIsa isa) {
   const std::size_t n = pos.size();
   const bool per = periodic.enabled;
   const Vec3 o = periodic.origin, L = periodic.length;
@@ -46,7 +219,8 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   }
   const std::size_t ncell = static_cast<std::size_t>(nc[0]) * nc[1] * nc[2];
   std::vector<std::int32_t> cell_of(n);
-  std::vector<std::uint32_t> cell_start(ncell + 1, 0), cell_items(n);
+  Sorted s;
+  s.cell_start.assign(ncell + 1, 0);
   auto cidx = [&](const Vec3& x, int k) {
     int c = static_cast<int>(std::floor((x[k] - lo[k]) / cs[k]));
     return std::clamp(c, 0, nc[k] - 1);
@@ -54,62 +228,83 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   for (std::size_t i = 0; i < n; ++i) {
     const int c = (cidx(pos[i], 2) * nc[1] + cidx(pos[i], 1)) * nc[0] + cidx(pos[i], 0);
     cell_of[i] = c;
-    ++cell_start[static_cast<std::size_t>(c) + 1];
+    ++s.cell_start[static_cast<std::size_t>(c) + 1];
   }
-  for (std::size_t c = 0; c < ncell; ++c) cell_start[c + 1] += cell_start[c];
+  for (std::size_t c = 0; c < ncell; ++c) s.cell_start[c + 1] += s.cell_start[c];
+  // the cell-ordered copy; within a cell in ascending row order
+  constexpr std::size_t kPad = 4;
+  s.x.assign(n + kPad, 0.0);
+  s.y.assign(n + kPad, 0.0);
+  s.z.assign(n + kPad, 0.0);
+  s.r.assign(n + kPad, 0.0);
+  s.row.assign(n + kPad, -1.0);
+  s.cell_last.assign(ncell, 0);
   {
-    std::vector<std::uint32_t> fill(cell_start.begin(), cell_start.end() - 1);
-    for (std::size_t i = 0; i < n; ++i) cell_items[fill[cell_of[i]]++] = static_cast<std::uint32_t>(i);
+    std::vector<std::uint32_t> fill(s.cell_start.begin(), s.cell_start.end() - 1);
+    for (std::size_t i = 0; i < n; ++i) {
+      const std::uint32_t k = fill[cell_of[i]]++;
+      s.x[k] = pos[i].x;
+      s.y[k] = pos[i].y;
+      s.z[k] = pos[i].z;
+      s.r[k] = rad[i];
+      s.row[k] = static_cast<double>(i);
+      s.cell_last[cell_of[i]] = static_cast<std::uint32_t>(i);
+    }
   }
-  // candidate pairs (i < j), then one sort by (i, j). Positions are wrapped, so the
-  // minimum image needs at most one cell shift per axis.
+  const bool vec = use_avx2(isa);
+  void (*row)(const RowArgs&, std::vector<PairCandidate>&) = per ? &row_scalar<true> : &row_scalar<false>;
+#ifdef DEMFDM_GRID_X86
+  if (vec) row = per ? &row_avx2<true> : &row_avx2<false>;
+#endif
+  // candidate pairs (i < j), row by row. Positions are wrapped, so the minimum image needs at
+  // most one cell shift per axis.
   std::vector<PairCandidate> np;
   np.reserve(reserve);
-  const Vec3 halfL = 0.5 * L;  // the same products as 0.5 * L[a]
+  RowArgs ra{};
+  ra.s = &s;
+  ra.L = L;
+  ra.halfL = 0.5 * L;  // the same products as 0.5 * L[a]
+  ra.pos = &pos;
+  Run runs[18];
+  ra.runs = runs;
+  int last_cell = -1;
   for (std::size_t i = 0; i < n; ++i) {
     const std::size_t row_begin = np.size();
     const int c = cell_of[i];
-    const int ci[3] = {c % nc[0], (c / nc[0]) % nc[1], c / (nc[0] * nc[1])};
-    int lists[3][3] = {}, cnt[3] = {};
-    for (int k = 0; k < 3; ++k) {
-      for (int d = -1; d <= 1; ++d) {
-        int q = ci[k] + d;
-        if (per) q = (q % nc[k] + nc[k]) % nc[k];
-        else if (q < 0 || q >= nc[k]) continue;
-        bool dup = false;
-        for (int m = 0; m < cnt[k]; ++m) dup |= lists[k][m] == q;
-        if (!dup) lists[k][cnt[k]++] = q;
+    if (c != last_cell) {
+      // the stencil's x-rows as runs of consecutive cells (rows come mostly cell by cell:
+      // World::reorder_spatially, so the runs are worked out once per cell in most cases)
+      last_cell = c;
+      const int ci[3] = {c % nc[0], (c / nc[0]) % nc[1], c / (nc[0] * nc[1])};
+      int lists[3][3] = {}, cnt[3] = {};
+      for (int k = 0; k < 3; ++k) {
+        for (int d = -1; d <= 1; ++d) {
+          int q = ci[k] + d;
+          if (per) q = (q % nc[k] + nc[k]) % nc[k];
+          else if (q < 0 || q >= nc[k]) continue;
+          bool dup = false;
+          for (int m = 0; m < cnt[k]; ++m) dup |= lists[k][m] == q;
+          if (!dup) lists[k][cnt[k]++] = q;
+        }
       }
-    }
-    const Vec3 xi = pos[i];
-    const double ri = rad[i] + skin;
-    for (int z = 0; z < cnt[2]; ++z)
-      for (int y = 0; y < cnt[1]; ++y)
-        for (int x = 0; x < cnt[0]; ++x) {
-          const std::size_t cc = (static_cast<std::size_t>(lists[2][z]) * nc[1] + lists[1][y]) * nc[0] + lists[0][x];
-          // A cell lists its balls in ascending order: start after i (only j > i is a new pair).
-          const std::uint32_t* first = cell_items.data() + cell_start[cc];
-          const std::uint32_t* last = cell_items.data() + cell_start[cc + 1];
-          for (const std::uint32_t* it = std::upper_bound(first, last, static_cast<std::uint32_t>(i)); it != last;
-               ++it) {
-            const std::uint32_t j = *it;
-            Vec3 d = pos[j] - xi;
-            // minimum image as selects (no unpredictable branch per candidate); the image
-            // shift is only worked out for the few candidates within reach
-            if (per)
-              for (int a = 0; a < 3; ++a) d[a] = d[a] > halfL[a] ? d[a] - L[a] : (d[a] < -halfL[a] ? d[a] + L[a] : d[a]);
-            const double rc = ri + rad[j];
-            if (norm2(d) < rc * rc) {
-              std::array<std::int8_t, 4> s{0, 0, 0, 0};
-              if (per)
-                for (int a = 0; a < 3; ++a) {
-                  const double e = pos[j][a] - xi[a];
-                  s[a] = static_cast<std::int8_t>(e > halfL[a] ? -1 : (e < -halfL[a] ? 1 : 0));
-                }
-              np.push_back({static_cast<std::uint32_t>(i), j, s});
-            }
+      for (int u = 1; u < cnt[0]; ++u)  // ascending x, so that neighbouring cells join into runs
+        for (int v = u; v > 0 && lists[0][v] < lists[0][v - 1]; --v) std::swap(lists[0][v], lists[0][v - 1]);
+      int nr = 0;
+      for (int z = 0; z < cnt[2]; ++z)
+        for (int y = 0; y < cnt[1]; ++y) {
+          const std::size_t base = (static_cast<std::size_t>(lists[2][z]) * nc[1] + lists[1][y]) * nc[0];
+          for (int x = 0; x < cnt[0]; ++x) {
+            const auto cc = static_cast<std::uint32_t>(base + lists[0][x]);
+            if (x > 0 && lists[0][x] == lists[0][x - 1] + 1) ++runs[nr - 1].count;
+            else runs[nr++] = {cc, 1};
           }
         }
+      ra.nruns = nr;
+    }
+    ra.i = static_cast<std::uint32_t>(i);
+    ra.xi = pos[i];
+    ra.ri = rad[i] + skin;
+    row(ra, np);
     // Rows come in order of i, so sorting each row's partners by j sorts the list by (i, j)
     // (each j is found once per i: every cell is visited once).
     std::sort(np.begin() + static_cast<std::ptrdiff_t>(row_begin), np.end(),

@@ -1,5 +1,6 @@
 // Ball-ball neighbour search (docs/theory.md 1.4): a cell grid over the balls, each ball's 27
-// neighbouring cells searched once, every pair whose centres are closer than R_a + R_b + skin
+// neighbouring cells searched once (as 9 contiguous x-rows of a cell-ordered copy; docs/speed.md
+// issue 16 item 3), every pair whose centres are closer than R_a + R_b + skin
 // listed. A unit of its own: World::rebuild() calls it, then carries the contact history over
 // to the pairs it finds (world_detail.hpp HistoryCarry).
 #pragma once
@@ -27,5 +28,17 @@ struct PairCandidate {
 /// in a free domain. `reserve`: expected number of pairs (the previous list's size).
 std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& x, const std::vector<double>& r, double skin,
                                                 const PeriodicParams& periodic, std::size_t reserve = 0);
+
+/// The instruction set of the candidate test: kBest is AVX2 where the processor has it, else the
+/// baseline (one candidate at a time). Every choice gives the same list (the same operations in
+/// the same order, no fused multiply-add); the choice is for the tests that check this.
+enum class SearchIsa { kBest, kBaseline, kAvx2 };
+
+/// Whether `isa` runs as asked on this processor (kAvx2 without AVX2 runs the baseline).
+bool search_isa_available(SearchIsa isa);
+
+/// find_pair_candidates with the candidate test's instruction set chosen.
+std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& x, const std::vector<double>& r, double skin,
+                                                const PeriodicParams& periodic, std::size_t reserve, SearchIsa isa);
 
 }  // namespace demfdm::dem
