@@ -209,22 +209,27 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
         hi[k] = std::max(hi[k], pos[i][k]);
       }
   }
+  // Cells: kSplitX per cut-off along x, one per cut-off along y and z. A ball's search covers,
+  // per axis, the cells of [x_i - reach_i, x_i + reach_i], reach_i = (R_i + skin) + R_max (the
+  // largest R_i + skin + R_j), widened by a margin far above the rounding of the cell numbers; the
+  // thin x-cells make a ball's x-rows hardly longer than twice its reach.
+  constexpr int kSplitX = 4;
   int nc[3];
-  double cs[3];
+  double cs[3], margin[3];
   for (int k = 0; k < 3; ++k) {
     const double ext = hi[k] - lo[k];
-    if (per) nc[k] = std::max(1, static_cast<int>(std::floor(ext / cut)));
-    else nc[k] = std::max(1, std::min(1024, static_cast<int>(std::ceil(ext / cut))));
-    cs[k] = per ? ext / nc[k] : std::max(cut, ext / nc[k]);
+    const double w = k == 0 ? cut / kSplitX : cut;
+    if (per) nc[k] = std::max(1, static_cast<int>(std::floor(ext / w)));
+    else nc[k] = std::max(1, std::min(1024, static_cast<int>(std::ceil(ext / w))));
+    cs[k] = per ? ext / nc[k] : std::max(w, ext / nc[k]);
+    margin[k] = 1e-9 * (cut + std::abs(lo[k]) + std::abs(hi[k]));
   }
   const std::size_t ncell = static_cast<std::size_t>(nc[0]) * nc[1] * nc[2];
   std::vector<std::int32_t> cell_of(n);
   Sorted s;
   s.cell_start.assign(ncell + 1, 0);
-  auto cidx = [&](const Vec3& x, int k) {
-    int c = static_cast<int>(std::floor((x[k] - lo[k]) / cs[k]));
-    return std::clamp(c, 0, nc[k] - 1);
-  };
+  auto cell_floor = [&](double u, int k) { return static_cast<int>(std::floor((u - lo[k]) / cs[k])); };
+  auto cidx = [&](const Vec3& x, int k) { return std::clamp(cell_floor(x[k], k), 0, nc[k] - 1); };
   for (std::size_t i = 0; i < n; ++i) {
     const int c = (cidx(pos[i], 2) * nc[1] + cidx(pos[i], 1)) * nc[0] + cidx(pos[i], 0);
     cell_of[i] = c;
@@ -256,6 +261,29 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
 #ifdef DEMFDM_GRID_X86
   if (vec) row = per ? &row_avx2<true> : &row_avx2<false>;
 #endif
+  // The cells of axis k a ball at u with reach `reach` searches, each once, as runs of
+  // consecutive cell numbers (first, count); returns the number of runs (at most 2: a periodic
+  // wrap splits the range).
+  auto axis_runs = [&](int k, double u, double reach, int first[2], int count[2]) {
+    int a = cell_floor(u - (reach + margin[k]), k), b = cell_floor(u + (reach + margin[k]), k);
+    if (!per) {
+      a = std::clamp(a, 0, nc[k] - 1);
+      b = std::clamp(b, 0, nc[k] - 1);
+    } else if (b - a + 1 >= nc[k]) {
+      a = 0;
+      b = nc[k] - 1;
+    }
+    if (a < 0) {  // [a + nc, nc - 1] and [0, b]
+      first[0] = a + nc[k], count[0] = -a, first[1] = 0, count[1] = b + 1;
+      return 2;
+    }
+    if (b >= nc[k]) {  // [a, nc - 1] and [0, b - nc]
+      first[0] = a, count[0] = nc[k] - a, first[1] = 0, count[1] = b - nc[k] + 1;
+      return 2;
+    }
+    first[0] = a, count[0] = b - a + 1;
+    return 1;
+  };
   // candidate pairs (i < j), row by row. Positions are wrapped, so the minimum image needs at
   // most one cell shift per axis.
   std::vector<PairCandidate> np;
@@ -265,42 +293,23 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   ra.L = L;
   ra.halfL = 0.5 * L;  // the same products as 0.5 * L[a]
   ra.pos = &pos;
-  Run runs[18];
+  Run runs[8 * 8 * 2];
   ra.runs = runs;
-  int last_cell = -1;
   for (std::size_t i = 0; i < n; ++i) {
     const std::size_t row_begin = np.size();
-    const int c = cell_of[i];
-    if (c != last_cell) {
-      // the stencil's x-rows as runs of consecutive cells (rows come mostly cell by cell:
-      // World::reorder_spatially, so the runs are worked out once per cell in most cases)
-      last_cell = c;
-      const int ci[3] = {c % nc[0], (c / nc[0]) % nc[1], c / (nc[0] * nc[1])};
-      int lists[3][3] = {}, cnt[3] = {};
-      for (int k = 0; k < 3; ++k) {
-        for (int d = -1; d <= 1; ++d) {
-          int q = ci[k] + d;
-          if (per) q = (q % nc[k] + nc[k]) % nc[k];
-          else if (q < 0 || q >= nc[k]) continue;
-          bool dup = false;
-          for (int m = 0; m < cnt[k]; ++m) dup |= lists[k][m] == q;
-          if (!dup) lists[k][cnt[k]++] = q;
-        }
-      }
-      for (int u = 1; u < cnt[0]; ++u)  // ascending x, so that neighbouring cells join into runs
-        for (int v = u; v > 0 && lists[0][v] < lists[0][v - 1]; --v) std::swap(lists[0][v], lists[0][v - 1]);
-      int nr = 0;
-      for (int z = 0; z < cnt[2]; ++z)
-        for (int y = 0; y < cnt[1]; ++y) {
-          const std::size_t base = (static_cast<std::size_t>(lists[2][z]) * nc[1] + lists[1][y]) * nc[0];
-          for (int x = 0; x < cnt[0]; ++x) {
-            const auto cc = static_cast<std::uint32_t>(base + lists[0][x]);
-            if (x > 0 && lists[0][x] == lists[0][x - 1] + 1) ++runs[nr - 1].count;
-            else runs[nr++] = {cc, 1};
+    const double reach = (rad[i] + skin) + rmax;
+    int f[3][2], m[3][2], nrun[3];
+    for (int k = 0; k < 3; ++k) nrun[k] = axis_runs(k, pos[i][k], reach, f[k], m[k]);
+    int nr = 0;
+    for (int zr = 0; zr < nrun[2]; ++zr)
+      for (int z = f[2][zr]; z < f[2][zr] + m[2][zr]; ++z)
+        for (int yr = 0; yr < nrun[1]; ++yr)
+          for (int y = f[1][yr]; y < f[1][yr] + m[1][yr]; ++y) {
+            const std::size_t base = (static_cast<std::size_t>(z) * nc[1] + y) * nc[0];
+            for (int xr = 0; xr < nrun[0]; ++xr)
+              runs[nr++] = {static_cast<std::uint32_t>(base + f[0][xr]), static_cast<std::uint32_t>(m[0][xr])};
           }
-        }
-      ra.nruns = nr;
-    }
+    ra.nruns = nr;
     ra.i = static_cast<std::uint32_t>(i);
     ra.xi = pos[i];
     ra.ri = rad[i] + skin;
