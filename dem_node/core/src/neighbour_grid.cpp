@@ -13,6 +13,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -41,7 +42,9 @@ struct Sorted {
   std::vector<std::uint32_t> cell_last;   // the largest row in cell c (0 for an empty cell)
 };
 
-// One ball's row: the hits (i < j) of the runs, appended to np in the order found.
+// One ball's row: the hits (rows j > i) of the runs, their places in the cell-ordered arrays
+// written to `hits` in the order found (as doubles; the caller sorts them by row and works out
+// the image shifts). `hits` has room for every candidate of the row plus 4.
 struct RowArgs {
   const Sorted* s;
   const Run* runs;
@@ -50,7 +53,7 @@ struct RowArgs {
   Vec3 xi;
   double ri;  // R_i + skin
   Vec3 L, halfL;
-  const std::vector<Vec3>* pos;
+  double* hits;
 };
 
 // The image shift of a hit, as the scalar search has always worked it out.
@@ -58,7 +61,7 @@ inline std::array<std::int8_t, 4> image_shift(const Vec3& pj, const Vec3& xi, co
   std::array<std::int8_t, 4> s{0, 0, 0, 0};
   for (int a = 0; a < 3; ++a) {
     const double e = pj[a] - xi[a];
-    s[a] = static_cast<std::int8_t>(e > halfL[a] ? -1 : (e < -halfL[a] ? 1 : 0));
+    s[a] = static_cast<std::int8_t>(int(e < -halfL[a]) - int(e > halfL[a]));  // -1, 0 or 1 (not both)
   }
   return s;
 }
@@ -74,11 +77,13 @@ inline bool trim(const Sorted& s, const Run& run, std::uint32_t i, std::uint32_t
   return begin < end;
 }
 
-// Baseline: one candidate at a time, the same operations as the vector lanes.
+// Baseline: one candidate at a time, the same operations as the vector lanes. Returns the
+// number of hits.
 template <bool Per>
-void row_scalar(const RowArgs& a, std::vector<PairCandidate>& np) {
+std::size_t row_scalar(const RowArgs& a) {
   const Sorted& s = *a.s;
   const double fi = static_cast<double>(a.i);
+  std::size_t nh = 0;
   for (int q = 0; q < a.nruns; ++q) {
     std::uint32_t b, e;
     if (!trim(s, a.runs[q], a.i, b, e)) continue;
@@ -92,11 +97,19 @@ void row_scalar(const RowArgs& a, std::vector<PairCandidate>& np) {
       }
       const double d2 = dx * dx + dy * dy + dz * dz;
       const double rc = a.ri + s.r[k];
-      if ((s.row[k] > fi) & (d2 < rc * rc)) {
-        const auto j = static_cast<std::uint32_t>(s.row[k]);
-        np.push_back({a.i, j, Per ? image_shift((*a.pos)[j], a.xi, a.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}});
-      }
+      if ((s.row[k] > fi) & (d2 < rc * rc)) a.hits[nh++] = static_cast<double>(k);
     }
+  }
+  return nh;
+}
+
+// The rank of each of a row's nh hits by row number (how many are smaller; each j once):
+// rank[h] for the rows j[0..nh), which are followed by 4 entries +inf.
+void rank_scalar(const double* j, std::size_t nh, std::uint32_t* rank) {
+  for (std::size_t h = 0; h < nh; ++h) {
+    std::uint32_t r = 0;
+    for (std::size_t g = 0; g < nh; ++g) r += j[g] < j[h];
+    rank[h] = r;
   }
 }
 
@@ -110,11 +123,36 @@ void row_scalar(const RowArgs& a, std::vector<PairCandidate>& np) {
   return _mm256_blendv_pd(low, _mm256_sub_pd(d, L), over);
 }
 
+// Moves the lanes of a 4-bit mask to the front: 32-bit lane indices for a permute of four
+// doubles (lanes 2l and 2l + 1 for double l).
+alignas(32) constexpr std::int32_t kCompress[16][8] = {
+    {0, 1, 0, 1, 0, 1, 0, 1}, {0, 1, 0, 1, 0, 1, 0, 1}, {2, 3, 0, 1, 0, 1, 0, 1}, {0, 1, 2, 3, 0, 1, 0, 1},
+    {4, 5, 0, 1, 0, 1, 0, 1}, {0, 1, 4, 5, 0, 1, 0, 1}, {2, 3, 4, 5, 0, 1, 0, 1}, {0, 1, 2, 3, 4, 5, 0, 1},
+    {6, 7, 0, 1, 0, 1, 0, 1}, {0, 1, 6, 7, 0, 1, 0, 1}, {2, 3, 6, 7, 0, 1, 0, 1}, {0, 1, 2, 3, 6, 7, 0, 1},
+    {4, 5, 6, 7, 0, 1, 0, 1}, {0, 1, 4, 5, 6, 7, 0, 1}, {2, 3, 4, 5, 6, 7, 0, 1}, {0, 1, 2, 3, 4, 5, 6, 7}};
+
+// trim() for a run of at most 8 cells: the cells with a row after i, as one mask.
+[[gnu::always_inline]] inline bool trim_avx2(const Sorted& s, const Run& run, std::uint32_t i, std::uint32_t& begin,
+                                              std::uint32_t& end) {
+  if (run.count > 8) return trim(s, run, i, begin, end);
+  const __m256i sign = _mm256_set1_epi32(static_cast<int>(0x80000000u));
+  const __m256i last = _mm256_xor_si256(
+      _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.cell_last.data() + run.first)), sign);
+  const __m256i after = _mm256_cmpgt_epi32(last, _mm256_xor_si256(_mm256_set1_epi32(static_cast<int>(i)), sign));
+  const unsigned m = static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(after))) & ((1u << run.count) - 1u);
+  if (m == 0) return false;
+  begin = s.cell_start[run.first + static_cast<unsigned>(__builtin_ctz(m))];
+  end = s.cell_start[run.first + 32u - static_cast<unsigned>(__builtin_clz(m))];
+  return true;
+}
+
 // AVX2: four candidates per block. Multiplies and adds are separate instructions (no FMA is
 // enabled here), in the order of the scalar test: ((dx dx + dy dy) + dz dz) < (ri + R_j)^2.
+// The hit lanes' rows are moved to the front and stored without a branch.
 template <bool Per>
-void row_avx2(const RowArgs& a, std::vector<PairCandidate>& np) {
+std::size_t row_avx2(const RowArgs& a) {
   const Sorted& s = *a.s;
+  std::size_t nh = 0;
   const __m256d xi = _mm256_set1_pd(a.xi.x), yi = _mm256_set1_pd(a.xi.y), zi = _mm256_set1_pd(a.xi.z);
   const __m256d ri = _mm256_set1_pd(a.ri), fi = _mm256_set1_pd(static_cast<double>(a.i));
   const __m256d Lx = _mm256_set1_pd(a.L.x), Ly = _mm256_set1_pd(a.L.y), Lz = _mm256_set1_pd(a.L.z);
@@ -129,8 +167,10 @@ void row_avx2(const RowArgs& a, std::vector<PairCandidate>& np) {
   const double* pj = s.row.data();
   for (int q = 0; q < a.nruns; ++q) {
     std::uint32_t b, e;
-    if (!trim(s, a.runs[q], a.i, b, e)) continue;
+    if (!trim_avx2(s, a.runs[q], a.i, b, e)) continue;
+    const __m256d ev = _mm256_set1_pd(static_cast<double>(e));
     for (std::uint32_t k = b; k < e; k += 4) {
+      const __m256d kv = _mm256_add_pd(_mm256_set1_pd(static_cast<double>(k)), lane);
       __m256d dx = _mm256_sub_pd(_mm256_loadu_pd(px + k), xi);
       __m256d dy = _mm256_sub_pd(_mm256_loadu_pd(py + k), yi);
       __m256d dz = _mm256_sub_pd(_mm256_loadu_pd(pz + k), zi);
@@ -145,15 +185,26 @@ void row_avx2(const RowArgs& a, std::vector<PairCandidate>& np) {
       const __m256d jv = _mm256_loadu_pd(pj + k);
       __m256d hit = _mm256_and_pd(_mm256_cmp_pd(jv, fi, _CMP_GT_OQ), _mm256_cmp_pd(d2, _mm256_mul_pd(rc, rc), _CMP_LT_OQ));
       // lanes past the range's end belong to the next cells (or the padding): not candidates here
-      hit = _mm256_and_pd(hit, _mm256_cmp_pd(lane, _mm256_set1_pd(static_cast<double>(e - k)), _CMP_LT_OQ));
-      unsigned m = static_cast<unsigned>(_mm256_movemask_pd(hit));
-      while (m != 0) {
-        const unsigned l = static_cast<unsigned>(__builtin_ctz(m));
-        m &= m - 1;
-        const auto j = static_cast<std::uint32_t>(pj[k + l]);
-        np.push_back({a.i, j, Per ? image_shift((*a.pos)[j], a.xi, a.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}});
-      }
+      hit = _mm256_and_pd(hit, _mm256_cmp_pd(kv, ev, _CMP_LT_OQ));
+      const unsigned m = static_cast<unsigned>(_mm256_movemask_pd(hit));
+      const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress[m]));
+      _mm256_storeu_pd(a.hits + nh, _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(kv), perm)));
+      nh += static_cast<unsigned>(__builtin_popcount(m));
     }
+  }
+  return nh;
+}
+// rank_scalar four hits at a time: every g compared with a block of four h, counts summed in
+// the lanes (exact small integers). Every block runs nh steps: no branch varies within a row.
+void rank_avx2(const double* j, std::size_t nh, std::uint32_t* rank) {
+  const __m256d one = _mm256_set1_pd(1.0);
+  for (std::size_t h = 0; h < nh; h += 4) {
+    const __m256d jh = _mm256_loadu_pd(j + h);
+    __m256d r = _mm256_setzero_pd();
+    for (std::size_t g = 0; g < nh; ++g)
+      r = _mm256_add_pd(r, _mm256_and_pd(_mm256_cmp_pd(_mm256_broadcast_sd(j + g), jh, _CMP_LT_OQ), one));
+    const __m128i r32 = _mm256_cvttpd_epi32(r);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(rank + h), r32);
   }
 }
 #pragma GCC pop_options
@@ -228,7 +279,13 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   std::vector<std::int32_t> cell_of(n);
   Sorted s;
   s.cell_start.assign(ncell + 1, 0);
-  auto cell_floor = [&](double u, int k) { return static_cast<int>(std::floor((u - lo[k]) / cs[k])); };
+  // The cell number along axis k of a coordinate u: floor((u - lo) / cs) up to rounding, as
+  // trunc((u - lo) * (1 / cs) + 64) - 64 (no library floor; u is never 64 cells below lo). Any
+  // rounding is harmless: the balls' cells and the search ranges come from the same monotone
+  // function, and the ranges' margin is far wider than its rounding.
+  double inv_cs[3];
+  for (int k = 0; k < 3; ++k) inv_cs[k] = 1.0 / cs[k];
+  auto cell_floor = [&](double u, int k) { return static_cast<int>((u - lo[k]) * inv_cs[k] + 64.0) - 64; };
   auto cidx = [&](const Vec3& x, int k) { return std::clamp(cell_floor(x[k], k), 0, nc[k] - 1); };
   for (std::size_t i = 0; i < n; ++i) {
     const int c = (cidx(pos[i], 2) * nc[1] + cidx(pos[i], 1)) * nc[0] + cidx(pos[i], 0);
@@ -243,7 +300,7 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   s.z.assign(n + kPad, 0.0);
   s.r.assign(n + kPad, 0.0);
   s.row.assign(n + kPad, -1.0);
-  s.cell_last.assign(ncell, 0);
+  s.cell_last.assign(ncell + 8, 0);  // 8 more: trim_avx2 loads 8 at a time
   {
     std::vector<std::uint32_t> fill(s.cell_start.begin(), s.cell_start.end() - 1);
     for (std::size_t i = 0; i < n; ++i) {
@@ -257,9 +314,13 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     }
   }
   const bool vec = use_avx2(isa);
-  void (*row)(const RowArgs&, std::vector<PairCandidate>&) = per ? &row_scalar<true> : &row_scalar<false>;
+  std::size_t (*row)(const RowArgs&) = per ? &row_scalar<true> : &row_scalar<false>;
+  void (*rank_of)(const double*, std::size_t, std::uint32_t*) = &rank_scalar;
 #ifdef DEMFDM_GRID_X86
-  if (vec) row = per ? &row_avx2<true> : &row_avx2<false>;
+  if (vec) {
+    row = per ? &row_avx2<true> : &row_avx2<false>;
+    rank_of = &rank_avx2;
+  }
 #endif
   // The cells of axis k a ball at u with reach `reach` searches, each once, as runs of
   // consecutive cell numbers (first, count); returns the number of runs (at most 2: a periodic
@@ -292,11 +353,13 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   ra.s = &s;
   ra.L = L;
   ra.halfL = 0.5 * L;  // the same products as 0.5 * L[a]
-  ra.pos = &pos;
+  std::vector<double> hits(n + kPad);  // a row has fewer than n hits
+  ra.hits = hits.data();
+  std::vector<double> hit_row(n + kPad);
+  std::vector<std::uint32_t> rank(n + kPad), order(n);
   Run runs[8 * 8 * 2];
   ra.runs = runs;
   for (std::size_t i = 0; i < n; ++i) {
-    const std::size_t row_begin = np.size();
     const double reach = (rad[i] + skin) + rmax;
     int f[3][2], m[3][2], nrun[3];
     for (int k = 0; k < 3; ++k) nrun[k] = axis_runs(k, pos[i][k], reach, f[k], m[k]);
@@ -313,11 +376,20 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     ra.i = static_cast<std::uint32_t>(i);
     ra.xi = pos[i];
     ra.ri = rad[i] + skin;
-    row(ra, np);
-    // Rows come in order of i, so sorting each row's partners by j sorts the list by (i, j)
-    // (each j is found once per i: every cell is visited once).
-    std::sort(np.begin() + static_cast<std::ptrdiff_t>(row_begin), np.end(),
-              [](const PairCandidate& p, const PairCandidate& q) { return p.b < q.b; });
+    const std::size_t nh = row(ra);
+    // The row's partners in ascending order: each to its rank. Rows come in order of i, so the
+    // list is sorted by (i, j).
+    for (std::size_t h = 0; h < nh; ++h) hit_row[h] = s.row[static_cast<std::size_t>(hits[h])];
+    for (std::size_t h = nh; h < nh + kPad; ++h) hit_row[h] = std::numeric_limits<double>::infinity();
+    rank_of(hit_row.data(), nh, rank.data());
+    for (std::size_t h = 0; h < nh; ++h) order[rank[h]] = static_cast<std::uint32_t>(hits[h]);
+    const std::size_t at = np.size();
+    np.resize(at + nh);
+    for (std::size_t h = 0; h < nh; ++h) {
+      const std::uint32_t k = order[h];
+      np[at + h] = {ra.i, static_cast<std::uint32_t>(s.row[k]),
+                    per ? image_shift({s.x[k], s.y[k], s.z[k]}, ra.xi, ra.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}};
+    }
   }
   return np;
 }
