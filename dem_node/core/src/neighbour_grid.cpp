@@ -42,6 +42,14 @@ struct Sorted {
   std::vector<std::uint32_t> cell_last;   // the largest row in cell c (0 for an empty cell)
 };
 
+// The work arrays of a search.
+struct Scratch {
+  Sorted s;
+  std::vector<std::int32_t> cell_of;
+  std::vector<std::uint32_t> fill, rank, order;
+  std::vector<double> hits, hit_row;
+};
+
 // One ball's row: the hits (rows j > i) of the runs, their places in the cell-ordered arrays
 // written to `hits` in the order found (as doubles; the caller sorts them by row and works out
 // the image shifts). `hits` has room for every candidate of the row plus 4.
@@ -276,8 +284,12 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     margin[k] = 1e-9 * (cut + std::abs(lo[k]) + std::abs(hi[k]));
   }
   const std::size_t ncell = static_cast<std::size_t>(nc[0]) * nc[1] * nc[2];
-  std::vector<std::int32_t> cell_of(n);
-  Sorted s;
+  // Work arrays kept from call to call in this thread (a rebuild would otherwise take about
+  // 90 bytes per ball of fresh pages from the system each time).
+  thread_local Scratch scratch;
+  Sorted& s = scratch.s;
+  std::vector<std::int32_t>& cell_of = scratch.cell_of;
+  cell_of.resize(n);
   s.cell_start.assign(ncell + 1, 0);
   // The cell number along axis k of a coordinate u: floor((u - lo) / cs) up to rounding, as
   // trunc((u - lo) * (1 / cs) + 64) - 64 (no library floor; u is never 64 cells below lo). Any
@@ -302,7 +314,8 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   s.row.assign(n + kPad, -1.0);
   s.cell_last.assign(ncell + 8, 0);  // 8 more: trim_avx2 loads 8 at a time
   {
-    std::vector<std::uint32_t> fill(s.cell_start.begin(), s.cell_start.end() - 1);
+    std::vector<std::uint32_t>& fill = scratch.fill;
+    fill.assign(s.cell_start.begin(), s.cell_start.end() - 1);
     for (std::size_t i = 0; i < n; ++i) {
       const std::uint32_t k = fill[cell_of[i]]++;
       s.x[k] = pos[i].x;
@@ -315,10 +328,12 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   }
   const bool vec = use_avx2(isa);
   std::size_t (*row)(const RowArgs&) = per ? &row_scalar<true> : &row_scalar<false>;
+  std::size_t (*row_plain)(const RowArgs&) = &row_scalar<false>;  // no minimum image
   void (*rank_of)(const double*, std::size_t, std::uint32_t*) = &rank_scalar;
 #ifdef DEMFDM_GRID_X86
   if (vec) {
     row = per ? &row_avx2<true> : &row_avx2<false>;
+    row_plain = &row_avx2<false>;
     rank_of = &rank_avx2;
   }
 #endif
@@ -353,16 +368,29 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   ra.s = &s;
   ra.L = L;
   ra.halfL = 0.5 * L;  // the same products as 0.5 * L[a]
-  std::vector<double> hits(n + kPad);  // a row has fewer than n hits
+  std::vector<double>& hits = scratch.hits;  // a row has fewer than n hits
+  std::vector<double>& hit_row = scratch.hit_row;
+  std::vector<std::uint32_t>& rank = scratch.rank;
+  std::vector<std::uint32_t>& order = scratch.order;
+  for (auto* v : {&hits, &hit_row}) v->resize(n + kPad);
+  for (auto* v : {&rank, &order}) v->resize(n + kPad);
   ra.hits = hits.data();
-  std::vector<double> hit_row(n + kPad);
-  std::vector<std::uint32_t> rank(n + kPad), order(n);
   Run runs[8 * 8 * 2];
   ra.runs = runs;
   for (std::size_t i = 0; i < n; ++i) {
     const double reach = (rad[i] + skin) + rmax;
     int f[3][2], m[3][2], nrun[3];
-    for (int k = 0; k < 3; ++k) nrun[k] = axis_runs(k, pos[i][k], reach, f[k], m[k]);
+    // In a periodic cell, a ball whose searched cells lie within 0.99 L/2 of it on every axis
+    // (no wrap) has no candidate farther than L/2: the minimum-image selects would change
+    // nothing and every image shift is 0, so the test without them gives the same bits.
+    bool plain = true;
+    for (int k = 0; k < 3; ++k) {
+      nrun[k] = axis_runs(k, pos[i][k], reach, f[k], m[k]);
+      if (per) {
+        const double below = pos[i][k] - (lo[k] + f[k][0] * cs[k]), above = (lo[k] + (f[k][0] + m[k][0]) * cs[k]) - pos[i][k];
+        plain &= nrun[k] == 1 && below < 0.99 * ra.halfL[k] && above < 0.99 * ra.halfL[k];
+      }
+    }
     int nr = 0;
     for (int zr = 0; zr < nrun[2]; ++zr)
       for (int z = f[2][zr]; z < f[2][zr] + m[2][zr]; ++z)
@@ -376,7 +404,7 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     ra.i = static_cast<std::uint32_t>(i);
     ra.xi = pos[i];
     ra.ri = rad[i] + skin;
-    const std::size_t nh = row(ra);
+    const std::size_t nh = plain ? row_plain(ra) : row(ra);
     // The row's partners in ascending order: each to its rank. Rows come in order of i, so the
     // list is sorted by (i, j).
     for (std::size_t h = 0; h < nh; ++h) hit_row[h] = s.row[static_cast<std::size_t>(hits[h])];
@@ -388,7 +416,7 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     for (std::size_t h = 0; h < nh; ++h) {
       const std::uint32_t k = order[h];
       np[at + h] = {ra.i, static_cast<std::uint32_t>(s.row[k]),
-                    per ? image_shift({s.x[k], s.y[k], s.z[k]}, ra.xi, ra.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}};
+                    !plain ? image_shift({s.x[k], s.y[k], s.z[k]}, ra.xi, ra.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}};
     }
   }
   return np;
