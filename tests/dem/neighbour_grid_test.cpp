@@ -3,6 +3,7 @@
 // free domain, a periodic cell and a cell only just above twice the cut-off.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 #include <tuple>
 #include <vector>
@@ -190,5 +191,46 @@ TEST(NeighbourGrid, TheCutOffIsStrictAndSumsTheRadiiInRowOrder) {
     SCOPED_TRACE(isa_name(isa));
     const auto got = find_pair_candidates(p.x, p.r, skin, PeriodicParams{}, 0, isa);
     EXPECT_TRUE(same(got, want)) << got.size() << " pairs found, " << want.size() << " by brute force";
+  }
+}
+
+// Pairs just inside the cut-off in every direction, of the largest balls (the reach of a search
+// is R_i + skin + R_max: it has no slack for them), next to pairs just outside it: a search that
+// reaches any less far, or cells that miss a neighbour, loses pairs here. Periodic (pairs across
+// the faces) and free.
+TEST(NeighbourGrid, FindsPairsOfTheLargestBallsJustInsideTheCutOff) {
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::normal_distribution<double> g(0.0, 1.0);
+  const double R = 0.02, skin = 0.004, cut = 2.0 * R + skin;
+  PeriodicParams per;
+  per.enabled = true;
+  per.length = {0.7, 0.6, 0.5};
+  Packing p;
+  for (int c = 0; c < 1500; ++c) {
+    Vec3 dir{g(rng), g(rng), g(rng)};
+    dir = (1.0 / norm(dir)) * dir;
+    const double dist = cut * (c % 2 == 0 ? 1.0 - 1e-9 : 1.0 + 1e-9);
+    const Vec3 a{per.length.x * u(rng), per.length.y * u(rng), per.length.z * u(rng)};
+    Vec3 b = a + dist * dir;
+    for (int k = 0; k < 3; ++k) b[k] -= per.length[k] * std::floor(b[k] / per.length[k]);  // wrapped
+    p.x.push_back(a);
+    p.r.push_back(R);
+    p.x.push_back(b);
+    p.r.push_back(R);
+  }
+  const auto want = brute_force(p, skin, per);
+  std::size_t across = 0;
+  for (const auto& c : want) across += c.s[0] != 0 || c.s[1] != 0 || c.s[2] != 0;
+  EXPECT_GT(want.size(), 700u);
+  EXPECT_GT(across, 50u);
+  // the same balls in a free domain (no images)
+  const auto want_free = brute_force(p, skin, PeriodicParams{});
+  for (SearchIsa isa : kIsas) {
+    SCOPED_TRACE(isa_name(isa));
+    const auto got = find_pair_candidates(p.x, p.r, skin, per, 0, isa);
+    EXPECT_TRUE(same(got, want)) << got.size() << " pairs found, " << want.size() << " by brute force";
+    const auto got_free = find_pair_candidates(p.x, p.r, skin, PeriodicParams{}, 0, isa);
+    EXPECT_TRUE(same(got_free, want_free)) << got_free.size() << " pairs found, " << want_free.size();
   }
 }
