@@ -1,14 +1,15 @@
 // Ball-ball neighbour search (neighbour_grid.hpp; docs/theory.md 1.4).
 //
 // The balls are copied into cell order as separate x, y, z, R and row arrays (structure of
-// arrays). The three cells of an x-row of a ball's 3 x 3 x 3 stencil are then one contiguous
-// range (two when a periodic wrap splits the row), so a ball tests 9 ranges straight through,
-// with no search for the first j > i: every candidate gets the branch-free test
-// (j > i) & (d2 < rc^2), four at a time where AVX2 is available, and the rare hits are taken
-// from the lane mask (docs/speed.md, issue 16 item 3). The arithmetic of the test is the same
-// sequence of operations in every build (no fused multiply-add: the project compiles with
-// -ffp-contract=off and the AVX2 region uses separate multiplies and adds), so every build
-// finds the same pairs as a brute-force test of every pair (tests/dem/neighbour_grid_test.cpp).
+// arrays); cells are a quarter of the cut-off along x, one cut-off along y and z. A ball searches
+// the cells within its own reach R_i + skin + R_max on each axis, so each x-row of its search is
+// one contiguous range (two when a periodic wrap splits it), with no search for the first
+// j > i: every candidate gets the branch-free test (j > i) & (d2 < rc^2), four at a time where
+// AVX2 is available, and the rare hits are taken from the lane mask (docs/speed.md, issue 16
+// item 3). The arithmetic of the test is the same sequence of operations in every build (no
+// fused multiply-add: the project compiles with -ffp-contract=off and the AVX2 region uses
+// separate multiplies and adds), so every build finds the same pairs as a brute-force test of
+// every pair (tests/dem/neighbour_grid_test.cpp).
 #include "demfdm/dem/neighbour_grid.hpp"
 
 #include <algorithm>
@@ -191,7 +192,8 @@ std::size_t row_avx2(const RowArgs& a) {
           _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(dx, dx), _mm256_mul_pd(dy, dy)), _mm256_mul_pd(dz, dz));
       const __m256d rc = _mm256_add_pd(ri, _mm256_loadu_pd(pr + k));
       const __m256d jv = _mm256_loadu_pd(pj + k);
-      __m256d hit = _mm256_and_pd(_mm256_cmp_pd(jv, fi, _CMP_GT_OQ), _mm256_cmp_pd(d2, _mm256_mul_pd(rc, rc), _CMP_LT_OQ));
+      __m256d hit = _mm256_and_pd(_mm256_cmp_pd(jv, fi, _CMP_GT_OQ),
+                                  _mm256_cmp_pd(d2, _mm256_mul_pd(rc, rc), _CMP_LT_OQ));
       // lanes past the range's end belong to the next cells (or the padding): not candidates here
       hit = _mm256_and_pd(hit, _mm256_cmp_pd(kv, ev, _CMP_LT_OQ));
       const unsigned m = static_cast<unsigned>(_mm256_movemask_pd(hit));
@@ -387,7 +389,8 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     for (int k = 0; k < 3; ++k) {
       nrun[k] = axis_runs(k, pos[i][k], reach, f[k], m[k]);
       if (per) {
-        const double below = pos[i][k] - (lo[k] + f[k][0] * cs[k]), above = (lo[k] + (f[k][0] + m[k][0]) * cs[k]) - pos[i][k];
+        const double below = pos[i][k] - (lo[k] + f[k][0] * cs[k]);
+        const double above = (lo[k] + (f[k][0] + m[k][0]) * cs[k]) - pos[i][k];
         plain &= nrun[k] == 1 && below < 0.99 * ra.halfL[k] && above < 0.99 * ra.halfL[k];
       }
     }
@@ -415,8 +418,9 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
     np.resize(at + nh);
     for (std::size_t h = 0; h < nh; ++h) {
       const std::uint32_t k = order[h];
+      const std::array<std::int8_t, 4> none{0, 0, 0, 0};
       np[at + h] = {ra.i, static_cast<std::uint32_t>(s.row[k]),
-                    !plain ? image_shift({s.x[k], s.y[k], s.z[k]}, ra.xi, ra.halfL) : std::array<std::int8_t, 4>{0, 0, 0, 0}};
+                    plain ? none : image_shift({s.x[k], s.y[k], s.z[k]}, ra.xi, ra.halfL)};
     }
   }
   return np;
