@@ -423,6 +423,10 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
                     plain ? none : image_shift({s.x[k], s.y[k], s.z[k]}, ra.xi, ra.halfL)};
     }
   }
+  // A sparse free domain can have far more cells than balls: do not keep such cell arrays.
+  if (ncell > 8 * n + 65536) {
+    for (auto* v : {&s.cell_start, &s.cell_last, &scratch.fill}) std::vector<std::uint32_t>().swap(*v);
+  }
   return np;
 }
 
