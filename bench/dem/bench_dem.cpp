@@ -1,15 +1,16 @@
 // bench_dem: time the DEM cycle on the 25,835-sphere periodic reference packing (bench/dem/data)
 // (LAMMPS dump: 9 header lines, box bounds on lines 6–8, then "x y z radius", SI).
 // Same physics as the LAMMPS reference: k_n = 2.55e5 N/m for every pair, k_s = k_n/2.4,
+// (soft bond and parallel bond: every touching pair bonded, bond keys at their defaults),
 // μ = tan 32°, ρ = 2650 kg/m³, periodic, 2,000 held steps with no neighbour rebuild.
 // (Local damping α = 0.7, the WorldParams default; bench/dem/vs_lammps.py runs LAMMPS
 // gran/hooke/history on the same packing and prints the ratios, docs/speed.md.)
 //
-// Usage: bench_dem [packing] [linear|softbond|moving] [threads] [steps] [period]
+// Usage: bench_dem [packing] [linear|softbond|pbond|moving] [threads] [steps] [period]
 //        bench_dem [packing]            → runs the configurations in child processes: per model,
 //                                          1 thread, and 2 threads with the default OpenMP wait
 //                                          policy and with OMP_WAIT_POLICY=PASSIVE (labelled)
-//        bench_dem --info [packing] [linear|softbond]
+//        bench_dem --info [packing] [linear|softbond|pbond]
 //                                        → set-up only (load, sort, bond, 20 warm-up steps): one
 //                                          "info key=value ..." line (dt, skin, list size, active
 //                                          contacts, record sizes, bytes per contact of the pass)
@@ -143,11 +144,12 @@ double thread_cpu_s() {
 }
 
 // The world of the benchmark: the packing, the model ("moving" runs the linear model), rows
-// sorted along the Morton curve, soft bond: every touching pair bonded; 20 warm-up steps.
+// sorted along the Morton curve, soft bond and parallel bond: every touching pair bonded;
+// 20 warm-up steps.
 std::unique_ptr<World> make_world(const Packing& pk, const std::string& model, int threads, std::string& kname,
                                   PairKernel& kernel) {
-  if (model != "linear" && model != "softbond" && model != "moving")
-    throw std::runtime_error("model must be linear, softbond or moving, found '" + model + "'");
+  if (model != "linear" && model != "softbond" && model != "pbond" && model != "moving")
+    throw std::runtime_error("model must be linear, softbond, pbond or moving, found '" + model + "'");
   WorldParams p;
   p.density = 2650.0;
   p.threads = threads;
@@ -157,7 +159,9 @@ std::unique_ptr<World> make_world(const Packing& pk, const std::string& model, i
   p.ball_ball.linear.kn_fixed = 2.55e5;
   p.ball_ball.linear.kratio = 2.4;
   p.ball_ball.linear.fric = 0.6248693519093275;
-  p.ball_ball.model = model == "softbond" ? ContactModel::kSoftBond : ContactModel::kLinear;
+  p.ball_ball.model = model == "softbond" ? ContactModel::kSoftBond
+                      : model == "pbond"  ? ContactModel::kLinearPBond
+                                          : ContactModel::kLinear;
   p.skin = 0.1 * 2.0 * 0.058e-3;  // 0.1 d50 (the second LAMMPS anchor uses the same)
   auto w = std::make_unique<World>(p);
   kernel = kernel_from_env(kname);
@@ -165,7 +169,7 @@ std::unique_ptr<World> make_world(const Packing& pk, const std::string& model, i
   for (std::size_t i = 0; i < pk.x.size(); ++i) w->add_ball(pk.x[i], pk.r[i]);
   w->reorder_spatially();  // cache locality: the dump order is random in space
   w->prepare();
-  if (model == "softbond") w->bond_ball_ball(-1.0, 0.0);  // bond every touching pair
+  if (model == "softbond" || model == "pbond") w->bond_ball_ball(-1.0, 0.0);  // bond every touching pair
   w->step(20);  // warm-up (first-touch of all arrays)
   return w;
 }
@@ -483,7 +487,7 @@ int main(int argc, char** argv) {
       int threads;
       const char* policy;  // nullptr: default (unset)
     };
-    for (const char* m : {"linear", "softbond"})
+    for (const char* m : {"linear", "softbond", "pbond"})
       for (const Config& c : {Config{1, nullptr}, Config{2, nullptr}, Config{2, "PASSIVE"}}) {
         if (c.policy) setenv("OMP_WAIT_POLICY", c.policy, 1);
         else unsetenv("OMP_WAIT_POLICY");

@@ -1,7 +1,7 @@
 // The vectorised ball–ball pass and law of motion (pair_block.hpp, issue 3 item 12) must give
 // the scalar loops bit for bit: every lane performs the scalar operations in the same order,
 // the rare paths (soft-bond softening, breakage, shear break, large rotations, unbonded
-// contacts; rows with fixity) are redone by the scalar code, and sums keep their order. Checked on small random packings, linear and soft
+// contacts; parallel-bond breakage; rows with fixity) are redone by the scalar code, and sums keep their order. Checked on small random packings, linear and soft
 // bond, periodic (with a straining cell) and free, for every instruction set this CPU has.
 #include <gtest/gtest.h>
 
@@ -91,7 +91,8 @@ Result run(const Scene& sc, PairKernel kernel) {
                     (k + 0.5) * s + sc.pos_jitter * R * u(rng)},
                    R * (1.0 + sc.rad_jitter * u(rng)));
   w.prepare();
-  if (sc.model == ContactModel::kSoftBond) w.bond_ball_ball(-1.0, sc.bond_gap * R);
+  if (sc.model == ContactModel::kSoftBond || sc.model == ContactModel::kLinearPBond)
+    w.bond_ball_ball(-1.0, sc.bond_gap * R);
   const double rate = sc.rate;
   for (std::size_t i = 0; i < w.num_balls(); ++i) {
     w.balls().v[i] = sc.vel * Vec3{u(rng), u(rng), u(rng)};
@@ -255,13 +256,35 @@ TEST(SimdKernel, HertzPeriodicStrainedAndFreeBitIdentical) {
   check_scene(fr);
 }
 
+// Parallel bond (docs/theory.md §2): every contact has a lane (intact bonds, broken and
+// never-bonded ones alike); a bond that breaks in its lane is redone by the scalar law. The pull
+// breaks bonds in tension and the spins in shear within the run, with intact ones left.
+TEST(SimdKernel, ParallelBondPeriodicAndFreeBitIdentical) {
+  Scene sc;
+  sc.name = "pbond periodic strained";
+  bonded_setup(sc);
+  sc.model = ContactModel::kLinearPBond;
+  sc.spin = 400.0;
+  check_scene(sc);
+  const Result r = run(sc, PairKernel::kAuto);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kBrokenTension)], 0);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kBrokenShear)], 0);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kIntact)], 0);
+  Scene fr = sc;
+  fr.name = "pbond free incremental";
+  fr.periodic = false;
+  fr.mode = NormalMode::kIncremental;
+  check_scene(fr);
+}
+
 // Two threads: contact blocks per thread and the fixed-order reduction are shared by both
 // passes, so the vectorised pass repeats the scalar one bit for bit there too.
 TEST(SimdKernel, TwoThreadsBitIdentical) {
-  for (ContactModel m : {ContactModel::kLinear, ContactModel::kSoftBond}) {
+  for (ContactModel m : {ContactModel::kLinear, ContactModel::kSoftBond, ContactModel::kLinearPBond}) {
     Scene sc;
-    sc.name = m == ContactModel::kLinear ? "linear 2 threads" : "softbond 2 threads";
-    if (m == ContactModel::kSoftBond) bonded_setup(sc);
+    sc.name = std::string(law_name(m)) + " 2 threads";
+    if (m != ContactModel::kLinear) bonded_setup(sc);
+    sc.model = m;
     sc.nside = 12;  // > 4096 pairs: the threaded branch of the pass runs
     sc.threads = 2;
     sc.steps = 30;

@@ -67,6 +67,14 @@ Fn hertz_kernel(Isa isa) {
   }
 }
 
+Fn pbond_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::pbond_block;
+    case Isa::kAvx512: return &avx512::pbond_block;
+    default: return &baseline::pbond_block;
+  }
+}
+
 MotionFn motion_kernel(Isa isa) {
   switch (isa) {
     case Isa::kAvx2: return &avx2::motion_block;

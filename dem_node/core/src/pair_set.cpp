@@ -357,6 +357,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         in.hasn[n] = (fl & ContactHist::kHasNormal) != 0;
         in.incr[n] = (fl & ContactHist::kIncremental) != 0;
         in.scalar[n] = Law::lane_needs_scalar(bond_at(c));
+        if constexpr (Law::kBond) in.intact[n] = BD[c].state == BondState::kIntact;
         n += !skip;
       }
       if (n == 0) break;
@@ -364,6 +365,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         in.c[l] = in.c[0]; in.a[l] = in.a[0]; in.b[l] = in.b[0];
         in.dx[l] = in.dx[0]; in.dy[l] = in.dy[0]; in.dz[l] = in.dz[0]; in.d2[l] = in.d2[0];
         in.hasn[l] = in.hasn[0]; in.incr[l] = in.incr[0]; in.scalar[l] = in.scalar[0];
+        if constexpr (Law::kBond) in.intact[l] = in.intact[0];
       }
       kern(ctx, in, out);
       for (int l = 0; l < n; ++l) {

@@ -5,10 +5,10 @@
 // Stage 2 (here, one lane loop compiled for the baseline ISA, AVX2 and AVX-512, chosen at run
 // time): kinematics and the law for all lanes with branch-free selects. Every lane calls the
 // formula functions of the scalar law (laws/*.hpp: linear_core, softbond_predict, hertz_core,
-// rotate_xyz), so a formula is written once; IEEE +, −, ×, ÷ and √
+// pbond_core, rotate_xyz), so a formula is written once; IEEE +, −, ×, ÷ and √
 // are exact per lane and the build forbids FMA contraction (-ffp-contract=off), so each lane is
 // bit-identical to the scalar law. Rare paths (soft bond: peak exceeded, softening step,
-// breakage, shear break; unbonded soft-bond contacts; a plane rotation large enough to need
+// breakage, shear break; unbonded soft-bond contacts; a breaking parallel bond; a plane rotation large enough to need
 // the exact rescale √(m2/k2)) set `scalar` and are redone by the scalar law in stage 3, which
 // starts from the untouched history.
 // Stage 3 (PairSet::pass_law, scalar, contact order): histories written back, forces and
@@ -33,6 +33,8 @@ struct In {
   double dx[kLanes], dy[kLanes], dz[kLanes], d2[kLanes];  // branch vector x_B − x_A (image), ‖d‖²
   std::int64_t hasn[kLanes], incr[kLanes];  // ContactHist::kHasNormal, kIncremental set
   std::int64_t scalar[kLanes];              // lane known to need the scalar law (stage 1)
+  std::int64_t intact[kLanes];              // laws with bond state: BondState::kIntact (a byte
+                                            // load in the lane loop would stop GCC vectorising it)
 };
 
 /// Stage 2 output per lane: the new history and the contributions to the ball sums.
@@ -42,7 +44,8 @@ struct Out {
   double TB[3][kLanes];  // torque added to B (ℓ_B × F + M)
   double n[3][kLanes];   // unit normal (new n_old)
   double fs[3][kLanes], fn[kLanes], e_slip[kLanes];
-  double mb[3][kLanes], mt[kLanes];  // soft bond
+  double mb[3][kLanes], mt[kLanes];  // soft bond, parallel bond
+  double fsb[3][kLanes], nb[kLanes];  // parallel bond: shear and normal force
   double kn[kLanes], ks[kLanes];     // Hertz–Mindlin: tangent stiffnesses
   std::int64_t active[kLanes], slip[kLanes];  // new kActive / kSlip flags (linear)
   std::int64_t scalar[kLanes];  // lane must be redone by the scalar law
@@ -98,6 +101,8 @@ Isa best_isa();
 Fn linear_kernel(Isa isa);
 Fn softbond_kernel(Isa isa);
 Fn hertz_kernel(Isa isa);
+/// Parallel bond: every lane (requires rescale).
+Fn pbond_kernel(Isa isa);
 MotionFn motion_kernel(Isa isa);
 
 }  // namespace demfdm::dem::pairblock

@@ -1,6 +1,7 @@
 // Linear parallel bond (docs/theory.md §2, Potyondy & Cundall 2004): the linear contact (§1.7)
 // in parallel with an elastic, brittle cemented disc that carries force and moment until its
-// tensile or shear strength is exceeded. Scalar only (no lane kernel yet).
+// tensile or shear strength is exceeded. The bond's formula is written once (pbond_core, on
+// components, branch-free); the scalar law and the vector lanes (pair_block_body.inc) call it.
 #pragma once
 
 #include <cmath>
@@ -9,27 +10,61 @@
 
 namespace demfdm::dem {
 
-/// §2.4–2.5 parallel bond, bonded state. Returns false if the bond broke this step.
-/// Adds the bond force/moment on B into (F, M).
+/// §2.4–2.5 on components: the bond force and moment after the increments (Δu_n, Δu_s, Δθ_t,
+/// Δθ_b), and whether the bond breaks. Inputs: the bond's normal force `nb` (tension +), its
+/// shear force (sx, sy, sz) and bending moment (mx, my, mz) rotated into the current plane, its
+/// twisting moment `mt`, radius `rb` and normal stiffness per area `kn`. Strictly greater: a
+/// bond loaded exactly to its strength survives (U15).
+struct PBondStep {
+  double nb, sx, sy, sz, mt, mx, my, mz;
+  bool broken_t, broken_s;
+};
+[[gnu::always_inline]] inline PBondStep pbond_core(double nb, double sx, double sy, double sz, double mt, double mx,
+                                                   double my, double mz, double rb, double kn, const LawConst& c,
+                                                   double dun, double dsx, double dsy, double dsz, double dtt,
+                                                   double dbx, double dby, double dbz) {
+  const double A = std::numbers::pi * rb * rb, iA = 1.0 / A;  // BondHist::area()
+  const double rb_I = 4.0 * std::numbers::pi * rb * iA * iA;   // R̄/I = 4πR̄/A²
+  const double ks = kn * c.ks_kn;
+  const double kA = ks * A, J = 0.5 * A * rb * rb, I = 0.25 * A * rb * rb;  // BondHist::polar(), inertia()
+  const double kI = kn * I;
+  PBondStep o;
+  o.nb = nb + kn * A * dun;
+  o.sx = sx - kA * dsx;
+  o.sy = sy - kA * dsy;
+  o.sz = sz - kA * dsz;
+  o.mt = mt - ks * J * dtt;
+  o.mx = mx - kI * dbx;
+  o.my = my - kI * dby;
+  o.mz = mz - kI * dbz;
+  const double mb = __builtin_sqrt(o.mx * o.mx + o.my * o.my + o.mz * o.mz);
+  const double fs = __builtin_sqrt(o.sx * o.sx + o.sy * o.sy + o.sz * o.sz);
+  const double sigma = o.nb * iA + c.beta * mb * rb_I;
+  const double tau = fs * iA + c.beta * __builtin_fabs(o.mt) * (0.5 * rb_I);
+  o.broken_t = sigma > c.sigc;
+  o.broken_s = !o.broken_t & (tau > c.coh - (o.nb * iA) * c.tanphi);
+  return o;
+}
+
+/// §2.4–2.5 parallel bond, bonded state, on the history (pbond_core). Adds the bond force and
+/// moment on B into (F, M); a broken bond leaves with its elastic energy and adds nothing.
 [[gnu::always_inline]] inline void pbond_update(BondHist& b, const LawConst& c, double dun, const Vec3& dus, double dtt,
                          const Vec3& dtb, const Vec3& n, Vec3& F, Vec3& M) {
-  const double A = b.area(), iA = 1.0 / A;
-  const double rb_I = 4.0 * std::numbers::pi * b.rb * iA * iA;  // R̄/I = 4πR̄/A²
-  b.nb += b.kn * A * dun;
-  b.fsb -= ((b.kn * c.ks_kn) * A) * dus;
-  b.mt -= (b.kn * c.ks_kn) * b.polar() * dtt;
-  b.mb -= (b.kn * b.inertia()) * dtb;
-  const double sigma = b.nb * iA + c.beta * norm(b.mb) * rb_I;
-  const double tau = norm(b.fsb) * iA + c.beta * std::abs(b.mt) * (0.5 * rb_I);
-  // Strictly greater: a bond loaded exactly to its strength survives (U15).
-  if (sigma > c.sigc) {
+  const PBondStep p = pbond_core(b.nb, b.fsb.x, b.fsb.y, b.fsb.z, b.mt, b.mb.x, b.mb.y, b.mb.z, b.rb, b.kn, c, dun,
+                                 dus.x, dus.y, dus.z, dtt, dtb.x, dtb.y, dtb.z);
+  b.nb = p.nb;
+  b.fsb = {p.sx, p.sy, p.sz};
+  b.mt = p.mt;
+  b.mb = {p.mx, p.my, p.mz};
+  if (p.broken_t) {
     b.state = BondState::kBrokenTension;
-  } else if (tau > c.coh - (b.nb * iA) * c.tanphi) {
+  } else if (p.broken_s) {
     b.state = BondState::kBrokenShear;
   }
   if (b.state != BondState::kIntact) {  // §2.5: force, moment and stiffness removed
     // The bond's elastic energy leaves with it: book it as bond dissipation (§8.18), so that
     // the energy balance closes across breakage.
+    const double iA = 1.0 / b.area();
     const double ks = b.kn * c.ks_kn;
     b.e_soft += 0.5 * (b.nb * b.nb * iA / b.kn + norm2(b.fsb) * iA / ks + b.mt * b.mt / (ks * b.polar()) +
                        norm2(b.mb) / (b.kn * b.inertia()));
@@ -99,8 +134,13 @@ struct PBondLaw : LawDefaults {
     }
     return F;
   }
-  /// A bond across a gap carries load: never skipped.
-  static bool idle(double, double, const ContactHist&, const BondHist*) { return false; }
+  /// An intact bond across a gap carries load: never skipped. Without an intact bond (never
+  /// bonded, or broken: its force and moment were zeroed, §2.5) the contact is the linear one,
+  /// and a separated, force-free one needs no update (LinearLaw::idle): F_n = 0 implies F_s = 0,
+  /// and the bond's zero vectors are left as they are by a rotation.
+  static bool idle(double d2, double reach, const ContactHist& h, const BondHist* b) {
+    return (b->state != BondState::kIntact) & (d2 > reach * reach) & (h.fn == 0.0);
+  }
   /// The linear springs count only while the contact is active (a bond across a gap has none,
   /// §2.1); an intact bond adds k̄_n A, k̄_s A and k̄_n I.
   static ContactStiffness stiffness(const ContactHist& h, const BondHist* b, const ContactFamilyParams& f, double /*ra*/, double /*rb*/) {
@@ -138,9 +178,19 @@ struct PBondLaw : LawDefaults {
     b.nb = 0.0; b.fsb = Vec3{}; b.mt = 0.0; b.mb = Vec3{};
     if (f.pbond.zero_linear) { h.kn = h.ks = 0.0; h.fn = 0.0; h.fs = Vec3{}; }
   }
-  static pairblock::Fn lane_kernel(pairblock::Isa, const LawConst&) { return nullptr; }
-  static bool lane_needs_scalar(const BondHist*) { return true; }
-  static void store_lane(ContactHist&, BondHist*, const pairblock::Out&, int) {}
+  // Vectorised pass (pair_block.hpp): every contact has a lane; a breaking bond or a large
+  // rotation sends its lane to the scalar law.
+  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::pbond_kernel(isa) : nullptr;
+  }
+  static bool lane_needs_scalar(const BondHist* /*b*/) { return false; }
+  static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {
+    LinearLaw::store_lane(h, b, out, l);
+    b->nb = out.nb[l];
+    b->fsb = {out.fsb[0][l], out.fsb[1][l], out.fsb[2][l]};
+    b->mt = out.mt[l];
+    b->mb = {out.mb[0][l], out.mb[1][l], out.mb[2][l]};
+  }
 };
 
 }  // namespace demfdm::dem
