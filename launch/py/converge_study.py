@@ -28,6 +28,11 @@ Parts:
          REV, box of walls), and a DEM block of 2 x 2 x 2 mm and of 2 x 2 x 3 mm in the FDM
          continuum. Seed k is the same REV in every arm (replicated differently), so the arms are
          compared by paired differences against the DEM box.
+  wide   the same comparison under the paper scenes' footing (D_f = 1.2 mm, about seven grains
+         across, at the paper scenes' protocol rate I = 7.5e-4 and the chosen damping) in a
+         6 x 6 x 4 mm outer box: DEM everywhere (replication 3 x 3 x 4, about 34,000 balls)
+         against DEM blocks of 2 x 2 x 2, 4 x 4 x 2 and 4 x 4 x 3 mm (1.7 and 3.3 D_f wide, 1.7
+         and 2.5 D_f deep) in the FDM continuum.
 
 run: checks every planned run with the coordinator (coordinator SCENE --check --set ...; a bad
 one: its error line, exit 2, nothing runs), then runs the variants' missing seeds (a finished seed
@@ -62,6 +67,12 @@ BASE_SCENE = "scenes/accuracy_footing.toml"
 # of walls; an override sets keys, it cannot remove the [continuum] and [coupling] sections.
 BOX_SCENE = "scenes/accuracy_footing_box.toml"
 RATES = ["1e-2", "3.3e-3", "1e-3", "3.3e-4"]
+# The wide part: the paper scenes' footing and protocol rate (docs/convergence.md, chosen protocol)
+# over DEM blocks (width, width, depth) in mm of the 2 x 2 x 1 mm REV, in a 6 x 6 x 4 mm outer box.
+WIDE_RATE = "7.5e-4"
+WIDE_FOOTING = ["dem.footing.diameter=1.2e-3", "dem.footing.height=0.6e-3"]
+WIDE_OUTER = (6, 6, 4)
+WIDE_BLOCKS = [(2, 2), (4, 2), (4, 3)]
 DAMPINGS = ["0.7", "0.1"]
 STEPS = ["0.8", "0.4", "0.2"]
 
@@ -72,6 +83,14 @@ def rate_variant(rate, damping):
 
 def box_variant(arm, rate, damping):
     return "box_%s_I%s_a%s" % (arm, rate, damping)
+
+
+def wide_variant(arm, damping):
+    return "wide_%s_a%s" % (arm, damping)
+
+
+def wide_arm(w, h):
+    return "coupled%dx%dx%d" % (w, w, h)
 
 
 def penetration(rate, damping, steps):
@@ -114,6 +133,18 @@ def plan(parts, rate, damping, quick):
             out.append((box_variant("coupled%d" % h, rate, damping), "box", "DEM block 2 x 2 x %d mm in FDM" % h,
                         BASE_SCENE, ["continuum.mesh.size=[4e-3, 4e-3, 4e-3]"] + pen +
                         ["dem.specimen.replicate=[1, 1, %d]" % h, "continuum.mesh.inner_size=[2e-3, 2e-3, %de-3]" % h]))
+    if "wide" in parts:
+        steps = int(40000 * 1e-2 / float(WIDE_RATE) * 2)
+        pen = penetration(WIDE_RATE, damping, steps) + WIDE_FOOTING
+        ox, oy, oz = WIDE_OUTER
+        for w, h in WIDE_BLOCKS:
+            out.append((wide_variant(wide_arm(w, h), damping), "wide", "DEM block %d x %d x %d mm in FDM" % (w, w, h),
+                        BASE_SCENE, ["continuum.mesh.size=[%de-3, %de-3, %de-3]" % WIDE_OUTER] + pen +
+                        ["dem.specimen.replicate=[%d, %d, %d]" % (w // 2, w // 2, h),
+                         "continuum.mesh.inner_size=[%de-3, %de-3, %de-3]" % (w, w, h)]))
+        # The reference last: it costs about as much as the three coupled arms together.
+        out.append((wide_variant("dem", damping), "wide", "DEM everywhere (%d x %d x %d mm box)" % WIDE_OUTER, BOX_SCENE,
+                    pen + ["dem.specimen.replicate=[%d, %d, %d]" % (ox // 2, oy // 2, oz)]))
     if quick:
         out = [(n, p, lab, sc, s + [overrides.stage_set("penetrate", "depth_ratio", "0.05")])
                for n, p, lab, sc, s in out]
@@ -249,7 +280,7 @@ def main():
     r.add_argument("study")
     ls = sub.add_parser("list")
     for q in (r, ls):
-        q.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping"])
+        q.add_argument("--parts", nargs="+", default=["rate", "dt"], choices=["rate", "dt", "box", "damping", "wide"])
         q.add_argument("--seeds", type=int, default=5)
         q.add_argument("--rate", default="1e-3")
         q.add_argument("--damping", default="0.1")
@@ -367,25 +398,34 @@ def cmd_table(a):
         meta = json.load(f)
     variants = {v["name"]: v for v in meta["variants"]}
     present = {n: os.path.join(a.study, n) for n in variants if os.path.isdir(os.path.join(a.study, n))}
-    # Common stroke: from 0 to the smallest final displacement of every run.
-    starts, ends, runs = [], [], {}
-    for n, d in present.items():
-        runs[n] = ensemble.load_runs(d)
-        starts += [float(r["disp"][0]) for r in runs[n]]
-        ends += [float(r["disp"][-1]) for r in runs[n]]
-    if not ends:
+    # Common stroke: from 0 to the smallest final displacement of every run; the wide part (another
+    # footing, a longer stroke) has its own.
+    runs = {n: ensemble.load_runs(d) for n, d in present.items()}
+
+    def stroke_of(names):
+        rs = [r for n in names for r in runs[n]]
+        if not rs:
+            return None
+        lo, hi = max(float(r["disp"][0]) for r in rs), min(float(r["disp"][-1]) for r in rs)
+        return list(np.linspace(lo, hi, INTERVALS + 1)), np.linspace(lo, hi, 300)
+
+    wide = [n for n in present if variants[n]["part"] == "wide"]
+    narrow = [n for n in present if n not in wide]
+    if stroke_of(wide + narrow) is None:
         raise SystemExit("converge study: no finished run in %s" % a.study)
-    stroke = min(ends)
-    edges = list(np.linspace(max(starts), stroke, INTERVALS + 1))
-    grid = np.linspace(max(starts), stroke, 300)
-    met = {n: seed_metrics(d, edges) for n, d in present.items()}
+    edges, grid = stroke_of(narrow) or stroke_of(wide)
+    wedges, wgrid = stroke_of(wide) or (edges, grid)
+    stroke = edges[-1]
+    met = {n: seed_metrics(d, wedges if n in wide else edges) for n, d in present.items()}
     md = ["# Convergence study: tables", "",
           "Study folder `%s`; base scene `%s`; %d seeds planned. Every variant runs seeds 1..N on the same bonded "
           "blocks (specimen preparation does not depend on the knobs varied, docs/theory.md 4.11), so knobs are "
           "compared by the paired difference over seeds: mean ± half-width of its 95 %% confidence interval "
           "(Student t), relative to the reference's seed mean. \"not resolved\" = the interval holds 0. Loads are "
           "means over the common stroke 0 to %.4g mm (%d equal intervals), a robust measure beside the raw peak."
-          % (a.study, meta["base_scene"], meta["seeds"], stroke * 1e3, INTERVALS), ""]
+          % (a.study, meta["base_scene"], meta["seeds"], stroke * 1e3, INTERVALS) +
+          (" The wide part's loads are over its own common stroke, 0 to %.4g mm." % (wedges[-1] * 1e3) if wide and narrow
+           else ""), ""]
     rows = [["variant", "n", "mean load [N]", "q1 [N]", "q2 [N]", "q3 [N]", "q4 [N]", "raw peak [N]", "k_e [N/m]",
              "KE/W end", "KE/W max (2nd half)", "energy balance error", "bonds broken", "wall [s]"]]
     for n in variants:
@@ -434,6 +474,15 @@ def cmd_table(a):
                     [("I %s, damping %s, 4 mm outer box" % (meta["rate"], meta["damping"]),
                       [(variants[n]["label"], runs.get(n, [])) for n in names])], grid)
         figures.append("converge_box.png")
+    if "wide" in meta["parts"]:
+        md += wide_tables(met, meta)
+        names = [n for n, v in variants.items() if v["part"] == "wide"]
+        if wide:
+            band_figure(os.path.join(a.study, "converge_wide.png"),
+                        "Footing load, seed mean and 95 % band: coupled against DEM everywhere, D_f = 1.2 mm",
+                        [("I %s, damping %s, %d x %d x %d mm outer box" % ((WIDE_RATE, meta["damping"]) + WIDE_OUTER),
+                          [(variants[n]["label"], runs.get(n, [])) for n in names])], wgrid)
+            figures.append("converge_wide.png")
     md += ["", "Figures: " + ", ".join("`%s`" % x for x in figures), ""]
     text = "\n".join(md) + "\n"
     with open(os.path.join(a.study, "convergence_tables.md"), "w") as f:
@@ -501,6 +550,19 @@ def box_tables(met, meta):
         cur = met.get(box_variant("coupled%d" % h, meta["rate"], meta["damping"]))
         if ref and cur:
             rows.append(["DEM block 2 x 2 x %d mm" % h] + [paired(cur, ref, k) for k, _ in MEASURES])
+    return md + table_md(rows)
+
+
+def wide_tables(met, meta):
+    md = ["## Coupled against DEM everywhere under the paper's footing (D_f = 1.2 mm): each coupled arm against "
+          "the DEM box, I %s, damping %s (paired over seeds)" % (WIDE_RATE, meta["damping"]), ""]
+    ref = met.get(wide_variant("dem", meta["damping"]))
+    rows = [["arm"] + [lab for _, lab in MEASURES] + ["k_e", "wall time"]]
+    for w, h in WIDE_BLOCKS:
+        cur = met.get(wide_variant(wide_arm(w, h), meta["damping"]))
+        if ref and cur:
+            rows.append(["DEM block %d x %d x %d mm" % (w, w, h)] + [paired(cur, ref, k) for k, _ in MEASURES] +
+                        [paired(cur, ref, "k_e"), paired(cur, ref, "wall_s")])
     return md + table_md(rows)
 
 

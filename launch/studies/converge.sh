@@ -9,6 +9,9 @@
 #                  damping: penetration damping 0.05 and 0 against 0.1 at --rate;
 #                  box: the coupled model (DEM block 2 x 2 x 2 and 2 x 2 x 3 mm) against DEM
 #                  everywhere in the same 4 x 4 x 4 mm box, upscaling 1.5, at --rate and --damping
+#                  wide: the same under the paper scenes' footing (D_f = 1.2 mm, seven grains) at
+#                  I = 7.5e-4 and --damping, 6 x 6 x 4 mm outer box: DEM everywhere (about 34,000
+#                  balls) against DEM blocks of 2 x 2 x 2, 4 x 4 x 2 and 4 x 4 x 3 mm in the FDM
 #   --seeds N      seeds 1..N of every variant (default 5); seed k is the same bonded block in
 #                  every variant, so knobs are compared by paired differences
 #   --jobs J       runs at once (default 1; each run is a DEM and a continuum process)
@@ -25,7 +28,8 @@
 # Writes DIR/studies/<date>-converge/: one folder per variant with seed-<k>/ run folders (each
 # records its effective scene, scenes/accuracy_footing.toml or accuracy_footing_box.toml with the
 # variant's overrides, as scene.toml), convergence_tables.md, converge_seeds.csv,
-# converge_rate.png, converge_dt.png.
+# converge_rate.png, converge_dt.png (and converge_box.png, converge_damping.png, converge_wide.png
+# for those parts).
 # Cost on this 2-core machine (2026-12-02, base scene scenes/accuracy_footing.toml, 2,856 balls):
 # 10 / 40 / 90 / 270 s per run at I = 1e-2 / 3.3e-3 / 1e-3 / 3.3e-4. Reading: docs/convergence.md.
 set -euo pipefail

@@ -187,10 +187,13 @@ def test_accuracy(tmp, env):
 
 def test_converge(tmp, env):
     study_py = os.path.join(PY, "converge_study.py")
-    r = subprocess.run([sys.executable, study_py, "list", "--parts", "rate", "dt", "damping", "box", "--seeds", "2",
+    r = subprocess.run([sys.executable, study_py, "list", "--parts", "rate", "dt", "damping", "box", "wide", "--seeds", "2",
                         "--check"], capture_output=True, text=True, env=env)
     check(r.returncode == 0 and "0 refused" in r.stderr and "launch/run scenes/accuracy_footing_box.toml" in r.stdout,
           "converge list --check: %d %s %s" % (r.returncode, r.stdout[-500:], r.stderr[-500:]))
+    wide = [x for x in r.stdout.split("\n") if x.startswith("wide_")]
+    check(len(wide) == 4 and all("dem.footing.diameter=1.2e-3" in x and "inertial_number=7.5e-4" in x for x in wide)
+          and sum("[3, 3, 4]" in x for x in wide) == 1, "converge list: the wide part's four arms: %s" % wide)
     study = os.path.join(tmp, "conv")
     log = os.path.join(tmp, "conv.calls")
     cmd = [sys.executable, study_py, "run", study, "--parts", "box", "--quick", "--seeds", "2",
