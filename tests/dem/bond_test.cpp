@@ -396,3 +396,43 @@ TEST(SoftBond, UnbondedMomentLimits) {
   EXPECT_NEAR(norm(b.mb) / (Fn * b.rb / 4), 1.0, 1e-12);
   EXPECT_NEAR(std::abs(b.mt) / (2.0 / 3.0 * 0.5 * Fn * b.rb), 1.0, 1e-12);
 }
+
+// §3.5 with §8.18: a moment held at its limit slips, and the work of the slip is booked with the
+// contact's frictional slip. Monotone rotation θ at a fixed F_n, elastic up to M_lim/k, then
+// slipping: the work M_lim θ − M_lim²/(2k) = stored M_lim²/(2k) + booked, for bending and
+// twisting alike, so the booked slip is M_lim θ − M_lim²/k summed over both.
+TEST(SoftBond, UnbondedMomentSlipWorkIsBooked) {
+  Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
+  BondHist& b = g.b;
+  b.state = BondState::kBrokenShear;
+  LawConst c = soft_const(100, 0.05);
+  ContactHist h;
+  h.kn = b.kn * g.area;
+  h.ks = g.ks * g.area;
+  h.mu = 0.5;
+  h.flags = ContactHist::kHasNormal;
+  const Vec3 n{1, 0, 0};
+  h.n_old = n;
+  Kin k;
+  k.n = n;
+  k.gap = -1e-8;
+  k.dt = 1.0;
+  const double dth = 1e-5;
+  k.dtheta = {dth, 0, dth};  // twist about n, bending about z
+  const int steps = 300;
+  Vec3 M;
+  for (int s = 0; s < steps; ++s) contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
+  const double Fn = h.kn * 1e-8, theta = steps * dth;
+  const double mbl = Fn * b.rb / 4, kb = b.kn * b.inertia();
+  const double mtl = 2.0 / 3.0 * 0.5 * Fn * b.rb, kt = b.kn * c.ks_kn * b.polar();
+  ASSERT_LT(mbl / kb, 0.5 * theta);  // both moments reach their limits early in the run
+  ASSERT_LT(mtl / kt, 0.5 * theta);
+  const double want = mbl * theta - mbl * mbl / kb + mtl * theta - mtl * mtl / kt;
+  EXPECT_NEAR(h.e_slip / want, 1.0, 1e-9) << "booked " << h.e_slip << " J, expected " << want << " J";
+  double stored = 0.0;
+  ContactFamilyParams f;
+  f.linear.kratio = 1.0 / c.ks_kn;
+  SoftBondLaw::add_strain(stored, h, &b, f);
+  const double work = mbl * theta - 0.5 * mbl * mbl / kb + mtl * theta - 0.5 * mtl * mtl / kt;
+  EXPECT_NEAR((stored - 0.5 * h.fn * h.fn / h.kn + h.e_slip) / work, 1.0, 1e-9);
+}

@@ -179,15 +179,25 @@ inline double softbond_plastic_elongation(const BondHist& b, const LawConst& c) 
     M = Vec3{};
     return F;
   }
-  b.mb -= (b.kn * b.inertia()) * dtb;
-  b.mt -= (b.kn * c.ks_kn) * b.polar() * dtt;
+  const double kb = b.kn * b.inertia(), kt = (b.kn * c.ks_kn) * b.polar();
+  b.mb -= kb * dtb;
+  b.mt -= kt * dtt;
   const double mbl = c.bmul * h.fn * b.rb * 0.25;
   const double mbn = norm(b.mb);
   b.slip_b = mbn > mbl;
-  if (b.slip_b) b.mb *= (mbn > 0.0 ? mbl / mbn : 0.0);
+  // A moment scaled back to its limit has slipped by (|M*| − M_lim)/k: its work M_lim times
+  // that is booked with the contact's frictional slip (§3.5, §8.18), as coulomb_shear does.
+  if (b.slip_b) {
+    b.mb *= (mbn > 0.0 ? mbl / mbn : 0.0);
+    if (kb > 0.0) h.e_slip += mbl * (mbn - mbl) / kb;
+  }
   const double mtl = c.twist * h.mu * h.fn * b.rb;
-  b.slip_t = std::abs(b.mt) > mtl;
-  if (b.slip_t) b.mt = std::copysign(mtl, b.mt);
+  const double mta = std::abs(b.mt);
+  b.slip_t = mta > mtl;
+  if (b.slip_t) {
+    b.mt = std::copysign(mtl, b.mt);
+    if (kt > 0.0) h.e_slip += mtl * (mta - mtl) / kt;
+  }
   M = b.mt * n + b.mb;
   return F;
 }
