@@ -114,22 +114,34 @@ inline double softbond_plastic_elongation(const BondHist& b, const LawConst& c) 
         // 3. envelope step: σ_t drops by (k_n/ζ)·(excess elongation), §3.3.
         const double st_new = b.sigma_t - (b.kn / c.zeta) * (sig - b.sigma_t) / kne;
         const double x = (sig - st_new) / kne;  // plastic peripheral elongation this step
-        b.e_soft += 0.5 * (b.sigma_t + std::max(st_new, 0.0)) * b.area() * x;
+        // Bond dissipation (§8.18): the plastic work of the return, N̄ Δu_p + M̄_b Δθ_p, with
+        // the rim stress on the plastic path taken as the mean σ̄ of the old and the new
+        // strength (the pair (N, M_b) on that path as the return moves it).
+        const double sbar = 0.5 * (b.sigma_t + std::max(st_new, 0.0));
+        const double A = b.area(), I = b.inertia();
         b.sigma_t = st_new;
         b.state = BondState::kSoftening;
         // 4. return to σ = σ_t
         if (c.ret == SoftReturn::kAssociated || !(N > 0.0)) {
           if (c.ret == SoftReturn::kAssociated) {
-            const double cmm = (mbn > 0.0 && c.bend_soft) ? c.beta * c.beta * b.rb * b.rb / b.inertia() : 0.0;
-            const double lam = x / (1.0 / b.area() + cmm);
+            // Flow along ∂σ/∂(N, M_b) = (1/A, βR̄/I): Δu_p = λ/A, Δθ_p = βR̄λ/I, so the plastic
+            // work is λ σ̄ (λ (σ̄ − βR̄|M_b|/I) when the moment does not soften: then Δθ_p = 0).
+            const double cmm = (mbn > 0.0 && c.bend_soft) ? c.beta * c.beta * b.rb * b.rb / I : 0.0;
+            const double lam = x / (1.0 / A + cmm);
+            b.e_soft += lam * (cmm > 0.0 ? sbar : sbar - c.beta * mbn * b.rb / I);
             N -= kne * lam;
             if (cmm > 0.0) b.mb -= (kne * c.beta * b.rb * lam / mbn) * b.mb;
           } else {  // radial with N ≤ 0: reduce only the moment
-            const double mnew = std::max(st_new - N / b.area(), 0.0) * b.inertia() / (c.beta * b.rb);
+            const double mnew = std::max(st_new - N / A, 0.0) * I / (c.beta * b.rb);
+            // Δθ_p = (|M_b| − M_new)/(k I), at the mean moment M̄ = (σ̄ − N/A) I/(βR̄).
+            b.e_soft += std::max(sbar - N / A, 0.0) * I / (c.beta * b.rb) * std::max(mbn - mnew, 0.0) / (kne * I);
             if (mbn > 0.0) b.mb *= mnew / mbn;
           }
         } else {  // radial, N > 0
           const double s = st_new / sig;
+          // (N, M_b) scaled by s: Δu_p = N(1 − s)/(k A), Δθ_p = |M_b|(1 − s)/(k I), at the mean
+          // forces (σ̄/σ)(N, |M_b|).
+          b.e_soft += sbar / sig * (1.0 - s) * (N * N / (kne * A) + mbn * mbn / (kne * I));
           N *= s;
           b.mb *= s;
         }
