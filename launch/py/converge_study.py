@@ -496,7 +496,7 @@ def cmd_table(a):
         names = [n for n, v in variants.items() if v["part"] == "wide"]
         if wide:
             band_figure(os.path.join(a.study, "converge_wide.png"),
-                        "Footing load, seed mean and 95 % band: coupled against DEM everywhere, D_f = 1.2 mm",
+                        "Coupled vs DEM everywhere, D_f = 1.2 mm: mean, 95 % band",
                         [("I %s, damping %s, %d x %d x %d mm outer box" % ((WIDE_RATE, meta["damping"]) + WIDE_OUTER),
                           [(variants[n]["label"], runs.get(n, [])) for n in names])], wgrid)
             figures.append("converge_wide.png")
