@@ -372,22 +372,33 @@ TEST(SoftBond, ZetaZeroEqualsParallelBond) {
 }
 
 // §3.5: unbonded soft-bond moment limits λ_b F_n R̄/4 and (2/3) μ F_n R̄.
-TEST(SoftBond, UnbondedMomentLimits) {
+namespace {
+// An unbonded soft-bond contact (state `st`) along x, overlapping by 1e-8 m, μ = 0.5, Δt = 1 s.
+struct Unbonded {
   Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
-  BondHist& b = g.b;
-  b.state = BondState::kNeverBonded;
   LawConst c = soft_const(100, 0.05);
   ContactHist h;
-  h.kn = b.kn * g.area;
-  h.ks = g.ks * g.area;
-  h.mu = 0.5;
-  h.flags = ContactHist::kHasNormal;
-  const Vec3 n{1, 0, 0};
-  h.n_old = n;
   Kin k;
-  k.n = n;
-  k.gap = -1e-8;
-  k.dt = 1.0;
+  explicit Unbonded(BondState st) {
+    g.b.state = st;
+    h.kn = g.b.kn * g.area;
+    h.ks = g.ks * g.area;
+    h.mu = 0.5;
+    h.flags = ContactHist::kHasNormal;
+    h.n_old = {1, 0, 0};
+    k.n = h.n_old;
+    k.gap = -1e-8;
+    k.dt = 1.0;
+  }
+};
+}  // namespace
+
+TEST(SoftBond, UnbondedMomentLimits) {
+  Unbonded u(BondState::kNeverBonded);
+  BondHist& b = u.g.b;
+  LawConst& c = u.c;
+  ContactHist& h = u.h;
+  Kin& k = u.k;
   k.dtheta = {1e-5, 1e-5, 0};
   Vec3 M;
   for (int s = 0; s < 200; ++s) contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
@@ -402,21 +413,11 @@ TEST(SoftBond, UnbondedMomentLimits) {
 // slipping: the work M_lim θ − M_lim²/(2k) = stored M_lim²/(2k) + booked, for bending and
 // twisting alike, so the booked slip is M_lim θ − M_lim²/k summed over both.
 TEST(SoftBond, UnbondedMomentSlipWorkIsBooked) {
-  Soft g = soft_geometry(5.8e-5, 2.8e9, 2.4);
-  BondHist& b = g.b;
-  b.state = BondState::kBrokenShear;
-  LawConst c = soft_const(100, 0.05);
-  ContactHist h;
-  h.kn = b.kn * g.area;
-  h.ks = g.ks * g.area;
-  h.mu = 0.5;
-  h.flags = ContactHist::kHasNormal;
-  const Vec3 n{1, 0, 0};
-  h.n_old = n;
-  Kin k;
-  k.n = n;
-  k.gap = -1e-8;
-  k.dt = 1.0;
+  Unbonded u(BondState::kBrokenShear);
+  BondHist& b = u.g.b;
+  LawConst& c = u.c;
+  ContactHist& h = u.h;
+  Kin& k = u.k;
   const double dth = 1e-5;
   k.dtheta = {dth, 0, dth};  // twist about n, bending about z
   const int steps = 300;
