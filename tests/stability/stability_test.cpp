@@ -179,8 +179,10 @@ TEST(Stability, UndampedCyclingKeepsTheEnergyBalance) {
   std::cout << "[ figures  ] energy balance error: gravity " << g.at("energy_balance_error") << " (work "
             << g.at("energy_work_J") << " J), penetrate " << p.at("energy_balance_error") << " (work "
             << p.at("energy_work_J") << " J)\n";
-  EXPECT_LT(std::abs(g.at("energy_balance_error")), 0.15);
-  EXPECT_LT(std::abs(p.at("energy_balance_error")), 0.30);
+  // Measured 2026-12-03: gravity -1.1 %, penetration -4.8 % (+16.8 % before the soft bond's
+  // softening return booked its plastic work instead of rim stress times disc area).
+  EXPECT_LT(std::abs(g.at("energy_balance_error")), 0.03);
+  EXPECT_LT(std::abs(p.at("energy_balance_error")), 0.08);
   if (!testing::Test::HasFailure()) r.clean();
 }
 
