@@ -159,9 +159,7 @@ std::unique_ptr<World> make_world(const Packing& pk, const std::string& model, i
   p.ball_ball.linear.kn_fixed = 2.55e5;
   p.ball_ball.linear.kratio = 2.4;
   p.ball_ball.linear.fric = 0.6248693519093275;
-  p.ball_ball.model = model == "softbond" ? ContactModel::kSoftBond
-                      : model == "pbond"  ? ContactModel::kLinearPBond
-                                          : ContactModel::kLinear;
+  if (model == "moving" || !law_from_name(model, p.ball_ball.model)) p.ball_ball.model = ContactModel::kLinear;
   p.skin = 0.1 * 2.0 * 0.058e-3;  // 0.1 d50 (the second LAMMPS anchor uses the same)
   auto w = std::make_unique<World>(p);
   kernel = kernel_from_env(kname);
@@ -169,7 +167,7 @@ std::unique_ptr<World> make_world(const Packing& pk, const std::string& model, i
   for (std::size_t i = 0; i < pk.x.size(); ++i) w->add_ball(pk.x[i], pk.r[i]);
   w->reorder_spatially();  // cache locality: the dump order is random in space
   w->prepare();
-  if (model == "softbond" || model == "pbond") w->bond_ball_ball(-1.0, 0.0);  // bond every touching pair
+  if (law_has_bond(p.ball_ball.model)) w->bond_ball_ball(-1.0, 0.0);  // bond every touching pair
   w->step(20);  // warm-up (first-touch of all arrays)
   return w;
 }

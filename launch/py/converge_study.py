@@ -428,7 +428,7 @@ def cmd_table(a):
 
     wide = [n for n in present if variants[n]["part"] == "wide"]
     narrow = [n for n in present if n not in wide]
-    if stroke_of(wide + narrow) is None:
+    if not any(runs.values()):
         raise SystemExit("converge study: no finished run in %s" % a.study)
     edges, grid = stroke_of(narrow) or stroke_of(wide)
     wedges, wgrid = stroke_of(wide) or (edges, grid)

@@ -9,6 +9,7 @@
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
+#include "lattice.hpp"
 
 using namespace demfdm::dem;
 
@@ -247,12 +248,7 @@ TEST(Measure, SoftBondClosedSystemEnergyBalance) {
     std::mt19937_64 rng(2024);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
     const Vec3 c{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
-    for (int k = 0; k < ns; ++k)
-      for (int j = 0; j < ns; ++j)
-        for (int i = 0; i < ns; ++i)
-          w.add_ball({(i + 0.5) * s + 0.002 * R * u(rng), (j + 0.5) * s + 0.002 * R * u(rng),
-                      (k + 0.5) * s + 0.002 * R * u(rng)},
-                     R * (1.0 + 0.002 * u(rng)));
+    test::add_jittered_lattice(w, ns, s, R, 0.002 * R, 0.002, rng);
     w.prepare();
     w.bond_ball_ball(-1.0, 0.01 * R);
     for (std::size_t i = 0; i < w.num_balls(); ++i) {

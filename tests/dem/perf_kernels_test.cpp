@@ -10,6 +10,7 @@
 
 #include "demfdm/dem/contact_kernels.hpp"
 #include "demfdm/dem/world.hpp"
+#include "lattice.hpp"
 
 using namespace demfdm::dem;
 
@@ -91,12 +92,7 @@ LatticeRun lattice_run(int threads, ContactModel model) {
   World w(p);
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
-  for (int k = 0; k < nside; ++k)
-    for (int j = 0; j < nside; ++j)
-      for (int i = 0; i < nside; ++i)
-        w.add_ball({(i + 0.5) * s + 0.01 * R * u(rng), (j + 0.5) * s + 0.01 * R * u(rng),
-                    (k + 0.5) * s + 0.01 * R * u(rng)},
-                   R * (1.0 + 0.005 * u(rng)));
+  test::add_jittered_lattice(w, nside, s, R, 0.01 * R, 0.005, rng);
   for (auto& v : w.balls().v) v = {0.01 * u(rng), 0.01 * u(rng), 0.01 * u(rng)};
   for (auto& om : w.balls().w) om = {20.0 * u(rng), 20.0 * u(rng), 20.0 * u(rng)};
   w.prepare();

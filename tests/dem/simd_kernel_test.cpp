@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "demfdm/dem/world.hpp"
+#include "lattice.hpp"
 
 using namespace demfdm::dem;
 
@@ -84,15 +85,9 @@ Result run(const Scene& sc, PairKernel kernel) {
   std::mt19937_64 rng(2024);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const Vec3 c{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
-  for (int k = 0; k < ns; ++k)
-    for (int j = 0; j < ns; ++j)
-      for (int i = 0; i < ns; ++i)
-        w.add_ball({(i + 0.5) * s + sc.pos_jitter * R * u(rng), (j + 0.5) * s + sc.pos_jitter * R * u(rng),
-                    (k + 0.5) * s + sc.pos_jitter * R * u(rng)},
-                   R * (1.0 + sc.rad_jitter * u(rng)));
+  test::add_jittered_lattice(w, ns, s, R, sc.pos_jitter * R, sc.rad_jitter, rng);
   w.prepare();
-  if (sc.model == ContactModel::kSoftBond || sc.model == ContactModel::kLinearPBond)
-    w.bond_ball_ball(-1.0, sc.bond_gap * R);
+  if (law_has_bond(sc.model)) w.bond_ball_ball(-1.0, sc.bond_gap * R);
   const double rate = sc.rate;
   for (std::size_t i = 0; i < w.num_balls(); ++i) {
     w.balls().v[i] = sc.vel * Vec3{u(rng), u(rng), u(rng)};

@@ -54,9 +54,12 @@ struct BondHist {
   BondState state = BondState::kNeverBonded;
   std::uint8_t slip_b = 0, slip_t = 0;  // soft-bond unbonded moment slip flags (§3.5)
   // Disc geometry derived from R̄ (cheaper than storing it: the loop is memory bound).
-  double area() const { return std::numbers::pi * rb * rb; }  // A = π R̄²
-  double inertia() const { return 0.25 * area() * rb * rb; }        // I = π R̄⁴/4
-  double polar() const { return 0.5 * area() * rb * rb; }           // J = 2I
+  static double disc_area(double r) { return std::numbers::pi * r * r; }               // A = π R̄²
+  static double disc_inertia(double r) { return 0.25 * disc_area(r) * r * r; }        // I = π R̄⁴/4
+  static double disc_polar(double r) { return 0.5 * disc_area(r) * r * r; }           // J = 2I
+  double area() const { return disc_area(rb); }
+  double inertia() const { return disc_inertia(rb); }
+  double polar() const { return disc_polar(rb); }
 };
 
 /// Kinematics of one contact over one step (§1.4, §1.5).

@@ -23,11 +23,10 @@ struct PBondStep {
                                                    double my, double mz, double rb, double kn, const LawConst& c,
                                                    double dun, double dsx, double dsy, double dsz, double dtt,
                                                    double dbx, double dby, double dbz) {
-  const double A = std::numbers::pi * rb * rb, iA = 1.0 / A;  // BondHist::area()
-  const double rb_I = 4.0 * std::numbers::pi * rb * iA * iA;   // R̄/I = 4πR̄/A²
+  const double A = BondHist::disc_area(rb), iA = 1.0 / A;
+  const double rb_I = 4.0 * std::numbers::pi * rb * iA * iA;  // R̄/I = 4πR̄/A²
   const double ks = kn * c.ks_kn;
-  const double kA = ks * A, J = 0.5 * A * rb * rb, I = 0.25 * A * rb * rb;  // BondHist::polar(), inertia()
-  const double kI = kn * I;
+  const double kA = ks * A, J = BondHist::disc_polar(rb), kI = kn * BondHist::disc_inertia(rb);
   PBondStep o;
   o.nb = nb + kn * A * dun;
   o.sx = sx - kA * dsx;
