@@ -244,7 +244,7 @@ TEST(Specimen, DepthScaling) {
 }
 
 // Habit 13: a bonded random packing (soft bonds, replicated 2×2×1 so that the threaded
-// paths run) gives bit-identical positions from run to run, with 1 and with 2 threads.
+// paths run) gives bit-identical positions from run to run, and the same at 1 and 2 threads.
 TEST(Determinism, SameThreadCountSameHash) {
   Rev& r = shared_rev();
   auto run = [&](int threads) {
@@ -279,6 +279,7 @@ TEST(Determinism, SameThreadCountSameHash) {
   const auto h1a = run(1), h1b = run(1), h2a = run(2), h2b = run(2);
   EXPECT_EQ(h1a, h1b);
   EXPECT_EQ(h2a, h2b);
+  EXPECT_EQ(h1a, h2a);
   std::printf("hash 1 thread %016llx / %016llx, 2 threads %016llx / %016llx\n", (unsigned long long)h1a,
               (unsigned long long)h1b, (unsigned long long)h2a, (unsigned long long)h2b);
 }

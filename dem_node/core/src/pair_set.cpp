@@ -24,17 +24,33 @@ namespace {
 // it and flushed when A changes (fixed order, hence deterministic). The scalar pass calls at()
 // for every contact, the block pass for live ones only: the sums are the same, since idle
 // contacts add nothing and flushing a zero sum cannot change a ball's sum (the sums start at
-// +0 and never become −0).
+// +0 and never become −0). The threaded pass (Save) also keeps the run sum of every split ball
+// (PairSet::plan_split) in its record of `run`, stamped with the pass.
+template <bool Save>
 struct BallSums {
   Vec3* __restrict__ f;
   Vec3* __restrict__ t;
   std::uint32_t cur;
+  // Save: the chunk's split balls with a run, ascending rows (ending in a sentinel above every
+  // row), their records, and the pass's stamp. A runs in ascending order within a chunk, so one
+  // cursor finds them.
+  const std::uint32_t* __restrict__ rrow = nullptr;
+  const std::uint32_t* __restrict__ rrec = nullptr;
+  PairSet::RunSave* __restrict__ run = nullptr;
+  std::uint64_t stamp = 0;
   Vec3 fa{}, ta{};
+  [[gnu::always_inline]] void put() {
+    f[cur] += fa;
+    t[cur] += ta;
+    if constexpr (Save) {
+      while (*rrow < cur) ++rrow, ++rrec;
+      if (*rrow == cur) run[*rrec] = {fa, ta, stamp};
+    }
+  }
   // Contact with A = a next: flush the sums of the previous A.
   [[gnu::always_inline]] void at(std::uint32_t a) {
     if (a != cur) {
-      f[cur] += fa;
-      t[cur] += ta;
+      put();
       fa = Vec3{};
       ta = Vec3{};
       cur = a;
@@ -46,10 +62,7 @@ struct BallSums {
     ta += TA;
     t[b] += TB;
   }
-  void flush() {
-    f[cur] += fa;
-    t[cur] += ta;
-  }
+  void flush() { put(); }
 };}  // namespace
 
 // ------------------------------------------------------------------------------------------
@@ -147,6 +160,7 @@ void PairSet::rebuild(SetContext& cx) {
     q = std::move(r);
   }
   pc = std::move(q);
+  ++gen_;
 }
 
 // ------------------------------------------------------------------------------------------
@@ -168,10 +182,24 @@ void PairSet::pass(SetContext& cx, double dt) {
 }
 
 // Ball–ball pass. Each contact stores its force (and moment) in its own slot for the
-// measurements, and adds −F/+F and the torques into a force buffer: the particle arrays for
-// thread 0 and a private buffer for every other thread; the buffers are then summed in
-// thread order. The static partition makes the result bit-identical from run to run for a
-// given thread count (determinism: same scene, seed and thread count, same bits).
+// measurements, and adds −F/+F and the torques onto its balls through BallSums, in contact order.
+//
+// One thread: straight into the particle arrays. A ball's sum is then a fixed sequence of
+// additions: +F of each contact where it is B, and the flushed run sum of the contacts where it
+// is A, in contact order, starting from +0.
+//
+// Several threads: the list is cut into `threads` chunks of contiguous contacts, each boundary
+// moved forward to where A changes, so that no ball's run of A contacts is cut. Chunk 0 adds into
+// the particle arrays, every other chunk into its own buffer, and the buffers are added in after
+// a barrier. A ball whose contacts all lie in one chunk gets the sequence of the one-thread pass
+// (+0 plus a sum that is never −0 leaves it unchanged). A ball whose contacts span chunks
+// ("split": plan_split) would get a different association. In a sorted list its contacts as B
+// all come before its run, so its first chunk holds only B contacts and sums a true prefix of
+// the one-thread sequence. The later chunks save what the ball receives from each of its B
+// contacts there (F and the torque on B, stamped with the pass) and its run sum (BallSums), and
+// the reduction continues the prefix with them in contact order. The result is the one-thread
+// pass bit for bit at any thread count (tests/dem/thread_count_test.cpp); a list that is not
+// sorted (never seen by a pass in practice: a rebuild sorts it) runs on one thread.
 template <class Law, bool Periodic>
 void PairSet::pass_law(SetContext& cx, double dt) {
   const std::int64_t m = static_cast<std::int64_t>(contacts.size());
@@ -192,7 +220,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
   const double rgap = lc.rgap;
   const int nt = cx.threads;
-  const bool par = nt > 1 && m > 4096;
+  const bool par = nt > 1 && m > 1024;  // any thread count gives the same bits (see above)
   const bool strained = ed.x != 0.0 || ed.y != 0.0 || ed.z != 0.0;
   // Vectorised blocks (pair_block.hpp) where the law has a lane kernel; bit-identical to the
   // scalar loop below (tests/dem/simd_kernel_test.cpp).
@@ -202,6 +230,20 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     if (detail::block_isa(cx.kernel, isa)) kern = Law::lane_kernel(isa, lc);
   }
   const pairblock::Ctx ctx{V, W, R, H, BD, lc, dt, ed, Periodic && strained};
+  // Threaded: the B contacts of split balls after their first chunk save into their records; a
+  // chunk walks its list of them (ascending contact, sentinel-terminated) with a cursor. `stamp`
+  // tells this pass's records from stale ones (a contact idle this pass saved nothing and adds
+  // nothing).
+  if (par && (plan_gen_ != gen_ || plan_chunks_ != nt || plan_m_ != contacts.size() || plan_n_ != n))
+    plan_split(n, nt);
+  const bool threaded = par && plan_ok_;
+  const std::uint64_t stamp = ++stamp_;
+  BSave* __restrict__ SV = threaded ? save_.data() : nullptr;
+  RunSave* __restrict__ RS = threaded ? run_.data() : nullptr;
+  auto cursor = [this](int k) {
+    const std::size_t uk = static_cast<std::size_t>(k);
+    return ChunkCursor{sc_.data(), sc_.data() + sc_off_[uk], rrow_.data() + rr_off_[uk], rrec_.data() + rr_off_[uk]};
+  };
   // The helpers below are forced inline: left to GCC, the soft-bond block pass measured 1.27 x
   // slower (bench/dem/results_2core_kvm.csv).
   // The helpers and the loop bodies capture by value: the arrays' base pointers then live in the
@@ -306,8 +348,12 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   auto law_rare = [&](std::int64_t c, std::uint32_t a, std::uint32_t b, const Vec3& d, double d2, Vec3& F, Vec3& TA,
                       Vec3& TB) __attribute__((noinline)) { law(c, a, b, d, d2, F, TA, TB); };
   // One contact at a time (the reference).
-  auto body = [=](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
-    BallSums sums{f, t, c0 < c1 ? A[c0] : 0u};
+  // `save` (std::bool_constant): store every contact's force and torques in its save slot.
+  // (Save: `cur` is the chunk's cursors, see ChunkCursor.)
+  auto body = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
+                  ChunkCursor cur) {
+    constexpr bool Save = decltype(save)::value;
+    BallSums<Save> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
     for (std::int64_t c = c0; c < c1; ++c) {
       const std::uint32_t a = A[c], b = B[c];
       prefetch(c, c1, f, t);
@@ -321,6 +367,10 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       }
       Vec3 F, TA, TB;
       law(c, a, b, d, d2, F, TA, TB);
+      if constexpr (Save) {
+        while (*cur.c < static_cast<std::uint64_t>(c)) ++cur.c;
+        if (*cur.c == static_cast<std::uint64_t>(c)) SV[cur.c - cur.c0] = {F, TB, stamp};
+      }
       sums.add(b, F, TA, TB);
     }
     if (c0 < c1) sums.flush();
@@ -328,9 +378,11 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   // Blocks of kLanes live contacts: stage 1 (lane list), stage 2 (kern), stage 3 (histories
   // and sums in contact order; lanes flagged `scalar` are redone by the scalar law from their
   // untouched history).
-  auto body_block = [=](std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t) {
+  auto body_block = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
+                        ChunkCursor cur) {
+    constexpr bool Save = decltype(save)::value;
     constexpr int K = pairblock::kLanes;
-    BallSums sums{f, t, c0 < c1 ? A[c0] : 0u};
+    BallSums<Save> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
     pairblock::In in;
     pairblock::Out out;
     std::int64_t c = c0;
@@ -380,78 +432,200 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
+        if constexpr (Save) {
+          while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
+          if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};
+        }
         sums.at(a);
         sums.add(b, F, TA, TB);
       }
     }
     if (c0 < c1) sums.flush();
   };
-  auto run = [&](std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t) {
-    if (kern) body_block(c0, c1, f, t);
-    else body(c0, c1, f, t);
+  auto run = [&](auto save, std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t, ChunkCursor cur) {
+    if (kern) body_block(save, c0, c1, f, t, cur);
+    else body(save, c0, c1, f, t, cur);
   };
-  if (!par) {
+  if (!threaded) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
     std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
-    run(0, m, cx.pt.f.data(), cx.pt.t.data());
+    run(std::false_type{}, 0, m, cx.pt.f.data(), cx.pt.t.data(), ChunkCursor{});
     return;
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
-  // Thread buffers are all zero between passes (zeroed by the reduction that reads them), so a
-  // block only costs the rows it touches: [lo, hi) of its contacts' rows, found by a scan of
-  // its (A, B) indices. Adding zeros elsewhere is skipped; the order of the sums is unchanged.
+  // Chunk buffers are all zero between passes (zeroed by the reduction that reads them), so a
+  // chunk only costs the rows it touches: [lo, hi) of its contacts' rows, found by a scan of its
+  // (A, B) indices. Adding zeros elsewhere is skipped; the order of the sums is unchanged.
   for (int k = 1; k < nt; ++k) {
     auto& tb = tbuf_[static_cast<std::size_t>(k)];
     if (tb.size() != 2 * n) tb.assign(2 * n, Vec3{});
   }
   row_lo_.assign(static_cast<std::size_t>(nt), n);
   row_hi_.assign(static_cast<std::size_t>(nt), 0);
-  // One parallel region per pass: contact blocks, a barrier, then the fixed-order
-  // reduction of the thread buffers split by particle rows (one fork/join per step).
+  const std::int64_t* CB = cut_.data();
+  const std::uint32_t* __restrict__ EO = ev_off_.data();
+  const std::uint32_t* __restrict__ EV = ev_.data();
+  const std::int32_t* __restrict__ K0 = first_.data();
+  // One parallel region per pass: the chunks (chunk k on thread k mod T, so the chunks, and the
+  // bits, do not depend on how many threads the runtime grants), a barrier, then the fixed-order
+  // reduction of the chunk buffers split by particle rows, which also finishes the split balls.
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num(), T = omp_get_num_threads();
-    const std::size_t ut = static_cast<std::size_t>(tid);
-    const std::int64_t c0 = m * tid / T, c1 = m * (tid + 1) / T;
-    Vec3* f = cx.pt.f.data();
-    Vec3* t = cx.pt.t.data();
-    if (tid == 0) {
-      std::fill(f, f + n, Vec3{});
-      std::fill(t, t + n, Vec3{});
-    } else {
-      f = tbuf_[ut].data();
-      t = f + n;
-      std::uint32_t lo = static_cast<std::uint32_t>(n), hi = 0;
-      for (std::int64_t c = c0; c < c1; ++c) {
-        lo = std::min(lo, std::min(A[c], B[c]));
-        hi = std::max(hi, std::max(A[c], B[c]));
+    for (int k = tid; k < nt; k += T) {
+      const std::size_t uk = static_cast<std::size_t>(k);
+      const std::int64_t c0 = CB[k], c1 = CB[k + 1];
+      Vec3* f = cx.pt.f.data();
+      Vec3* t = cx.pt.t.data();
+      if (k == 0) {
+        std::fill(f, f + n, Vec3{});
+        std::fill(t, t + n, Vec3{});
+      } else {
+        f = tbuf_[uk].data();
+        t = f + n;
+        std::uint32_t lo = static_cast<std::uint32_t>(n), hi = 0;
+        for (std::int64_t c = c0; c < c1; ++c) {
+          lo = std::min(lo, std::min(A[c], B[c]));
+          hi = std::max(hi, std::max(A[c], B[c]));
+        }
+        row_lo_[uk] = lo;
+        row_hi_[uk] = c0 < c1 ? std::size_t{hi} + 1 : 0;
       }
-      row_lo_[ut] = lo;
-      row_hi_[ut] = c0 < c1 ? std::size_t{hi} + 1 : 0;
+      run(std::true_type{}, c0, c1, f, t, cursor(k));
     }
-    run(c0, c1, f, t);
 #pragma omp barrier
     std::size_t rlo = n, rhi = 0;
-    for (int k = 1; k < T; ++k) {
+    for (int k = 1; k < nt; ++k) {
       rlo = std::min(rlo, row_lo_[static_cast<std::size_t>(k)]);
       rhi = std::max(rhi, row_hi_[static_cast<std::size_t>(k)]);
     }
+    // (Every split ball has a contact outside chunk 0, so its row is in [rlo, rhi).)
 #pragma omp for schedule(static)
     for (std::int64_t ii = static_cast<std::int64_t>(rlo); ii < static_cast<std::int64_t>(rhi); ++ii) {
       const std::size_t i = static_cast<std::size_t>(ii);
-      for (int k = 1; k < T; ++k) {
+      const std::int32_t sp = split_of_[i];
+      if (sp < 0) {
+        for (int k = 1; k < nt; ++k) {
+          const std::size_t uk = static_cast<std::size_t>(k);
+          if (i < row_lo_[uk] || i >= row_hi_[uk]) continue;
+          Vec3& bf = tbuf_[uk][i];
+          Vec3& bt = tbuf_[uk][n + i];
+          cx.pt.f[i] += bf;
+          cx.pt.t[i] += bt;
+          bf = Vec3{};
+          bt = Vec3{};
+        }
+        continue;
+      }
+      // A split ball: the prefix of its first chunk, then its saved B contacts of the later
+      // chunks in contact order, then its run sum.
+      const std::size_t us = static_cast<std::size_t>(sp);
+      const int k0 = K0[us];
+      Vec3 fs = k0 == 0 ? cx.pt.f[i] : tbuf_[static_cast<std::size_t>(k0)][i];
+      Vec3 ts = k0 == 0 ? cx.pt.t[i] : tbuf_[static_cast<std::size_t>(k0)][n + i];
+      for (std::uint32_t e = EO[us]; e < EO[us + 1]; ++e) {
+        const BSave& q = SV[EV[e]];
+        if (q.stamp != stamp) continue;  // idle this pass
+        fs += q.f;
+        ts += q.tb;
+      }
+      if (RS[us].stamp == stamp) {
+        fs += RS[us].f;
+        ts += RS[us].t;
+      }
+      cx.pt.f[i] = fs;
+      cx.pt.t[i] = ts;
+      for (int k = 1; k < nt; ++k) {
         const std::size_t uk = static_cast<std::size_t>(k);
         if (i < row_lo_[uk] || i >= row_hi_[uk]) continue;
-        Vec3& bf = tbuf_[uk][i];
-        Vec3& bt = tbuf_[uk][n + i];
-        cx.pt.f[i] += bf;
-        cx.pt.t[i] += bt;
-        bf = Vec3{};
-        bt = Vec3{};
+        tbuf_[uk][i] = Vec3{};
+        tbuf_[uk][n + i] = Vec3{};
       }
     }
   }
 }
+
+// The plan of a threaded pass in `chunks` chunks (see pass_law): the chunk boundaries, the split
+// balls with their first chunk, the save record of every B contact of a split ball after that
+// chunk (in contact order per ball), and a run record per split ball. O(contacts + balls), redone
+// only when the list, its size, the ball count or the chunk count changes.
+void PairSet::plan_split(std::size_t n, int chunks) {
+  const std::size_t m = contacts.size();
+  const std::uint32_t* A = contacts.a.data();
+  const std::uint32_t* B = contacts.b.data();
+  plan_gen_ = gen_;
+  plan_chunks_ = chunks;
+  plan_m_ = m;
+  plan_n_ = n;
+  // The scheme needs a list sorted by (a, b) with a < b (a rebuild leaves it so).
+  plan_ok_ = true;
+  for (std::size_t c = 0; c < m && plan_ok_; ++c)
+    plan_ok_ = A[c] < B[c] && (c == 0 || A[c - 1] < A[c] || (A[c - 1] == A[c] && B[c - 1] < B[c]));
+  if (!plan_ok_) return;
+  cut_.assign(static_cast<std::size_t>(chunks) + 1, 0);
+  for (int k = 1; k < chunks; ++k) {
+    std::size_t c = std::max<std::size_t>(m * static_cast<std::size_t>(k) / static_cast<std::size_t>(chunks),
+                                          static_cast<std::size_t>(cut_[static_cast<std::size_t>(k) - 1]));
+    while (c > 0 && c < m && A[c] == A[c - 1]) ++c;  // do not cut a run
+    cut_[static_cast<std::size_t>(k)] = static_cast<std::int64_t>(c);
+  }
+  cut_[static_cast<std::size_t>(chunks)] = static_cast<std::int64_t>(m);
+  std::vector<std::int32_t> first(n, -1);
+  std::vector<std::uint8_t> split(n, 0);
+  for (int k = 0; k < chunks; ++k)
+    for (std::int64_t c = cut_[static_cast<std::size_t>(k)]; c < cut_[static_cast<std::size_t>(k) + 1]; ++c)
+      for (const std::uint32_t e : {A[c], B[c]}) {
+        if (first[e] < 0) first[e] = k;
+        else if (first[e] != k) split[e] = 1;
+      }
+  split_of_.assign(n, -1);
+  first_.clear();
+  std::int32_t ns = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    if (split[i]) {
+      split_of_[i] = ns++;
+      first_.push_back(first[i]);
+    }
+  run_.assign(static_cast<std::size_t>(ns), RunSave{});
+  // Save records: one per contact whose B is a split ball outside its first chunk, numbered in
+  // contact order (the chunks write theirs in sequence; sentinels take a number too). Per chunk,
+  // the list of those contacts and of its split balls with a run (ascending rows) with their run
+  // records, each ending in a sentinel; per split ball, its records in contact order (CSR).
+  constexpr std::uint64_t kEnd = ~std::uint64_t{0};
+  constexpr std::uint32_t kEndRow = ~std::uint32_t{0};
+  sc_.clear();
+  rrow_.clear();
+  rrec_.clear();
+  sc_off_.assign(static_cast<std::size_t>(chunks), 0);
+  rr_off_.assign(static_cast<std::size_t>(chunks), 0);
+  ev_off_.assign(static_cast<std::size_t>(ns) + 1, 0);
+  for (int k = 0; k < chunks; ++k) {
+    sc_off_[static_cast<std::size_t>(k)] = sc_.size();
+    rr_off_[static_cast<std::size_t>(k)] = rrow_.size();
+    for (std::int64_t c = cut_[static_cast<std::size_t>(k)]; c < cut_[static_cast<std::size_t>(k) + 1]; ++c) {
+      const std::int32_t sb = split_of_[B[c]];
+      if (sb >= 0 && first[B[c]] != k) {
+        sc_.push_back(static_cast<std::uint64_t>(c));
+        ++ev_off_[static_cast<std::size_t>(sb) + 1];
+      }
+      const std::int32_t sa = split_of_[A[c]];
+      if (sa >= 0 && (rrow_.size() == rr_off_[static_cast<std::size_t>(k)] || rrow_.back() != A[c])) {
+        rrow_.push_back(A[c]);
+        rrec_.push_back(static_cast<std::uint32_t>(sa));
+      }
+    }
+    sc_.push_back(kEnd);
+    rrow_.push_back(kEndRow);
+    rrec_.push_back(0);
+  }
+  for (std::size_t s = 0; s < static_cast<std::size_t>(ns); ++s) ev_off_[s + 1] += ev_off_[s];
+  ev_.resize(ev_off_.back());
+  std::vector<std::uint32_t> fill(ev_off_.begin(), ev_off_.end() - 1);
+  for (std::size_t r = 0; r < sc_.size(); ++r)  // records in contact order, so per ball too
+    if (sc_[r] != kEnd) ev_[fill[static_cast<std::size_t>(split_of_[B[sc_[r]]])]++] = static_cast<std::uint32_t>(r);
+  save_.assign(sc_.size(), BSave{});
+}
+
 // ------------------------------------------------------------------------------------------
 // measurements: one parallel pass computes each contact's terms (its force norm, its
 // stiffnesses); the sums over them then run in contact order, the additions and their order of
@@ -541,6 +715,7 @@ void PairSet::add_energy(Energy& e, const WorldParams& p) const {
 // bookkeeping
 
 void PairSet::remap(const std::vector<std::uint32_t>& newrow) {
+  ++gen_;
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) {
     pc.a[c] = newrow[pc.a[c]];
@@ -562,6 +737,7 @@ void PairSet::refresh(const SetContext& cx) {
 
 void PairSet::reset(PairContacts loaded) {
   contacts = std::move(loaded);
+  ++gen_;
   tbuf_.clear();
   row_lo_.clear();
   row_hi_.clear();
@@ -588,6 +764,7 @@ Vec3 PairSet::branch(const Particles& pt, const PeriodicParams& cell, std::size_
 
 void PairSet::append(std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s, const ContactHist& h,
                      const BondHist* bond, bool has_bond) {
+  ++gen_;
   contacts.a.push_back(a);
   contacts.b.push_back(b);
   contacts.shift.push_back(s);

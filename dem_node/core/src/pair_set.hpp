@@ -27,7 +27,10 @@ class PairSet final : public ContactSet {
   void add_energy(Energy& e, const WorldParams& p) const override;
   void remap(const std::vector<std::uint32_t>& new_row) override;
   void refresh(const SetContext& cx) override;
-  void clear() override { contacts = PairContacts{}; }
+  void clear() override {
+    contacts = PairContacts{};
+    ++gen_;
+  }
   /// Take a loaded contact list (a checkpoint); the scratch is dropped.
   void reset(PairContacts loaded);
 
@@ -41,14 +44,54 @@ class PairSet final : public ContactSet {
               const BondHist* bond, bool has_bond);
   /// Bond every contact with gap in [lo, hi] (docs/theory.md 4.6); returns the count.
   std::size_t bond(const SetContext& cx, double lo, double hi);
+  /// The list's pairs (a, b) may have been changed from outside (World::pair_contacts): the
+  /// threaded pass re-plans its split balls before the next pass.
+  void touch() { ++gen_; }
+  /// A split ball's run sum (its contacts as A) in the threaded pass, and the pass that wrote it.
+  struct RunSave {
+    Vec3 f, t;
+    std::uint64_t stamp = 0;
+  };
+  /// A chunk's cursors into its save lists (pass_law); empty for the one-thread pass.
+  struct ChunkCursor {
+    const std::uint64_t* c0 = nullptr;  // the save list's start: record of *c = c - c0
+    const std::uint64_t* c = nullptr;
+    const std::uint32_t* run_row = nullptr;
+    const std::uint32_t* run_rec = nullptr;
+  };
 
  private:
   template <class Law, bool Periodic>
   void pass_law(SetContext& cx, double dt);
 
-  std::vector<std::vector<Vec3>> tbuf_;       // per-thread force/torque buffers [2n] (thread >= 1),
+  // Plan of the threaded pass for its chunk count (pass_law, plan_split).
+  void plan_split(std::size_t n, int chunks);
+  struct BSave {
+    Vec3 f, tb;               // force and torque a split ball received as B
+    std::uint64_t stamp = 0;  // the pass that wrote them
+  };
+
+  std::vector<std::vector<Vec3>> tbuf_;       // per-chunk force/torque buffers [2n] (chunk >= 1),
                                               // all zero between passes
-  std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each thread's block
+  std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each chunk
+  std::uint64_t gen_ = 0;                     // bumped whenever the pairs (a, b) may change
+  std::uint64_t plan_gen_ = ~std::uint64_t{0};
+  int plan_chunks_ = 0;
+  bool plan_ok_ = false;                      // the list is sorted: the scheme applies
+  std::size_t plan_m_ = 0, plan_n_ = 0;
+  std::uint64_t stamp_ = 0;                   // passes so far
+  std::vector<std::int64_t> cut_;             // chunk boundaries [chunks + 1]
+  std::vector<std::int32_t> split_of_;        // per row: split record, or -1
+  std::vector<std::int32_t> first_;           // per split ball: its first chunk
+  std::vector<std::uint32_t> ev_off_, ev_;    // per split ball: its save records (CSR)
+  // Per chunk (offsets sc_off_, rr_off_), each list ending in a sentinel: the contacts whose
+  // B is a split ball outside its first chunk (ascending; record = place in sc_), and the split
+  // balls with a run in the chunk (ascending rows) with their run records.
+  std::vector<std::uint64_t> sc_;
+  std::vector<std::uint32_t> rrow_, rrec_;
+  std::vector<std::size_t> sc_off_, rr_off_;
+  std::vector<BSave> save_;
+  std::vector<RunSave> run_;
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   std::vector<double> norm_;             // per-contact ||F||
   std::vector<double> k_, ka_, kb_;      // per-contact k and rotational terms of A, B

@@ -49,7 +49,10 @@ SetContext World::context() {
   return SetContext{pt_, p_, skin_, edot_, thread_count(), kernel_, e_slip_dead_, e_soft_dead_, bond_failures_};
 }
 
-PairContacts& World::pair_contacts() { return pairs_->contacts; }
+PairContacts& World::pair_contacts() {
+  pairs_->touch();  // the caller may change the pairs: the threaded pass re-plans
+  return pairs_->contacts;
+}
 const PairContacts& World::pair_contacts() const { return pairs_->contacts; }
 WallContacts& World::plane_contacts() { return planes_->contacts; }
 WallContacts& World::facet_contacts() { return facets_->contacts; }
