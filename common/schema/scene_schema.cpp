@@ -68,11 +68,12 @@ void declare_run(config::Section& root) {
   auto& run = root.section("run", "Run identity and process settings.", config::Presence::Optional);
   run.string("name", std::string("run"), "Short name used in the run folder name.");
   run.string("description", std::string(""), "Free text copied into the run summary.");
-  run.integer("seed", "-", 1, "Seed of every random generator (same seed + same threads = same results).").min(0);
+  run.integer("seed", "-", 1, "Seed of every random generator (same scene + same seed = same results, at any thread count).").min(0);
   run.integer("threads", "-", 1,
               "OpenMP threads per node. \"auto\": every CPU the node's process may run on (with the serial "
               "coupling scheme the nodes take turns, so each can use them all; the run summary reports the cores "
-              "each node kept busy). Same bits need the same count: with \"auto\", the same machine.")
+              "each node kept busy). Any count gives the same bits (tests/dem/thread_count_test.cpp, "
+              "tests/stability/determinism_test.cpp).")
       .min(1).max(256).or_word("auto", false);
   run.integer("guard_every", "steps", 1,
               "Blow-up guard (docs/stability.md): every node scans its state for non-finite values and energy "

@@ -121,13 +121,17 @@ void PairSet::rebuild(SetContext& cx) {
       detail::init_contact(pt, a, b, q.h.back(), has_bond ? &q.bond.back() : nullptr, cx.p.ball_ball, false);
     }
   };
-  for (const auto& e : np) push(e.a, e.b, e.s);
+  // A rank's world (cx.ghost): a pair of two ghosts acts on ghosts only and is not kept.
+  const std::uint8_t* G = cx.ghost;
+  for (const auto& e : np)
+    if (!G || !(G[e.a] & G[e.b])) push(e.a, e.b, e.s);
   // bonded contacts beyond the cut-off are kept (a bond never disappears in a rebuild)
   bool appended = false;
   carry.rest(
       pc.h, pc.bond, has_bond,
       [&](std::size_t k) {
         std::uint32_t a = pc.a[k], b = pc.b[k];
+        if (G && (G[a] & G[b])) return;
         Vec3 d = pt.x[b] - pt.x[a];
         std::array<std::int8_t, 4> s{0, 0, 0, 0};
         if (per)

@@ -46,7 +46,9 @@ World::World(const WorldParams& p)
 World::~World() = default;
 
 SetContext World::context() {
-  return SetContext{pt_, p_, skin_, edot_, thread_count(), kernel_, e_slip_dead_, e_soft_dead_, bond_failures_};
+  return SetContext{pt_,           p_,           skin_,          edot_,
+                    thread_count(), kernel_,      e_slip_dead_,   e_soft_dead_,
+                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data()};
 }
 
 PairContacts& World::pair_contacts() {
@@ -211,9 +213,11 @@ void World::append_pair(std::uint32_t a, std::uint32_t b, const std::array<std::
   dirty_ = true;
 }
 
-bool World::need_rebuild() const {
+bool World::need_rebuild() const { return need_rebuild(max_disp2_); }
+
+bool World::need_rebuild(double max_disp2) const {
   if (dirty_) return true;
-  const double dmax = std::sqrt(max_disp2_);
+  const double dmax = std::sqrt(max_disp2);
   double dcell = 0.0;
   if (p_.periodic.enabled)
     for (int k = 0; k < 3; ++k)
@@ -472,6 +476,11 @@ std::int64_t World::dt_interval() const {
 }
 
 void World::step() {
+  step_motion();
+  step_forces(need_rebuild());
+}
+
+void World::step_motion() {
   if (!prepared_) prepare();
   run_effects(0);
   Lap lap;
@@ -489,11 +498,28 @@ void World::step() {
   time_ += dt_;
   ++step_;
   lap_walls(times_.motion);
-  if (need_rebuild()) rebuild();
-  lap_walls(times_.rebuild);
+}
+
+void World::step_forces(bool rebuild_now) {
+  Lap lap;
+  if (rebuild_now) rebuild();
+  lap(times_.rebuild);
   force_pass(dt_);
   run_effects(2);
   ++times_.steps;
+}
+
+void World::set_ghost_rows(std::vector<std::uint8_t> ghost) {
+  ghost_ = std::move(ghost);
+  dirty_ = true;
+}
+
+void World::replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_t> ghost) {
+  pt_ = std::move(pt);
+  pairs_->reset(std::move(pc));
+  ghost_ = std::move(ghost);
+  dirty_ = true;
+  last_dt_step_ = -1;
 }
 
 void World::step(std::int64_t n) {

@@ -246,6 +246,23 @@ class World {
   // ---- stepping ----
   void step();
   void step(std::int64_t n);
+  /// step() in two halves, for a driver that acts between them (a rank of the DEM on MPI
+  /// ranks, dem_node/dist): step_motion() (time step, integration, wall motion), then
+  /// step_forces(rebuild) (the neighbour rebuild if asked, the force pass). step() is
+  /// step_motion(); step_forces(need_rebuild()).
+  void step_motion();
+  void step_forces(bool rebuild);
+  /// The rebuild test of step() for a given largest squared displacement of a ball since the
+  /// last rebuild (a rank passes the largest over every rank's own balls).
+  bool need_rebuild(double max_disp2) const;
+  /// Rows that are ghosts, copies of balls another rank owns (1 = ghost; empty: none): a pair
+  /// of two ghosts is not kept in the list (it acts on ghosts only).
+  void set_ghost_rows(std::vector<std::uint8_t> ghost);
+  const std::vector<std::uint8_t>& ghost_rows() const { return ghost_; }
+  /// Replace every ball, the ball-ball list (in the rows of `pt`) and the ghost rows, e.g. after
+  /// balls moved between ranks: the next step_forces(true) searches the pairs again and carries
+  /// these histories across by ball id. Wall contacts are kept as they are.
+  void replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_t> ghost);
   double time() const { return time_; }
   std::int64_t step_count() const { return step_; }
   double dt() const { return dt_; }
@@ -391,6 +408,7 @@ class World {
   double e_damp_ = 0.0;
   std::vector<double> chunk_e_;
   double max_disp2_ = 0.0;
+  std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (set_ghost_rows)
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
   mutable std::vector<double> scratch_kt_, scratch_kr_;  // critical step: per-ball k_t, k_r

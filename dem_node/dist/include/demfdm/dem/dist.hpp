@@ -1,0 +1,91 @@
+// The DEM on MPI ranks (issue 17; docs/scaling.md): space cut into a brick grid, one brick per
+// rank. A rank's World holds the balls whose centres lie in its brick (owned) and copies of the
+// balls within reach of it (ghosts), every row in ball-id order, and the ball-ball pairs that have
+// an owned ball. A pair of an owned ball and a ghost is computed on both ranks, from the same
+// inputs, so both keep the same history (LAMMPS's `newton off` for pairs).
+//
+// Every step: the World's first half (integration), then the ghosts' x, v, ω from their owners,
+// then the rebuild test over every rank's own balls, then at a rebuild the migration (balls to
+// the rank of their brick, with their contacts' histories) and new ghosts, then the World's
+// second half (rebuild, force pass). Rows in id order make each owned ball's sums those of one
+// World holding every ball (docs/scaling.md), so positions, velocities, forces and histories are
+// the same bits at any rank count (tests/dist).
+//
+// What this version covers: balls and ball-ball contacts of every law, periodic cells (also
+// strained) and free space, a fixed step (WorldParams::dt_fixed > 0). Not yet: walls, facets and
+// the footing; the automatic critical step; gravity and other effects; the node's measurements,
+// output and checkpoints; specimen procedures; load balancing.
+#pragma once
+
+#include <mpi.h>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "demfdm/dem/world.hpp"
+
+namespace demfdm::dem {
+
+/// A brick grid over [lo, lo + len): n[0] x n[1] x n[2] bricks; brick (i, j, k) is rank
+/// i + n0 (j + n1 k). On a periodic axis a point is wrapped into the cell first; on a free axis a
+/// point outside [lo, lo + len) belongs to the nearest brick.
+struct BrickGrid {
+  Vec3 lo{}, len{};
+  int n[3] = {1, 1, 1};
+  bool periodic[3] = {false, false, false};
+  int count() const { return n[0] * n[1] * n[2]; }
+  int owner(const Vec3& x) const;
+  /// Every rank whose brick, grown by `halo` on each side, holds x or (periodic axes) an image of
+  /// x; ascending, without repeats.
+  void near(const Vec3& x, double halo, std::vector<int>& out) const;
+};
+
+class DistDem {
+ public:
+  /// `p` must have a fixed step (dt_fixed > 0); the ranks of `comm` must number grid.count().
+  DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid);
+  ~DistDem();
+
+  /// Take the balls and ball-ball contacts of `full`, the same World on every rank (built the
+  /// same way, not stepped since its last prepare): each rank keeps its own balls, their ghosts
+  /// and their pairs, in id order, and prepares its World (as `full.prepare()` would).
+  void load(const World& full);
+  void step(std::int64_t n = 1);
+
+  World& world() { return *w_; }
+  const World& world() const { return *w_; }
+  int rank() const { return rank_; }
+  std::size_t owned() const;
+  std::size_t ghosts() const;
+  /// Exchanges so far (one per rebuild step), and the balls this rank sent to a new owner in them.
+  std::int64_t exchanges() const { return exchanges_; }
+  std::int64_t migrated() const { return migrated_; }
+
+  /// Every ball's state on rank 0 in id order (the other ranks get empty arrays). Collective.
+  struct Balls {
+    std::vector<std::uint64_t> id;
+    std::vector<Vec3> x, v, w, f, t;
+  };
+  Balls gather() const;
+
+ private:
+  void exchange();  // migration, new ghosts, histories, forward lists; replaces the World's balls
+  void forward();   // the ghosts' x, v, ω from their owners
+  void build_forward();  // the forward lists of the current rows
+  double owned_max_disp2() const;
+
+  MPI_Comm comm_;
+  int rank_ = 0, size_ = 1;
+  BrickGrid grid_;
+  WorldParams p_;
+  std::unique_ptr<World> w_;
+  double halo_ = 0.0;
+  double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
+  std::int64_t exchanges_ = 0, migrated_ = 0;
+  // Forward communication, fixed at each exchange: per rank, my owned rows whose ghosts it holds
+  // and my ghost rows it owns, both in id order.
+  std::vector<std::vector<std::uint32_t>> send_rows_, recv_rows_;
+};
+
+}  // namespace demfdm::dem

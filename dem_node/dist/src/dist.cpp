@@ -1,0 +1,400 @@
+// The DEM on MPI ranks (dist.hpp, docs/scaling.md).
+#include "demfdm/dem/dist.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <numeric>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+
+namespace demfdm::dem {
+
+// ------------------------------------------------------------------------------------------
+// brick grid
+
+namespace {
+
+// Position of x along axis k relative to the grid, wrapped into [0, len) on a periodic axis.
+double along(const BrickGrid& g, const Vec3& x, int k) {
+  double u = x[k] - g.lo[k];
+  if (g.periodic[k]) {
+    u -= std::floor(u / g.len[k]) * g.len[k];
+    if (u >= g.len[k]) u = 0.0;  // rounding of the wrap
+  }
+  return u;
+}
+
+}  // namespace
+
+int BrickGrid::owner(const Vec3& x) const {
+  int idx[3];
+  for (int k = 0; k < 3; ++k) {
+    const double h = len[k] / n[k];
+    const int i = static_cast<int>(std::floor(along(*this, x, k) / h));
+    idx[k] = std::clamp(i, 0, n[k] - 1);
+  }
+  return idx[0] + n[0] * (idx[1] + n[1] * idx[2]);
+}
+
+void BrickGrid::near(const Vec3& x, double halo, std::vector<int>& out) const {
+  out.clear();
+  std::vector<int> ax[3];
+  for (int k = 0; k < 3; ++k) {
+    const double h = len[k] / n[k];
+    const double u = along(*this, x, k);
+    for (int i = 0; i < n[k]; ++i) {
+      // brick i grown by the halo; on a free axis the end bricks reach to infinity
+      const double lo_i = (!periodic[k] && i == 0) ? -INFINITY : i * h - halo;
+      const double hi_i = (!periodic[k] && i == n[k] - 1) ? INFINITY : (i + 1) * h + halo;
+      bool in = u >= lo_i && u < hi_i;
+      if (periodic[k]) in = in || (u - len[k] >= lo_i && u - len[k] < hi_i) || (u + len[k] >= lo_i && u + len[k] < hi_i);
+      if (in) ax[k].push_back(i);
+    }
+  }
+  for (int k2 : ax[2])
+    for (int k1 : ax[1])
+      for (int k0 : ax[0]) out.push_back(k0 + n[0] * (k1 + n[1] * k2));
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+}
+
+// ------------------------------------------------------------------------------------------
+// records
+
+namespace {
+
+static_assert(std::is_trivially_copyable_v<Vec3> && std::is_trivially_copyable_v<ContactHist> &&
+              std::is_trivially_copyable_v<BondHist>);
+
+// One ball, all of its row.
+struct BallRec {
+  std::uint64_t id;
+  Vec3 x, v, w, f, t, fa, ta, xr;
+  double r, m, inertia;
+  std::uint8_t fix;
+};
+
+// One ball-ball contact, its balls by id (a: the lower id, which is the lower row on every rank).
+struct PairRec {
+  std::uint64_t ia, ib;
+  std::array<std::int8_t, 4> s;
+  ContactHist h;
+  BondHist b;
+};
+
+BallRec ball_rec(const Particles& pt, std::size_t i) {
+  return BallRec{pt.id[i], pt.x[i], pt.v[i], pt.w[i], pt.f[i], pt.t[i], pt.fa[i], pt.ta[i], pt.x_ref[i],
+                 pt.r[i],  pt.m[i], pt.inertia[i], pt.fix[i]};
+}
+
+void push_ball(Particles& pt, const BallRec& b) {
+  pt.id.push_back(b.id);
+  pt.x.push_back(b.x);
+  pt.v.push_back(b.v);
+  pt.w.push_back(b.w);
+  pt.f.push_back(b.f);
+  pt.t.push_back(b.t);
+  pt.fa.push_back(b.fa);
+  pt.ta.push_back(b.ta);
+  pt.x_ref.push_back(b.xr);
+  pt.r.push_back(b.r);
+  pt.m.push_back(b.m);
+  pt.inertia.push_back(b.inertia);
+  pt.fix.push_back(b.fix);
+}
+
+// All-to-all of trivially copyable records: out[r] goes to rank r; returns what every rank sent
+// here, in rank order.
+template <class T>
+std::vector<T> all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out) {
+  const int P = static_cast<int>(out.size());
+  std::vector<int> sc(P), rc(P), sd(P), rd(P);
+  for (int r = 0; r < P; ++r) sc[r] = static_cast<int>(out[r].size() * sizeof(T));
+  MPI_Alltoall(sc.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, comm);
+  std::vector<char> sb, rb;
+  for (int r = 0; r < P; ++r) {
+    sd[r] = static_cast<int>(sb.size());
+    sb.insert(sb.end(), reinterpret_cast<const char*>(out[r].data()),
+              reinterpret_cast<const char*>(out[r].data()) + sc[r]);
+  }
+  int total = 0;
+  for (int r = 0; r < P; ++r) {
+    rd[r] = total;
+    total += rc[r];
+  }
+  rb.resize(static_cast<std::size_t>(total));
+  MPI_Alltoallv(sb.data(), sc.data(), sd.data(), MPI_BYTE, rb.data(), rc.data(), rd.data(), MPI_BYTE, comm);
+  std::vector<T> in(static_cast<std::size_t>(total) / sizeof(T));
+  if (total) std::memcpy(in.data(), rb.data(), static_cast<std::size_t>(total));
+  return in;
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------------------
+// DistDem
+
+DistDem::DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid) : comm_(comm), grid_(grid), p_(p) {
+  MPI_Comm_rank(comm_, &rank_);
+  MPI_Comm_size(comm_, &size_);
+  if (size_ != grid_.count())
+    throw std::invalid_argument("DistDem: the brick grid has " + std::to_string(grid_.count()) + " bricks but " +
+                                std::to_string(size_) + " ranks run.");
+  if (!(p_.dt_fixed > 0.0))
+    throw std::invalid_argument("DistDem: a fixed step (dt_fixed > 0) is required on ranks for now.");
+}
+
+DistDem::~DistDem() = default;
+
+std::size_t DistDem::owned() const {
+  const auto& g = w_->ghost_rows();
+  return w_->num_balls() - static_cast<std::size_t>(std::count(g.begin(), g.end(), std::uint8_t{1}));
+}
+
+std::size_t DistDem::ghosts() const { return w_->num_balls() - owned(); }
+
+void DistDem::load(const World& full) {
+  const Particles& fp = full.balls();
+  const std::size_t n = fp.size();
+  for (std::size_t i = 1; i < n; ++i)
+    if (!(fp.id[i - 1] < fp.id[i])) throw std::invalid_argument("DistDem::load: the rows must be in id order.");
+  p_ = full.params();
+  p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
+  double rmax = 0.0;
+  for (double r : fp.r) rmax = std::max(rmax, r);
+  halo_ = 2.0 * rmax + p_.skin;
+  // Which rows are local: the brick's balls, the balls within the halo, and the partners of a
+  // contact with one of this rank's balls (a bonded pair may be stretched beyond the halo).
+  std::vector<int> own(n), nb;
+  std::vector<std::uint8_t> local(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    own[i] = grid_.owner(fp.x[i]);
+    grid_.near(fp.x[i], halo_, nb);
+    local[i] = own[i] == rank_ || std::binary_search(nb.begin(), nb.end(), rank_);
+  }
+  const PairContacts& fc = full.pair_contacts();
+  for (std::size_t c = 0; c < fc.size(); ++c) {
+    if (own[fc.a[c]] == rank_) local[fc.b[c]] = 1;
+    if (own[fc.b[c]] == rank_) local[fc.a[c]] = 1;
+  }
+  Particles pt;
+  std::vector<std::uint8_t> ghost;
+  std::vector<std::int64_t> row(n, -1);
+  for (std::size_t i = 0; i < n; ++i)
+    if (local[i]) {
+      row[i] = static_cast<std::int64_t>(pt.size());
+      push_ball(pt, ball_rec(fp, i));
+      ghost.push_back(own[i] != rank_);
+    }
+  PairContacts pc;
+  const bool has_bond = !fc.bond.empty();
+  for (std::size_t c = 0; c < fc.size(); ++c) {
+    const std::uint32_t a = fc.a[c], b = fc.b[c];
+    if (!(own[a] == rank_ || own[b] == rank_)) continue;
+    pc.a.push_back(static_cast<std::uint32_t>(row[a]));
+    pc.b.push_back(static_cast<std::uint32_t>(row[b]));
+    pc.shift.push_back(fc.shift[c]);
+    pc.h.push_back(fc.h[c]);
+    if (has_bond) pc.bond.push_back(fc.bond[c]);
+  }
+  w_ = std::make_unique<World>(p_);
+  w_->set_pair_kernel(full.pair_kernel());
+  w_->set_cell(full.cell_origin(), full.cell_length());
+  w_->set_strain_rate(full.strain_rate());
+  w_->replace_balls(std::move(pt), std::move(pc), std::move(ghost));
+  w_->prepare();
+  run_disp2_ = 0.0;
+  exchanges_ = 0;
+  build_forward();
+}
+
+double DistDem::owned_max_disp2() const {
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  double d = 0.0;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (g.empty() || !g[i]) d = std::max(d, norm2(pt.x[i] - pt.x_ref[i]));
+  return d;
+}
+
+void DistDem::step(std::int64_t n) {
+  for (std::int64_t k = 0; k < n; ++k) {
+    w_->step_motion();
+    forward();
+    run_disp2_ = std::max(run_disp2_, owned_max_disp2());
+    double g = 0.0;
+    MPI_Allreduce(&run_disp2_, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
+    const bool rebuild = w_->need_rebuild(g);
+    if (rebuild) {
+      exchange();
+      run_disp2_ = 0.0;
+    }
+    w_->step_forces(rebuild);
+  }
+}
+
+void DistDem::forward() {
+  std::vector<std::vector<Vec3>> out(static_cast<std::size_t>(size_));
+  const Particles& pt = w_->balls();
+  for (int r = 0; r < size_; ++r)
+    for (std::uint32_t i : send_rows_[static_cast<std::size_t>(r)]) {
+      auto& o = out[static_cast<std::size_t>(r)];
+      o.push_back(pt.x[i]);
+      o.push_back(pt.v[i]);
+      o.push_back(pt.w[i]);
+    }
+  const std::vector<Vec3> in = all_to_all(comm_, out);
+  Particles& q = w_->balls();
+  std::size_t k = 0;
+  for (int r = 0; r < size_; ++r)
+    for (std::uint32_t i : recv_rows_[static_cast<std::size_t>(r)]) {
+      q.x[i] = in[k++];
+      q.v[i] = in[k++];
+      q.w[i] = in[k++];
+    }
+}
+
+// Migration and ghosts. Every rank sends each ball it owns to the rank of its brick and to every
+// rank within the halo, and each contact of one of its balls to the ranks that will own either
+// ball, with the partner's row (a ghost copy here) so that the pair can be computed there. The
+// receivers keep one copy of each (copies are identical), order the rows by id, and ask each
+// owner for the ghosts they hold.
+void DistDem::exchange() {
+  const Particles& pt = w_->balls();
+  const std::size_t n = pt.size();
+  const auto& gh = w_->ghost_rows();
+  auto mine = [&](std::size_t i) { return gh.empty() || !gh[i]; };
+  std::vector<int> own(n), nb;
+  for (std::size_t i = 0; i < n; ++i) own[i] = grid_.owner(pt.x[i]);
+  // destinations per row, as (row, rank) pairs
+  std::vector<std::pair<std::uint32_t, int>> dest;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!mine(i)) continue;
+    if (own[i] != rank_) ++migrated_;
+    grid_.near(pt.x[i], halo_, nb);
+    dest.emplace_back(static_cast<std::uint32_t>(i), own[i]);
+    for (int r : nb) dest.emplace_back(static_cast<std::uint32_t>(i), r);
+  }
+  const PairContacts& pc = w_->pair_contacts();
+  const bool has_bond = !pc.bond.empty();
+  std::vector<std::vector<PairRec>> pout(static_cast<std::size_t>(size_));
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const std::uint32_t a = pc.a[c], b = pc.b[c];
+    if (!(mine(a) || mine(b))) continue;
+    dest.emplace_back(a, own[b]);
+    dest.emplace_back(b, own[a]);
+    PairRec rec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}};
+    pout[static_cast<std::size_t>(own[a])].push_back(rec);
+    if (own[b] != own[a]) pout[static_cast<std::size_t>(own[b])].push_back(rec);
+  }
+  std::sort(dest.begin(), dest.end());
+  dest.erase(std::unique(dest.begin(), dest.end()), dest.end());
+  std::vector<std::vector<BallRec>> bout(static_cast<std::size_t>(size_));
+  for (const auto& [i, r] : dest) bout[static_cast<std::size_t>(r)].push_back(ball_rec(pt, i));
+  std::vector<BallRec> bin = all_to_all(comm_, bout);
+  std::vector<PairRec> pin = all_to_all(comm_, pout);
+  // the new rows: one copy per id, in id order
+  std::sort(bin.begin(), bin.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
+  bin.erase(std::unique(bin.begin(), bin.end(), [](const BallRec& x, const BallRec& y) { return x.id == y.id; }),
+            bin.end());
+  Particles q;
+  std::vector<std::uint8_t> ghost;
+  std::vector<std::uint64_t> ids;
+  for (const BallRec& b : bin) {
+    push_ball(q, b);
+    ids.push_back(b.id);
+    ghost.push_back(grid_.owner(b.x) != rank_);
+  }
+  auto row_of = [&](std::uint64_t id) -> std::int64_t {
+    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
+    return (it != ids.end() && *it == id) ? it - ids.begin() : -1;
+  };
+  std::sort(pin.begin(), pin.end(),
+            [](const PairRec& x, const PairRec& y) { return x.ia != y.ia ? x.ia < y.ia : x.ib < y.ib; });
+  PairContacts nc;
+  for (std::size_t k = 0; k < pin.size(); ++k) {
+    if (k > 0 && pin[k].ia == pin[k - 1].ia && pin[k].ib == pin[k - 1].ib) continue;
+    const std::int64_t a = row_of(pin[k].ia), b = row_of(pin[k].ib);
+    if (a < 0 || b < 0)
+      throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a contact of ball " +
+                             std::to_string(a < 0 ? pin[k].ia : pin[k].ib) + " without the ball.");
+    if (ghost[static_cast<std::size_t>(a)] && ghost[static_cast<std::size_t>(b)]) continue;
+    nc.a.push_back(static_cast<std::uint32_t>(a));
+    nc.b.push_back(static_cast<std::uint32_t>(b));
+    nc.shift.push_back(pin[k].s);
+    nc.h.push_back(pin[k].h);
+    if (has_bond) nc.bond.push_back(pin[k].b);
+  }
+  w_->replace_balls(std::move(q), std::move(nc), std::move(ghost));
+  ++exchanges_;
+  build_forward();
+}
+
+// Forward lists: every rank asks each owner for the ghosts it holds, in id order (its rows' order).
+void DistDem::build_forward() {
+  const Particles& q = w_->balls();
+  const auto& ghost = w_->ghost_rows();
+  std::vector<std::vector<std::uint64_t>> ask(static_cast<std::size_t>(size_));
+  recv_rows_.assign(static_cast<std::size_t>(size_), {});
+  for (std::size_t i = 0; i < q.size(); ++i)
+    if (!ghost.empty() && ghost[i]) {
+      const int r = grid_.owner(q.x[i]);
+      ask[static_cast<std::size_t>(r)].push_back(q.id[i]);
+      recv_rows_[static_cast<std::size_t>(r)].push_back(static_cast<std::uint32_t>(i));
+    }
+  // the counts first, so that each owner knows which requests came from which rank
+  std::vector<int> cnt(static_cast<std::size_t>(size_)), rcnt(static_cast<std::size_t>(size_));
+  for (int r = 0; r < size_; ++r) cnt[static_cast<std::size_t>(r)] = static_cast<int>(ask[static_cast<std::size_t>(r)].size());
+  MPI_Alltoall(cnt.data(), 1, MPI_INT, rcnt.data(), 1, MPI_INT, comm_);
+  const std::vector<std::uint64_t> req = all_to_all(comm_, ask);
+  send_rows_.assign(static_cast<std::size_t>(size_), {});
+  std::size_t k = 0;
+  for (int r = 0; r < size_; ++r)
+    for (int j = 0; j < rcnt[static_cast<std::size_t>(r)]; ++j) {
+      const std::uint64_t id = req[k++];
+      const auto it = std::lower_bound(q.id.begin(), q.id.end(), id);
+      const std::size_t i = static_cast<std::size_t>(it - q.id.begin());
+      if (it == q.id.end() || *it != id || (!ghost.empty() && ghost[i]))
+        throw std::logic_error("DistDem: rank " + std::to_string(r) + " asked rank " + std::to_string(rank_) +
+                               " for ball " + std::to_string(id) + ", which it does not own.");
+      send_rows_[static_cast<std::size_t>(r)].push_back(static_cast<std::uint32_t>(i));
+    }
+}
+
+DistDem::Balls DistDem::gather() const {
+  struct Rec {
+    std::uint64_t id;
+    Vec3 x, v, w, f, t;
+  };
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  std::vector<Rec> mine;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (g.empty() || !g[i]) mine.push_back(Rec{pt.id[i], pt.x[i], pt.v[i], pt.w[i], pt.f[i], pt.t[i]});
+  int bytes = static_cast<int>(mine.size() * sizeof(Rec));
+  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_));
+  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
+  int total = 0;
+  for (int r = 0; r < size_; ++r) {
+    displ[static_cast<std::size_t>(r)] = total;
+    total += counts[static_cast<std::size_t>(r)];
+  }
+  std::vector<Rec> all(rank_ == 0 ? static_cast<std::size_t>(total) / sizeof(Rec) : 0);
+  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+  Balls out;
+  if (rank_ != 0) return out;
+  std::sort(all.begin(), all.end(), [](const Rec& a, const Rec& b) { return a.id < b.id; });
+  for (const Rec& r : all) {
+    out.id.push_back(r.id);
+    out.x.push_back(r.x);
+    out.v.push_back(r.v);
+    out.w.push_back(r.w);
+    out.f.push_back(r.f);
+    out.t.push_back(r.t);
+  }
+  return out;
+}
+
+}  // namespace demfdm::dem
