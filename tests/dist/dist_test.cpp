@@ -31,6 +31,7 @@ struct Scene {
   int axis = 0;  // the axis cut into bricks
   int steps = 600;
   int threads = 1;
+  bool auto_dt = false;  // the automatic step instead of a fixed one
 };
 
 constexpr int kSide = 12;  // kSide³ balls
@@ -50,7 +51,7 @@ std::unique_ptr<World> build(const Scene& sc, bool final_prepare) {
   p.periodic.length = {kSide * s, kSide * s, kSide * s};
   p.ball_ball.model = sc.model;
   p.ball_ball.softbond.soft = 20.0;
-  p.dt_fixed = 5e-8;
+  p.dt_fixed = sc.auto_dt ? 0.0 : 5e-8;
   auto w = std::make_unique<World>(p);
   std::mt19937_64 rng(91);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
@@ -93,6 +94,7 @@ void check(const Scene& sc) {
   d.load(*full);
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
+  const double dt_end = d.world().dt();
   long long mine[3] = {static_cast<long long>(d.owned()), static_cast<long long>(d.ghosts()),
                        static_cast<long long>(d.migrated())};
   long long sum[3] = {0, 0, 0};
@@ -103,9 +105,9 @@ void check(const Scene& sc) {
     std::unique_ptr<World> ref = build(sc, true);
     ref->step(sc.steps);
     const Particles& r = ref->balls();
-    std::printf("%s on %d ranks: %zu balls, %lld ghosts at the end, %lld exchanges, %lld migrations, reference "
+    std::printf("%s on %d ranks: dt %.4e s, %zu balls, %lld ghosts at the end, %lld exchanges, %lld migrations, reference "
                 "%lld rebuilds\n",
-                sc.name.c_str(), g_size, got.id.size(), sum_ghosts, static_cast<long long>(d.exchanges()),
+                sc.name.c_str(), g_size, ref->dt(), got.id.size(), sum_ghosts, static_cast<long long>(d.exchanges()),
                 sum_migrated, static_cast<long long>(ref->rebuild_count()));
     EXPECT_EQ(static_cast<std::size_t>(sum_owned), r.size()) << "every ball owned once";
     EXPECT_EQ(got.id, r.id);
@@ -114,6 +116,8 @@ void check(const Scene& sc) {
     EXPECT_TRUE(same(got.w, r.w)) << "spins differ";
     EXPECT_TRUE(same(got.f, r.f)) << "forces differ";
     EXPECT_TRUE(same(got.t, r.t)) << "torques differ";
+    const double dt_ref = ref->dt();
+    EXPECT_EQ(std::memcmp(&dt_ref, &dt_end, sizeof dt_end), 0) << "the last step differs";
     EXPECT_GT(ref->rebuild_count(), 2) << "the run must rebuild its lists";
     if (sc.bonded) {  // bonds failed during the run (some across the cuts)
       const BondCounts bc = bond_counts(*ref);
@@ -142,6 +146,14 @@ TEST(Dist, LinearFreeSameBits) {
 }
 TEST(Dist, SoftBondPeriodicSameBits) {
   check({"softbond periodic, cut along y", ContactModel::kSoftBond, true, true, 1});
+}
+// The automatic step, recomputed every step for Hertz–Mindlin (its stiffness grows with the
+// overlap): the smallest over the ranks.
+TEST(Dist, HertzPeriodicAutomaticStepSameBits) {
+  Scene sc{"hertz periodic, automatic step, cut along x", ContactModel::kHertz, true};
+  sc.auto_dt = true;
+  sc.steps = 300;
+  check(sc);
 }
 TEST(Dist, ParallelBondPeriodicTwoThreadsSameBits) {
   check({"pbond periodic, cut along x, 2 threads", ContactModel::kLinearPBond, true, true, 0, 600, 2});

@@ -34,7 +34,7 @@ static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
 static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
 static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
-static_assert(sizeof(World) == 1960, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state), ghost rows (refused)
+static_assert(sizeof(World) == 1992, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state), ghost rows (refused), step reduction (a rank driver's)
 // The contact sets: vtable, phase, contacts, the kind's walls (PairSet: + pass and measurement scratch, not state).
 static_assert(sizeof(PairSet) == 672, "PairSet changed: is the new member state? update the checkpoint");  // + the threaded pass plan (derived)
 static_assert(sizeof(WallSet<PlaneKind>) == 328, "WallSet<PlaneKind> changed: update the checkpoint");

@@ -460,7 +460,7 @@ void World::prepare() {
   lap(times_.rebuild);
   force_pass(0.0);
   Lap lap_dt;
-  dt_ = p_.dt_fixed > 0.0 ? p_.dt_fixed : critical_timestep();
+  dt_ = p_.dt_fixed > 0.0 ? p_.dt_fixed : reduced_step(critical_timestep());
   lap_dt(times_.motion);
   last_dt_step_ = step_;
   prepared_ = true;
@@ -487,7 +487,7 @@ void World::step_motion() {
   if (p_.dt_fixed > 0.0) {
     dt_ = p_.dt_fixed;
   } else if (last_dt_step_ < 0 || step_ - last_dt_step_ >= dt_interval()) {
-    dt_ = critical_timestep();
+    dt_ = reduced_step(critical_timestep());
     last_dt_step_ = step_;
   }
   integrate(dt_);
@@ -518,9 +518,12 @@ void World::replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_
   pt_ = std::move(pt);
   pairs_->reset(std::move(pc));
   ghost_ = std::move(ghost);
-  dirty_ = true;
-  last_dt_step_ = -1;
+  dirty_ = true;  // (the step is not recomputed: one World holding every ball would not either)
 }
+
+void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }
+
+double World::reduced_step(double dt) const { return step_reduction_ ? step_reduction_(dt) : dt; }
 
 void World::step(std::int64_t n) {
   for (std::int64_t k = 0; k < n; ++k) step();

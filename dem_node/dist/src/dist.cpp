@@ -142,8 +142,6 @@ DistDem::DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid) : c
   if (size_ != grid_.count())
     throw std::invalid_argument("DistDem: the brick grid has " + std::to_string(grid_.count()) + " bricks but " +
                                 std::to_string(size_) + " ranks run.");
-  if (!(p_.dt_fixed > 0.0))
-    throw std::invalid_argument("DistDem: a fixed step (dt_fixed > 0) is required on ranks for now.");
 }
 
 DistDem::~DistDem() = default;
@@ -204,6 +202,12 @@ void DistDem::load(const World& full) {
   w_->set_cell(full.cell_origin(), full.cell_length());
   w_->set_strain_rate(full.strain_rate());
   w_->replace_balls(std::move(pt), std::move(pc), std::move(ghost));
+  // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
+  w_->set_step_reduction([this](double dt) {
+    double g = dt;
+    MPI_Allreduce(&dt, &g, 1, MPI_DOUBLE, MPI_MIN, comm_);
+    return g;
+  });
   w_->prepare();
   run_disp2_ = 0.0;
   exchanges_ = 0;

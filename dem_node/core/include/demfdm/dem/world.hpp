@@ -20,6 +20,7 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <omp.h>
 #include <cstdint>
 #include <memory>
@@ -263,6 +264,10 @@ class World {
   /// balls moved between ranks: the next step_forces(true) searches the pairs again and carries
   /// these histories across by ball id. Wall contacts are kept as they are.
   void replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_t> ghost);
+  /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
+  /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
+  /// owner's). Collective for such a caller: every rank computes the step at the same steps.
+  void set_step_reduction(std::function<double(double)> reduce);
   double time() const { return time_; }
   std::int64_t step_count() const { return step_; }
   double dt() const { return dt_; }
@@ -409,6 +414,8 @@ class World {
   std::vector<double> chunk_e_;
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (set_ghost_rows)
+  std::function<double(double)> step_reduction_;  // set_step_reduction
+  double reduced_step(double dt) const;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
   mutable std::vector<double> scratch_kt_, scratch_kr_;  // critical step: per-ball k_t, k_r

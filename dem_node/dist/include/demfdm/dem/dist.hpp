@@ -12,8 +12,8 @@
 // the same bits at any rank count (tests/dist).
 //
 // What this version covers: balls and ball-ball contacts of every law, periodic cells (also
-// strained) and free space, a fixed step (WorldParams::dt_fixed > 0). Not yet: walls, facets and
-// the footing; the automatic critical step; gravity and other effects; the node's measurements,
+// strained) and free space, the fixed or the automatic step (the smallest over the ranks). Not
+// yet: walls, facets and the footing; gravity and other effects; the node's measurements,
 // output and checkpoints; specimen procedures; load balancing.
 #pragma once
 
@@ -43,7 +43,7 @@ struct BrickGrid {
 
 class DistDem {
  public:
-  /// `p` must have a fixed step (dt_fixed > 0); the ranks of `comm` must number grid.count().
+  /// The ranks of `comm` must number grid.count().
   DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid);
   ~DistDem();
 
