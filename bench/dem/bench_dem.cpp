@@ -60,36 +60,11 @@
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/pair_block.hpp"
 #include "demfdm/dem/world.hpp"
+#include "packing.hpp"
 
 using namespace demfdm::dem;
 
 namespace {
-struct Packing {
-  Vec3 lo, hi;
-  std::vector<Vec3> x;
-  std::vector<double> r;
-};
-
-Packing load(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw std::runtime_error("cannot open packing file '" + path + "'");
-  Packing p;
-  std::string line;
-  for (int l = 1; l <= 9; ++l) {
-    std::getline(in, line);
-    if (l >= 6 && l <= 8) {
-      std::istringstream s(line);
-      s >> p.lo[l - 6] >> p.hi[l - 6];
-    }
-  }
-  double x, y, z, r;
-  while (in >> x >> y >> z >> r) {
-    p.x.push_back({x, y, z});
-    p.r.push_back(r);
-  }
-  return p;
-}
-
 PairKernel kernel_from_env(std::string& name) {
   const char* k = std::getenv("BENCH_DEM_KERNEL");
   name = k ? k : "auto";

@@ -105,30 +105,33 @@ void push_ball(Particles& pt, const BallRec& b) {
   pt.fix.push_back(b.fix);
 }
 
-// All-to-all of trivially copyable records: out[r] goes to rank r; returns what every rank sent
-// here, in rank order.
+// All-to-all of trivially copyable records: out[r] goes to rank r; `in` gets what every rank
+// sent here, in rank order. The byte buffers and `in` keep their capacity from call to call (a
+// fresh allocation of this size per exchange cost more in page faults than the exchange).
 template <class T>
-std::vector<T> all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out) {
+void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vector<T>& in, std::vector<char>& sb,
+                std::vector<char>& rb) {
   const int P = static_cast<int>(out.size());
   std::vector<int> sc(P), rc(P), sd(P), rd(P);
-  for (int r = 0; r < P; ++r) sc[r] = static_cast<int>(out[r].size() * sizeof(T));
-  MPI_Alltoall(sc.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, comm);
-  std::vector<char> sb, rb;
+  int stotal = 0;
   for (int r = 0; r < P; ++r) {
-    sd[r] = static_cast<int>(sb.size());
-    sb.insert(sb.end(), reinterpret_cast<const char*>(out[r].data()),
-              reinterpret_cast<const char*>(out[r].data()) + sc[r]);
+    sc[r] = static_cast<int>(out[r].size() * sizeof(T));
+    sd[r] = stotal;
+    stotal += sc[r];
   }
+  MPI_Alltoall(sc.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, comm);
+  if (sb.size() < static_cast<std::size_t>(stotal)) sb.resize(static_cast<std::size_t>(stotal));
+  for (int r = 0; r < P; ++r)
+    if (sc[r]) std::memcpy(sb.data() + sd[r], out[r].data(), static_cast<std::size_t>(sc[r]));
   int total = 0;
   for (int r = 0; r < P; ++r) {
     rd[r] = total;
     total += rc[r];
   }
-  rb.resize(static_cast<std::size_t>(total));
+  if (rb.size() < static_cast<std::size_t>(total)) rb.resize(static_cast<std::size_t>(total));
   MPI_Alltoallv(sb.data(), sc.data(), sd.data(), MPI_BYTE, rb.data(), rc.data(), rd.data(), MPI_BYTE, comm);
-  std::vector<T> in(static_cast<std::size_t>(total) / sizeof(T));
-  if (total) std::memcpy(in.data(), rb.data(), static_cast<std::size_t>(total));
-  return in;
+  in.resize(static_cast<std::size_t>(total) / sizeof(T));
+  if (total) std::memcpy(static_cast<void*>(in.data()), rb.data(), static_cast<std::size_t>(total));
 }
 
 }  // namespace
@@ -225,31 +228,46 @@ double DistDem::owned_max_disp2() const {
 
 void DistDem::step(std::int64_t n) {
   for (std::int64_t k = 0; k < n; ++k) {
+    double t0 = MPI_Wtime();
     w_->step_motion();
+    double t1 = MPI_Wtime();
+    times_.motion += t1 - t0;
     forward();
+    t0 = MPI_Wtime();
+    times_.forward += t0 - t1;
     run_disp2_ = std::max(run_disp2_, owned_max_disp2());
     double g = 0.0;
     MPI_Allreduce(&run_disp2_, &g, 1, MPI_DOUBLE, MPI_MAX, comm_);
     const bool rebuild = w_->need_rebuild(g);
+    t1 = MPI_Wtime();
+    times_.reduce += t1 - t0;
     if (rebuild) {
       exchange();
       run_disp2_ = 0.0;
     }
+    t0 = MPI_Wtime();
+    times_.exchange += t0 - t1;
     w_->step_forces(rebuild);
+    times_.forces += MPI_Wtime() - t0;
   }
 }
 
 void DistDem::forward() {
-  std::vector<std::vector<Vec3>> out(static_cast<std::size_t>(size_));
+  std::vector<std::vector<Vec3>>& out = fwd_out_;
+  out.resize(static_cast<std::size_t>(size_));
   const Particles& pt = w_->balls();
-  for (int r = 0; r < size_; ++r)
+  for (int r = 0; r < size_; ++r) {
+    auto& o = out[static_cast<std::size_t>(r)];
+    o.clear();
     for (std::uint32_t i : send_rows_[static_cast<std::size_t>(r)]) {
-      auto& o = out[static_cast<std::size_t>(r)];
       o.push_back(pt.x[i]);
       o.push_back(pt.v[i]);
       o.push_back(pt.w[i]);
     }
-  const std::vector<Vec3> in = all_to_all(comm_, out);
+  }
+  std::vector<Vec3>& in = fwd_in_;
+  all_to_all(comm_, out, in, sbuf_, rbuf_);
+  times_.forwarded += static_cast<std::int64_t>(in.size() / 3);
   Particles& q = w_->balls();
   std::size_t k = 0;
   for (int r = 0; r < size_; ++r)
@@ -272,41 +290,64 @@ void DistDem::exchange() {
   auto mine = [&](std::size_t i) { return gh.empty() || !gh[i]; };
   std::vector<int> own(n), nb;
   for (std::size_t i = 0; i < n; ++i) own[i] = grid_.owner(pt.x[i]);
-  // destinations per row, as (row, rank) pairs
-  std::vector<std::pair<std::uint32_t, int>> dest;
+  // Destinations of each row: its owner and the ranks within the halo (own balls), and the
+  // owners of its contacts' partners. Collected per row (a counting sort by row), then each
+  // row's few ranks sorted and deduplicated.
+  const PairContacts& pc = w_->pair_contacts();
+  const bool has_bond = !pc.bond.empty();
+  std::vector<std::uint32_t> off(n + 1, 0);
+  for (std::size_t i = 0; i < n; ++i)
+    if (mine(i)) {
+      grid_.near(pt.x[i], halo_, nb);
+      off[i + 1] += static_cast<std::uint32_t>(1 + nb.size());
+    }
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (mine(pc.a[c]) || mine(pc.b[c])) {
+      ++off[pc.a[c] + 1];
+      ++off[pc.b[c] + 1];
+    }
+  for (std::size_t i = 0; i < n; ++i) off[i + 1] += off[i];
+  std::vector<int> dest(off[n]);
+  std::vector<std::uint32_t> fill(off.begin(), off.end() - 1);
+  std::vector<std::vector<PairRec>> pout(static_cast<std::size_t>(size_));
   for (std::size_t i = 0; i < n; ++i) {
     if (!mine(i)) continue;
     if (own[i] != rank_) ++migrated_;
     grid_.near(pt.x[i], halo_, nb);
-    dest.emplace_back(static_cast<std::uint32_t>(i), own[i]);
-    for (int r : nb) dest.emplace_back(static_cast<std::uint32_t>(i), r);
+    dest[fill[i]++] = own[i];
+    for (int r : nb) dest[fill[i]++] = r;
   }
-  const PairContacts& pc = w_->pair_contacts();
-  const bool has_bond = !pc.bond.empty();
-  std::vector<std::vector<PairRec>> pout(static_cast<std::size_t>(size_));
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const std::uint32_t a = pc.a[c], b = pc.b[c];
     if (!(mine(a) || mine(b))) continue;
-    dest.emplace_back(a, own[b]);
-    dest.emplace_back(b, own[a]);
+    dest[fill[a]++] = own[b];
+    dest[fill[b]++] = own[a];
     PairRec rec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}};
     pout[static_cast<std::size_t>(own[a])].push_back(rec);
     if (own[b] != own[a]) pout[static_cast<std::size_t>(own[b])].push_back(rec);
   }
-  std::sort(dest.begin(), dest.end());
-  dest.erase(std::unique(dest.begin(), dest.end()), dest.end());
   std::vector<std::vector<BallRec>> bout(static_cast<std::size_t>(size_));
-  for (const auto& [i, r] : dest) bout[static_cast<std::size_t>(r)].push_back(ball_rec(pt, i));
-  std::vector<BallRec> bin = all_to_all(comm_, bout);
-  std::vector<PairRec> pin = all_to_all(comm_, pout);
-  // the new rows: one copy per id, in id order
-  std::sort(bin.begin(), bin.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
-  bin.erase(std::unique(bin.begin(), bin.end(), [](const BallRec& x, const BallRec& y) { return x.id == y.id; }),
-            bin.end());
+  for (std::size_t i = 0; i < n; ++i) {
+    int* d0 = dest.data() + off[i];
+    int* d1 = dest.data() + off[i + 1];
+    std::sort(d0, d1);
+    for (int* d = d0; d < d1; ++d)
+      if (d == d0 || *d != d[-1]) bout[static_cast<std::size_t>(*d)].push_back(ball_rec(pt, i));
+  }
+  std::vector<BallRec> bin;
+  std::vector<PairRec> pin;
+  all_to_all(comm_, bout, bin, sbuf_, rbuf_);
+  all_to_all(comm_, pout, pin, sbuf_, rbuf_);
+  // the new rows: one copy per id, in id order (indices sorted, not the records)
+  std::vector<std::uint32_t> bo(bin.size());
+  std::iota(bo.begin(), bo.end(), 0u);
+  std::sort(bo.begin(), bo.end(), [&](std::uint32_t x, std::uint32_t y) { return bin[x].id < bin[y].id; });
   Particles q;
   std::vector<std::uint8_t> ghost;
   std::vector<std::uint64_t> ids;
-  for (const BallRec& b : bin) {
+  for (std::uint32_t k : bo) {
+    const BallRec& b = bin[k];
+    if (!ids.empty() && ids.back() == b.id) continue;
     push_ball(q, b);
     ids.push_back(b.id);
     ghost.push_back(grid_.owner(b.x) != rank_);
@@ -315,21 +356,27 @@ void DistDem::exchange() {
     const auto it = std::lower_bound(ids.begin(), ids.end(), id);
     return (it != ids.end() && *it == id) ? it - ids.begin() : -1;
   };
-  std::sort(pin.begin(), pin.end(),
-            [](const PairRec& x, const PairRec& y) { return x.ia != y.ia ? x.ia < y.ia : x.ib < y.ib; });
+  std::vector<std::uint32_t> po(pin.size());
+  std::iota(po.begin(), po.end(), 0u);
+  std::sort(po.begin(), po.end(), [&](std::uint32_t x, std::uint32_t y) {
+    return pin[x].ia != pin[y].ia ? pin[x].ia < pin[y].ia : pin[x].ib < pin[y].ib;
+  });
   PairContacts nc;
-  for (std::size_t k = 0; k < pin.size(); ++k) {
-    if (k > 0 && pin[k].ia == pin[k - 1].ia && pin[k].ib == pin[k - 1].ib) continue;
-    const std::int64_t a = row_of(pin[k].ia), b = row_of(pin[k].ib);
+  const PairRec* prev = nullptr;
+  for (std::uint32_t k : po) {
+    const PairRec& r = pin[k];
+    if (prev && r.ia == prev->ia && r.ib == prev->ib) continue;
+    prev = &r;
+    const std::int64_t a = row_of(r.ia), b = row_of(r.ib);
     if (a < 0 || b < 0)
       throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a contact of ball " +
-                             std::to_string(a < 0 ? pin[k].ia : pin[k].ib) + " without the ball.");
+                             std::to_string(a < 0 ? r.ia : r.ib) + " without the ball.");
     if (ghost[static_cast<std::size_t>(a)] && ghost[static_cast<std::size_t>(b)]) continue;
     nc.a.push_back(static_cast<std::uint32_t>(a));
     nc.b.push_back(static_cast<std::uint32_t>(b));
-    nc.shift.push_back(pin[k].s);
-    nc.h.push_back(pin[k].h);
-    if (has_bond) nc.bond.push_back(pin[k].b);
+    nc.shift.push_back(r.s);
+    nc.h.push_back(r.h);
+    if (has_bond) nc.bond.push_back(r.b);
   }
   w_->replace_balls(std::move(q), std::move(nc), std::move(ghost));
   ++exchanges_;
@@ -352,7 +399,8 @@ void DistDem::build_forward() {
   std::vector<int> cnt(static_cast<std::size_t>(size_)), rcnt(static_cast<std::size_t>(size_));
   for (int r = 0; r < size_; ++r) cnt[static_cast<std::size_t>(r)] = static_cast<int>(ask[static_cast<std::size_t>(r)].size());
   MPI_Alltoall(cnt.data(), 1, MPI_INT, rcnt.data(), 1, MPI_INT, comm_);
-  const std::vector<std::uint64_t> req = all_to_all(comm_, ask);
+  std::vector<std::uint64_t> req;
+  all_to_all(comm_, ask, req, sbuf_, rbuf_);
   send_rows_.assign(static_cast<std::size_t>(size_), {});
   std::size_t k = 0;
   for (int r = 0; r < size_; ++r)

@@ -62,6 +62,17 @@ class DistDem {
   std::int64_t exchanges() const { return exchanges_; }
   std::int64_t migrated() const { return migrated_; }
 
+  /// Wall time [s] of this rank's steps by part: the World's two halves (compute), the ghosts'
+  /// forward exchange, the rebuild test's reduction, and the migrations (communication).
+  struct Times {
+    double motion = 0.0, forces = 0.0, forward = 0.0, reduce = 0.0, exchange = 0.0;
+    std::int64_t forwarded = 0;  // ghost states received
+    double compute() const { return motion + forces; }
+    double comm() const { return forward + reduce + exchange; }
+  };
+  const Times& times() const { return times_; }
+  void reset_times() { times_ = Times{}; }
+
   /// Every ball's state on rank 0 in id order (the other ranks get empty arrays). Collective.
   struct Balls {
     std::vector<std::uint64_t> id;
@@ -83,9 +94,14 @@ class DistDem {
   double halo_ = 0.0;
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0;
+  Times times_;
   // Forward communication, fixed at each exchange: per rank, my owned rows whose ghosts it holds
   // and my ghost rows it owns, both in id order.
   std::vector<std::vector<std::uint32_t>> send_rows_, recv_rows_;
+  // Buffers kept from call to call: the byte buffers of the all-to-all, the forward records.
+  std::vector<char> sbuf_, rbuf_;
+  std::vector<std::vector<Vec3>> fwd_out_;
+  std::vector<Vec3> fwd_in_;
 };
 
 }  // namespace demfdm::dem
