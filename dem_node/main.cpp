@@ -162,6 +162,7 @@ class DemParticipant : public node::Participant {
     dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = schema::run_threads(s_);
+    world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
     omp_set_num_threads(world_.params().threads);
     auto sec = r.section("dem_node");
     Block saved;

@@ -244,12 +244,14 @@ TEST(Specimen, DepthScaling) {
 }
 
 // Habit 13: a bonded random packing (soft bonds, replicated 2×2×1 so that the threaded
-// paths run) gives bit-identical positions from run to run, and the same at 1 and 2 threads.
+// paths run) gives bit-identical positions from run to run, and (thread_independent) the same
+// at 1 and 2 threads.
 TEST(Determinism, SameThreadCountSameHash) {
   Rev& r = shared_rev();
   auto run = [&](int threads) {
     WorldParams p = r.w->params();
     p.threads = threads;
+    p.thread_independent = true;
     p.ball_ball.model = ContactModel::kSoftBond;
     World w(p);
     const auto& pt = r.w->balls();

@@ -1,6 +1,7 @@
-// A DEM run gives the same bits at any thread count (issue 17 item 3, for threads): the threaded
-// ball–ball pass cuts the contact list into one chunk per thread and rebuilds the sums of the
-// balls whose contacts span chunks in the one-thread order (PairSet::pass_law), and every other
+// With WorldParams::thread_independent (scene: run.thread_independent) a DEM run gives the same
+// bits at any thread count (issue 17 item 3, for threads): the threaded ball–ball pass cuts the
+// contact list into one chunk per thread and rebuilds the sums of the balls whose contacts span
+// chunks in the one-thread order (PairSet::pass_law), and every other
 // threaded loop (facet walls, the contact scan, the per-ball sums) was already summed in a
 // fixed order. Checked for every law, periodic with a straining cell and free, with the scalar
 // and the vector pass, at 1, 2, 3 and 4 threads (more threads than cores is fine): positions,
@@ -26,6 +27,8 @@ struct Scene {
   bool periodic = true;
   bool bonded = false;
   int steps = 150;
+  double skin = 0.0;  // [R] Verlet skin; 0: the default
+  double rate = 150.0;  // [1/s] pull rate
 };
 
 struct Result {
@@ -44,11 +47,13 @@ Result run(const Scene& sc, int threads, PairKernel kernel) {
   const double R = 1e-4, s = (sc.bonded ? 2.0 : 1.96) * R;
   WorldParams p;
   p.threads = threads;
+  p.thread_independent = true;
   p.periodic.enabled = sc.periodic;
   p.periodic.origin = {0, 0, 0};
   p.periodic.length = {ns * s, ns * s, ns * s};
   p.ball_ball.model = sc.model;
   p.ball_ball.softbond.soft = 20.0;
+  p.skin = sc.skin * R;
   World w(p);
   w.set_pair_kernel(kernel);
   std::mt19937_64 rng(77);
@@ -58,7 +63,7 @@ Result run(const Scene& sc, int threads, PairKernel kernel) {
   w.prepare();
   if (sc.bonded) w.bond_ball_ball(-1.0, 0.01 * R);
   const Vec3 c{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
-  const double vel = sc.bonded ? 0.002 : 0.05, spin = sc.bonded ? 2.0 : 300.0, rate = 150.0;
+  const double vel = sc.bonded ? 0.002 : 0.05, spin = sc.bonded ? 2.0 : 300.0, rate = sc.rate;
   for (std::size_t i = 0; i < w.num_balls(); ++i) {
     w.balls().v[i] = vel * Vec3{u(rng), u(rng), u(rng)};
     if (!sc.periodic) w.balls().v[i] += rate * (w.balls().x[i] - c);
@@ -111,6 +116,14 @@ void check(const Scene& sc) {
 }  // namespace
 
 TEST(ThreadCount, LinearPeriodicStrainedSameBits) { check({"linear periodic", ContactModel::kLinear, true, false}); }
+// A wide skin keeps the list for many steps while a fast pull opens contacts: saved contacts of
+// split balls go from loaded to open to idle between two rebuilds.
+TEST(ThreadCount, LinearPeriodicWideSkinSameBits) {
+  Scene sc{"linear periodic, wide skin", ContactModel::kLinear, true, false, 300};
+  sc.skin = 0.6;
+  sc.rate = 3000.0;
+  check(sc);
+}
 TEST(ThreadCount, LinearFreeSameBits) { check({"linear free", ContactModel::kLinear, false, false, 40}); }
 TEST(ThreadCount, HertzPeriodicSameBits) { check({"hertz periodic", ContactModel::kHertz, true, false}); }
 TEST(ThreadCount, SoftBondPeriodicSameBits) {

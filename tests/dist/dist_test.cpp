@@ -46,6 +46,7 @@ std::unique_ptr<World> build(const Scene& sc, bool final_prepare) {
   const double s = spacing(sc);
   WorldParams p;
   p.threads = sc.threads;
+  p.thread_independent = true;  // what the ranks run with (DistDem::load)
   p.periodic.enabled = sc.periodic;
   p.periodic.origin = {0, 0, 0};
   p.periodic.length = {kSide * s, kSide * s, kSide * s};

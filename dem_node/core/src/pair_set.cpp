@@ -224,7 +224,11 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
   const double rgap = lc.rgap;
   const int nt = cx.threads;
-  const bool par = nt > 1 && m > 1024;  // any thread count gives the same bits (see above)
+  // Thread-independent bits (WorldParams::thread_independent): the chunk scheme below from 1,024
+  // contacts. Otherwise the chunks cut at m k / threads from 4,096 contacts, and a ball's sums are
+  // associated per chunk (same bits for the same thread count only).
+  const bool ti = cx.p.thread_independent;
+  const bool par = nt > 1 && m > (ti ? 1024 : 4096);
   const bool strained = ed.x != 0.0 || ed.y != 0.0 || ed.z != 0.0;
   // Vectorised blocks (pair_block.hpp) where the law has a lane kernel; bit-identical to the
   // scalar loop below (tests/dem/simd_kernel_test.cpp).
@@ -238,9 +242,9 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   // chunk walks its list of them (ascending contact, sentinel-terminated) with a cursor. `stamp`
   // tells this pass's records from stale ones (a contact idle this pass saved nothing and adds
   // nothing).
-  if (par && (plan_gen_ != gen_ || plan_chunks_ != nt || plan_m_ != contacts.size() || plan_n_ != n))
+  if (par && ti && (plan_gen_ != gen_ || plan_chunks_ != nt || plan_m_ != contacts.size() || plan_n_ != n))
     plan_split(n, nt);
-  const bool threaded = par && plan_ok_;
+  const bool threaded = par && ti && plan_ok_;
   const std::uint64_t stamp = ++stamp_;
   BSave* __restrict__ SV = threaded ? save_.data() : nullptr;
   RunSave* __restrict__ RS = threaded ? run_.data() : nullptr;
@@ -450,7 +454,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     if (kern) body_block(save, c0, c1, f, t, cur);
     else body(save, c0, c1, f, t, cur);
   };
-  if (!threaded) {
+  if (!par || (ti && !threaded)) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
     std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
     run(std::false_type{}, 0, m, cx.pt.f.data(), cx.pt.t.data(), ChunkCursor{});
@@ -466,6 +470,12 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   }
   row_lo_.assign(static_cast<std::size_t>(nt), n);
   row_hi_.assign(static_cast<std::size_t>(nt), 0);
+  // chunk boundaries: the plan's (thread-independent) or m k / threads
+  if (!threaded) {
+    cut_.assign(static_cast<std::size_t>(nt) + 1, 0);
+    for (int k = 0; k <= nt; ++k) cut_[static_cast<std::size_t>(k)] = m * k / nt;
+    plan_gen_ = ~std::uint64_t{0};  // the plan's cuts are gone
+  }
   const std::int64_t* CB = cut_.data();
   const std::uint32_t* __restrict__ EO = ev_off_.data();
   const std::uint32_t* __restrict__ EV = ev_.data();
@@ -495,7 +505,8 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         row_lo_[uk] = lo;
         row_hi_[uk] = c0 < c1 ? std::size_t{hi} + 1 : 0;
       }
-      run(std::true_type{}, c0, c1, f, t, cursor(k));
+      if (threaded) run(std::true_type{}, c0, c1, f, t, cursor(k));
+      else run(std::false_type{}, c0, c1, f, t, ChunkCursor{});
     }
 #pragma omp barrier
     std::size_t rlo = n, rhi = 0;
@@ -507,7 +518,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
 #pragma omp for schedule(static)
     for (std::int64_t ii = static_cast<std::int64_t>(rlo); ii < static_cast<std::int64_t>(rhi); ++ii) {
       const std::size_t i = static_cast<std::size_t>(ii);
-      const std::int32_t sp = split_of_[i];
+      const std::int32_t sp = threaded ? split_of_[i] : -1;
       if (sp < 0) {
         for (int k = 1; k < nt; ++k) {
           const std::size_t uk = static_cast<std::size_t>(k);

@@ -163,6 +163,9 @@ void DistDem::load(const World& full) {
     if (!(fp.id[i - 1] < fp.id[i])) throw std::invalid_argument("DistDem::load: the rows must be in id order.");
   p_ = full.params();
   p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
+  // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
+  // thread count.
+  p_.thread_independent = true;
   double rmax = 0.0;
   for (double r : fp.r) rmax = std::max(rmax, r);
   halo_ = 2.0 * rmax + p_.skin;

@@ -212,6 +212,8 @@ struct WorldParams {
   bool facet_spin = true;       // [-] kinematic facet spin for ball–facet contacts (§6.2)
   bool track_energy = true;     // [-] accumulate damping/friction/softening dissipation (§8.18)
   int threads = 0;              // [-] OpenMP threads for the force loop; 0 = OpenMP default
+  bool thread_independent = false;  // [-] same bits at any thread count (PairSet::pass_law); not
+                                    // in checkpoints: the scene's, as threads
   PeriodicParams periodic;      // periodic cell (§4.2)
   ContactFamilyParams ball_ball;     // family ball–ball
   ContactFamilyParams ball_wall;     // family ball–planar wall (platens, boxes)
