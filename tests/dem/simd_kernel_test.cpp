@@ -43,8 +43,7 @@ struct Scene {
   int steps = 400;
 };
 
-struct Result {
-  std::vector<Vec3> x, v, w, f, t;
+struct Result : test::BallState {
   std::vector<BondState> state;
   std::size_t pairs = 0;
   int count[5] = {0, 0, 0, 0, 0};  // by BondState
@@ -99,11 +98,7 @@ Result run(const Scene& sc, PairKernel kernel) {
   if (sc.periodic) w.set_strain_rate({rate, rate, -0.5 * rate});
   w.step(sc.steps);
   Result r;
-  r.x = w.balls().x;
-  r.v = w.balls().v;
-  r.w = w.balls().w;
-  r.f = w.balls().f;
-  r.t = w.balls().t;
+  static_cast<test::BallState&>(r) = test::ball_state(w);
   r.pairs = w.pair_contacts().size();
   for (const BondHist& b : w.pair_contacts().bond) {
     r.state.push_back(b.state);

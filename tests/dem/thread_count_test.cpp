@@ -31,8 +31,7 @@ struct Scene {
   double rate = 150.0;  // [1/s] pull rate
 };
 
-struct Result {
-  std::vector<Vec3> x, v, w, f, t;
+struct Result : test::BallState {
   std::vector<BondState> state;
   std::size_t pairs = 0;
   Energy e;
@@ -72,11 +71,7 @@ Result run(const Scene& sc, int threads, PairKernel kernel) {
   if (sc.periodic) w.set_strain_rate({rate, rate, -0.5 * rate});
   w.step(sc.steps);
   Result r;
-  r.x = w.balls().x;
-  r.v = w.balls().v;
-  r.w = w.balls().w;
-  r.f = w.balls().f;
-  r.t = w.balls().t;
+  static_cast<test::BallState&>(r) = test::ball_state(w);
   r.pairs = w.pair_contacts().size();
   for (const BondHist& b : w.pair_contacts().bond) r.state.push_back(b.state);
   r.e = w.energy();
