@@ -7,6 +7,7 @@
 
 #include <array>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "contact_set.hpp"
@@ -33,6 +34,11 @@ class PairSet final : public ContactSet {
   }
   /// Take a loaded contact list (a checkpoint); the scratch is dropped.
   void reset(PairContacts loaded);
+  /// Exchange the list with `other` (World::swap_balls: the caller reuses the old arrays).
+  void swap_in(PairContacts& other) {
+    std::swap(contacts, other);
+    ++gen_;
+  }
 
   /// Force and moment on B of contact k, rebuilt from its history (World::pair_force).
   Vec3 force(std::size_t k, const ContactFamilyParams& fam) const;

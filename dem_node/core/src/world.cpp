@@ -521,6 +521,13 @@ void World::replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_
   dirty_ = true;  // (the step is not recomputed: one World holding every ball would not either)
 }
 
+void World::swap_balls(Particles& pt, PairContacts& pc, std::vector<std::uint8_t>& ghost) {
+  std::swap(pt_, pt);
+  pairs_->swap_in(pc);
+  std::swap(ghost_, ghost);
+  dirty_ = true;
+}
+
 void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }
 
 double World::reduced_step(double dt) const { return step_reduction_ ? step_reduction_(dt) : dt; }

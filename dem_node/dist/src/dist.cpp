@@ -84,6 +84,15 @@ struct PairRec {
   BondHist b;
 };
 
+// Empty every array, keeping its memory (refilled at the next exchange).
+void clear_keep(Particles& p) {
+  p.x.clear(), p.v.clear(), p.w.clear(), p.f.clear(), p.t.clear(), p.fa.clear(), p.ta.clear(), p.x_ref.clear();
+  p.r.clear(), p.m.clear(), p.inertia.clear(), p.id.clear(), p.fix.clear();
+}
+void clear_keep(PairContacts& c) {
+  c.a.clear(), c.b.clear(), c.shift.clear(), c.h.clear(), c.bond.clear();
+}
+
 BallRec ball_rec(const Particles& pt, std::size_t i) {
   return BallRec{pt.id[i], pt.x[i], pt.v[i], pt.w[i], pt.f[i], pt.t[i], pt.fa[i], pt.ta[i], pt.x_ref[i],
                  pt.r[i],  pt.m[i], pt.inertia[i], pt.fix[i]};
@@ -139,7 +148,15 @@ void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vect
 // ------------------------------------------------------------------------------------------
 // DistDem
 
-DistDem::DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid) : comm_(comm), grid_(grid), p_(p) {
+struct DistDem::Buffers {
+  std::vector<std::vector<BallRec>> bout;
+  std::vector<std::vector<PairRec>> pout;
+  std::vector<BallRec> bin;
+  std::vector<PairRec> pin;
+};
+
+DistDem::DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid)
+    : comm_(comm), grid_(grid), p_(p), buf_(std::make_unique<Buffers>()) {
   MPI_Comm_rank(comm_, &rank_);
   MPI_Comm_size(comm_, &size_);
   if (size_ != grid_.count())
@@ -312,7 +329,9 @@ void DistDem::exchange() {
   for (std::size_t i = 0; i < n; ++i) off[i + 1] += off[i];
   std::vector<int> dest(off[n]);
   std::vector<std::uint32_t> fill(off.begin(), off.end() - 1);
-  std::vector<std::vector<PairRec>> pout(static_cast<std::size_t>(size_));
+  std::vector<std::vector<PairRec>>& pout = buf_->pout;
+  pout.resize(static_cast<std::size_t>(size_));
+  for (auto& o : pout) o.clear();
   for (std::size_t i = 0; i < n; ++i) {
     if (!mine(i)) continue;
     if (own[i] != rank_) ++migrated_;
@@ -329,7 +348,9 @@ void DistDem::exchange() {
     pout[static_cast<std::size_t>(own[a])].push_back(rec);
     if (own[b] != own[a]) pout[static_cast<std::size_t>(own[b])].push_back(rec);
   }
-  std::vector<std::vector<BallRec>> bout(static_cast<std::size_t>(size_));
+  std::vector<std::vector<BallRec>>& bout = buf_->bout;
+  bout.resize(static_cast<std::size_t>(size_));
+  for (auto& o : bout) o.clear();
   for (std::size_t i = 0; i < n; ++i) {
     int* d0 = dest.data() + off[i];
     int* d1 = dest.data() + off[i + 1];
@@ -337,16 +358,18 @@ void DistDem::exchange() {
     for (int* d = d0; d < d1; ++d)
       if (d == d0 || *d != d[-1]) bout[static_cast<std::size_t>(*d)].push_back(ball_rec(pt, i));
   }
-  std::vector<BallRec> bin;
-  std::vector<PairRec> pin;
+  std::vector<BallRec>& bin = buf_->bin;
+  std::vector<PairRec>& pin = buf_->pin;
   all_to_all(comm_, bout, bin, sbuf_, rbuf_);
   all_to_all(comm_, pout, pin, sbuf_, rbuf_);
   // the new rows: one copy per id, in id order (indices sorted, not the records)
   std::vector<std::uint32_t> bo(bin.size());
   std::iota(bo.begin(), bo.end(), 0u);
   std::sort(bo.begin(), bo.end(), [&](std::uint32_t x, std::uint32_t y) { return bin[x].id < bin[y].id; });
-  Particles q;
-  std::vector<std::uint8_t> ghost;
+  Particles& q = q_;
+  clear_keep(q);
+  std::vector<std::uint8_t>& ghost = ghost_buf_;
+  ghost.clear();
   std::vector<std::uint64_t> ids;
   for (std::uint32_t k : bo) {
     const BallRec& b = bin[k];
@@ -364,7 +387,8 @@ void DistDem::exchange() {
   std::sort(po.begin(), po.end(), [&](std::uint32_t x, std::uint32_t y) {
     return pin[x].ia != pin[y].ia ? pin[x].ia < pin[y].ia : pin[x].ib < pin[y].ib;
   });
-  PairContacts nc;
+  PairContacts& nc = nc_;
+  clear_keep(nc);
   const PairRec* prev = nullptr;
   for (std::uint32_t k : po) {
     const PairRec& r = pin[k];
@@ -381,7 +405,7 @@ void DistDem::exchange() {
     nc.h.push_back(r.h);
     if (has_bond) nc.bond.push_back(r.b);
   }
-  w_->replace_balls(std::move(q), std::move(nc), std::move(ghost));
+  w_->swap_balls(q, nc, ghost);  // q_, nc_, ghost_buf_ now hold the old arrays, for next time
   ++exchanges_;
   build_forward();
 }

@@ -264,6 +264,9 @@ class World {
   /// balls moved between ranks: the next step_forces(true) searches the pairs again and carries
   /// these histories across by ball id. Wall contacts are kept as they are.
   void replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_t> ghost);
+  /// replace_balls() by exchange: the arguments get the World's previous arrays, so that a caller
+  /// that refills them each time reuses their memory.
+  void swap_balls(Particles& pt, PairContacts& pc, std::vector<std::uint8_t>& ghost);
   /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
   /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
   /// owner's). Collective for such a caller: every rank computes the step at the same steps.

@@ -98,7 +98,14 @@ class DistDem {
   // Forward communication, fixed at each exchange: per rank, my owned rows whose ghosts it holds
   // and my ghost rows it owns, both in id order.
   std::vector<std::vector<std::uint32_t>> send_rows_, recv_rows_;
-  // Buffers kept from call to call: the byte buffers of the all-to-all, the forward records.
+  // Buffers kept from call to call (a fresh allocation per exchange cost more in page faults than
+  // the exchange's own work): the all-to-all's byte buffers, the forward records, the exchange's
+  // records, and the arrays the World swaps out at each exchange.
+  struct Buffers;  // the exchange's records (dist.cpp)
+  std::unique_ptr<Buffers> buf_;
+  Particles q_;
+  PairContacts nc_;
+  std::vector<std::uint8_t> ghost_buf_;
   std::vector<char> sbuf_, rbuf_;
   std::vector<std::vector<Vec3>> fwd_out_;
   std::vector<Vec3> fwd_in_;
