@@ -390,18 +390,20 @@ struct Unbonded {
     k.gap = -1e-8;
     k.dt = 1.0;
   }
+  // `steps` calls of the soft-bond law with the rotation increment dtheta per step.
+  void rotate(const Vec3& dtheta, int steps) {
+    k.dtheta = dtheta;
+    Vec3 M;
+    for (int s = 0; s < steps; ++s) contact_law<ContactModel::kSoftBond>(k, h, &g.b, c, M);
+  }
 };
 }  // namespace
 
 TEST(SoftBond, UnbondedMomentLimits) {
   Unbonded u(BondState::kNeverBonded);
-  BondHist& b = u.g.b;
-  LawConst& c = u.c;
-  ContactHist& h = u.h;
-  Kin& k = u.k;
-  k.dtheta = {1e-5, 1e-5, 0};
-  Vec3 M;
-  for (int s = 0; s < 200; ++s) contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
+  u.rotate({1e-5, 1e-5, 0}, 200);
+  const BondHist& b = u.g.b;
+  const ContactHist& h = u.h;
   const double Fn = h.kn * 1e-8;
   EXPECT_NEAR(h.fn / Fn, 1.0, 1e-12);
   EXPECT_NEAR(norm(b.mb) / (Fn * b.rb / 4), 1.0, 1e-12);
@@ -414,15 +416,12 @@ TEST(SoftBond, UnbondedMomentLimits) {
 // twisting alike, so the booked slip is M_lim θ − M_lim²/k summed over both.
 TEST(SoftBond, UnbondedMomentSlipWorkIsBooked) {
   Unbonded u(BondState::kBrokenShear);
-  BondHist& b = u.g.b;
-  LawConst& c = u.c;
-  ContactHist& h = u.h;
-  Kin& k = u.k;
   const double dth = 1e-5;
-  k.dtheta = {dth, 0, dth};  // twist about n, bending about z
   const int steps = 300;
-  Vec3 M;
-  for (int s = 0; s < steps; ++s) contact_law<ContactModel::kSoftBond>(k, h, &b, c, M);
+  u.rotate({dth, 0, dth}, steps);  // twist about n, bending about z
+  const BondHist& b = u.g.b;
+  const LawConst& c = u.c;
+  const ContactHist& h = u.h;
   const double Fn = h.kn * 1e-8, theta = steps * dth;
   const double mbl = Fn * b.rb / 4, kb = b.kn * b.inertia();
   const double mtl = 2.0 / 3.0 * 0.5 * Fn * b.rb, kt = b.kn * c.ks_kn * b.polar();

@@ -509,18 +509,6 @@ void World::step_forces(bool rebuild_now) {
   ++times_.steps;
 }
 
-void World::set_ghost_rows(std::vector<std::uint8_t> ghost) {
-  ghost_ = std::move(ghost);
-  dirty_ = true;
-}
-
-void World::replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_t> ghost) {
-  pt_ = std::move(pt);
-  pairs_->reset(std::move(pc));
-  ghost_ = std::move(ghost);
-  dirty_ = true;  // (the step is not recomputed: one World holding every ball would not either)
-}
-
 void World::swap_balls(Particles& pt, PairContacts& pc, std::vector<std::uint8_t>& ghost) {
   std::swap(pt_, pt);
   pairs_->swap_in(pc);

@@ -224,7 +224,7 @@ void DistDem::load(const World& full) {
   w_->set_pair_kernel(full.pair_kernel());
   w_->set_cell(full.cell_origin(), full.cell_length());
   w_->set_strain_rate(full.strain_rate());
-  w_->replace_balls(std::move(pt), std::move(pc), std::move(ghost));
+  w_->swap_balls(pt, pc, ghost);
   // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
   w_->set_step_reduction([this](double dt) {
     double g = dt;
@@ -315,12 +315,16 @@ void DistDem::exchange() {
   // row's few ranks sorted and deduplicated.
   const PairContacts& pc = w_->pair_contacts();
   const bool has_bond = !pc.bond.empty();
-  std::vector<std::uint32_t> off(n + 1, 0);
-  for (std::size_t i = 0; i < n; ++i)
+  std::vector<std::uint32_t> off(n + 1, 0), near_off(n + 1, 0);
+  std::vector<int> near_all;  // each own row's ranks within the halo (one grid query per row)
+  for (std::size_t i = 0; i < n; ++i) {
     if (mine(i)) {
       grid_.near(pt.x[i], halo_, nb);
+      near_all.insert(near_all.end(), nb.begin(), nb.end());
       off[i + 1] += static_cast<std::uint32_t>(1 + nb.size());
     }
+    near_off[i + 1] = static_cast<std::uint32_t>(near_all.size());
+  }
   for (std::size_t c = 0; c < pc.size(); ++c)
     if (mine(pc.a[c]) || mine(pc.b[c])) {
       ++off[pc.a[c] + 1];
@@ -335,9 +339,8 @@ void DistDem::exchange() {
   for (std::size_t i = 0; i < n; ++i) {
     if (!mine(i)) continue;
     if (own[i] != rank_) ++migrated_;
-    grid_.near(pt.x[i], halo_, nb);
     dest[fill[i]++] = own[i];
-    for (int r : nb) dest[fill[i]++] = r;
+    for (std::uint32_t k = near_off[i]; k < near_off[i + 1]; ++k) dest[fill[i]++] = near_all[k];
   }
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const std::uint32_t a = pc.a[c], b = pc.b[c];

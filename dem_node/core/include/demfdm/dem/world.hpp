@@ -258,14 +258,12 @@ class World {
   bool need_rebuild(double max_disp2) const;
   /// Rows that are ghosts, copies of balls another rank owns (1 = ghost; empty: none): a pair
   /// of two ghosts is not kept in the list (it acts on ghosts only).
-  void set_ghost_rows(std::vector<std::uint8_t> ghost);
   const std::vector<std::uint8_t>& ghost_rows() const { return ghost_; }
-  /// Replace every ball, the ball-ball list (in the rows of `pt`) and the ghost rows, e.g. after
-  /// balls moved between ranks: the next step_forces(true) searches the pairs again and carries
-  /// these histories across by ball id. Wall contacts are kept as they are.
-  void replace_balls(Particles pt, PairContacts pc, std::vector<std::uint8_t> ghost);
-  /// replace_balls() by exchange: the arguments get the World's previous arrays, so that a caller
-  /// that refills them each time reuses their memory.
+  /// Replace every ball, the ball-ball list (in the rows of `pt`) and the ghost rows by exchange,
+  /// e.g. after balls moved between ranks: the arguments get the World's previous arrays (a
+  /// caller that refills them each time reuses their memory). The next step_forces(true)
+  /// searches the pairs again and carries these histories across by ball id. Wall contacts are
+  /// kept as they are.
   void swap_balls(Particles& pt, PairContacts& pc, std::vector<std::uint8_t>& ghost);
   /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
   /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
@@ -416,7 +414,7 @@ class World {
   double e_damp_ = 0.0;
   std::vector<double> chunk_e_;
   double max_disp2_ = 0.0;
-  std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (set_ghost_rows)
+  std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
   std::function<double(double)> step_reduction_;  // set_step_reduction
   double reduced_step(double dt) const;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
