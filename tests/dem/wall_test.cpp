@@ -183,3 +183,25 @@ TEST(Interface, BrokenInterfaceBondStopsTheBallAtTheWall) {
   std::printf("lowest ball centre after the break: %.4g R (floor at 0)\n", zmin / R);
   EXPECT_GT(zmin, 0.9 * R) << "the ball sank into the interface wall after the break";
 }
+
+// A bonded wall contact is kept when its ball leaves the candidate range; the rebuilt list is
+// still in (ball, wall) order, so that its order is fixed by its contacts alone (a rank of the DEM
+// on MPI ranks merges every rank's contacts in this order, World::set_wall_sums).
+TEST(Interface, KeptBondedContactIsSortedIn) {
+  WorldParams p;
+  p.ball_facet.model = ContactModel::kLinearPBond;
+  p.ball_facet.pbond.zero_linear = true;
+  const double R = 1e-4;
+  World w(p);
+  add_square(w, 2e-3);
+  for (int i = 0; i < 3; ++i) w.add_ball({(i - 1) * 3 * R, 0, R}, R);
+  w.prepare();
+  ASSERT_EQ(w.bond_ball_facet(1e-9), 3u);
+  w.balls().x[0].z += 3.0 * w.skin();  // out of reach, still bonded
+  w.balls().x_ref[0] = w.balls().x[0];
+  w.prepare();
+  const WallContacts& fc = w.facet_contacts();
+  ASSERT_EQ(fc.size(), 3u);
+  EXPECT_EQ(fc.ball, (std::vector<std::uint32_t>{0, 1, 2}));
+  EXPECT_TRUE(bonded(fc.bond[0].state));
+}

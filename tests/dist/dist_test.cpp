@@ -16,12 +16,13 @@
 #include "demfdm/dem/dist.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "tests/dem/lattice.hpp"
+#include "tests/dist/dist_util.hpp"
 
 using namespace demfdm::dem;
+using test::g_rank;
+using test::g_size;
 
 namespace {
-
-int g_rank = 0, g_size = 1;
 
 struct Scene {
   std::string name;
@@ -83,10 +84,6 @@ BrickGrid grid(const Scene& sc) {
   return g;
 }
 
-bool same(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Vec3)) == 0;
-}
-
 // Runs the scene on the ranks; rank 0 compares with the reference. The verdict is shared, so
 // every rank passes or fails together.
 void check(const Scene& sc) {
@@ -101,7 +98,6 @@ void check(const Scene& sc) {
   long long sum[3] = {0, 0, 0};
   MPI_Reduce(mine, sum, 3, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
   const long long sum_owned = sum[0], sum_ghosts = sum[1], sum_migrated = sum[2];
-  int ok = 1;
   if (g_rank == 0) {
     std::unique_ptr<World> ref = build(sc, true);
     ref->step(sc.steps);
@@ -112,11 +108,11 @@ void check(const Scene& sc) {
                 sum_migrated, static_cast<long long>(ref->rebuild_count()));
     EXPECT_EQ(static_cast<std::size_t>(sum_owned), r.size()) << "every ball owned once";
     EXPECT_EQ(got.id, r.id);
-    EXPECT_TRUE(same(got.x, r.x)) << "positions differ";
-    EXPECT_TRUE(same(got.v, r.v)) << "velocities differ";
-    EXPECT_TRUE(same(got.w, r.w)) << "spins differ";
-    EXPECT_TRUE(same(got.f, r.f)) << "forces differ";
-    EXPECT_TRUE(same(got.t, r.t)) << "torques differ";
+    EXPECT_TRUE(test::same_bits(got.x, r.x)) << "positions differ";
+    EXPECT_TRUE(test::same_bits(got.v, r.v)) << "velocities differ";
+    EXPECT_TRUE(test::same_bits(got.w, r.w)) << "spins differ";
+    EXPECT_TRUE(test::same_bits(got.f, r.f)) << "forces differ";
+    EXPECT_TRUE(test::same_bits(got.t, r.t)) << "torques differ";
     const double dt_ref = ref->dt();
     EXPECT_EQ(std::memcmp(&dt_ref, &dt_end, sizeof dt_end), 0) << "the last step differs";
     EXPECT_GT(ref->rebuild_count(), 2) << "the run must rebuild its lists";
@@ -131,12 +127,8 @@ void check(const Scene& sc) {
       EXPECT_GT(sum_ghosts, 0);
       EXPECT_GT(sum_migrated, 0) << "balls must cross brick faces";
     }
-    ok = !::testing::Test::HasFailure();
   }
-  MPI_Bcast(&ok, 1, MPI_INT, 0, MPI_COMM_WORLD);
-  if (g_rank != 0) {
-    EXPECT_TRUE(ok) << "rank 0 found a difference";
-  }
+  test::share_verdict();
 }
 
 }  // namespace

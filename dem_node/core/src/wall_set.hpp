@@ -9,7 +9,8 @@
 //                              towards the wall, wall velocity and spin there, the facet and its
 //                              barycentric weights (facet walls);
 //   after_law(cx, wc, c)       a per-contact rule after the law (may run in parallel);
-//   add(wc, c)                 sum the contact's results, serially in contact order;
+//   rec(wc, c) / add(rec)      the contact's share of the kind's sums (a WallSumRec) and adding
+//                              it, serially in contact order (also World::set_wall_sums);
 //   end(cx, wc)                what the kind derives from all its contacts;
 //   candidates(cx, cands)      the (ball, wall, facet) triples within reach at a rebuild (the
 //                              walls' travel restarts); wall_id(w);
@@ -70,7 +71,8 @@ struct PlaneKind {
   void begin(const SetContext&, const WallContacts&);
   WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
   void after_law(const SetContext&, WallContacts&, std::int64_t) const {}
-  void add(const WallContacts& wc, std::int64_t c);
+  static WallSumRec rec(const WallContacts& wc, std::int64_t c);
+  void add(const WallSumRec& r);
   void end(const SetContext&, WallContacts&) {}
   void candidates(const SetContext& cx, std::vector<detail::WallCand>& cands);
   std::uint64_t wall_id(std::uint32_t w) const { return walls[w].id; }
@@ -92,7 +94,8 @@ struct FacetKind {
   void begin(const SetContext& cx, const WallContacts& wc);
   WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
   void after_law(const SetContext& cx, WallContacts& wc, std::int64_t c) const;
-  void add(const WallContacts&, std::int64_t) {}
+  static WallSumRec rec(const WallContacts&, std::int64_t) { return {}; }  // summed in end()
+  void add(const WallSumRec&) {}
   void end(const SetContext& cx, WallContacts& wc);
   void candidates(const SetContext& cx, std::vector<detail::WallCand>& cands);
   std::uint64_t wall_id(std::uint32_t w) const { return walls[w].id; }
@@ -115,7 +118,12 @@ struct FootingKind {
   void begin(const SetContext&, const WallContacts&) { ft.reaction = Vec3{}; }
   WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
   void after_law(const SetContext&, WallContacts&, std::int64_t) const {}
-  void add(const WallContacts& wc, std::int64_t c) { ft.reaction += wc.F[c]; }
+  static WallSumRec rec(const WallContacts& wc, std::int64_t c) {
+    WallSumRec r;
+    r.F = wc.F[c];
+    return r;
+  }
+  void add(const WallSumRec& r) { ft.reaction += r.F; }
   void end(const SetContext&, WallContacts&) {}
   void candidates(const SetContext& cx, std::vector<detail::WallCand>& cands);
   std::uint64_t wall_id(std::uint32_t) const { return ft.id; }

@@ -11,6 +11,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
 #include "demfdm/dem/geometry.hpp"
 #include "demfdm/dem/world.hpp"
@@ -40,16 +41,26 @@ WallSurface PlaneKind::surface(const Vec3& x, const WallContacts& wc, std::int64
   return s;
 }
 
-void PlaneKind::add(const WallContacts& wc, std::int64_t c) {
-  PlaneWall& pw = walls[wc.wall[c]];
-  pw.reaction += wc.F[c];
-  if (wc.h[c].flags & ContactHist::kActive) pw.k_sum += wc.h[c].kn;
+WallSumRec PlaneKind::rec(const WallContacts& wc, std::int64_t c) {
+  WallSumRec r;
+  r.wall = wc.wall[c];
+  r.F = wc.F[c];
+  r.active = (wc.h[c].flags & ContactHist::kActive) != 0;
+  r.k = wc.h[c].kn;
+  return r;
+}
+
+void PlaneKind::add(const WallSumRec& r) {
+  PlaneWall& pw = walls[r.wall];
+  pw.reaction += r.F;
+  if (r.active) pw.k_sum += r.k;
 }
 
 void PlaneKind::candidates(const SetContext& cx, std::vector<WallCand>& cands) {
   const auto& pt = cx.pt;
   for (std::size_t w = 0; w < walls.size(); ++w) {
     for (std::size_t i = 0; i < pt.size(); ++i) {
+      if (cx.ghost && cx.ghost[i]) continue;  // a ghost's wall contacts are its owner's
       Vec3 nn;
       const double d = plane_distance(pt.x[i], walls[w], nn);
       if (d - pt.r[i] < cx.skin + cx.p.ball_wall.linear.rgap)
@@ -108,32 +119,58 @@ void FacetKind::after_law(const SetContext& cx, WallContacts& wc, std::int64_t c
     detail::init_contact(cx.pt, wc.ball[c], 0, wc.h[c], &wc.bond[c], cx.p.ball_facet, true);
 }
 
-// §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order
-void FacetKind::end(const SetContext& cx, WallContacts& wc) {
+namespace {
+
+// §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order. `one(c)` gives a
+// contact's WallSumRec (its wall, facet, F, M, x_c, weights and K, whether it acts): the force
+// pass and World::set_wall_sums share this arithmetic.
+template <class One>
+void facet_sums(std::vector<FacetWall>& walls, std::int64_t m, One one) {
   for (auto& fw : walls) {
     std::fill(fw.vforce.begin(), fw.vforce.end(), Vec3{});
     std::fill(fw.vstiff.begin(), fw.vstiff.end(), 0.0);
     fw.total_force = Vec3{};
   }
-  const std::int64_t m = static_cast<std::int64_t>(wc.size());
   for (std::int64_t c = 0; c < m; ++c) {
-    FacetWall& fw = walls[wc.wall[c]];
-    const auto& tr = fw.tri[static_cast<std::size_t>(wc.facet[c])];
-    const bool bd = !wc.bond.empty() && bonded(wc.bond[c].state);
-    const bool act = (wc.h[c].flags & ContactHist::kActive) || bd;
-    if (!act) continue;
-    if (norm2(wc.F[c]) > 0.0 || norm2(wc.M[c]) > 0.0) {
+    const WallSumRec r = one(c);
+    if (!r.active) continue;
+    FacetWall& fw = walls[r.wall];
+    const auto& tr = fw.tri[static_cast<std::size_t>(r.facet)];
+    if (norm2(r.F) > 0.0 || norm2(r.M) > 0.0) {
       std::array<Vec3, 3> f;
-      facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, wc.xc[c], wc.F[c], wc.M[c], f);
+      facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, r.xc, r.F, r.M, f);
       for (int v = 0; v < 3; ++v) fw.vforce[tr[v]] += f[v];
-      fw.total_force += wc.F[c];
+      fw.total_force += r.F;
     }
-    double K = wc.h[c].kn + wc.h[c].ks;
-    if (bd && cx.p.ball_facet.model == ContactModel::kLinearPBond)
-      K += wc.bond[c].kn * (1.0 + 1.0 / cx.p.ball_facet.pbond.kratio) * wc.bond[c].area();
-    const Vec3& w = wc.bary[c];
-    for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += w[v] * K;
+    for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += r.bary[v] * r.k;
   }
+}
+
+// A facet contact's share: it acts while it carries a force or is bonded; K = K_n + K_s, plus
+// the parallel bond's stiffness.
+WallSumRec facet_rec(const SetContext& cx, const WallContacts& wc, std::int64_t c) {
+  WallSumRec r;
+  const bool bd = !wc.bond.empty() && bonded(wc.bond[c].state);
+  r.active = (wc.h[c].flags & ContactHist::kActive) || bd;
+  if (!r.active) return r;
+  r.wall = wc.wall[c];
+  r.facet = wc.facet[c];
+  r.kind = 1;
+  r.F = wc.F[c];
+  r.M = wc.M[c];
+  r.xc = wc.xc[c];
+  r.bary = wc.bary[c];
+  double K = wc.h[c].kn + wc.h[c].ks;
+  if (bd && cx.p.ball_facet.model == ContactModel::kLinearPBond)
+    K += wc.bond[c].kn * (1.0 + 1.0 / cx.p.ball_facet.pbond.kratio) * wc.bond[c].area();
+  r.k = K;
+  return r;
+}
+
+}  // namespace
+
+void FacetKind::end(const SetContext& cx, WallContacts& wc) {
+  facet_sums(walls, static_cast<std::int64_t>(wc.size()), [&](std::int64_t c) { return facet_rec(cx, wc, c); });
 }
 
 // every facet against every ball near its bounding box (sorted by x for a cheap sweep);
@@ -163,6 +200,7 @@ void FacetKind::candidates(const SetContext& cx, std::vector<WallCand>& cands) {
       auto it1 = std::upper_bound(xs.begin(), xs.end(), hi.x + reach);
       for (auto it = it0; it != it1; ++it) {
         const std::uint32_t i = order[static_cast<std::size_t>(it - xs.begin())];
+        if (cx.ghost && cx.ghost[i]) continue;
         const Vec3& x = pt.x[i];
         if (x.y < lo.y - reach || x.y > hi.y + reach || x.z < lo.z - reach || x.z > hi.z + reach) continue;
         Vec3 nn, ww;
@@ -259,6 +297,7 @@ void FootingKind::candidates(const SetContext& cx, std::vector<WallCand>& cands)
   const auto& pt = cx.pt;
   const double R = 0.5 * ft.p.diameter;
   for (std::size_t i = 0; i < pt.size(); ++i) {
+    if (cx.ghost && cx.ghost[i]) continue;
     Vec3 q, nn;
     const double d = closest_point_cylinder(pt.x[i], ft.p.bottom_centre, R, ft.p.height, q, nn);
     if (d - pt.r[i] < cx.skin + cx.p.ball_footing.linear.rgap) cands.push_back({static_cast<std::uint32_t>(i), 0, 0});
@@ -276,6 +315,33 @@ double FootingKind::travel() const { return ft.enabled ? norm(ft.disp) : 0.0; }
 
 // ------------------------------------------------------------------------------------------
 // the set: one template for every kind
+
+namespace {
+
+// Reorder a rebuilt list (ball, wall, candidates, facet, history, bond) by (ball, wall).
+void sort_by_ball(WallContacts& q) {
+  const std::size_t m = q.ball.size();
+  std::vector<std::uint32_t> o(m);
+  std::iota(o.begin(), o.end(), 0u);
+  std::stable_sort(o.begin(), o.end(), [&](std::uint32_t x, std::uint32_t y) {
+    return std::tie(q.ball[x], q.wall[x]) < std::tie(q.ball[y], q.wall[y]);
+  });
+  WallContacts s;
+  s.cand_off.push_back(0);
+  const bool has_bond = !q.bond.empty();
+  for (std::uint32_t c : o) {
+    s.ball.push_back(q.ball[c]);
+    s.wall.push_back(q.wall[c]);
+    s.cand.insert(s.cand.end(), q.cand.begin() + q.cand_off[c], q.cand.begin() + q.cand_off[c + 1]);
+    s.cand_off.push_back(static_cast<std::uint32_t>(s.cand.size()));
+    s.facet.push_back(q.facet[c]);
+    s.h.push_back(q.h[c]);
+    if (has_bond) s.bond.push_back(q.bond[c]);
+  }
+  q = std::move(s);
+}
+
+}  // namespace
 
 template <class Kind>
 void WallSet<Kind>::rebuild(SetContext& cx) {
@@ -315,7 +381,10 @@ void WallSet<Kind>::rebuild(SetContext& cx) {
     q.facet.push_back(keep_facet);
     k = k2;
   }
-  // bonded wall contacts never disappear: keep them with their last facet as candidate
+  // bonded wall contacts never disappear: keep them with their last facet as candidate, then
+  // sort them in by (ball, wall), so that the list's order is fixed by its contacts alone (the
+  // order that a rank of the DEM on MPI ranks merges in, World::set_wall_sums)
+  const std::size_t kept = q.ball.size();
   carry.rest(
       old.h, old.bond, has_bond,
       [&](std::size_t c) {
@@ -328,6 +397,7 @@ void WallSet<Kind>::rebuild(SetContext& cx) {
         q.bond.push_back(old.bond[c]);
       },
       cx.e_slip_dead, cx.e_soft_dead);
+  if (q.ball.size() > kept) sort_by_ball(q);
   const std::size_t m = q.ball.size();
   q.F.assign(m, {});
   q.M.assign(m, {});
@@ -393,7 +463,7 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
   } else {
     for (std::int64_t c = 0; c < m; ++c) one(c);
   }
-  for (std::int64_t c = 0; c < m; ++c) kind.add(wc, c);
+  for (std::int64_t c = 0; c < m; ++c) kind.add(Kind::rec(wc, c));
   kind.end(cx, wc);
 }
 
@@ -481,6 +551,7 @@ int World::add_plane(const PlaneWallParams& p) {
 }
 
 PlaneWall& World::plane(int i) { return planes_->kind.walls[static_cast<std::size_t>(i)]; }
+const PlaneWall& World::plane(int i) const { return planes_->kind.walls[static_cast<std::size_t>(i)]; }
 int World::num_planes() const { return static_cast<int>(planes_->kind.walls.size()); }
 
 int World::add_facet_wall(std::span<const double> vertices, std::span<const std::int32_t> triangles) {
@@ -582,6 +653,47 @@ bool World::has_footing() const { return footing_->kind.ft.enabled; }
 void World::set_footing_velocity(const Vec3& v) { footing_->kind.ft.p.velocity = v; }
 const Footing& World::footing() const { return footing_->kind.ft; }
 Vec3 World::footing_reaction() const { return footing_->kind.ft.reaction; }
+
+void World::wall_sum_records(std::vector<WallSumRec>& out) const {
+  const SetContext cx = const_cast<World*>(this)->context();
+  auto ids = [&](const WallContacts& wc, std::size_t c, WallSumRec r, std::uint8_t kind) {
+    r.ball = pt_.id[wc.ball[c]];
+    r.wall = wc.wall[c];
+    r.kind = kind;
+    out.push_back(r);
+  };
+  const WallContacts& pc = planes_->contacts;
+  for (std::size_t c = 0; c < pc.size(); ++c) ids(pc, c, PlaneKind::rec(pc, static_cast<std::int64_t>(c)), 0);
+  const WallContacts& fc = facets_->contacts;
+  for (std::size_t c = 0; c < fc.size(); ++c) {  // a facet contact that does not act adds nothing
+    const WallSumRec r = facet_rec(cx, fc, static_cast<std::int64_t>(c));
+    if (r.active) ids(fc, c, r, 1);
+  }
+  const WallContacts& gc = footing_->contacts;
+  for (std::size_t c = 0; c < gc.size(); ++c) ids(gc, c, FootingKind::rec(gc, static_cast<std::int64_t>(c)), 2);
+}
+
+void World::set_wall_sums(std::span<const WallSumRec> recs) {
+  std::size_t k0 = 0, k1 = 0, k2 = 0;
+  while (k1 < recs.size() && recs[k1].kind == 0) ++k1;
+  k2 = k1;
+  while (k2 < recs.size() && recs[k2].kind == 1) ++k2;
+  for (std::size_t k = 0; k < recs.size(); ++k)
+    if (recs[k].kind != (k < k1 ? 0 : k < k2 ? 1 : 2))
+      throw std::invalid_argument("set_wall_sums: the records must be sorted by kind.");
+  const SetContext cx = context();
+  if (planes_->present()) {
+    planes_->kind.begin(cx, planes_->contacts);
+    for (std::size_t k = k0; k < k1; ++k) planes_->kind.add(recs[k]);
+  }
+  if (facets_->present())
+    facet_sums(facets_->kind.walls, static_cast<std::int64_t>(k2 - k1),
+               [&](std::int64_t c) { return recs[k1 + static_cast<std::size_t>(c)]; });
+  if (footing_->present()) {
+    footing_->kind.begin(cx, footing_->contacts);
+    for (std::size_t k = k2; k < recs.size(); ++k) footing_->kind.add(recs[k]);
+  }
+}
 
 std::size_t World::bond_ball_facet(double hi) {
   if (!law_has_bond(p_.ball_facet.model))

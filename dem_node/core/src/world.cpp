@@ -509,9 +509,13 @@ void World::step_forces(bool rebuild_now) {
   ++times_.steps;
 }
 
-void World::swap_balls(Particles& pt, PairContacts& pc, std::vector<std::uint8_t>& ghost) {
+void World::swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts, 3>& wall,
+                       std::vector<std::uint8_t>& ghost) {
   std::swap(pt_, pt);
   pairs_->swap_in(pc);
+  std::swap(planes_->contacts, wall[0]);
+  std::swap(facets_->contacts, wall[1]);
+  std::swap(footing_->contacts, wall[2]);
   std::swap(ghost_, ghost);
   dirty_ = true;
 }

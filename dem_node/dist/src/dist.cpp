@@ -1,7 +1,10 @@
 // The DEM on MPI ranks (dist.hpp, docs/scaling.md).
 #include "demfdm/dem/dist.hpp"
 
+#include "demfdm/dem/laws/registry.hpp"
+
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -84,6 +87,22 @@ struct PairRec {
   BondHist b;
 };
 
+// One ball-wall contact, its ball by id: the history goes with the ball to its new owner (a
+// rank keeps the wall contacts of its own balls only).
+struct WallRec {
+  std::uint64_t id;
+  std::uint32_t wall;
+  std::int32_t facet;
+  std::uint8_t kind;  // 0 planes, 1 facets, 2 footing (World::swap_balls)
+  ContactHist h;
+  BondHist b;
+};
+
+bool by_kind_ball_wall(const WallSumRec& x, const WallSumRec& y) {
+  if (x.kind != y.kind) return x.kind < y.kind;
+  return x.ball != y.ball ? x.ball < y.ball : x.wall < y.wall;
+}
+
 // Empty every array, keeping its memory (refilled at the next exchange).
 void clear_keep(Particles& p) {
   p.x.clear(), p.v.clear(), p.w.clear(), p.f.clear(), p.t.clear(), p.fa.clear(), p.ta.clear(), p.x_ref.clear();
@@ -91,6 +110,37 @@ void clear_keep(Particles& p) {
 }
 void clear_keep(PairContacts& c) {
   c.a.clear(), c.b.clear(), c.shift.clear(), c.h.clear(), c.bond.clear();
+}
+void clear_keep(WallContacts& c) {
+  c.ball.clear(), c.wall.clear(), c.h.clear(), c.bond.clear(), c.facet.clear(), c.cand_off.clear(), c.cand.clear();
+  c.F.clear(), c.M.clear(), c.TA.clear(), c.xc.clear(), c.bary.clear();
+}
+
+// Append one wall contact of the ball in `row` with a given history; its facet is its only
+// candidate until the rebuild that follows (World::swap_balls). F, M and the rest are results of
+// the next pass.
+void push_wall(WallContacts& wc, std::uint32_t row, std::uint32_t wall, std::int32_t facet, const ContactHist& h,
+               const BondHist* b) {
+  if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+  wc.ball.push_back(row);
+  wc.wall.push_back(wall);
+  wc.facet.push_back(facet);
+  wc.cand.push_back(static_cast<std::uint32_t>(facet));
+  wc.cand_off.push_back(static_cast<std::uint32_t>(wc.cand.size()));
+  wc.h.push_back(h);
+  if (b) wc.bond.push_back(*b);
+  wc.F.emplace_back(), wc.M.emplace_back(), wc.TA.emplace_back(), wc.xc.emplace_back(), wc.bary.emplace_back();
+}
+
+// The wall-contact lists of a World, by kind (World::swap_balls's order).
+std::array<const WallContacts*, 3> wall_lists(const World& w) {
+  return {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()};
+}
+
+// Whether a kind's law keeps bond histories.
+bool kind_bonds(const WorldParams& p, int kind) {
+  const ContactFamilyParams& f = kind == 0 ? p.ball_wall : kind == 1 ? p.ball_facet : p.ball_footing;
+  return law_has_bond(f.model);
 }
 
 BallRec ball_rec(const Particles& pt, std::size_t i) {
@@ -151,8 +201,12 @@ void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vect
 struct DistDem::Buffers {
   std::vector<std::vector<BallRec>> bout;
   std::vector<std::vector<PairRec>> pout;
+  std::vector<std::vector<WallRec>> wout;
   std::vector<BallRec> bin;
   std::vector<PairRec> pin;
+  std::vector<WallRec> win;
+  std::array<WallContacts, 3> wall;
+  std::vector<WallSumRec> sums, all_sums;
 };
 
 DistDem::DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid)
@@ -220,11 +274,32 @@ void DistDem::load(const World& full) {
     pc.h.push_back(fc.h[c]);
     if (has_bond) pc.bond.push_back(fc.bond[c]);
   }
+  // The walls, the same on every rank (each moves them itself), and the wall contacts of this
+  // rank's balls.
+  std::array<WallContacts, 3> wc;
+  const auto fw = wall_lists(full);
+  for (int k = 0; k < 3; ++k) {
+    const WallContacts& f = *fw[static_cast<std::size_t>(k)];
+    for (std::size_t c = 0; c < f.size(); ++c)
+      if (own[f.ball[c]] == rank_)
+        push_wall(wc[static_cast<std::size_t>(k)], static_cast<std::uint32_t>(row[f.ball[c]]), f.wall[c], f.facet[c],
+                  f.h[c], f.bond.empty() ? nullptr : &f.bond[c]);
+  }
   w_ = std::make_unique<World>(p_);
   w_->set_pair_kernel(full.pair_kernel());
   w_->set_cell(full.cell_origin(), full.cell_length());
   w_->set_strain_rate(full.strain_rate());
-  w_->swap_balls(pt, pc, ghost);
+  for (int i = 0; i < full.num_planes(); ++i) w_->plane(w_->add_plane(full.plane(i).p)) = full.plane(i);
+  for (int i = 0; i < full.num_facet_walls(); ++i) {
+    const FacetWall& f = full.facet_wall(i);
+    std::vector<double> v;
+    std::vector<std::int32_t> t;
+    for (const Vec3& x : f.pos) v.insert(v.end(), {x.x, x.y, x.z});
+    for (const auto& tr : f.tri) t.insert(t.end(), tr.begin(), tr.end());
+    w_->facet_wall(w_->add_facet_wall(v, t)) = f;
+  }
+  if (full.has_footing()) w_->set_footing(full.footing().p);
+  w_->swap_balls(pt, pc, wc, ghost);
   // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
   w_->set_step_reduction([this](double dt) {
     double g = dt;
@@ -232,9 +307,32 @@ void DistDem::load(const World& full) {
     return g;
   });
   w_->prepare();
+  reduce_walls();
   run_disp2_ = 0.0;
   exchanges_ = 0;
   build_forward();
+}
+
+// Every rank's wall-contact shares to every rank, merged in (kind, ball id, wall) order: one
+// World's contact order, so each wall's sums are one World's bits on every rank.
+void DistDem::reduce_walls() {
+  if (w_->num_planes() == 0 && w_->num_facet_walls() == 0 && !w_->has_footing()) return;
+  std::vector<WallSumRec>& mine = buf_->sums;
+  mine.clear();
+  w_->wall_sum_records(mine);
+  std::vector<WallSumRec>& all = buf_->all_sums;
+  const int bytes = static_cast<int>(mine.size() * sizeof(WallSumRec));
+  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_));
+  MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
+  int total = 0;
+  for (int r = 0; r < size_; ++r) {
+    displ[static_cast<std::size_t>(r)] = total;
+    total += counts[static_cast<std::size_t>(r)];
+  }
+  all.resize(static_cast<std::size_t>(total) / sizeof(WallSumRec));
+  MPI_Allgatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, comm_);
+  std::sort(all.begin(), all.end(), by_kind_ball_wall);
+  w_->set_wall_sums(all);
 }
 
 double DistDem::owned_max_disp2() const {
@@ -268,7 +366,10 @@ void DistDem::step(std::int64_t n) {
     t0 = MPI_Wtime();
     times_.exchange += t0 - t1;
     w_->step_forces(rebuild);
-    times_.forces += MPI_Wtime() - t0;
+    t1 = MPI_Wtime();
+    times_.forces += t1 - t0;
+    reduce_walls();
+    times_.walls += MPI_Wtime() - t1;
   }
 }
 
@@ -351,6 +452,20 @@ void DistDem::exchange() {
     pout[static_cast<std::size_t>(own[a])].push_back(rec);
     if (own[b] != own[a]) pout[static_cast<std::size_t>(own[b])].push_back(rec);
   }
+  // each wall contact (all of them are of this rank's balls) to its ball's new owner
+  std::vector<std::vector<WallRec>>& wout = buf_->wout;
+  wout.resize(static_cast<std::size_t>(size_));
+  for (auto& o : wout) o.clear();
+  const auto wl = wall_lists(*w_);
+  for (int k = 0; k < 3; ++k) {
+    const WallContacts& wc = *wl[static_cast<std::size_t>(k)];
+    for (std::size_t c = 0; c < wc.size(); ++c) {
+      const std::uint32_t i = wc.ball[c];
+      wout[static_cast<std::size_t>(own[i])].push_back(WallRec{pt.id[i], wc.wall[c], wc.facet[c],
+                                                               static_cast<std::uint8_t>(k), wc.h[c],
+                                                               wc.bond.empty() ? BondHist{} : wc.bond[c]});
+    }
+  }
   std::vector<std::vector<BallRec>>& bout = buf_->bout;
   bout.resize(static_cast<std::size_t>(size_));
   for (auto& o : bout) o.clear();
@@ -365,6 +480,8 @@ void DistDem::exchange() {
   std::vector<PairRec>& pin = buf_->pin;
   all_to_all(comm_, bout, bin, sbuf_, rbuf_);
   all_to_all(comm_, pout, pin, sbuf_, rbuf_);
+  std::vector<WallRec>& win = buf_->win;
+  all_to_all(comm_, wout, win, sbuf_, rbuf_);
   // the new rows: one copy per id, in id order (indices sorted, not the records)
   std::vector<std::uint32_t> bo(bin.size());
   std::iota(bo.begin(), bo.end(), 0u);
@@ -408,7 +525,21 @@ void DistDem::exchange() {
     nc.h.push_back(r.h);
     if (has_bond) nc.bond.push_back(r.b);
   }
-  w_->swap_balls(q, nc, ghost);  // q_, nc_, ghost_buf_ now hold the old arrays, for next time
+  // the wall contacts, by kind in (ball id, wall) order; each came from the ball's one owner
+  std::sort(win.begin(), win.end(), [](const WallRec& x, const WallRec& y) {
+    if (x.kind != y.kind) return x.kind < y.kind;
+    return x.id != y.id ? x.id < y.id : x.wall < y.wall;
+  });
+  std::array<WallContacts, 3>& wc = buf_->wall;
+  for (auto& l : wc) clear_keep(l);
+  for (const WallRec& r : win) {
+    const std::int64_t i = row_of(r.id);
+    if (i < 0 || ghost[static_cast<std::size_t>(i)])
+      throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a wall contact of ball " +
+                             std::to_string(r.id) + ", which it does not own.");
+    push_wall(wc[r.kind], static_cast<std::uint32_t>(i), r.wall, r.facet, r.h, kind_bonds(p_, r.kind) ? &r.b : nullptr);
+  }
+  w_->swap_balls(q, nc, wc, ghost);  // q_, nc_, the wall lists, ghost_buf_ now hold the old arrays
   ++exchanges_;
   build_forward();
 }

@@ -58,6 +58,19 @@ struct WallContacts {
   std::size_t size() const { return ball.size(); }
 };
 
+/// One wall contact's share of its wall's sums (World::wall_sum_records, World::set_wall_sums):
+/// what a rank of the DEM on MPI ranks (dem_node/dist) passes to every rank, so that each sums
+/// the contacts of every rank in the order of one World.
+struct WallSumRec {
+  std::uint64_t ball = 0;   // ball id
+  std::uint32_t wall = 0;   // wall index within its kind
+  std::int32_t facet = 0;   // facet walls: the contact's facet
+  std::uint8_t kind = 0;    // 0 planes, 1 facets, 2 footing
+  std::uint8_t active = 0;  // carries a force (facets: or bonded)
+  Vec3 F{}, M{}, xc{}, bary{};
+  double k = 0.0;  // planes: K_n (servo gain); facets: the vertex stiffness K (docs/theory.md 6.5)
+};
+
 /// Planar wall: infinite plane, or a bounded rectangle (half1, half2 finite).
 struct PlaneWallParams {
   Vec3 point{};          // [m] a point on the plane (rectangle centre)
@@ -212,6 +225,7 @@ class World {
   // ---- walls ----
   int add_plane(const PlaneWallParams& p);
   PlaneWall& plane(int i);
+  const PlaneWall& plane(int i) const;
   int num_planes() const;
   /// Interface wall from vertex positions [nv*3] and triangles [nt*3].
   int add_facet_wall(std::span<const double> vertices, std::span<const std::int32_t> triangles);
@@ -259,12 +273,20 @@ class World {
   /// Rows that are ghosts, copies of balls another rank owns (1 = ghost; empty: none): a pair
   /// of two ghosts is not kept in the list (it acts on ghosts only).
   const std::vector<std::uint8_t>& ghost_rows() const { return ghost_; }
-  /// Replace every ball, the ball-ball list (in the rows of `pt`) and the ghost rows by exchange,
-  /// e.g. after balls moved between ranks: the arguments get the World's previous arrays (a
-  /// caller that refills them each time reuses their memory). The next step_forces(true)
-  /// searches the pairs again and carries these histories across by ball id. Wall contacts are
-  /// kept as they are.
-  void swap_balls(Particles& pt, PairContacts& pc, std::vector<std::uint8_t>& ghost);
+  /// Replace every ball, the ball-ball list and the wall contacts of each kind (planes, facets,
+  /// footing; all in the rows of `pt`) and the ghost rows by exchange, e.g. after balls moved
+  /// between ranks: the arguments get the World's previous arrays (a caller that refills them
+  /// each time reuses their memory). The next step_forces(true) searches the contacts again and
+  /// carries these histories across by ball and wall id. A ghost row has no wall contacts.
+  void swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts, 3>& wall,
+                  std::vector<std::uint8_t>& ghost);
+  /// Every wall contact's share of its wall's sums (reactions, servo gains, facet vertex forces
+  /// and stiffness), appended to `out` kind by kind (planes, facets, footing) in contact order.
+  void wall_sum_records(std::vector<WallSumRec>& out) const;
+  /// Recompute the walls' sums from `recs`, sorted by (kind, ball id, wall): the records of every
+  /// rank merged, which are the contacts of one World (rows in id order) in its order. The same
+  /// arithmetic as the force pass's own sums.
+  void set_wall_sums(std::span<const WallSumRec> recs);
   /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
   /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
   /// owner's). Collective for such a caller: every rank computes the step at the same steps.

@@ -11,10 +11,15 @@
 // World holding every ball (docs/scaling.md), so positions, velocities, forces and histories are
 // the same bits at any rank count (tests/dist).
 //
-// What this version covers: balls and ball-ball contacts of every law, periodic cells (also
-// strained) and free space, the fixed or the automatic step (the smallest over the ranks). Not
-// yet: walls, facets and the footing; gravity and other effects; the node's measurements,
-// output and checkpoints; specimen procedures; load balancing.
+// Walls, facets and the footing are on every rank, each moving them itself; a rank holds the
+// wall contacts of its own balls (they migrate with them), and after every force pass each
+// wall's sums (reactions, servo gains, facet vertex forces and stiffness) are formed on every
+// rank from every rank's contacts, merged in the order of one World (reduce_walls).
+//
+// What this version covers: balls, ball-ball and ball-wall contacts of every law, periodic cells
+// (also strained) and free space, gravity, the fixed or the automatic step (the smallest over
+// the ranks). Not yet: effects other than gravity (servos); the node's measurements, output and
+// checkpoints; specimen procedures; load balancing.
 #pragma once
 
 #include <mpi.h>
@@ -63,12 +68,13 @@ class DistDem {
   std::int64_t migrated() const { return migrated_; }
 
   /// Wall time [s] of this rank's steps by part: the World's two halves (compute), the ghosts'
-  /// forward exchange, the rebuild test's reduction, and the migrations (communication).
+  /// forward exchange, the rebuild test's reduction, the migrations and the walls' sums
+  /// (communication).
   struct Times {
-    double motion = 0.0, forces = 0.0, forward = 0.0, reduce = 0.0, exchange = 0.0;
+    double motion = 0.0, forces = 0.0, forward = 0.0, reduce = 0.0, exchange = 0.0, walls = 0.0;
     std::int64_t forwarded = 0;  // ghost states received
     double compute() const { return motion + forces; }
-    double comm() const { return forward + reduce + exchange; }
+    double comm() const { return forward + reduce + exchange + walls; }
   };
   const Times& times() const { return times_; }
   void reset_times() { times_ = Times{}; }
@@ -84,6 +90,7 @@ class DistDem {
   void exchange();  // migration, new ghosts, histories, forward lists; replaces the World's balls
   void forward();   // the ghosts' x, v, ω from their owners
   void build_forward();  // the forward lists of the current rows
+  void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   double owned_max_disp2() const;
 
   MPI_Comm comm_;
