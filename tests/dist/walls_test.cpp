@@ -36,6 +36,7 @@ struct WallScene {
   ContactModel facet_model = ContactModel::kLinear;  // kLinearPBond: the floor bonded (2.6)
   int axis = 0;                                      // the axis cut into bricks
   int steps = 800;
+  int balance_every = 0;  // DistDem::Balance::every
 };
 
 // The floor: a 3 x 3 grid of vertices over the box's base (margin kS), 8 triangles facing +z.
@@ -148,6 +149,7 @@ void check(const WallScene& sc) {
   g.n[sc.axis] = g_size;
   DistDem d(MPI_COMM_WORLD, full->params(), g);
   d.load(*full);
+  d.set_balance({sc.balance_every});
   std::vector<Vec3> hist;
   run(d.world(), floor, sc.steps, hist, [&] { d.step(1); });
   const DistDem::Balls got = d.gather();
@@ -187,6 +189,16 @@ void check(const WallScene& sc) {
     if (g_size > 1) {
       EXPECT_GT(sum[1], 0) << "balls must cross brick faces";
     }
+    if (sc.balance_every > 0) {  // the cuts moved
+      EXPECT_EQ(d.rebalances(), d.exchanges() / sc.balance_every);
+      const auto& cuts = d.grid().cuts[sc.axis];
+      std::printf("  %lld rebalances; cuts along axis %d [L]:", static_cast<long long>(d.rebalances()), sc.axis);
+      for (double c : cuts) std::printf(" %.4f", c / kL);
+      std::printf("\n");
+      EXPECT_EQ(cuts.size(), static_cast<std::size_t>(g_size - 1));
+      for (std::size_t j = 0; j < cuts.size(); ++j)
+        EXPECT_NE(cuts[j], (j + 1) * (kL / g_size)) << "cut " << j << " did not move";
+    }
   }
   test::share_verdict();
 }
@@ -196,4 +208,10 @@ void check(const WallScene& sc) {
 TEST(DistWalls, LinearFloorCutAlongXSameBits) { check({"walls, linear floor, cut along x"}); }
 TEST(DistWalls, BondedFloorCutAlongZSameBits) {
   check({"walls, bonded floor, cut along z", ContactModel::kLinearPBond, 2});
+}
+// Dynamic balancing: the cuts move every 3rd exchange (balls change rank), the bits do not.
+TEST(DistWalls, BalancedCutsAlongZSameBits) {
+  WallScene sc{"walls, linear floor, cut along z, balanced", ContactModel::kLinear, 2};
+  sc.balance_every = 3;
+  check(sc);
 }

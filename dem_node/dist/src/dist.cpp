@@ -34,8 +34,13 @@ double along(const BrickGrid& g, const Vec3& x, int k) {
 int BrickGrid::owner(const Vec3& x) const {
   int idx[3];
   for (int k = 0; k < 3; ++k) {
-    const double h = len[k] / n[k];
-    const int i = static_cast<int>(std::floor(along(*this, x, k) / h));
+    const double u = along(*this, x, k);
+    int i;
+    if (cuts[k].empty()) {
+      i = static_cast<int>(std::floor(u / (len[k] / n[k])));
+    } else {  // the bricks whose start is at or below u
+      i = static_cast<int>(std::upper_bound(cuts[k].begin(), cuts[k].end(), u) - cuts[k].begin());
+    }
     idx[k] = std::clamp(i, 0, n[k] - 1);
   }
   return idx[0] + n[0] * (idx[1] + n[1] * idx[2]);
@@ -45,12 +50,11 @@ void BrickGrid::near(const Vec3& x, double halo, std::vector<int>& out) const {
   out.clear();
   std::vector<int> ax[3];
   for (int k = 0; k < 3; ++k) {
-    const double h = len[k] / n[k];
     const double u = along(*this, x, k);
     for (int i = 0; i < n[k]; ++i) {
       // brick i grown by the halo; on a free axis the end bricks reach to infinity
-      const double lo_i = (!periodic[k] && i == 0) ? -INFINITY : i * h - halo;
-      const double hi_i = (!periodic[k] && i == n[k] - 1) ? INFINITY : (i + 1) * h + halo;
+      const double lo_i = (!periodic[k] && i == 0) ? -INFINITY : edge(k, i) - halo;
+      const double hi_i = (!periodic[k] && i == n[k] - 1) ? INFINITY : edge(k, i + 1) + halo;
       bool in = u >= lo_i && u < hi_i;
       if (periodic[k]) in = in || (u - len[k] >= lo_i && u - len[k] < hi_i) || (u + len[k] >= lo_i && u + len[k] < hi_i);
       if (in) ax[k].push_back(i);
@@ -360,6 +364,7 @@ void DistDem::step(std::int64_t n) {
     t1 = MPI_Wtime();
     times_.reduce += t1 - t0;
     if (rebuild) {
+      if (bal_.every > 0 && (exchanges_ + 1) % bal_.every == 0) rebalance();
       exchange();
       run_disp2_ = 0.0;
     }
@@ -542,6 +547,48 @@ void DistDem::exchange() {
   w_->swap_balls(q, nc, wc, ghost);  // q_, nc_, the wall lists, ghost_buf_ now hold the old arrays
   ++exchanges_;
   build_forward();
+}
+
+void DistDem::rebalance() {
+  const Particles& pt = w_->balls();
+  const std::size_t n = pt.size();
+  const auto& gh = w_->ghost_rows();
+  std::vector<std::int64_t> wt(n, 1);
+  const PairContacts& pc = w_->pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
+  for (const WallContacts* wc : wall_lists(*w_))
+    for (std::uint32_t i : wc->ball) ++wt[i];
+  const int B = std::max(bal_.bins, 2);
+  std::vector<std::int64_t> h(static_cast<std::size_t>(B)), g(static_cast<std::size_t>(B));
+  for (int k = 0; k < 3; ++k) {
+    const int nk = grid_.n[k];
+    if (nk < 2) continue;
+    std::fill(h.begin(), h.end(), 0);
+    const double L = grid_.len[k];
+    for (std::size_t i = 0; i < n; ++i) {
+      if (!gh.empty() && gh[i]) continue;
+      const double u = along(grid_, pt.x[i], k);
+      const int b = std::clamp(static_cast<int>(std::floor(u / L * B)), 0, B - 1);
+      h[static_cast<std::size_t>(b)] += wt[i];
+    }
+    MPI_Allreduce(h.data(), g.data(), B, MPI_INT64_T, MPI_SUM, comm_);
+    std::int64_t total = 0;
+    for (std::int64_t v : g) total += v;
+    // cut j after the first slab where the running weight reaches j/nk of the total; at least
+    // one slab per brick
+    std::vector<double> cuts;
+    std::int64_t run = 0;
+    int b = 0, last = 0;
+    for (int j = 1; j < nk; ++j) {
+      const std::int64_t target = (total * j + nk - 1) / nk;
+      while (b < B && run + g[static_cast<std::size_t>(b)] < target) run += g[static_cast<std::size_t>(b++)];
+      int e = std::clamp(b + 1, last + 1, B - (nk - j));  // the cut: the end of slab b
+      cuts.push_back(e * (L / B));
+      last = e;
+    }
+    grid_.cuts[k] = std::move(cuts);
+  }
+  ++rebalances_;
 }
 
 // Forward lists: every rank asks each owner for the ghosts it holds, in id order (its rows' order).

@@ -34,12 +34,21 @@ namespace demfdm::dem {
 
 /// A brick grid over [lo, lo + len): n[0] x n[1] x n[2] bricks; brick (i, j, k) is rank
 /// i + n0 (j + n1 k). On a periodic axis a point is wrapped into the cell first; on a free axis a
-/// point outside [lo, lo + len) belongs to the nearest brick.
+/// point outside [lo, lo + len) belongs to the nearest brick. The cuts along an axis are even
+/// unless `cuts` gives them (shifted by DistDem's balancing).
 struct BrickGrid {
   Vec3 lo{}, len{};
   int n[3] = {1, 1, 1};
   bool periodic[3] = {false, false, false};
+  /// Per axis: empty (even cuts), or the n[k] - 1 inner cuts, increasing, in (0, len[k]) from lo.
+  std::vector<double> cuts[3];
   int count() const { return n[0] * n[1] * n[2]; }
+  /// Start of brick i along axis k, from lo (edge(k, 0) = 0, edge(k, n[k]) = len[k]).
+  double edge(int k, int i) const {
+    if (i <= 0) return 0.0;
+    if (i >= n[k]) return len[k];
+    return cuts[k].empty() ? i * (len[k] / n[k]) : cuts[k][static_cast<std::size_t>(i - 1)];
+  }
   int owner(const Vec3& x) const;
   /// Every rank whose brick, grown by `halo` on each side, holds x or (periodic axes) an image of
   /// x; ascending, without repeats.
@@ -57,6 +66,20 @@ class DistDem {
   /// and their pairs, in id order, and prepares its World (as `full.prepare()` would).
   void load(const World& full);
   void step(std::int64_t n = 1);
+
+  /// Dynamic balancing (as LAMMPS's `fix balance ... shift`): at every `every`-th exchange (0:
+  /// never) the cuts along each axis with more than one brick move so that the slabs between
+  /// them carry equal weight, a ball's weight being 1 plus its listed contacts (the pair pass's
+  /// work grows with them). The cuts fall on the edges of `bins` even slabs per axis; the
+  /// weights are integers, summed exactly, so every rank finds the same cuts. Balancing moves
+  /// balls between ranks, never a bit of the results (rows stay in id order).
+  struct Balance {
+    int every = 0;
+    int bins = 2048;
+  };
+  void set_balance(const Balance& b) { bal_ = b; }
+  const BrickGrid& grid() const { return grid_; }
+  std::int64_t rebalances() const { return rebalances_; }
 
   World& world() { return *w_; }
   const World& world() const { return *w_; }
@@ -91,6 +114,7 @@ class DistDem {
   void forward();   // the ghosts' x, v, ω from their owners
   void build_forward();  // the forward lists of the current rows
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
+  void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
   double owned_max_disp2() const;
 
   MPI_Comm comm_;
@@ -100,7 +124,8 @@ class DistDem {
   std::unique_ptr<World> w_;
   double halo_ = 0.0;
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
-  std::int64_t exchanges_ = 0, migrated_ = 0;
+  std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0;
+  Balance bal_;
   Times times_;
   // Forward communication, fixed at each exchange: per rank, my owned rows whose ghosts it holds
   // and my ghost rows it owns, both in id order.
