@@ -1,24 +1,34 @@
 // bench_dist: the DEM on MPI ranks (dem_dist, issue 17 item 5) on the reference packing of
-// bench_dem (25,835 balls, periodic), cut into P bricks along x.
+// bench_dem (25,835 balls, periodic), cut into P bricks.
 //
-// Usage: mpirun -np P bench_dist [packing] [linear|softbond] [steps] [strong|weak]
-//   strong: the packing as it is, shared by the P ranks;
-//   weak:   the packing repeated P times along x (P x 25,835 balls), one copy's worth per rank.
-// The cell is strained in plane strain at the rate of bench_dem's `moving` run (the cell edge
-// moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during the run.
-// Ball ids follow a Morton order of the packing (rows in id order are then local in space, as
-// bench_dem's sorted rows). One thread per rank unless OMP_NUM_THREADS says otherwise.
+// Usage: mpirun -np P bench_dist [packing] [linear|softbond] [steps] [strong|weak|footing] [balance]
+//   strong:  the packing as it is, shared by the P ranks, cut along x;
+//   weak:    the packing repeated P times along x (P x 25,835 balls), one copy's worth per rank;
+//   footing: penetration: the packing in a box of five planes (floor and sides), gravity (100 g),
+//            and the footing (diameter half the width) pushed into the top by two mean radii in
+//            the run; cut along z, so the top brick holds the work under the footing.
+//            Before the timed steps the packing settles for BENCH_DIST_RELAX steps (default 2,000;
+//            the velocities zeroed four times on the way, stopping the rattlers that the
+//            released overlaps shoot off the free top). One DistDem::step call per step, as the
+//            DEM node makes at coupling.interval = 1, so the walls' sums are formed every step.
+//   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts).
+// strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
+// cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
+// the run. Ball ids follow a Morton order of the packing (rows in id order are then local in
+// space, as bench_dem's sorted rows). One thread per rank unless OMP_NUM_THREADS says otherwise.
 //
 // Output (rank 0), one CSV line: ranks, mode, model, balls, steps, wall_s, particle_steps_per_s,
 // then the times per step averaged over the ranks [ms]: motion, forces, forward, reduce,
-// exchange; comm_share (forward + reduce + exchange over the step, mean over ranks); imbalance
-// (largest compute time over the mean); ghosts per owned ball; ghost states received per step and
-// rank; rebuilds; balls that changed rank.
+// exchange, walls; comm_share (forward + reduce + exchange + walls over the step, mean over
+// ranks); imbalance (largest compute time over the mean); ghosts per owned ball; ghost states
+// received per step and rank; rebuilds; balls that changed rank; rebalances; owned balls per
+// rank (min/max); the footing force [N] (footing mode).
 #include <mpi.h>
 #include <omp.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
 #include <numeric>
 #include <string>
 
@@ -36,10 +46,14 @@ int main(int argc, char** argv) {
   const std::string model = argc > 2 ? argv[2] : "linear";
   const long steps = argc > 3 ? std::stol(argv[3]) : 1000;
   const std::string mode = argc > 4 ? argv[4] : "strong";
-  if ((model != "linear" && model != "softbond") || (mode != "strong" && mode != "weak")) {
-    if (rank == 0) std::fprintf(stderr, "usage: bench_dist [packing] [linear|softbond] [steps] [strong|weak]\n");
+  const int balance = argc > 5 ? std::stoi(argv[5]) : 0;
+  if ((model != "linear" && model != "softbond") || (mode != "strong" && mode != "weak" && mode != "footing") ||
+      balance < 0) {
+    if (rank == 0)
+      std::fprintf(stderr, "usage: bench_dist [packing] [linear|softbond] [steps] [strong|weak|footing] [balance]\n");
     MPI_Abort(MPI_COMM_WORLD, 2);
   }
+  const bool footing = mode == "footing";
   const Packing pk = load(file);
   const int copies = mode == "weak" ? P : 1;
   const Vec3 L0 = pk.hi - pk.lo;
@@ -60,47 +74,100 @@ int main(int argc, char** argv) {
   p.ball_ball.linear.kratio = 2.4;
   p.ball_ball.linear.fric = 0.6248693519093275;
   p.skin = 0.1 * 2.0 * 0.058e-3;
+  if (footing) {  // a box of planes (the balls' stiffness) and the footing
+    p.periodic.enabled = false;
+    p.gravity = true;
+    p.g_level = 100.0;
+    p.ball_wall.linear.kn_fixed = p.ball_footing.linear.kn_fixed = p.ball_ball.linear.kn_fixed;
+  }
   World full(p);
+  // footing: the balls that cross the box's planes are left out (a specimen carved from the
+  // periodic packing, without explosive initial overlaps with the planes)
+  auto inside = [&](std::size_t k) {
+    const Vec3& x = pk.x[k];
+    const double r = pk.r[k];
+    return x.x - r > pk.lo.x && x.x + r < pk.hi.x && x.y - r > pk.lo.y && x.y + r < pk.hi.y && x.z - r > pk.lo.z;
+  };
   for (int c = 0; c < copies; ++c)
-    for (std::size_t k : order) full.add_ball(pk.x[k] + Vec3{c * L0.x, 0.0, 0.0}, pk.r[k]);
+    for (std::size_t k : order)
+      if (!footing || inside(k)) full.add_ball(pk.x[k] + Vec3{c * L0.x, 0.0, 0.0}, pk.r[k]);
+  double rmean = 0.0, ztop = -1e300;
+  for (std::size_t i = 0; i < pk.r.size(); ++i) {
+    rmean += pk.r[i] / double(pk.r.size());
+    ztop = std::max(ztop, pk.x[i].z + pk.r[i]);
+  }
+  if (footing) {
+    full.add_plane({pk.lo, {0, 0, 1}});
+    full.add_plane({pk.lo, {1, 0, 0}});
+    full.add_plane({pk.lo, {0, 1, 0}});
+    full.add_plane({pk.hi, {-1, 0, 0}});
+    full.add_plane({pk.hi, {0, -1, 0}});
+    FootingParams fp;
+    fp.diameter = 0.5 * L0.x;
+    fp.height = 0.3 * L0.z;
+    fp.bottom_centre = {0.5 * (pk.lo.x + pk.hi.x), 0.5 * (pk.lo.y + pk.hi.y), ztop};
+    full.set_footing(fp);
+  }
   full.prepare();
   if (p.ball_ball.model == ContactModel::kSoftBond) full.bond_ball_ball(-1.0, 0.0);
-  const double edot = p.skin / 3.0 / (30.0 * full.dt() * p.periodic.length.x);
-  full.set_strain_rate({edot, -edot, 0.0});
+  if (!footing) {
+    const double edot = p.skin / 3.0 / (30.0 * full.dt() * p.periodic.length.x);
+    full.set_strain_rate({edot, -edot, 0.0});
+  }
   BrickGrid g;
   g.lo = p.periodic.origin;
   g.len = p.periodic.length;
-  g.n[0] = P;
-  g.periodic[0] = g.periodic[1] = g.periodic[2] = true;
+  g.n[footing ? 2 : 0] = P;
+  for (bool& per : g.periodic) per = !footing;
   DistDem d(MPI_COMM_WORLD, p, g);
   d.load(full);
+  d.set_balance({balance});
+  if (footing) {  // the packing settles in its box (the footing at rest), then the footing moves
+    const char* relax = std::getenv("BENCH_DIST_RELAX");
+    const long n_relax = relax ? std::atol(relax) : 2000;
+    for (int round = 0; round < 4; ++round) {  // rattlers shot out by the released overlaps are stopped
+      d.step(n_relax / 4);
+      Particles& b = d.world().balls();
+      std::fill(b.v.begin(), b.v.end(), Vec3{});
+      std::fill(b.w.begin(), b.w.end(), Vec3{});
+    }
+    d.world().set_footing_velocity({0, 0, -2.0 * rmean / (double(steps + 20) * d.world().dt())});
+  }
   d.step(20);  // warm-up
   d.reset_times();
   const std::int64_t ex0 = d.exchanges(), mig0 = d.migrated();
   MPI_Barrier(MPI_COMM_WORLD);
   const double t0 = MPI_Wtime();
-  d.step(steps);
+  if (footing) {  // one step per call, as the node at coupling.interval = 1: the walls' sums every step
+    for (long k = 0; k < steps; ++k) d.step(1);
+  } else {
+    d.step(steps);
+  }
   MPI_Barrier(MPI_COMM_WORLD);
   const double wall = MPI_Wtime() - t0;
   const DistDem::Times& t = d.times();
-  double mine[7] = {t.motion, t.forces, t.forward, t.reduce, t.exchange, double(d.ghosts()) / double(d.owned()),
+  double mine[8] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
                     double(t.forwarded)};
-  double sum[7], cmax = 0.0;
-  MPI_Reduce(mine, sum, 7, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+  double sum[8], cmax = 0.0;
+  MPI_Reduce(mine, sum, 8, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
   const double comp = t.compute();
   MPI_Reduce(&comp, &cmax, 1, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
-  long long mig = d.migrated() - mig0, mig_sum = 0;
+  long long mig = d.migrated() - mig0, mig_sum = 0, own = static_cast<long long>(d.owned()), own_min = 0, own_max = 0;
   MPI_Reduce(&mig, &mig_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  MPI_Reduce(&own, &own_min, 1, MPI_LONG_LONG, MPI_MIN, 0, MPI_COMM_WORLD);
+  MPI_Reduce(&own, &own_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
   if (rank == 0) {
     const double ms = 1e3 / double(steps) / P;
-    const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4];
+    const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5];
     std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
-                "exchange_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations\n");
-    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld\n", P, mode.c_str(),
-                model.c_str(), full.num_balls(), steps, wall, double(full.num_balls()) * double(steps) / wall,
-                sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms, sum[4] * ms, (sum[2] + sum[3] + sum[4]) / total,
-                cmax / ((sum[0] + sum[1]) / P), sum[5] / P, sum[6] / double(steps) / P,
-                static_cast<long long>(d.exchanges() - ex0), mig_sum);
+                "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
+                "rebalances,owned_min,owned_max,footing_fz_N\n");
+    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4g\n",
+                P, mode.c_str(), model.c_str(), full.num_balls(), steps, wall,
+                double(full.num_balls()) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
+                sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5]) / total, cmax / ((sum[0] + sum[1]) / P),
+                sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - ex0), mig_sum,
+                static_cast<long long>(d.rebalances()), own_min, own_max, d.world().footing_reaction().z);
   }
   MPI_Finalize();
   return 0;

@@ -695,6 +695,44 @@ void World::set_wall_sums(std::span<const WallSumRec> recs) {
   }
 }
 
+void World::pack_wall_sums(std::vector<double>& out) const {
+  out.clear();
+  auto put = [&](const Vec3& v) { out.insert(out.end(), {v.x, v.y, v.z}); };
+  for (const PlaneWall& pw : planes_->kind.walls) {
+    put(pw.reaction);
+    out.push_back(pw.k_sum);
+  }
+  for (const FacetWall& fw : facets_->kind.walls) {
+    for (const Vec3& f : fw.vforce) put(f);
+    out.insert(out.end(), fw.vstiff.begin(), fw.vstiff.end());
+    put(fw.total_force);
+  }
+  if (footing_->present()) put(footing_->kind.ft.reaction);
+}
+
+void World::unpack_wall_sums(std::span<const double> in) {
+  std::size_t k = 0;
+  auto get = [&](Vec3& v) {
+    v = {in[k], in[k + 1], in[k + 2]};
+    k += 3;
+  };
+  std::size_t need = 4 * planes_->kind.walls.size() + (footing_->present() ? 3 : 0);
+  for (const FacetWall& fw : facets_->kind.walls) need += 4 * fw.vforce.size() + 3;
+  if (in.size() != need)
+    throw std::invalid_argument("unpack_wall_sums: " + std::to_string(in.size()) + " values for walls that take " +
+                                std::to_string(need) + ".");
+  for (PlaneWall& pw : planes_->kind.walls) {
+    get(pw.reaction);
+    pw.k_sum = in[k++];
+  }
+  for (FacetWall& fw : facets_->kind.walls) {
+    for (Vec3& f : fw.vforce) get(f);
+    for (double& v : fw.vstiff) v = in[k++];
+    get(fw.total_force);
+  }
+  if (footing_->present()) get(footing_->kind.ft.reaction);
+}
+
 std::size_t World::bond_ball_facet(double hi) {
   if (!law_has_bond(p_.ball_facet.model))
     throw std::invalid_argument(std::string("bond_ball_facet: family 'ball_facet' uses model '") +

@@ -211,6 +211,7 @@ struct DistDem::Buffers {
   std::vector<WallRec> win;
   std::array<WallContacts, 3> wall;
   std::vector<WallSumRec> sums, all_sums;
+  std::vector<double> packed;
 };
 
 DistDem::DistDem(MPI_Comm comm, const WorldParams& p, const BrickGrid& grid)
@@ -317,26 +318,94 @@ void DistDem::load(const World& full) {
   build_forward();
 }
 
-// Every rank's wall-contact shares to every rank, merged in (kind, ball id, wall) order: one
-// World's contact order, so each wall's sums are one World's bits on every rank.
+// Every rank's wall-contact shares go to rank 0, which merges them in (kind, ball id, wall)
+// order, one World's contact order (each rank's shares are already in that order), sums them as
+// one World does, and sends every rank the sums. A share carries only what its kind sums.
 void DistDem::reduce_walls() {
-  if (w_->num_planes() == 0 && w_->num_facet_walls() == 0 && !w_->has_footing()) return;
+  // one rank: its own sums are already those (the same contacts in the same order)
+  if (size_ == 1 || (w_->num_planes() == 0 && w_->num_facet_walls() == 0 && !w_->has_footing())) return;
   std::vector<WallSumRec>& mine = buf_->sums;
   mine.clear();
   w_->wall_sum_records(mine);
-  std::vector<WallSumRec>& all = buf_->all_sums;
-  const int bytes = static_cast<int>(mine.size() * sizeof(WallSumRec));
-  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_));
-  MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
-  int total = 0;
-  for (int r = 0; r < size_; ++r) {
-    displ[static_cast<std::size_t>(r)] = total;
-    total += counts[static_cast<std::size_t>(r)];
+  // compact shares by kind
+  struct PlaneShare {
+    std::uint64_t ball;
+    std::uint32_t wall;
+    std::uint8_t active;
+    Vec3 F;
+    double k;
+  };
+  struct FootingShare {
+    std::uint64_t ball;
+    Vec3 F;
+  };
+  std::vector<PlaneShare> ps;
+  std::vector<WallSumRec> fs;
+  std::vector<FootingShare> gs;
+  for (const WallSumRec& r : mine) {
+    if (r.kind == 0) ps.push_back({r.ball, r.wall, r.active, r.F, r.k});
+    else if (r.kind == 1) fs.push_back(r);
+    else gs.push_back({r.ball, r.F});
   }
-  all.resize(static_cast<std::size_t>(total) / sizeof(WallSumRec));
-  MPI_Allgatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, comm_);
-  std::sort(all.begin(), all.end(), by_kind_ball_wall);
-  w_->set_wall_sums(all);
+  // one message per rank: three counts, then the shares of each kind
+  std::vector<char>& out = sbuf_;
+  out.clear();
+  auto put = [&](const void* p, std::size_t n) {
+    out.insert(out.end(), static_cast<const char*>(p), static_cast<const char*>(p) + n);
+  };
+  const std::uint64_t cnt[3] = {ps.size(), fs.size(), gs.size()};
+  put(cnt, sizeof cnt);
+  put(ps.data(), ps.size() * sizeof(PlaneShare));
+  put(fs.data(), fs.size() * sizeof(WallSumRec));
+  put(gs.data(), gs.size() * sizeof(FootingShare));
+  const int bytes = static_cast<int>(out.size());
+  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_) + 1, 0);
+  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
+  for (int r = 0; r < size_; ++r)
+    displ[static_cast<std::size_t>(r) + 1] = displ[static_cast<std::size_t>(r)] + counts[static_cast<std::size_t>(r)];
+  if (rank_ == 0) rbuf_.resize(static_cast<std::size_t>(displ.back()));
+  MPI_Gatherv(out.data(), bytes, MPI_BYTE, rbuf_.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+  std::vector<WallSumRec>& all = buf_->all_sums;
+  if (rank_ == 0) {
+    // per kind, the ranks' runs one after the other, each merged into the sorted front
+    all.clear();
+    for (int kind = 0; kind < 3; ++kind) {
+      const std::size_t first = all.size();
+      for (int r = 0; r < size_; ++r) {
+        const char* q = rbuf_.data() + displ[static_cast<std::size_t>(r)];
+        std::uint64_t c[3];
+        std::memcpy(c, q, sizeof c);
+        q += sizeof c;
+        if (kind > 0) q += c[0] * sizeof(PlaneShare);
+        if (kind > 1) q += c[1] * sizeof(WallSumRec);
+        const std::size_t mid = all.size();
+        for (std::uint64_t j = 0; j < c[kind]; ++j) {
+          WallSumRec rec;
+          if (kind == 0) {
+            PlaneShare x;
+            std::memcpy(&x, q + j * sizeof x, sizeof x);
+            rec.ball = x.ball, rec.wall = x.wall, rec.active = x.active, rec.F = x.F, rec.k = x.k;
+          } else if (kind == 1) {
+            std::memcpy(&rec, q + j * sizeof rec, sizeof rec);
+          } else {
+            FootingShare x;
+            std::memcpy(&x, q + j * sizeof x, sizeof x);
+            rec.ball = x.ball, rec.F = x.F;
+          }
+          rec.kind = static_cast<std::uint8_t>(kind);
+          all.push_back(rec);
+        }
+        std::inplace_merge(all.begin() + static_cast<std::ptrdiff_t>(first), all.begin() + static_cast<std::ptrdiff_t>(mid),
+                           all.end(), by_kind_ball_wall);
+      }
+    }
+  }
+  // the sums back: every rank has the same walls, so the same array length
+  std::vector<double>& packed = buf_->packed;
+  if (rank_ == 0) w_->set_wall_sums(all);
+  w_->pack_wall_sums(packed);
+  MPI_Bcast(packed.data(), static_cast<int>(packed.size()), MPI_DOUBLE, 0, comm_);
+  if (rank_ != 0) w_->unpack_wall_sums(packed);
 }
 
 double DistDem::owned_max_disp2() const {
@@ -371,11 +440,13 @@ void DistDem::step(std::int64_t n) {
     t0 = MPI_Wtime();
     times_.exchange += t0 - t1;
     w_->step_forces(rebuild);
-    t1 = MPI_Wtime();
-    times_.forces += t1 - t0;
-    reduce_walls();
-    times_.walls += MPI_Wtime() - t1;
+    times_.forces += MPI_Wtime() - t0;
   }
+  // The walls' sums of the last step only: within the call nothing reads them (the effects on
+  // ranks, gravity, do not).
+  const double t0 = MPI_Wtime();
+  reduce_walls();
+  times_.walls += MPI_Wtime() - t0;
 }
 
 void DistDem::forward() {

@@ -287,6 +287,11 @@ class World {
   /// rank merged, which are the contacts of one World (rows in id order) in its order. The same
   /// arithmetic as the force pass's own sums.
   void set_wall_sums(std::span<const WallSumRec> recs);
+  /// The walls' sums as one array (planes: reaction, servo gain; facet walls: vertex forces,
+  /// vertex stiffness, total force; the footing's reaction), and back: what one rank sends the
+  /// others after set_wall_sums.
+  void pack_wall_sums(std::vector<double>& out) const;
+  void unpack_wall_sums(std::span<const double> in);
   /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
   /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
   /// owner's). Collective for such a caller: every rank computes the step at the same steps.

@@ -12,9 +12,10 @@
 // the same bits at any rank count (tests/dist).
 //
 // Walls, facets and the footing are on every rank, each moving them itself; a rank holds the
-// wall contacts of its own balls (they migrate with them), and after every force pass each
-// wall's sums (reactions, servo gains, facet vertex forces and stiffness) are formed on every
-// rank from every rank's contacts, merged in the order of one World (reduce_walls).
+// wall contacts of its own balls (they migrate with them). At the end of step(n) each wall's sums
+// (reactions, servo gains, facet vertex forces and stiffness) are formed on rank 0 from every
+// rank's contacts, merged in the order of one World, and sent to every rank (reduce_walls): the
+// sums of one World, on every rank.
 //
 // What this version covers: balls, ball-ball and ball-wall contacts of every law, periodic cells
 // (also strained) and free space, gravity, the fixed or the automatic step (the smallest over
@@ -65,6 +66,7 @@ class DistDem {
   /// same way, not stepped since its last prepare): each rank keeps its own balls, their ghosts
   /// and their pairs, in id order, and prepares its World (as `full.prepare()` would).
   void load(const World& full);
+  /// n steps; the walls' sums are those of the last (within the call nothing reads them).
   void step(std::int64_t n = 1);
 
   /// Dynamic balancing (as LAMMPS's `fix balance ... shift`): at every `every`-th exchange (0:
