@@ -1,0 +1,10 @@
+#!/bin/sh
+# Open MPI's remote-start agent (plm_rsh_agent) for tests/dist/two_hosts.sh: called as
+# "ns_agent.sh HOST COMMAND...", like ssh. Host B is a network and UTS namespace entered with
+# nsenter (its holder's pid in TWO_HOSTS_B_PID); any other host is this one.
+host="$1"
+shift
+if [ "$host" = "$TWO_HOSTS_B_ADDR" ]; then
+  exec nsenter -t "$TWO_HOSTS_B_PID" -n -u -- sh -c "$*"
+fi
+exec sh -c "$*"

@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The DEM on ranks across two "hosts" (issue 17 item 4): two network namespaces, each with its
+# own host name, joined by a veth pair (10.77.0.1 and 10.77.0.2). mpirun in host A starts its
+# daemon in host B through ns_agent.sh (as it would through ssh); the ranks talk MPI over TCP on
+# the veth pair only (no shared memory). Checks: one rank runs on each host, and the rank-count
+# cases give the bits of one World. Nothing leaves the namespaces.
+# Usage: two_hosts.sh DIST_TESTS   (exit 77 = skipped: needs root, unshare, nsenter and ip)
+set -euo pipefail
+tests="$1"
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+if [ -z "${TWO_HOSTS_INNER:-}" ]; then
+  for tool in unshare nsenter ip mpirun; do
+    command -v "$tool" >/dev/null || { echo "SKIP: '$tool' is not installed"; exit 77; }
+  done
+  [ "$(id -u)" -eq 0 ] || { echo "SKIP: network namespaces need root"; exit 77; }
+  unshare -n -u true 2>/dev/null || { echo "SKIP: cannot create network namespaces here"; exit 77; }
+  exec unshare -n -u -- env TWO_HOSTS_INNER=1 "$0" "$@"
+fi
+# host A: this namespace
+hostname hosta
+ip link set lo up
+work="$(mktemp -d)"
+unshare -n -u -- sh -c 'hostname hostb; exec sleep 3600' &
+bpid=$!
+trap 'kill $bpid 2>/dev/null || true; rm -rf "$work"' EXIT
+for _ in $(seq 50); do  # until the holder is in its namespace
+  [ "$(readlink /proc/$bpid/ns/net)" != "$(readlink /proc/self/ns/net)" ] && break
+  sleep 0.1
+done
+if ! ip link add vA type veth peer name vB 2>/dev/null; then
+  echo "SKIP: cannot create a veth pair here"
+  exit 77
+fi
+ip link set vB netns "$bpid"
+ip addr add 10.77.0.1/24 dev vA
+ip link set vA up
+nsenter -t "$bpid" -n -- ip link set lo up
+nsenter -t "$bpid" -n -- ip addr add 10.77.0.2/24 dev vB
+nsenter -t "$bpid" -n -- ip link set vB up
+printf '10.77.0.1 slots=1\n10.77.0.2 slots=1\n' > "$work/hosts"
+export TWO_HOSTS_B_PID="$bpid" TWO_HOSTS_B_ADDR=10.77.0.2
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1
+run() {
+  mpirun -np 2 --map-by node --hostfile "$work/hosts" --mca plm_rsh_agent "$here/ns_agent.sh" \
+    --mca btl self,tcp --mca btl_tcp_if_include 10.77.0.0/24 --mca oob_tcp_if_include 10.77.0.0/24 "$@"
+}
+names="$(run hostname | sort | tr '\n' ' ')"
+echo "ranks on: $names"
+if [ "$names" != "hosta hostb " ]; then
+  echo "FAIL: expected one rank on hosta and one on hostb, found: $names"
+  exit 1
+fi
+run "$tests" --gtest_filter='Dist.LinearFreeSameBits:DistWalls.LinearFloorCutAlongXSameBits'
