@@ -11,7 +11,11 @@
 //            the velocities zeroed four times on the way, stopping the rattlers that the
 //            released overlaps shoot off the free top). One DistDem::step call per step, as the
 //            DEM node makes at coupling.interval = 1, so the walls' sums are formed every step.
+//            BENCH_DIST_REPLICATE=K: K x K x K copies of the periodic packing first (a wider block).
 //   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts).
+// BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
+// of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
+// bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
 // cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
 // the run. Ball ids follow a Morton order of the packing (rows in id order are then local in
@@ -22,7 +26,8 @@
 // exchange, walls; comm_share (forward + reduce + exchange + walls over the step, mean over
 // ranks); imbalance (largest compute time over the mean); ghosts per owned ball; ghost states
 // received per step and rank; rebuilds; balls that changed rank; rebalances; owned balls per
-// rank (min/max); the footing force [N] (footing mode).
+// rank (min/max); weight_imbalance (the balancing's weight, 1 + listed contacts per own ball, at
+// the end: largest over mean; free of timing noise); the footing force [N] (footing mode).
 #include <mpi.h>
 #include <omp.h>
 
@@ -32,12 +37,145 @@
 #include <numeric>
 #include <string>
 
+#include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/dist.hpp"
 #include "packing.hpp"
 
 using namespace demfdm::dem;
 
+namespace {
+
+// The projection's imbalance (docs/scaling.md): the balancing weight of every ball (1 + listed
+// contacts) of the final state, gathered on rank 0 and cut by a model grid of nx x ny x nz
+// bricks over the same box, three ways: even cuts; shifted cuts (DistDem's balancing: per axis,
+// equal-weight slabs from a 2,048-bin histogram); recursive coordinate bisection (RCB, LAMMPS's
+// tiled balance: the longest side halved at the weighted median, recursively; any brick count).
+// Prints the largest brick weight over the mean for each.
+struct WB {
+  Vec3 x;
+  std::int64_t w;
+};
+
+void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len, const char* spec);
+
+void model_grid(const DistDem& d, const BrickGrid& g, const char* spec) {
+  std::vector<std::int64_t> wt;
+  d.ball_weights(wt);
+  const World& w = d.world();
+  const auto& gh = w.ghost_rows();
+  std::vector<WB> mine;
+  for (std::size_t i = 0; i < w.num_balls(); ++i)
+    if (gh.empty() || !gh[i]) mine.push_back({w.balls().x[i], wt[i]});
+  int rank = 0, P = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &P);
+  int bytes = static_cast<int>(mine.size() * sizeof(WB));
+  std::vector<int> cnt(static_cast<std::size_t>(P)), dis(static_cast<std::size_t>(P));
+  MPI_Gather(&bytes, 1, MPI_INT, cnt.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
+  int tot = 0;
+  for (int r = 0; r < P; ++r) dis[static_cast<std::size_t>(r)] = tot, tot += cnt[static_cast<std::size_t>(r)];
+  std::vector<WB> all(rank == 0 ? static_cast<std::size_t>(tot) / sizeof(WB) : 0);
+  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), cnt.data(), dis.data(), MPI_BYTE, 0, MPI_COMM_WORLD);
+  if (rank == 0) model_imbalance(all, g.lo, g.len, spec);
+}
+
+void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len, const char* spec) {
+  int n[3] = {1, 1, 1};
+  if (std::sscanf(spec, "%d,%d,%d", &n[0], &n[1], &n[2]) != 3) {
+    std::fprintf(stderr, "model grid '%s': expected nx,ny,nz\n", spec);
+    return;
+  }
+  const int B = n[0] * n[1] * n[2];
+  std::int64_t total = 0;
+  for (const WB& b : all) total += b.w;
+  const double mean = double(total) / B;
+  auto imbalance = [&](const std::vector<std::int64_t>& s) {
+    return double(*std::max_element(s.begin(), s.end())) / mean;
+  };
+  auto unit = [&](const Vec3& x, int k) { return std::clamp((x[k] - lo[k]) / len[k], 0.0, 1.0 - 1e-12); };
+  // even and shifted cuts
+  std::vector<double> cuts[3];
+  for (int k = 0; k < 3; ++k) {
+    const int bins = 2048;
+    std::vector<std::int64_t> h(bins, 0);
+    for (const WB& b : all) h[static_cast<std::size_t>(unit(b.x, k) * bins)] += b.w;
+    std::int64_t run = 0;
+    int bin = 0;
+    for (int j = 1; j < n[k]; ++j) {
+      const std::int64_t target = (total * j + n[k] - 1) / n[k];
+      while (bin < bins && run + h[static_cast<std::size_t>(bin)] < target) run += h[static_cast<std::size_t>(bin++)];
+      cuts[k].push_back(double(bin + 1) / bins);
+    }
+  }
+  std::vector<std::int64_t> even(static_cast<std::size_t>(B), 0), shift(static_cast<std::size_t>(B), 0);
+  for (const WB& b : all) {
+    int ie[3], is[3];
+    for (int k = 0; k < 3; ++k) {
+      const double u = unit(b.x, k);
+      ie[k] = std::min(static_cast<int>(u * n[k]), n[k] - 1);
+      is[k] = static_cast<int>(std::upper_bound(cuts[k].begin(), cuts[k].end(), u) - cuts[k].begin());
+    }
+    even[static_cast<std::size_t>(ie[0] + n[0] * (ie[1] + n[1] * ie[2]))] += b.w;
+    shift[static_cast<std::size_t>(is[0] + n[0] * (is[1] + n[1] * is[2]))] += b.w;
+  }
+  // RCB into B parts
+  std::vector<std::int64_t> rcb;
+  std::vector<WB> v = all;
+  auto bisect = [&](auto&& self, std::size_t lo, std::size_t hi, int parts) -> void {
+    if (parts == 1) {
+      std::int64_t s = 0;
+      for (std::size_t i = lo; i < hi; ++i) s += v[i].w;
+      rcb.push_back(s);
+      return;
+    }
+    Vec3 a = v[lo].x, b = v[lo].x;
+    for (std::size_t i = lo; i < hi; ++i)
+      for (int k = 0; k < 3; ++k) a[k] = std::min(a[k], v[i].x[k]), b[k] = std::max(b[k], v[i].x[k]);
+    int k = 0;
+    for (int j = 1; j < 3; ++j)
+      if (b[j] - a[j] > b[k] - a[k]) k = j;
+    std::sort(v.begin() + static_cast<std::ptrdiff_t>(lo), v.begin() + static_cast<std::ptrdiff_t>(hi),
+              [k](const WB& p, const WB& q) { return p.x[k] < q.x[k]; });
+    const int left = parts / 2;
+    std::int64_t s = 0, want = 0;
+    for (std::size_t i = lo; i < hi; ++i) want += v[i].w;
+    want = want * left / parts;
+    std::size_t m = lo;
+    while (m < hi && s + v[m].w <= want) s += v[m++].w;
+    self(self, lo, m, left);
+    self(self, m, hi, parts - left);
+  };
+  bisect(bisect, 0, v.size(), B);
+  std::printf("model_grid,%dx%dx%d,balls,%zu,balls_per_brick,%.0f,imbalance_even,%.4f,imbalance_shift,%.4f,imbalance_rcb,%.4f\n",
+              n[0], n[1], n[2], all.size(), double(all.size()) / B, imbalance(even), imbalance(shift), imbalance(rcb));
+}
+
+// `bench_dist --state FILE SCENE_HASH nx,ny,nz`: the model grid over a World saved in a
+// checkpoint (dem.world.state of a run folder's checkpoint), over its balls' bounding box.
+int model_state(const char* file, const char* hash, const char* spec) {
+  World w(WorldParams{});
+  load_state_file(w, file, std::stoull(hash, nullptr, 16));
+  std::vector<WB> all;
+  const PairContacts& pc = w.pair_contacts();
+  std::vector<std::int64_t> wt(w.num_balls(), 1);
+  for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
+  for (const WallContacts* wc : {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()})
+    for (std::uint32_t i : wc->ball) ++wt[i];
+  Vec3 lo = w.balls().x[0], hi = lo;
+  for (std::size_t i = 0; i < w.num_balls(); ++i) {
+    all.push_back({w.balls().x[i], wt[i]});
+    for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], w.balls().x[i][k]), hi[k] = std::max(hi[k], w.balls().x[i][k]);
+  }
+  std::printf("state,%s,step,%lld,footing_z,%.6g\n", file, static_cast<long long>(w.step_count()),
+              w.has_footing() ? w.footing().p.bottom_centre.z : 0.0);
+  model_imbalance(all, lo, hi - lo, spec);
+  return 0;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
+  if (argc == 5 && std::string(argv[1]) == "--state") return model_state(argv[2], argv[3], argv[4]);
   MPI_Init(&argc, &argv);
   int rank = 0, P = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
@@ -54,8 +192,23 @@ int main(int argc, char** argv) {
     MPI_Abort(MPI_COMM_WORLD, 2);
   }
   const bool footing = mode == "footing";
-  const Packing pk = load(file);
+  Packing pk = load(file);
   const int copies = mode == "weak" ? P : 1;
+  if (footing && std::getenv("BENCH_DIST_REPLICATE")) {  // K x K x K copies of the periodic packing
+    const int K = std::atoi(std::getenv("BENCH_DIST_REPLICATE"));
+    const Vec3 L = pk.hi - pk.lo;
+    Packing big;
+    big.lo = pk.lo;
+    big.hi = pk.lo + static_cast<double>(K) * L;
+    for (int a = 0; a < K; ++a)
+      for (int b = 0; b < K; ++b)
+        for (int c = 0; c < K; ++c)
+          for (std::size_t i = 0; i < pk.x.size(); ++i) {
+            big.x.push_back(pk.x[i] + Vec3{a * L.x, b * L.y, c * L.z});
+            big.r.push_back(pk.r[i]);
+          }
+    pk = std::move(big);
+  }
   const Vec3 L0 = pk.hi - pk.lo;
   // the balls of one copy in Morton order (ids, hence rows, local in space)
   Particles probe;
@@ -156,19 +309,24 @@ int main(int argc, char** argv) {
   MPI_Reduce(&mig, &mig_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
   MPI_Reduce(&own, &own_min, 1, MPI_LONG_LONG, MPI_MIN, 0, MPI_COMM_WORLD);
   MPI_Reduce(&own, &own_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
+  long long wgt = static_cast<long long>(d.weight()), wgt_max = 0, wgt_sum = 0;
+  MPI_Reduce(&wgt, &wgt_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
+  MPI_Reduce(&wgt, &wgt_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
   if (rank == 0) {
     const double ms = 1e3 / double(steps) / P;
     const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5];
     std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
                 "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
-                "rebalances,owned_min,owned_max,footing_fz_N\n");
-    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4g\n",
+                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N\n");
+    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g\n",
                 P, mode.c_str(), model.c_str(), full.num_balls(), steps, wall,
                 double(full.num_balls()) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
                 sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5]) / total, cmax / ((sum[0] + sum[1]) / P),
                 sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - ex0), mig_sum,
-                static_cast<long long>(d.rebalances()), own_min, own_max, d.world().footing_reaction().z);
+                static_cast<long long>(d.rebalances()), own_min, own_max, double(wgt_max) / (double(wgt_sum) / P),
+                d.world().footing_reaction().z);
   }
+  if (const char* mg = std::getenv("BENCH_DIST_MODEL_GRID")) model_grid(d, g, mg);
   MPI_Finalize();
   return 0;
 }

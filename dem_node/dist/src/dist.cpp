@@ -620,15 +620,30 @@ void DistDem::exchange() {
   build_forward();
 }
 
-void DistDem::rebalance() {
-  const Particles& pt = w_->balls();
-  const std::size_t n = pt.size();
-  const auto& gh = w_->ghost_rows();
-  std::vector<std::int64_t> wt(n, 1);
+void DistDem::ball_weights(std::vector<std::int64_t>& wt) const {
+  wt.assign(w_->num_balls(), 1);
   const PairContacts& pc = w_->pair_contacts();
   for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
   for (const WallContacts* wc : wall_lists(*w_))
     for (std::uint32_t i : wc->ball) ++wt[i];
+}
+
+std::int64_t DistDem::weight() const {
+  std::vector<std::int64_t> wt;
+  ball_weights(wt);
+  const auto& gh = w_->ghost_rows();
+  std::int64_t s = 0;
+  for (std::size_t i = 0; i < wt.size(); ++i)
+    if (gh.empty() || !gh[i]) s += wt[i];
+  return s;
+}
+
+void DistDem::rebalance() {
+  const Particles& pt = w_->balls();
+  const std::size_t n = pt.size();
+  const auto& gh = w_->ghost_rows();
+  std::vector<std::int64_t> wt;
+  ball_weights(wt);
   const int B = std::max(bal_.bins, 2);
   std::vector<std::int64_t> h(static_cast<std::size_t>(B)), g(static_cast<std::size_t>(B));
   for (int k = 0; k < 3; ++k) {

@@ -82,6 +82,10 @@ class DistDem {
   void set_balance(const Balance& b) { bal_ = b; }
   const BrickGrid& grid() const { return grid_; }
   std::int64_t rebalances() const { return rebalances_; }
+  /// This rank's load as the balancing weighs it: Σ over its own balls of 1 + listed contacts.
+  std::int64_t weight() const;
+  /// The balancing's weight of every row (own or ghost): 1 + its listed contacts.
+  void ball_weights(std::vector<std::int64_t>& wt) const;
 
   World& world() { return *w_; }
   const World& world() const { return *w_; }
