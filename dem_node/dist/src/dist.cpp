@@ -202,7 +202,24 @@ void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vect
 // ------------------------------------------------------------------------------------------
 // DistDem
 
+// A wall contact's share as sent to rank 0 (DistDem::reduce_walls): planes and the footing send
+// only what they sum; a facet sends its whole WallSumRec.
+struct PlaneShare {
+  std::uint64_t ball;
+  std::uint32_t wall;
+  std::uint8_t active;
+  Vec3 F;
+  double k;
+};
+struct FootingShare {
+  std::uint64_t ball;
+  Vec3 F;
+};
+
 struct DistDem::Buffers {
+  std::vector<PlaneShare> plane_shares;
+  std::vector<WallSumRec> facet_shares, merge_tmp;
+  std::vector<FootingShare> footing_shares;
   std::vector<std::vector<BallRec>> bout;
   std::vector<std::vector<PairRec>> pout;
   std::vector<std::vector<WallRec>> wout;
@@ -328,20 +345,10 @@ void DistDem::reduce_walls() {
   mine.clear();
   w_->wall_sum_records(mine);
   // compact shares by kind
-  struct PlaneShare {
-    std::uint64_t ball;
-    std::uint32_t wall;
-    std::uint8_t active;
-    Vec3 F;
-    double k;
-  };
-  struct FootingShare {
-    std::uint64_t ball;
-    Vec3 F;
-  };
-  std::vector<PlaneShare> ps;
-  std::vector<WallSumRec> fs;
-  std::vector<FootingShare> gs;
+  auto& ps = buf_->plane_shares;
+  auto& fs = buf_->facet_shares;
+  auto& gs = buf_->footing_shares;
+  ps.clear(), fs.clear(), gs.clear();
   for (const WallSumRec& r : mine) {
     if (r.kind == 0) ps.push_back({r.ball, r.wall, r.active, r.F, r.k});
     else if (r.kind == 1) fs.push_back(r);
@@ -395,8 +402,13 @@ void DistDem::reduce_walls() {
           rec.kind = static_cast<std::uint8_t>(kind);
           all.push_back(rec);
         }
-        std::inplace_merge(all.begin() + static_cast<std::ptrdiff_t>(first), all.begin() + static_cast<std::ptrdiff_t>(mid),
-                           all.end(), by_kind_ball_wall);
+        if (mid > first && all.size() > mid) {  // merge [first, mid) and [mid, end) through a kept buffer
+          std::vector<WallSumRec>& tmp = buf_->merge_tmp;
+          tmp.resize(all.size() - first);
+          std::merge(all.begin() + static_cast<std::ptrdiff_t>(first), all.begin() + static_cast<std::ptrdiff_t>(mid),
+                     all.begin() + static_cast<std::ptrdiff_t>(mid), all.end(), tmp.begin(), by_kind_ball_wall);
+          std::copy(tmp.begin(), tmp.end(), all.begin() + static_cast<std::ptrdiff_t>(first));
+        }
       }
     }
   }
@@ -449,22 +461,45 @@ void DistDem::step(std::int64_t n) {
   times_.walls += MPI_Wtime() - t0;
 }
 
+// Point to point with the ranks this one shares ghosts with (the counts are known from the
+// forward lists, so no count exchange): no message to the other ranks, whatever their number.
 void DistDem::forward() {
   std::vector<std::vector<Vec3>>& out = fwd_out_;
   out.resize(static_cast<std::size_t>(size_));
   const Particles& pt = w_->balls();
+  std::size_t nin = 0;
+  std::vector<std::size_t> at(static_cast<std::size_t>(size_) + 1, 0);
   for (int r = 0; r < size_; ++r) {
+    nin += 3 * recv_rows_[static_cast<std::size_t>(r)].size();
+    at[static_cast<std::size_t>(r) + 1] = nin;
+  }
+  std::vector<Vec3>& in = fwd_in_;
+  in.resize(nin);
+  std::vector<MPI_Request>& req = fwd_req_;
+  req.clear();
+  constexpr int kTag = 7301;
+  for (int r = 0; r < size_; ++r) {
+    const auto& rows = recv_rows_[static_cast<std::size_t>(r)];
+    if (rows.empty()) continue;
+    req.emplace_back();
+    MPI_Irecv(in.data() + at[static_cast<std::size_t>(r)], static_cast<int>(3 * rows.size() * sizeof(Vec3)), MPI_BYTE,
+              r, kTag, comm_, &req.back());
+  }
+  for (int r = 0; r < size_; ++r) {
+    const auto& rows = send_rows_[static_cast<std::size_t>(r)];
+    if (rows.empty()) continue;
     auto& o = out[static_cast<std::size_t>(r)];
     o.clear();
-    for (std::uint32_t i : send_rows_[static_cast<std::size_t>(r)]) {
+    for (std::uint32_t i : rows) {
       o.push_back(pt.x[i]);
       o.push_back(pt.v[i]);
       o.push_back(pt.w[i]);
     }
+    req.emplace_back();
+    MPI_Isend(o.data(), static_cast<int>(o.size() * sizeof(Vec3)), MPI_BYTE, r, kTag, comm_, &req.back());
   }
-  std::vector<Vec3>& in = fwd_in_;
-  all_to_all(comm_, out, in, sbuf_, rbuf_);
-  times_.forwarded += static_cast<std::int64_t>(in.size() / 3);
+  MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
+  times_.forwarded += static_cast<std::int64_t>(nin / 3);
   Particles& q = w_->balls();
   std::size_t k = 0;
   for (int r = 0; r < size_; ++r)

@@ -4,8 +4,9 @@
 // an owned ball. A pair of an owned ball and a ghost is computed on both ranks, from the same
 // inputs, so both keep the same history (LAMMPS's `newton off` for pairs).
 //
-// Every step: the World's first half (integration), then the ghosts' x, v, ω from their owners,
-// then the rebuild test over every rank's own balls, then at a rebuild the migration (balls to
+// Every step: the World's first half (integration), then the ghosts' x, v, ω from their owners
+// (point to point with the ranks that share ghosts with this one), then the rebuild test over
+// every rank's own balls, then at a rebuild the migration (balls to
 // the rank of their brick, with their contacts' histories) and new ghosts, then the World's
 // second half (rebuild, force pass). Rows in id order make each owned ball's sums those of one
 // World holding every ball (docs/scaling.md), so positions, velocities, forces and histories are
@@ -147,6 +148,7 @@ class DistDem {
   std::vector<char> sbuf_, rbuf_;
   std::vector<std::vector<Vec3>> fwd_out_;
   std::vector<Vec3> fwd_in_;
+  std::vector<MPI_Request> fwd_req_;
 };
 
 }  // namespace demfdm::dem

@@ -1,0 +1,134 @@
+#!/usr/bin/env python3
+"""Weak-scaling projection of the DEM on MPI ranks (docs/scaling.md, issue 17 item 5).
+
+A cost model per step and rank, fed with figures measured by bench_dist on this machine (the
+defaults below, each named with where it was measured) and a stated network model (Hockney:
+a message of m bytes costs alpha + m / beta). Bricks are cubes of n balls at the packing's
+density; the ghost shell is the halo 2 R_max + skin around a brick. Prints, for each rank count,
+the time per step split by part and the weak-scaling efficiency T(1) / T(P), for two designs:
+
+  today: the exchange re-packs every local ball and contact at each rebuild; the forward and
+         the exchange are all-to-all collectives over every rank (2 (P - 1) messages per step);
+         even or shifted cuts; the walls' sums gathered on rank 0.
+  next:  an incremental exchange (only the balls that leave; ghost lists updated in place),
+         messages to the 26 neighbour bricks only, RCB cuts, ghosts not integrated, the walls'
+         sums as exact (order-free) accumulators in one allreduce.
+
+Usage: project_scaling.py [--network ib|ethernet] [--balls N] [--csv]
+"""
+import argparse
+import math
+
+# Measured on this machine (AMD EPYC, 2 vCPUs, AVX2), bench_dist, the bench packing, linear law:
+MEASURED = dict(
+    # compute per ball-step, one rank, strong mode, 600 steps: motion 0.61 ms + forces 5.55 ms per step
+    # for 25,835 balls (docs/scaling.md, session 12 table)
+    compute_us=(0.61 + 5.55) * 1e3 / 25835,
+    motion_us=0.61 * 1e3 / 25835,
+    # the pair work of the ghost pairs (computed on both sides): forces at 2 ranks 2.92 ms against
+    # 5.55 / 2 ms, at 0.24 ghosts per owned ball -> +5.2 % per 0.24 ghosts per owned ball
+    ghost_pair_coeff=(2.92 / (5.55 / 2) - 1.0) / 0.24,
+    # the exchange today: about 60 ms per rebuild for 25,835 local balls (local re-pack and sort)
+    exchange_us_per_ball=60e3 / 25835,
+    # rebuild interval of the strained bench (26 rebuilds in 600 steps)
+    steps_per_rebuild=600 / 26,
+    # packing density [balls / mm^3]: 25,835 balls in 3.551 x 3.551 x 1.775 mm
+    density=25835 / (3.5504 * 3.5504 * 1.7752),
+    # halo [mm]: 2 R_max + skin = 2 x 0.0905 + 0.0116
+    halo=2 * 0.0905 + 0.0116,
+    # forward record per ghost: x, v, omega (9 doubles)
+    ghost_bytes=72,
+    # imbalance, model grid 4x4x4 over the default scene's DEM block at the end of penetration
+    # (bench_dist --state, 595 balls per brick): even 1.20, shifted 1.09, RCB 1.003
+    imbalance_even=1.20,
+    imbalance_shift=1.09,
+    imbalance_rcb=1.003,
+    # incremental exchange (estimate, not measured): the balls that leave plus the ghost lists,
+    # taken as a tenth of today's re-pack
+    incremental_fraction=0.1,
+    # walls' sums on rank 0: wall contacts of the one-rank block (bench footing: 1,404 for five
+    # box faces and the footing, 23,790 balls), growing with the block's surface, P^(2/3) in
+    # weak scaling; root work per record (2 ranks: 0.016 ms for 1,404 records, sums and
+    # broadcast); bytes per record (a plane share)
+    wall_records_one=1404,
+    wall_root_us=0.016e3 / 1404,
+    wall_record_bytes=48,
+    # "next": exact (order-free) accumulators per wall value, one allreduce of the sums; values
+    # per step: the bench's 5 planes x 4 + footing 3 (an interface of 400 vertices adds 1,600),
+    # 3 words each
+    wall_values=1623,
+)
+
+NETWORKS = {
+    # InfiniBand HDR class: 2 us latency, 10 GB/s
+    "ib": dict(alpha_us=2.0, beta_gbs=10.0),
+    # 10 Gigabit Ethernet with TCP: 25 us latency, 1.2 GB/s
+    "ethernet": dict(alpha_us=25.0, beta_gbs=1.2),
+}
+
+
+def ghosts_per_ball(n, m):
+    a = (n / m["density"]) ** (1.0 / 3.0)  # brick side [mm]
+    h = m["halo"]
+    return ((a + 2 * h) ** 3 - a ** 3) / a ** 3
+
+
+def step_time(P, n, m, net, design):
+    a_us, beta = net["alpha_us"], net["beta_gbs"] * 1e3  # bytes per us
+    one = P == 1
+    g = 0.0 if one else ghosts_per_ball(n, m)
+    parts = {}
+    comp = n * m["compute_us"] * (1.0 + m["ghost_pair_coeff"] * g)
+    if design == "today":
+        comp += n * g * m["motion_us"]  # ghosts integrated too
+        imb = 1.0 if one else (m["imbalance_shift"] if P > 1 else 1.0)
+    else:
+        imb = 1.0 if one else m["imbalance_rcb"]
+    parts["compute"] = comp * imb
+    local = n * (1.0 + g)
+    ex = local * m["exchange_us_per_ball"] / m["steps_per_rebuild"]
+    if design == "next":
+        ex *= m["incremental_fraction"]
+    parts["exchange"] = ex
+    if one:
+        parts["forward"] = parts["reduce"] = parts["walls"] = 0.0
+    else:
+        msgs = 2 * (P - 1) if design == "today" else 26
+        parts["forward"] = msgs * a_us + n * g * m["ghost_bytes"] / beta
+        parts["reduce"] = 2 * math.log2(P) * a_us  # rebuild test, recursive doubling
+        if design == "today":
+            recs = m["wall_records_one"] * P ** (2.0 / 3.0)
+            parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta +
+                              recs * m["wall_root_us"])
+        else:
+            parts["walls"] = 2 * math.log2(P) * (a_us + m["wall_values"] * 24 / beta)
+    parts["total"] = sum(v for k, v in parts.items())
+    return parts
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--network", choices=sorted(NETWORKS), default="ib")
+    ap.add_argument("--balls", type=int, default=25835, help="balls per rank (weak scaling)")
+    ap.add_argument("--csv", action="store_true")
+    args = ap.parse_args()
+    m, net = MEASURED, NETWORKS[args.network]
+    print(f"# network {args.network}: alpha {net['alpha_us']} us, beta {net['beta_gbs']} GB/s; "
+          f"{args.balls} balls per rank; ghosts per owned ball in a cubic brick: "
+          f"{ghosts_per_ball(args.balls, m):.3f}")
+    hdr = "design,ranks,compute_ms,exchange_ms,forward_ms,reduce_ms,walls_ms,total_ms,efficiency"
+    print(hdr if args.csv else "| " + " | ".join(hdr.split(",")) + " |")
+    if not args.csv:
+        print("|" + "---|" * len(hdr.split(",")))
+    for design in ("today", "next"):
+        t1 = step_time(1, args.balls, m, net, design)["total"]
+        for P in (1, 2, 8, 64, 256, 1024):
+            p = step_time(P, args.balls, m, net, design)
+            row = [design, str(P)] + [f"{p[k] / 1e3:.3f}" for k in
+                                      ("compute", "exchange", "forward", "reduce", "walls", "total")]
+            row.append(f"{t1 / p['total']:.2f}")
+            print(",".join(row) if args.csv else "| " + " | ".join(row) + " |")
+
+
+if __name__ == "__main__":
+    main()
