@@ -93,6 +93,8 @@ void check(const Scene& sc) {
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
   const double dt_end = d.world().dt();
+  // the node's measurements, collective
+  const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
   long long mine[3] = {static_cast<long long>(d.owned()), static_cast<long long>(d.ghosts()),
                        static_cast<long long>(d.migrated())};
   long long sum[3] = {0, 0, 0};
@@ -114,6 +116,7 @@ void check(const Scene& sc) {
     EXPECT_TRUE(test::same_bits(got.f, r.f)) << "forces differ";
     EXPECT_TRUE(test::same_bits(got.t, r.t)) << "torques differ";
     const double dt_ref = ref->dt();
+    test::expect_same_measures(*ref, ke, fc, ratio);
     EXPECT_EQ(std::memcmp(&dt_ref, &dt_end, sizeof dt_end), 0) << "the last step differs";
     EXPECT_GT(ref->rebuild_count(), 2) << "the run must rebuild its lists";
     if (sc.bonded) {  // bonds failed during the run (some across the cuts)

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "demfdm/dem/vec3.hpp"
+#include "demfdm/dem/world.hpp"
 
 namespace demfdm::dem::test {
 
@@ -18,6 +19,18 @@ inline int g_rank = 0, g_size = 1;
 template <class T>
 bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+/// The node's measurements on the ranks (DistDem::kinetic_energy, mean_contact_force,
+/// unbalanced_ratio) against one World's, bit for bit (rank 0).
+inline void expect_same_measures(const World& ref, double ke, double fc, double ratio) {
+  const double want[3] = {ref.kinetic_energy(), ref.mean_contact_force(), 0.0};
+  const double r = ref.unbalanced_ratio(want[1]);
+  EXPECT_EQ(std::memcmp(&want[0], &ke, sizeof ke), 0) << "kinetic energy " << ke << " vs " << want[0];
+  EXPECT_EQ(std::memcmp(&want[1], &fc, sizeof fc), 0) << "mean contact force " << fc << " vs " << want[1];
+  EXPECT_EQ(std::memcmp(&r, &ratio, sizeof r), 0) << "unbalanced ratio " << ratio << " vs " << r;
+  EXPECT_GT(want[0], 0.0);
+  EXPECT_GT(want[1], 0.0);
 }
 
 /// Call on every rank after rank 0 has run its EXPECTs.

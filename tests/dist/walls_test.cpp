@@ -154,6 +154,8 @@ void check(const WallScene& sc) {
   run(d.world(), floor, sc.steps, hist, [&] { d.step(1); });
   const DistDem::Balls got = d.gather();
   const Sums got_sums = sums(d.world(), hist);
+  // the node's measurements, collective
+  const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
   long long mine[2] = {static_cast<long long>(d.owned()), static_cast<long long>(d.migrated())};
   long long sum[2] = {0, 0};
   MPI_Reduce(mine, sum, 2, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
@@ -162,6 +164,7 @@ void check(const WallScene& sc) {
     std::vector<Vec3> rh;
     run(*ref, floor, sc.steps, rh, [&] { ref->step(); });
     const Sums want = sums(*ref, rh);
+    test::expect_same_measures(*ref, ke, fc, ratio);
     const Particles& r = ref->balls();
     std::size_t bonded_floor = 0;
     for (const BondHist& b : ref->facet_contacts().bond) bonded_floor += bonded(b.state);

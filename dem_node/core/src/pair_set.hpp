@@ -40,6 +40,8 @@ class PairSet final : public ContactSet {
     ++gen_;
   }
 
+  /// ||F|| of every contact from the last scan(.., want_fc = true).
+  const std::vector<double>& force_norms() const { return norm_; }
   /// Force and moment on B of contact k, rebuilt from its history (World::pair_force).
   Vec3 force(std::size_t k, const ContactFamilyParams& fam) const;
   Vec3 moment(std::size_t k, const ContactFamilyParams& fam) const;

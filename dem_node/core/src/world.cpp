@@ -547,8 +547,20 @@ std::size_t World::bond_ball_ball(double lo, double hi) {
 // measurements
 
 double World::kinetic_energy() const {
-  return ordered_ball_sum(
-      [this](std::size_t i) { return 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]); });
+  return ordered_ball_sum([this](std::size_t i) { return kinetic_energy_of(i); });
+}
+
+void World::contact_force_norms(std::vector<ContactTerm>& out) const {
+  const SetContext cx = const_cast<World*>(this)->context();
+  pairs_->scan(cx, false, true);
+  const PairContacts& pc = pairs_->contacts;
+  const std::vector<double>& f = pairs_->force_norms();
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (ghost_.empty() || !ghost_[pc.a[c]]) out.push_back({0, pt_.id[pc.a[c]], pt_.id[pc.b[c]], f[c]});
+  const WallContacts* wl[3] = {&planes_->contacts, &facets_->contacts, &footing_->contacts};
+  for (std::uint64_t k = 0; k < 3; ++k)
+    for (std::size_t c = 0; c < wl[k]->size(); ++c)
+      out.push_back({k + 1, pt_.id[wl[k]->ball[c]], wl[k]->wall[c], norm(wl[k]->F[c])});
 }
 
 Energy World::energy() const {
@@ -561,15 +573,13 @@ Energy World::energy() const {
   return e;
 }
 
-namespace {
-double unbalanced(const Particles& pt, std::size_t i) {
-  const Vec3 F = pt.f[i] + pt.fa[i];
+double World::unbalanced_force_of(std::size_t i) const {
+  const Vec3 F = pt_.f[i] + pt_.fa[i];
   double s = 0.0;
   for (int k = 0; k < 3; ++k)
-    if (!(pt.fix[i] & (1u << k))) s += F[k] * F[k];
+    if (!(pt_.fix[i] & (1u << k))) s += F[k] * F[k];
   return std::sqrt(s);
 }
-}  // namespace
 
 double World::mean_contact_force() const { return contact_scan(false, true).fc; }
 
@@ -580,14 +590,14 @@ double World::unbalanced_ratio() const {
 
 double World::unbalanced_ratio(double fc) const {
   if (pt_.size() == 0) return 0.0;
-  const double s = ordered_ball_sum([this](std::size_t i) { return unbalanced(pt_, i); });
+  const double s = ordered_ball_sum([this](std::size_t i) { return unbalanced_force_of(i); });
   if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
   return (s / double(pt_.size())) / fc;
 }
 
 double World::max_unbalanced_force() const {
   double s = 0.0;
-  for (std::size_t i = 0; i < pt_.size(); ++i) s = std::max(s, unbalanced(pt_, i));
+  for (std::size_t i = 0; i < pt_.size(); ++i) s = std::max(s, unbalanced_force_of(i));
   return s;
 }
 

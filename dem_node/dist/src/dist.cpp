@@ -7,6 +7,8 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <tuple>
 #include <numeric>
 #include <stdexcept>
 #include <string>
@@ -742,6 +744,77 @@ void DistDem::build_forward() {
                                " for ball " + std::to_string(id) + ", which it does not own.");
       send_rows_[static_cast<std::size_t>(r)].push_back(static_cast<std::uint32_t>(i));
     }
+}
+
+double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count) const {
+  using T = World::ContactTerm;
+  const int bytes = static_cast<int>(terms.size() * sizeof(T));
+  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_));
+  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
+  int total = 0;
+  for (int r = 0; r < size_; ++r) {
+    displ[static_cast<std::size_t>(r)] = total;
+    total += counts[static_cast<std::size_t>(r)];
+  }
+  std::vector<T> all(rank_ == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
+  MPI_Gatherv(terms.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+  double res[2] = {0.0, 0.0};
+  if (rank_ == 0) {
+    std::sort(all.begin(), all.end(),
+              [](const T& x, const T& y) { return std::tie(x.set, x.a, x.b) < std::tie(y.set, y.a, y.b); });
+    double s = 0.0;
+    std::int64_t c = 0;
+    for (const T& t : all) {
+      if (count) {  // the mean's rule: only the terms that carry a force
+        if (t.v > 0.0) s += t.v, ++c;
+      } else {
+        s += t.v;
+      }
+    }
+    res[0] = s;
+    res[1] = static_cast<double>(c);
+  }
+  MPI_Bcast(res, 2, MPI_DOUBLE, 0, comm_);
+  if (count) *count = static_cast<std::int64_t>(res[1]);
+  return res[0];
+}
+
+template <class Term>
+double DistDem::ball_sum(Term term) const {
+  const auto& g = w_->ghost_rows();
+  const Particles& pt = w_->balls();
+  std::vector<World::ContactTerm> t;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (g.empty() || !g[i]) t.push_back({0, pt.id[i], 0, term(i)});
+  return ordered_sum(t);
+}
+
+double DistDem::kinetic_energy() const {
+  return ball_sum([this](std::size_t i) { return w_->kinetic_energy_of(i); });
+}
+
+std::size_t DistDem::num_balls() const {
+  unsigned long long mine = owned(), all = 0;
+  MPI_Allreduce(&mine, &all, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, comm_);
+  return static_cast<std::size_t>(all);
+}
+
+// World::contact_scan's rule: Σ ‖F‖ over the contacts that carry a force, over their count.
+double DistDem::mean_contact_force() const {
+  std::vector<World::ContactTerm> t;
+  w_->contact_force_norms(t);
+  std::int64_t n = 0;
+  const double s = ordered_sum(t, &n);
+  return n ? s / double(n) : 0.0;
+}
+
+// World::unbalanced_ratio's rule.
+double DistDem::unbalanced_ratio(double fc) const {
+  const std::size_t n = num_balls();
+  if (n == 0) return 0.0;
+  const double s = ball_sum([this](std::size_t i) { return w_->unbalanced_force_of(i); });
+  if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
+  return (s / double(n)) / fc;
 }
 
 DistDem::Balls DistDem::gather() const {

@@ -398,6 +398,22 @@ class World {
   /// Mean ‖F_c‖ over the contacts that carry a force (ball-ball and wall). The per-contact norms
   /// are computed in parallel and summed in contact order: the same bits at any thread count.
   double mean_contact_force() const;
+  /// One ball's terms of kinetic_energy() and unbalanced_ratio() (a rank of the DEM on MPI ranks
+  /// sums its own balls' terms in id order with every other rank's, dem_node/dist).
+  double kinetic_energy_of(std::size_t i) const {
+    return 0.5 * pt_.m[i] * norm2(pt_.v[i]) + 0.5 * pt_.inertia[i] * norm2(pt_.w[i]);
+  }
+  double unbalanced_force_of(std::size_t i) const;
+  /// A contact's term of an O(contacts) sum, keyed so that the terms of several ranks merge into
+  /// one World's order: set (0 pairs, 1 planes, 2 facets, 3 footing), then ball ids (a pair) or
+  /// ball id and wall index (a wall contact).
+  struct ContactTerm {
+    std::uint64_t set, a, b;
+    double v;
+  };
+  /// ‖F‖ of every contact, the terms of mean_contact_force(), appended in set and contact order.
+  /// With ghost rows, a pair whose ball A is a ghost is left out (its owner has it).
+  void contact_force_norms(std::vector<ContactTerm>& out) const;
   Vec3 cell_strain_since_reset() const { return cell_strain_; }
 
  private:

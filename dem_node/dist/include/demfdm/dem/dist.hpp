@@ -109,6 +109,17 @@ class DistDem {
   const Times& times() const { return times_; }
   void reset_times() { times_ = Times{}; }
 
+  /// The node's measurements (collective): World::kinetic_energy, mean_contact_force and
+  /// unbalanced_ratio of one World holding every ball, the same bits. Each term is formed on the
+  /// rank that owns its ball (a pair: its ball A, the lower id), the terms are merged on rank 0
+  /// in one World's order (ball id; set, then ids, for contacts), summed there in that order and
+  /// broadcast.
+  double kinetic_energy() const;
+  double mean_contact_force() const;
+  double unbalanced_ratio(double mean_contact_force) const;
+  /// The number of balls over every rank.
+  std::size_t num_balls() const;
+
   /// Every ball's state on rank 0 in id order (the other ranks get empty arrays). Collective.
   struct Balls {
     std::vector<std::uint64_t> id;
@@ -123,6 +134,11 @@ class DistDem {
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
   double owned_max_disp2() const;
+  /// Σ of the terms of every rank in key order, on every rank; `count`: how many are > 0.
+  double ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count = nullptr) const;
+  /// The owned balls' terms keyed by id (set 0), in id order.
+  template <class Term>
+  double ball_sum(Term term) const;
 
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
