@@ -518,6 +518,10 @@ void DistDem::forward() {
 // receivers keep one copy of each (copies are identical), order the rows by id, and ask each
 // owner for the ghosts they hold.
 void DistDem::exchange() {
+  if (size_ == 1) {  // no ghosts and no other rank: the rows stay, the World's rebuild does the rest
+    ++exchanges_;
+    return;
+  }
   const Particles& pt = w_->balls();
   const std::size_t n = pt.size();
   const auto& gh = w_->ghost_rows();
