@@ -219,6 +219,9 @@ struct FootingShare {
 };
 
 struct DistDem::Buffers {
+  std::vector<std::vector<std::uint64_t>> kout;
+  std::vector<std::uint64_t> kin;
+  std::vector<std::uint32_t> order, order2;
   std::vector<PlaneShare> plane_shares;
   std::vector<WallSumRec> facet_shares, merge_tmp;
   std::vector<FootingShare> footing_shares;
@@ -512,11 +515,17 @@ void DistDem::forward() {
     }
 }
 
-// Migration and ghosts. Every rank sends each ball it owns to the rank of its brick and to every
-// rank within the halo, and each contact of one of its balls to the ranks that will own either
-// ball, with the partner's row (a ghost copy here) so that the pair can be computed there. The
-// receivers keep one copy of each (copies are identical), order the rows by id, and ask each
-// owner for the ghosts they hold.
+// Migration and ghosts, incremental (as LAMMPS's exchange + borders, in id order). The rows a
+// rank holds after the exchange are fixed by the owners: each owner sends each of its balls to
+// the rank of its brick, to the ranks within the halo and to the owners of its contacts'
+// partners (so that a bonded pair stretched beyond the halo stays complete). A rank that holds
+// the ball already (its old owner, or a rank it was a ghost on: the forward lists say which)
+// gets only the ball's id, and keeps its row (a ghost's x, v, ω are this step's, forwarded; its
+// other fields do not change); any other rank gets the whole row. A rank drops every row no
+// owner named. A contact goes to a new owner of either ball that did not own either before, a
+// wall contact to its ball's new owner. The kept rows and the new ones are merged in id order,
+// the kept and new contacts in (ball id, partner id) order: the rows and lists of a full
+// re-distribution, so the same bits.
 void DistDem::exchange() {
   if (size_ == 1) {  // no ghosts and no other rank: the rows stay, the World's rebuild does the rest
     ++exchanges_;
@@ -526,15 +535,30 @@ void DistDem::exchange() {
   const std::size_t n = pt.size();
   const auto& gh = w_->ghost_rows();
   auto mine = [&](std::size_t i) { return gh.empty() || !gh[i]; };
+  const std::size_t P = static_cast<std::size_t>(size_);
   std::vector<int> own(n), nb;
   for (std::size_t i = 0; i < n; ++i) own[i] = grid_.owner(pt.x[i]);
-  // Destinations of each row: its owner and the ranks within the halo (own balls), and the
-  // owners of its contacts' partners. Collected per row (a counting sort by row), then each
-  // row's few ranks sorted and deduplicated.
+  // the old owner of every row (this rank, or the rank that forwards the ghost's state) and the
+  // ranks that hold each own row as a ghost
+  std::vector<int> old_owner(n, rank_);
+  std::vector<std::uint32_t> hold_off(n + 1, 0);
+  for (std::size_t r = 0; r < P; ++r) {
+    for (std::uint32_t i : recv_rows_[r]) old_owner[i] = static_cast<int>(r);
+    for (std::uint32_t i : send_rows_[r]) ++hold_off[i + 1];
+  }
+  for (std::size_t i = 0; i < n; ++i) hold_off[i + 1] += hold_off[i];
+  std::vector<int> holders(hold_off[n]);
+  {
+    std::vector<std::uint32_t> f(hold_off.begin(), hold_off.end() - 1);
+    for (std::size_t r = 0; r < P; ++r)
+      for (std::uint32_t i : send_rows_[r]) holders[f[i]++] = static_cast<int>(r);
+  }
+  // Destinations of each own row (counting sort by row): its owner, the ranks within the halo,
+  // the owners of its contacts' partners.
   const PairContacts& pc = w_->pair_contacts();
   const bool has_bond = !pc.bond.empty();
   std::vector<std::uint32_t> off(n + 1, 0), near_off(n + 1, 0);
-  std::vector<int> near_all;  // each own row's ranks within the halo (one grid query per row)
+  std::vector<int> near_all;
   for (std::size_t i = 0; i < n; ++i) {
     if (mine(i)) {
       grid_.near(pt.x[i], halo_, nb);
@@ -543,118 +567,222 @@ void DistDem::exchange() {
     }
     near_off[i + 1] = static_cast<std::uint32_t>(near_all.size());
   }
-  for (std::size_t c = 0; c < pc.size(); ++c)
-    if (mine(pc.a[c]) || mine(pc.b[c])) {
-      ++off[pc.a[c] + 1];
-      ++off[pc.b[c] + 1];
-    }
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    if (mine(pc.a[c])) ++off[pc.a[c] + 1];
+    if (mine(pc.b[c])) ++off[pc.b[c] + 1];
+  }
   for (std::size_t i = 0; i < n; ++i) off[i + 1] += off[i];
   std::vector<int> dest(off[n]);
   std::vector<std::uint32_t> fill(off.begin(), off.end() - 1);
-  std::vector<std::vector<PairRec>>& pout = buf_->pout;
-  pout.resize(static_cast<std::size_t>(size_));
-  for (auto& o : pout) o.clear();
   for (std::size_t i = 0; i < n; ++i) {
     if (!mine(i)) continue;
     if (own[i] != rank_) ++migrated_;
     dest[fill[i]++] = own[i];
     for (std::uint32_t k = near_off[i]; k < near_off[i + 1]; ++k) dest[fill[i]++] = near_all[k];
   }
+  // contacts: the partner rule, and the records for a new owner that did not own either ball
+  std::vector<std::vector<PairRec>>& pout = buf_->pout;
+  pout.resize(P);
+  for (auto& o : pout) o.clear();
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const std::uint32_t a = pc.a[c], b = pc.b[c];
+    if (mine(a)) dest[fill[a]++] = own[b];
+    if (mine(b)) dest[fill[b]++] = own[a];
     if (!(mine(a) || mine(b))) continue;
-    dest[fill[a]++] = own[b];
-    dest[fill[b]++] = own[a];
-    PairRec rec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}};
-    pout[static_cast<std::size_t>(own[a])].push_back(rec);
-    if (own[b] != own[a]) pout[static_cast<std::size_t>(own[b])].push_back(rec);
+    const int oa = old_owner[a], ob = old_owner[b];
+    auto send = [&](int d) {
+      if (d == rank_ || d == oa || d == ob) return;  // an old owner of a or b: it has the pair
+      pout[static_cast<std::size_t>(d)].push_back(
+          PairRec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}});
+    };
+    send(own[a]);
+    if (own[b] != own[a]) send(own[b]);
   }
-  // each wall contact (all of them are of this rank's balls) to its ball's new owner
+  // balls: an id to a rank that holds the row, the whole row to any other
+  std::vector<std::vector<BallRec>>& bout = buf_->bout;
+  bout.resize(P);
+  for (auto& o : bout) o.clear();
+  std::vector<std::vector<std::uint64_t>>& kout = buf_->kout;
+  kout.resize(P);
+  for (auto& o : kout) o.clear();
+  std::vector<std::uint8_t> keep(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!mine(i)) continue;
+    int* d0 = dest.data() + off[i];
+    int* d1 = dest.data() + off[i + 1];
+    std::sort(d0, d1);
+    for (int* d = d0; d < d1; ++d) {
+      if (d != d0 && *d == d[-1]) continue;
+      if (*d == rank_) {
+        keep[i] = 1;
+      } else if (std::find(holders.begin() + hold_off[i], holders.begin() + hold_off[i + 1], *d) !=
+                 holders.begin() + hold_off[i + 1]) {
+        kout[static_cast<std::size_t>(*d)].push_back(pt.id[i]);
+      } else {
+        bout[static_cast<std::size_t>(*d)].push_back(ball_rec(pt, i));
+      }
+    }
+  }
+  // wall contacts to their ball's new owner; the others stay
   std::vector<std::vector<WallRec>>& wout = buf_->wout;
-  wout.resize(static_cast<std::size_t>(size_));
+  wout.resize(P);
   for (auto& o : wout) o.clear();
   const auto wl = wall_lists(*w_);
   for (int k = 0; k < 3; ++k) {
     const WallContacts& wc = *wl[static_cast<std::size_t>(k)];
     for (std::size_t c = 0; c < wc.size(); ++c) {
       const std::uint32_t i = wc.ball[c];
+      if (own[i] == rank_) continue;
       wout[static_cast<std::size_t>(own[i])].push_back(WallRec{pt.id[i], wc.wall[c], wc.facet[c],
                                                                static_cast<std::uint8_t>(k), wc.h[c],
                                                                wc.bond.empty() ? BondHist{} : wc.bond[c]});
     }
   }
-  std::vector<std::vector<BallRec>>& bout = buf_->bout;
-  bout.resize(static_cast<std::size_t>(size_));
-  for (auto& o : bout) o.clear();
-  for (std::size_t i = 0; i < n; ++i) {
-    int* d0 = dest.data() + off[i];
-    int* d1 = dest.data() + off[i + 1];
-    std::sort(d0, d1);
-    for (int* d = d0; d < d1; ++d)
-      if (d == d0 || *d != d[-1]) bout[static_cast<std::size_t>(*d)].push_back(ball_rec(pt, i));
-  }
   std::vector<BallRec>& bin = buf_->bin;
   std::vector<PairRec>& pin = buf_->pin;
+  std::vector<WallRec>& win = buf_->win;
+  std::vector<std::uint64_t>& kin = buf_->kin;
+  all_to_all(comm_, kout, kin, sbuf_, rbuf_);
   all_to_all(comm_, bout, bin, sbuf_, rbuf_);
   all_to_all(comm_, pout, pin, sbuf_, rbuf_);
-  std::vector<WallRec>& win = buf_->win;
   all_to_all(comm_, wout, win, sbuf_, rbuf_);
-  // the new rows: one copy per id, in id order (indices sorted, not the records)
-  std::vector<std::uint32_t> bo(bin.size());
+  // the rows kept: own rows that stay, and the rows some owner named
+  for (std::uint64_t id : kin) {
+    const auto it = std::lower_bound(pt.id.begin(), pt.id.end(), id);
+    if (it == pt.id.end() || *it != id)
+      throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " was asked to keep ball " +
+                             std::to_string(id) + ", which it does not hold.");
+    keep[static_cast<std::size_t>(it - pt.id.begin())] = 1;
+  }
+  // the new rows: one copy per id (every sender sends the same bits)
+  std::vector<std::uint32_t>& bo = buf_->order;
+  bo.resize(bin.size());
   std::iota(bo.begin(), bo.end(), 0u);
   std::sort(bo.begin(), bo.end(), [&](std::uint32_t x, std::uint32_t y) { return bin[x].id < bin[y].id; });
+  // merge the kept rows and the new ones in id order; new_row[old row] for the kept
   Particles& q = q_;
   clear_keep(q);
   std::vector<std::uint8_t>& ghost = ghost_buf_;
   ghost.clear();
-  std::vector<std::uint64_t> ids;
-  for (std::uint32_t k : bo) {
-    const BallRec& b = bin[k];
-    if (!ids.empty() && ids.back() == b.id) continue;
+  std::vector<std::int64_t> new_row(n, -1);
+  std::size_t i = 0, k = 0;
+  std::uint64_t last = 0;
+  bool any = false;
+  auto take_new = [&](const BallRec& b) {
+    if (any && b.id == last) return;
     push_ball(q, b);
-    ids.push_back(b.id);
     ghost.push_back(grid_.owner(b.x) != rank_);
+    last = b.id, any = true;
+  };
+  while (i < n || k < bo.size()) {
+    while (i < n && !keep[i]) ++i;
+    if (i >= n && k >= bo.size()) break;
+    if (k >= bo.size() || (i < n && pt.id[i] < bin[bo[k]].id)) {
+      new_row[i] = static_cast<std::int64_t>(q.size());
+      push_ball(q, ball_rec(pt, i));
+      ghost.push_back(own[i] != rank_);
+      last = pt.id[i], any = true;
+      ++i;
+    } else {
+      if (i < n && pt.id[i] == bin[bo[k]].id)
+        throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got ball " +
+                               std::to_string(pt.id[i]) + " whole, but holds it.");
+      take_new(bin[bo[k]]);
+      ++k;
+    }
   }
+  const std::vector<std::uint64_t>& ids = q.id;
   auto row_of = [&](std::uint64_t id) -> std::int64_t {
     const auto it = std::lower_bound(ids.begin(), ids.end(), id);
     return (it != ids.end() && *it == id) ? it - ids.begin() : -1;
   };
-  std::vector<std::uint32_t> po(pin.size());
+  // contacts: the kept ones (an own ball after the exchange, both balls kept), in (a, b) order,
+  // merged with the received ones (one copy per pair)
+  std::vector<std::uint32_t>& po = buf_->order2;
+  po.resize(pin.size());
   std::iota(po.begin(), po.end(), 0u);
   std::sort(po.begin(), po.end(), [&](std::uint32_t x, std::uint32_t y) {
     return pin[x].ia != pin[y].ia ? pin[x].ia < pin[y].ia : pin[x].ib < pin[y].ib;
   });
   PairContacts& nc = nc_;
   clear_keep(nc);
-  const PairRec* prev = nullptr;
-  for (std::uint32_t k : po) {
-    const PairRec& r = pin[k];
-    if (prev && r.ia == prev->ia && r.ib == prev->ib) continue;
-    prev = &r;
-    const std::int64_t a = row_of(r.ia), b = row_of(r.ib);
-    if (a < 0 || b < 0)
-      throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a contact of ball " +
-                             std::to_string(a < 0 ? r.ia : r.ib) + " without the ball.");
-    if (ghost[static_cast<std::size_t>(a)] && ghost[static_cast<std::size_t>(b)]) continue;
+  auto push_pair = [&](std::int64_t a, std::int64_t b, const std::array<std::int8_t, 4>& s, const ContactHist& h,
+                       const BondHist& bd) {
+    if (ghost[static_cast<std::size_t>(a)] && ghost[static_cast<std::size_t>(b)]) return;
     nc.a.push_back(static_cast<std::uint32_t>(a));
     nc.b.push_back(static_cast<std::uint32_t>(b));
-    nc.shift.push_back(r.s);
-    nc.h.push_back(r.h);
-    if (has_bond) nc.bond.push_back(r.b);
+    nc.shift.push_back(s);
+    nc.h.push_back(h);
+    if (has_bond) nc.bond.push_back(bd);
+  };
+  std::size_t c = 0, kk = 0;
+  const PairRec* prev = nullptr;
+  while (c < pc.size() || kk < po.size()) {
+    // the next kept contact
+    while (c < pc.size() && (new_row[pc.a[c]] < 0 || new_row[pc.b[c]] < 0)) ++c;
+    const bool have_c = c < pc.size();
+    const bool have_r = kk < po.size();
+    if (!have_c && !have_r) break;
+    bool take_c = have_c;
+    if (have_c && have_r) {
+      const PairRec& r = pin[po[kk]];
+      const std::uint64_t ia = pt.id[pc.a[c]], ib = pt.id[pc.b[c]];
+      if (r.ia == ia && r.ib == ib) {  // also received: the same pair, one copy
+        ++kk;
+        continue;
+      }
+      take_c = ia != r.ia ? ia < r.ia : ib < r.ib;
+    }
+    if (take_c) {
+      push_pair(new_row[pc.a[c]], new_row[pc.b[c]], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{});
+      ++c;
+    } else {
+      const PairRec& r = pin[po[kk++]];
+      if (prev && r.ia == prev->ia && r.ib == prev->ib) continue;
+      prev = &r;
+      const std::int64_t a = row_of(r.ia), b = row_of(r.ib);
+      if (a < 0 || b < 0)
+        throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a contact of ball " +
+                               std::to_string(a < 0 ? r.ia : r.ib) + " without the ball.");
+      push_pair(a, b, r.s, r.h, r.b);
+    }
   }
-  // the wall contacts, by kind in (ball id, wall) order; each came from the ball's one owner
+  // wall contacts: the kept ones (own balls that stay) merged with the received, by kind in
+  // (ball id, wall) order
   std::sort(win.begin(), win.end(), [](const WallRec& x, const WallRec& y) {
     if (x.kind != y.kind) return x.kind < y.kind;
     return x.id != y.id ? x.id < y.id : x.wall < y.wall;
   });
   std::array<WallContacts, 3>& wc = buf_->wall;
   for (auto& l : wc) clear_keep(l);
-  for (const WallRec& r : win) {
-    const std::int64_t i = row_of(r.id);
-    if (i < 0 || ghost[static_cast<std::size_t>(i)])
-      throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a wall contact of ball " +
-                             std::to_string(r.id) + ", which it does not own.");
-    push_wall(wc[r.kind], static_cast<std::uint32_t>(i), r.wall, r.facet, r.h, kind_bonds(p_, r.kind) ? &r.b : nullptr);
+  std::size_t w = 0;
+  for (int kind = 0; kind < 3; ++kind) {
+    const WallContacts& old = *wl[static_cast<std::size_t>(kind)];
+    const bool bonds = kind_bonds(p_, kind);
+    WallContacts& out = wc[static_cast<std::size_t>(kind)];
+    std::size_t c2 = 0;
+    while (true) {
+      while (c2 < old.size() && own[old.ball[c2]] != rank_) ++c2;
+      const bool have_c = c2 < old.size(), have_r = w < win.size() && win[w].kind == kind;
+      if (!have_c && !have_r) break;
+      bool take_c = have_c;
+      if (have_c && have_r) {
+        const std::uint64_t id = pt.id[old.ball[c2]];
+        take_c = id != win[w].id ? id < win[w].id : old.wall[c2] < win[w].wall;
+      }
+      if (take_c) {
+        push_wall(out, static_cast<std::uint32_t>(new_row[old.ball[c2]]), old.wall[c2], old.facet[c2], old.h[c2],
+                  bonds ? &old.bond[c2] : nullptr);
+        ++c2;
+      } else {
+        const WallRec& r = win[w++];
+        const std::int64_t row = row_of(r.id);
+        if (row < 0 || ghost[static_cast<std::size_t>(row)])
+          throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) +
+                                 " got a wall contact of ball " + std::to_string(r.id) + ", which it does not own.");
+        push_wall(out, static_cast<std::uint32_t>(row), r.wall, r.facet, r.h, bonds ? &r.b : nullptr);
+      }
+    }
   }
   w_->swap_balls(q, nc, wc, ghost);  // q_, nc_, the wall lists, ghost_buf_ now hold the old arrays
   ++exchanges_;
