@@ -7,12 +7,11 @@ a message of m bytes costs alpha + m / beta). Bricks are cubes of n balls at the
 density; the ghost shell is the halo 2 R_max + skin around a brick. Prints, for each rank count,
 the time per step split by part and the weak-scaling efficiency T(1) / T(P), for two designs:
 
-  today: the exchange re-packs every local ball and contact at each rebuild; the forward and
-         the exchange are all-to-all collectives over every rank (2 (P - 1) messages per step);
-         even or shifted cuts; the walls' sums gathered on rank 0.
-  next:  an incremental exchange (only the balls that leave; ghost lists updated in place),
-         messages to the 26 neighbour bricks only, RCB cuts, ghosts not integrated, the walls'
-         sums as exact (order-free) accumulators in one allreduce.
+  today: this code: the incremental exchange (measured), its collectives over every rank
+         (8 (P - 1) messages per rebuild); the forward exchange point to point; shifted cuts;
+         ghosts integrated; the walls' sums gathered on rank 0.
+  next:  the exchange's messages to the 26 neighbour bricks only, RCB cuts, ghosts not
+         integrated, the walls' sums as exact (order-free) accumulators in one allreduce.
 
 Usage: project_scaling.py [--network ib|ethernet] [--balls N] [--csv]
 """
@@ -21,31 +20,38 @@ import math
 
 # Measured on this machine (AMD EPYC, 2 vCPUs, AVX2), bench_dist, the bench packing, linear law:
 MEASURED = dict(
-    # compute per ball-step, one rank, strong mode, 600 steps: motion 0.61 ms + forces 5.55 ms per step
-    # for 25,835 balls (docs/scaling.md, session 12 table)
-    compute_us=(0.61 + 5.55) * 1e3 / 25835,
-    motion_us=0.61 * 1e3 / 25835,
-    # the pair work of the ghost pairs (computed on both sides): forces at 2 ranks 2.92 ms against
-    # 5.55 / 2 ms, at 0.24 ghosts per owned ball -> +5.2 % per 0.24 ghosts per owned ball
-    ghost_pair_coeff=(2.92 / (5.55 / 2) - 1.0) / 0.24,
-    # the exchange today: about 60 ms per rebuild for 25,835 local balls (local re-pack and sort)
-    exchange_us_per_ball=60e3 / 25835,
+    # compute per ball-step, one rank (no exchange), strong mode, 600 steps, 3 rounds of
+    # bench_dist runs (docs/scaling.md, the table of the incremental exchange): motion 0.643 ms + forces
+    # 5.907 ms per step for 25,835 balls
+    compute_us=(0.643 + 5.907) * 1e3 / 25835,
+    motion_us=0.643 * 1e3 / 25835,
+    # the pair work of the ghost pairs (computed on both sides): forces at 2 ranks 3.145 ms
+    # against 5.907 / 2 ms, at 0.236 ghosts per owned ball
+    ghost_pair_coeff=(3.145 / (5.907 / 2) - 1.0) / 0.236,
+    # the incremental exchange at 2 ranks: 0.44-0.56 ms per step, one rebuild per 23 steps,
+    # about 15,900 local balls (owned and ghosts) per rank -> 0.72 us per local ball and rebuild
+    exchange_us_per_ball=0.72,
     # rebuild interval of the strained bench (26 rebuilds in 600 steps)
     steps_per_rebuild=600 / 26,
+    # the exchange's collectives per rebuild (4 all-to-alls, each a count and a data exchange)
+    exchange_collectives=8,
     # packing density [balls / mm^3]: 25,835 balls in 3.551 x 3.551 x 1.775 mm
     density=25835 / (3.5504 * 3.5504 * 1.7752),
     # halo [mm]: 2 R_max + skin = 2 x 0.0905 + 0.0116
     halo=2 * 0.0905 + 0.0116,
     # forward record per ghost: x, v, omega (9 doubles)
     ghost_bytes=72,
+    # exchange record per ball that becomes a ghost or changes owner: a whole row (about 220
+    # bytes); the fraction of the ghost shell that is new at a rebuild (the strong bench: 879
+    # migrations in 26 rebuilds at 2 ranks, about 34 per rebuild, and a comparable number of new
+    # ghosts): 1 %
+    row_bytes=220,
+    new_ghost_fraction=0.01,
     # imbalance, model grid 4x4x4 over the default scene's DEM block at the end of penetration
     # (bench_dist --state, 595 balls per brick): even 1.20, shifted 1.09, RCB 1.003
     imbalance_even=1.20,
     imbalance_shift=1.09,
     imbalance_rcb=1.003,
-    # incremental exchange (estimate, not measured): the balls that leave plus the ghost lists,
-    # taken as a tenth of today's re-pack
-    incremental_fraction=0.1,
     # walls' sums on rank 0: wall contacts of the one-rank block (bench footing: 1,404 for five
     # box faces and the footing, 23,790 balls), growing with the block's surface, P^(2/3) in
     # weak scaling; root work per record (2 ranks: 0.016 ms for 1,404 records, sums and
@@ -81,20 +87,22 @@ def step_time(P, n, m, net, design):
     comp = n * m["compute_us"] * (1.0 + m["ghost_pair_coeff"] * g)
     if design == "today":
         comp += n * g * m["motion_us"]  # ghosts integrated too
-        imb = 1.0 if one else (m["imbalance_shift"] if P > 1 else 1.0)
+        imb = 1.0 if one else m["imbalance_shift"]
     else:
         imb = 1.0 if one else m["imbalance_rcb"]
     parts["compute"] = comp * imb
-    local = n * (1.0 + g)
-    ex = local * m["exchange_us_per_ball"] / m["steps_per_rebuild"]
-    if design == "next":
-        ex *= m["incremental_fraction"]
-    parts["exchange"] = ex
-    if one:
-        parts["forward"] = parts["reduce"] = parts["walls"] = 0.0
+    if one:  # one rank: no exchange, no messages
+        parts["exchange"] = parts["forward"] = parts["reduce"] = parts["walls"] = 0.0
     else:
-        msgs = 2 * (P - 1) if design == "today" else 26
-        parts["forward"] = msgs * a_us + n * g * m["ghost_bytes"] / beta
+        local = n * (1.0 + g)
+        # per rebuild: the local work, the collectives (today: over every rank; next: the 26
+        # neighbours), the rows of the new ghosts and migrants
+        msgs = m["exchange_collectives"] * ((P - 1) if design == "today" else 26)
+        per_rebuild = (local * m["exchange_us_per_ball"] + msgs * a_us +
+                       n * g * m["new_ghost_fraction"] * m["row_bytes"] / beta)
+        parts["exchange"] = per_rebuild / m["steps_per_rebuild"]
+        # forward: point to point with the ranks that share ghosts (26 for cubic bricks)
+        parts["forward"] = min(26, P - 1) * a_us + n * g * m["ghost_bytes"] / beta
         parts["reduce"] = 2 * math.log2(P) * a_us  # rebuild test, recursive doubling
         if design == "today":
             recs = m["wall_records_one"] * P ** (2.0 / 3.0)
