@@ -12,7 +12,8 @@
 //            released overlaps shoot off the free top). One DistDem::step call per step, as the
 //            DEM node makes at coupling.interval = 1, so the walls' sums are formed every step.
 //            BENCH_DIST_REPLICATE=K: K x K x K copies of the periodic packing first (a wider block).
-//   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts).
+//   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts);
+//            BENCH_DIST_WEIGHT=time weighs balls by their rank's measured time, not contacts.
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
@@ -274,7 +275,11 @@ int main(int argc, char** argv) {
   for (bool& per : g.periodic) per = !footing;
   DistDem d(MPI_COMM_WORLD, p, g);
   d.load(full);
-  d.set_balance({balance});
+  DistDem::Balance bal;
+  bal.every = balance;
+  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
+    bal.weight = DistDem::Weight::kTime;
+  d.set_balance(bal);
   if (footing) {  // the packing settles in its box (the footing at rest), then the footing moves
     const char* relax = std::getenv("BENCH_DIST_RELAX");
     const long n_relax = relax ? std::atol(relax) : 2000;

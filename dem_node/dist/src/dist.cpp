@@ -812,7 +812,15 @@ void DistDem::rebalance() {
   const std::size_t n = pt.size();
   const auto& gh = w_->ghost_rows();
   std::vector<std::int64_t> wt;
-  ball_weights(wt);
+  if (bal_.weight == Weight::kTime) {  // this rank's time since the last balancing, per own ball
+    const double t = times_.compute() - compute_at_balance_;
+    compute_at_balance_ = times_.compute();
+    const std::size_t mine = owned();
+    const auto per = static_cast<std::int64_t>(std::llround(mine ? t * 1e9 / double(mine) : 0.0));
+    wt.assign(n, std::max<std::int64_t>(per, 1));
+  } else {
+    ball_weights(wt);
+  }
   const int B = std::max(bal_.bins, 2);
   std::vector<std::int64_t> h(static_cast<std::size_t>(B)), g(static_cast<std::size_t>(B));
   for (int k = 0; k < 3; ++k) {

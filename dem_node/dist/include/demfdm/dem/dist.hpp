@@ -72,13 +72,18 @@ class DistDem {
 
   /// Dynamic balancing (as LAMMPS's `fix balance ... shift`): at every `every`-th exchange (0:
   /// never) the cuts along each axis with more than one brick move so that the slabs between
-  /// them carry equal weight, a ball's weight being 1 plus its listed contacts (the pair pass's
-  /// work grows with them). The cuts fall on the edges of `bins` even slabs per axis; the
-  /// weights are integers, summed exactly, so every rank finds the same cuts. Balancing moves
-  /// balls between ranks, never a bit of the results (rows stay in id order).
+  /// them carry equal weight. A ball's weight is, by `weight`:
+  ///   kContacts: 1 plus its listed contacts (the pair pass's work grows with them);
+  ///   kTime: its rank's compute time (motion and forces) since the last balancing, shared
+  ///          evenly by the rank's own balls (LAMMPS's `weight time`), in nanoseconds.
+  /// The cuts fall on the edges of `bins` even slabs per axis; the weights are integers, summed
+  /// exactly, so every rank finds the same cuts. Balancing moves balls between ranks, never a
+  /// bit of the results (rows stay in id order), even when the cuts follow measured times.
+  enum class Weight : std::uint8_t { kContacts, kTime };
   struct Balance {
     int every = 0;
     int bins = 2048;
+    Weight weight = Weight::kContacts;
   };
   void set_balance(const Balance& b) { bal_ = b; }
   const BrickGrid& grid() const { return grid_; }
@@ -107,7 +112,10 @@ class DistDem {
     double comm() const { return forward + reduce + exchange + walls; }
   };
   const Times& times() const { return times_; }
-  void reset_times() { times_ = Times{}; }
+  void reset_times() {
+    times_ = Times{};
+    compute_at_balance_ = 0.0;
+  }
 
   /// The node's measurements (collective): World::kinetic_energy, mean_contact_force and
   /// unbalanced_ratio of one World holding every ball, the same bits. Each term is formed on the
@@ -148,6 +156,7 @@ class DistDem {
   double halo_ = 0.0;
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0;
+  double compute_at_balance_ = 0.0;  // times_.compute() at the last balancing (Weight::kTime)
   Balance bal_;
   Times times_;
   // Forward communication, fixed at each exchange: per rank, my owned rows whose ghosts it holds
