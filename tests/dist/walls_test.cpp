@@ -200,9 +200,11 @@ void check(const WallScene& sc) {
       for (double c : cuts) std::printf(" %.4f", c / kL);
       std::printf("\n");
       EXPECT_EQ(cuts.size(), static_cast<std::size_t>(g_size - 1));
-      if (sc.weight == DistDem::Weight::kContacts)  // measured times may land on an even cut
-        for (std::size_t j = 0; j < cuts.size(); ++j)
+      if (sc.weight == DistDem::Weight::kContacts) {  // measured times may land on an even cut
+        for (std::size_t j = 0; j < cuts.size(); ++j) {
           EXPECT_NE(cuts[j], (j + 1) * (kL / g_size)) << "cut " << j << " did not move";
+        }
+      }
     }
   }
   test::share_verdict();
