@@ -103,18 +103,11 @@ void check(const Scene& sc) {
   if (g_rank == 0) {
     std::unique_ptr<World> ref = build(sc, true);
     ref->step(sc.steps);
-    const Particles& r = ref->balls();
     std::printf("%s on %d ranks: dt %.4e s, %zu balls, %lld ghosts at the end, %lld exchanges, %lld migrations, reference "
                 "%lld rebuilds\n",
                 sc.name.c_str(), g_size, ref->dt(), got.id.size(), sum_ghosts, static_cast<long long>(d.exchanges()),
                 sum_migrated, static_cast<long long>(ref->rebuild_count()));
-    EXPECT_EQ(static_cast<std::size_t>(sum_owned), r.size()) << "every ball owned once";
-    EXPECT_EQ(got.id, r.id);
-    EXPECT_TRUE(test::same_bits(got.x, r.x)) << "positions differ";
-    EXPECT_TRUE(test::same_bits(got.v, r.v)) << "velocities differ";
-    EXPECT_TRUE(test::same_bits(got.w, r.w)) << "spins differ";
-    EXPECT_TRUE(test::same_bits(got.f, r.f)) << "forces differ";
-    EXPECT_TRUE(test::same_bits(got.t, r.t)) << "torques differ";
+    test::expect_same_balls(got, *ref, static_cast<std::size_t>(sum_owned));
     const double dt_ref = ref->dt();
     test::expect_same_measures(*ref, ke, fc, ratio);
     EXPECT_EQ(std::memcmp(&dt_ref, &dt_end, sizeof dt_end), 0) << "the last step differs";

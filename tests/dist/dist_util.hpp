@@ -9,6 +9,7 @@
 #include <cstring>
 #include <vector>
 
+#include "demfdm/dem/dist.hpp"
 #include "demfdm/dem/vec3.hpp"
 #include "demfdm/dem/world.hpp"
 
@@ -19,6 +20,19 @@ inline int g_rank = 0, g_size = 1;
 template <class T>
 bool same_bits(const std::vector<T>& a, const std::vector<T>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(T)) == 0);
+}
+
+/// Every ball gathered from the ranks against one World's, bit for bit (rank 0); `owned`: the
+/// owned balls summed over the ranks.
+inline void expect_same_balls(const DistDem::Balls& got, const World& ref, std::size_t owned) {
+  const Particles& r = ref.balls();
+  EXPECT_EQ(owned, r.size()) << "every ball owned once";
+  EXPECT_EQ(got.id, r.id);
+  EXPECT_TRUE(same_bits(got.x, r.x)) << "positions differ";
+  EXPECT_TRUE(same_bits(got.v, r.v)) << "velocities differ";
+  EXPECT_TRUE(same_bits(got.w, r.w)) << "spins differ";
+  EXPECT_TRUE(same_bits(got.f, r.f)) << "forces differ";
+  EXPECT_TRUE(same_bits(got.t, r.t)) << "torques differ";
 }
 
 /// The node's measurements on the ranks (DistDem::kinetic_energy, mean_contact_force,

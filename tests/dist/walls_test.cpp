@@ -166,7 +166,6 @@ void check(const WallScene& sc) {
     run(*ref, floor, sc.steps, rh, [&] { ref->step(); });
     const Sums want = sums(*ref, rh);
     test::expect_same_measures(*ref, ke, fc, ratio);
-    const Particles& r = ref->balls();
     std::size_t bonded_floor = 0;
     for (const BondHist& b : ref->facet_contacts().bond) bonded_floor += bonded(b.state);
     std::printf("%s on %d ranks: %lld exchanges, %lld migrations, reference %lld rebuilds; footing %.4g N, floor %.4g N, "
@@ -174,13 +173,7 @@ void check(const WallScene& sc) {
                 sc.name.c_str(), g_size, static_cast<long long>(d.exchanges()), sum[1],
                 static_cast<long long>(ref->rebuild_count()), ref->footing_reaction().z, ref->facet_wall_force(0).z,
                 bonded_floor);
-    EXPECT_EQ(static_cast<std::size_t>(sum[0]), r.size()) << "every ball owned once";
-    EXPECT_EQ(got.id, r.id);
-    EXPECT_TRUE(test::same_bits(got.x, r.x)) << "positions differ";
-    EXPECT_TRUE(test::same_bits(got.v, r.v)) << "velocities differ";
-    EXPECT_TRUE(test::same_bits(got.w, r.w)) << "spins differ";
-    EXPECT_TRUE(test::same_bits(got.f, r.f)) << "forces differ";
-    EXPECT_TRUE(test::same_bits(got.t, r.t)) << "torques differ";
+    test::expect_same_balls(got, *ref, static_cast<std::size_t>(sum[0]));
     EXPECT_TRUE(test::same_bits(got_sums.plane_reaction, want.plane_reaction)) << "plane reactions differ";
     EXPECT_TRUE(test::same_bits(got_sums.k_sum, want.k_sum)) << "plane servo gains differ";
     EXPECT_TRUE(test::same_bits(got_sums.vforce, want.vforce)) << "vertex forces, floor or footing force differ";

@@ -199,6 +199,26 @@ void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vect
   if (total) std::memcpy(static_cast<void*>(in.data()), rb.data(), static_cast<std::size_t>(total));
 }
 
+// Every rank's records on rank 0, in rank order (the other ranks get an empty array).
+// Collective.
+template <class T>
+std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const int bytes = static_cast<int>(mine.size() * sizeof(T));
+  std::vector<int> counts(static_cast<std::size_t>(size)), displ(static_cast<std::size_t>(size));
+  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm);
+  int total = 0;
+  for (int r = 0; r < size; ++r) {
+    displ[static_cast<std::size_t>(r)] = total;
+    total += counts[static_cast<std::size_t>(r)];
+  }
+  std::vector<T> all(rank == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
+  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm);
+  return all;
+}
+
 }  // namespace
 
 // ------------------------------------------------------------------------------------------
@@ -888,16 +908,7 @@ void DistDem::build_forward() {
 
 double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count) const {
   using T = World::ContactTerm;
-  const int bytes = static_cast<int>(terms.size() * sizeof(T));
-  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_));
-  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
-  int total = 0;
-  for (int r = 0; r < size_; ++r) {
-    displ[static_cast<std::size_t>(r)] = total;
-    total += counts[static_cast<std::size_t>(r)];
-  }
-  std::vector<T> all(rank_ == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
-  MPI_Gatherv(terms.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+  std::vector<T> all = gather_on_root(comm_, terms);
   double res[2] = {0.0, 0.0};
   if (rank_ == 0) {
     std::sort(all.begin(), all.end(),
@@ -967,16 +978,7 @@ DistDem::Balls DistDem::gather() const {
   std::vector<Rec> mine;
   for (std::size_t i = 0; i < pt.size(); ++i)
     if (g.empty() || !g[i]) mine.push_back(Rec{pt.id[i], pt.x[i], pt.v[i], pt.w[i], pt.f[i], pt.t[i]});
-  int bytes = static_cast<int>(mine.size() * sizeof(Rec));
-  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_));
-  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
-  int total = 0;
-  for (int r = 0; r < size_; ++r) {
-    displ[static_cast<std::size_t>(r)] = total;
-    total += counts[static_cast<std::size_t>(r)];
-  }
-  std::vector<Rec> all(rank_ == 0 ? static_cast<std::size_t>(total) / sizeof(Rec) : 0);
-  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+  std::vector<Rec> all = gather_on_root(comm_, mine);
   Balls out;
   if (rank_ != 0) return out;
   std::sort(all.begin(), all.end(), [](const Rec& a, const Rec& b) { return a.id < b.id; });
