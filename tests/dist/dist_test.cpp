@@ -95,6 +95,8 @@ void check(const Scene& sc) {
   const double dt_end = d.world().dt();
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
+  const BondCounts bonds = d.bond_counts();
+  const std::int64_t failures = d.bond_failures();
   long long mine[3] = {static_cast<long long>(d.owned()), static_cast<long long>(d.ghosts()),
                        static_cast<long long>(d.migrated())};
   long long sum[3] = {0, 0, 0};
@@ -114,8 +116,16 @@ void check(const Scene& sc) {
     EXPECT_GT(ref->rebuild_count(), 2) << "the run must rebuild its lists";
     if (sc.bonded) {  // bonds failed during the run (some across the cuts)
       const BondCounts bc = bond_counts(*ref);
-      std::printf("  bonds: intact %zu, softening %zu, broken in tension %zu, in shear %zu\n", bc.intact, bc.softening,
-                  bc.broken_tension, bc.broken_shear);
+      std::printf("  bonds: intact %zu, softening %zu, broken in tension %zu, in shear %zu; %lld failures\n", bc.intact,
+                  bc.softening, bc.broken_tension, bc.broken_shear, static_cast<long long>(ref->bond_failures()));
+      // the ranks' counts (each pair counted where its ball A is owned)
+      EXPECT_EQ(bonds.intact, bc.intact);
+      EXPECT_EQ(bonds.softening, bc.softening);
+      EXPECT_EQ(bonds.broken_tension, bc.broken_tension);
+      EXPECT_EQ(bonds.broken_shear, bc.broken_shear);
+      EXPECT_EQ(bonds.never_bonded, bc.never_bonded);
+      EXPECT_EQ(failures, ref->bond_failures());
+      EXPECT_GT(failures, 0);
       EXPECT_GT(bc.intact, 0u);
       EXPECT_GT(bc.softening + bc.broken_tension + bc.broken_shear, 0u);
     }

@@ -118,21 +118,32 @@ Coordination coordination(const World& w) {
 }
 
 namespace {
-BondCounts count(const std::vector<BondHist>& bs) {
+// `skip(c)`: leave contact c out.
+template <class Skip>
+BondCounts count(const std::vector<BondHist>& bs, Skip skip) {
   BondCounts b;
-  for (const auto& x : bs) switch (x.state) {
+  for (std::size_t c = 0; c < bs.size(); ++c) {
+    if (skip(c)) continue;
+    switch (bs[c].state) {
       case BondState::kNeverBonded: ++b.never_bonded; break;
       case BondState::kIntact: ++b.intact; break;
       case BondState::kSoftening: ++b.softening; break;
       case BondState::kBrokenTension: ++b.broken_tension; break;
       case BondState::kBrokenShear: ++b.broken_shear; break;
     }
+  }
   return b;
 }
 }  // namespace
 
-BondCounts bond_counts(const World& w) { return count(w.pair_contacts().bond); }
-BondCounts facet_bond_counts(const World& w) { return count(w.facet_contacts().bond); }
+BondCounts bond_counts(const World& w) {
+  const auto& g = w.ghost_rows();
+  const auto& a = w.pair_contacts().a;
+  return count(w.pair_contacts().bond, [&](std::size_t c) { return !g.empty() && g[a[c]]; });
+}
+BondCounts facet_bond_counts(const World& w) {
+  return count(w.facet_contacts().bond, [](std::size_t) { return false; });
+}
 
 Snapshot snapshot(const World& w) {
   Snapshot s;

@@ -222,6 +222,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   const Vec3 L = cx.p.periodic.length;
   const Vec3 ed = cx.edot;
   std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
+  const std::uint8_t* const G = cx.ghost;          // ghost rows (a rank's world), or null
   const double rgap = lc.rgap;
   const int nt = cx.threads;
   // Thread-independent bits (WorldParams::thread_independent): the chunk scheme below from 1,024
@@ -334,7 +335,9 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       // A bond leaving the intact state is rare: one compare per contact, an atomic add per event.
       const bool was_intact = BD[c].state == BondState::kIntact;
       F = Law::update(k, H[c], BD + c, lc, Mo);
-      if (was_intact && BD[c].state != BondState::kIntact) {
+      // counted where ball A is owned (a rank of the DEM on ranks computes a pair across its
+      // brick's face too): the counts of the ranks add up to one World's
+      if (was_intact && BD[c].state != BondState::kIntact && !(G && G[a])) {
 #pragma omp atomic
         ++*fails;
       }

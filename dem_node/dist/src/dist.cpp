@@ -950,6 +950,19 @@ std::size_t DistDem::num_balls() const {
   return static_cast<std::size_t>(all);
 }
 
+BondCounts DistDem::bond_counts() const {
+  const BondCounts b = dem::bond_counts(*w_);
+  unsigned long long mine[5] = {b.never_bonded, b.intact, b.softening, b.broken_tension, b.broken_shear}, all[5];
+  MPI_Allreduce(mine, all, 5, MPI_UNSIGNED_LONG_LONG, MPI_SUM, comm_);
+  return BondCounts{all[0], all[1], all[2], all[3], all[4]};
+}
+
+std::int64_t DistDem::bond_failures() const {
+  long long mine = w_->bond_failures(), all = 0;
+  MPI_Allreduce(&mine, &all, 1, MPI_LONG_LONG, MPI_SUM, comm_);
+  return all;
+}
+
 // World::contact_scan's rule: Σ ‖F‖ over the contacts that carry a force, over their count.
 double DistDem::mean_contact_force() const {
   std::vector<World::ContactTerm> t;

@@ -46,7 +46,9 @@ Coordination coordination(const World& w);
 struct BondCounts {
   std::size_t never_bonded = 0, intact = 0, softening = 0, broken_tension = 0, broken_shear = 0;
 };
-/// Bond counts by state of the ball–ball family (§3.6).
+/// Bond counts by state of the ball–ball family (§3.6). On a rank of the DEM on MPI ranks
+/// (ghost rows) a pair whose ball A is a ghost is left out: the counts of the ranks add up to
+/// one World's.
 BondCounts bond_counts(const World& w);
 /// Same for ball–facet contacts (interface bonds).
 BondCounts facet_bond_counts(const World& w);

@@ -30,6 +30,7 @@
 #include <memory>
 #include <vector>
 
+#include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/world.hpp"
 
 namespace demfdm::dem {
@@ -127,6 +128,10 @@ class DistDem {
   double unbalanced_ratio(double mean_contact_force) const;
   /// The number of balls over every rank.
   std::size_t num_balls() const;
+  /// Bond counts by state (measure.hpp's bond_counts) and World::bond_failures() of one World:
+  /// each rank counts the pairs whose ball A it owns; integer sums (collective).
+  BondCounts bond_counts() const;
+  std::int64_t bond_failures() const;
 
   /// Every ball's state on rank 0 in id order (the other ranks get empty arrays). Collective.
   struct Balls {
