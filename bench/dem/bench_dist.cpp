@@ -61,22 +61,15 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
 
 void model_grid(const DistDem& d, const BrickGrid& g, const char* spec) {
   std::vector<std::int64_t> wt;
-  d.ball_weights(wt);
+  contact_weights(d.world(), wt);
   const World& w = d.world();
   const auto& gh = w.ghost_rows();
   std::vector<WB> mine;
   for (std::size_t i = 0; i < w.num_balls(); ++i)
     if (gh.empty() || !gh[i]) mine.push_back({w.balls().x[i], wt[i]});
-  int rank = 0, P = 1;
+  int rank = 0;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  MPI_Comm_size(MPI_COMM_WORLD, &P);
-  int bytes = static_cast<int>(mine.size() * sizeof(WB));
-  std::vector<int> cnt(static_cast<std::size_t>(P)), dis(static_cast<std::size_t>(P));
-  MPI_Gather(&bytes, 1, MPI_INT, cnt.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
-  int tot = 0;
-  for (int r = 0; r < P; ++r) dis[static_cast<std::size_t>(r)] = tot, tot += cnt[static_cast<std::size_t>(r)];
-  std::vector<WB> all(rank == 0 ? static_cast<std::size_t>(tot) / sizeof(WB) : 0);
-  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), cnt.data(), dis.data(), MPI_BYTE, 0, MPI_COMM_WORLD);
+  const std::vector<WB> all = gather_on_root(MPI_COMM_WORLD, mine);
   if (rank == 0) model_imbalance(all, g.lo, g.len, spec);
 }
 
@@ -100,13 +93,7 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
     const int bins = 2048;
     std::vector<std::int64_t> h(bins, 0);
     for (const WB& b : all) h[static_cast<std::size_t>(unit(b.x, k) * bins)] += b.w;
-    std::int64_t run = 0;
-    int bin = 0;
-    for (int j = 1; j < n[k]; ++j) {
-      const std::int64_t target = (total * j + n[k] - 1) / n[k];
-      while (bin < bins && run + h[static_cast<std::size_t>(bin)] < target) run += h[static_cast<std::size_t>(bin++)];
-      cuts[k].push_back(double(bin + 1) / bins);
-    }
+    cuts[k] = equal_weight_cuts(h, n[k], 1.0);
   }
   std::vector<std::int64_t> even(static_cast<std::size_t>(B), 0), shift(static_cast<std::size_t>(B), 0);
   for (const WB& b : all) {
@@ -157,11 +144,8 @@ int model_state(const char* file, const char* hash, const char* spec) {
   World w(WorldParams{});
   load_state_file(w, file, std::stoull(hash, nullptr, 16));
   std::vector<WB> all;
-  const PairContacts& pc = w.pair_contacts();
-  std::vector<std::int64_t> wt(w.num_balls(), 1);
-  for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
-  for (const WallContacts* wc : {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()})
-    for (std::uint32_t i : wc->ball) ++wt[i];
+  std::vector<std::int64_t> wt;
+  contact_weights(w, wt);
   Vec3 lo = w.balls().x[0], hi = lo;
   for (std::size_t i = 0; i < w.num_balls(); ++i) {
     all.push_back({w.balls().x[i], wt[i]});

@@ -199,26 +199,6 @@ void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vect
   if (total) std::memcpy(static_cast<void*>(in.data()), rb.data(), static_cast<std::size_t>(total));
 }
 
-// Every rank's records on rank 0, in rank order (the other ranks get an empty array).
-// Collective.
-template <class T>
-std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine) {
-  int rank = 0, size = 1;
-  MPI_Comm_rank(comm, &rank);
-  MPI_Comm_size(comm, &size);
-  const int bytes = static_cast<int>(mine.size() * sizeof(T));
-  std::vector<int> counts(static_cast<std::size_t>(size)), displ(static_cast<std::size_t>(size));
-  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm);
-  int total = 0;
-  for (int r = 0; r < size; ++r) {
-    displ[static_cast<std::size_t>(r)] = total;
-    total += counts[static_cast<std::size_t>(r)];
-  }
-  std::vector<T> all(rank == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
-  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm);
-  return all;
-}
-
 }  // namespace
 
 // ------------------------------------------------------------------------------------------
@@ -809,17 +789,34 @@ void DistDem::exchange() {
   build_forward();
 }
 
-void DistDem::ball_weights(std::vector<std::int64_t>& wt) const {
-  wt.assign(w_->num_balls(), 1);
-  const PairContacts& pc = w_->pair_contacts();
+void contact_weights(const World& w, std::vector<std::int64_t>& wt) {
+  wt.assign(w.num_balls(), 1);
+  const PairContacts& pc = w.pair_contacts();
   for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
-  for (const WallContacts* wc : wall_lists(*w_))
+  for (const WallContacts* wc : wall_lists(w))
     for (std::uint32_t i : wc->ball) ++wt[i];
+}
+
+std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int n, double len) {
+  const int B = static_cast<int>(hist.size());
+  std::int64_t total = 0;
+  for (std::int64_t v : hist) total += v;
+  std::vector<double> cuts;
+  std::int64_t run = 0;
+  int b = 0, last = 0;
+  for (int j = 1; j < n; ++j) {
+    const std::int64_t target = (total * j + n - 1) / n;
+    while (b < B && run + hist[static_cast<std::size_t>(b)] < target) run += hist[static_cast<std::size_t>(b++)];
+    const int e = std::clamp(b + 1, last + 1, B - (n - j));  // the cut: the end of bin b
+    cuts.push_back(e * (len / B));
+    last = e;
+  }
+  return cuts;
 }
 
 std::int64_t DistDem::weight() const {
   std::vector<std::int64_t> wt;
-  ball_weights(wt);
+  contact_weights(*w_, wt);
   const auto& gh = w_->ghost_rows();
   std::int64_t s = 0;
   for (std::size_t i = 0; i < wt.size(); ++i)
@@ -839,7 +836,7 @@ void DistDem::rebalance() {
     const auto per = static_cast<std::int64_t>(std::llround(mine ? t * 1e9 / double(mine) : 0.0));
     wt.assign(n, std::max<std::int64_t>(per, 1));
   } else {
-    ball_weights(wt);
+    contact_weights(*w_, wt);
   }
   const int B = std::max(bal_.bins, 2);
   std::vector<std::int64_t> h(static_cast<std::size_t>(B)), g(static_cast<std::size_t>(B));
@@ -855,21 +852,7 @@ void DistDem::rebalance() {
       h[static_cast<std::size_t>(b)] += wt[i];
     }
     MPI_Allreduce(h.data(), g.data(), B, MPI_INT64_T, MPI_SUM, comm_);
-    std::int64_t total = 0;
-    for (std::int64_t v : g) total += v;
-    // cut j after the first slab where the running weight reaches j/nk of the total; at least
-    // one slab per brick
-    std::vector<double> cuts;
-    std::int64_t run = 0;
-    int b = 0, last = 0;
-    for (int j = 1; j < nk; ++j) {
-      const std::int64_t target = (total * j + nk - 1) / nk;
-      while (b < B && run + g[static_cast<std::size_t>(b)] < target) run += g[static_cast<std::size_t>(b++)];
-      int e = std::clamp(b + 1, last + 1, B - (nk - j));  // the cut: the end of slab b
-      cuts.push_back(e * (L / B));
-      last = e;
-    }
-    grid_.cuts[k] = std::move(cuts);
+    grid_.cuts[k] = equal_weight_cuts(g, nk, L);
   }
   ++rebalances_;
 }

@@ -58,6 +58,34 @@ struct BrickGrid {
   void near(const Vec3& x, double halo, std::vector<int>& out) const;
 };
 
+/// The balancing's weight of every row of `w`: 1 plus its listed contacts (pairs and wall
+/// contacts); the pair pass's work grows with them.
+void contact_weights(const World& w, std::vector<std::int64_t>& wt);
+
+/// The inner cuts of `n` slabs of equal weight along an axis of length `len`, from the weights of
+/// `hist.size()` even bins: cut j at the end of the first bin where the running weight reaches
+/// j/n of the total, at least one bin per slab (DistDem's balancing, bench_dist's model grids).
+std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int n, double len);
+
+/// Every rank's records on rank 0, in rank order (the other ranks get an empty array). Collective.
+template <class T>
+std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const int bytes = static_cast<int>(mine.size() * sizeof(T));
+  std::vector<int> counts(static_cast<std::size_t>(size)), displ(static_cast<std::size_t>(size));
+  MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm);
+  int total = 0;
+  for (int r = 0; r < size; ++r) {
+    displ[static_cast<std::size_t>(r)] = total;
+    total += counts[static_cast<std::size_t>(r)];
+  }
+  std::vector<T> all(rank == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
+  MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm);
+  return all;
+}
+
 class DistDem {
  public:
   /// The ranks of `comm` must number grid.count().
@@ -91,8 +119,6 @@ class DistDem {
   std::int64_t rebalances() const { return rebalances_; }
   /// This rank's load as the balancing weighs it: Σ over its own balls of 1 + listed contacts.
   std::int64_t weight() const;
-  /// The balancing's weight of every row (own or ghost): 1 + its listed contacts.
-  void ball_weights(std::vector<std::int64_t>& wt) const;
 
   World& world() { return *w_; }
   const World& world() const { return *w_; }
