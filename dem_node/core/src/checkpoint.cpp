@@ -449,24 +449,25 @@ struct CheckpointAccess {
     o.end();
 
     o.begin("counters");
-    o.f64(w.time_);
-    o.f64(w.dt_);
-    o.f64(w.skin_);
-    o.i64(w.step_);
-    o.i64(w.rebuilds_);
-    o.i64(w.last_dt_step_);
-    o.i64(w.bond_failures_);
-    o.b(w.prepared_);
-    o.b(w.dirty_);
-    put(o, w.edot_);
-    put(o, w.cell_strain_);
-    put(o, w.cell_len_ref_);
-    o.u64(w.next_id_);
-    o.u64(w.next_wall_id_);
-    o.f64(w.e_damp_);
-    o.f64(w.max_disp2_);
-    o.f64(w.e_slip_dead_);
-    o.f64(w.e_soft_dead_);
+    const World::Counters k = w.counters();
+    o.f64(k.time);
+    o.f64(k.dt);
+    o.f64(k.skin);
+    o.i64(k.step);
+    o.i64(k.rebuilds);
+    o.i64(k.last_dt_step);
+    o.i64(k.bond_failures);
+    o.b(k.prepared);
+    o.b(k.dirty);
+    put(o, k.edot);
+    put(o, k.cell_strain);
+    put(o, k.cell_len_ref);
+    o.u64(k.next_id);
+    o.u64(k.next_wall_id);
+    o.f64(k.e_damp);
+    o.f64(k.max_disp2);
+    o.f64(k.e_slip_dead);
+    o.f64(k.e_soft_dead);
     o.end();
 
     o.begin("effects");
@@ -547,14 +548,7 @@ struct CheckpointAccess {
         in.fail(std::string("invalid parameters: ") + e.what());
       }
     }
-    struct Counters {
-      double time, dt, skin;
-      std::int64_t step, rebuilds, last_dt_step, bond_failures;
-      bool prepared, dirty;
-      Vec3 edot, cell_strain, cell_len_ref;
-      std::uint64_t next_id, next_wall_id;
-      double e_damp, max_disp2, e_slip_dead, e_soft_dead;
-    } k;
+    World::Counters k;
     {
       auto in = r.section("counters");
       k.time = in.f64();
@@ -680,24 +674,7 @@ struct CheckpointAccess {
     // saved: the target keeps its own (the scene's, like the thread count).
     p.thread_independent = w.p_.thread_independent;
     w.p_ = p;
-    w.time_ = k.time;
-    w.dt_ = k.dt;
-    w.skin_ = k.skin;
-    w.step_ = k.step;
-    w.rebuilds_ = k.rebuilds;
-    w.last_dt_step_ = k.last_dt_step;
-    w.bond_failures_ = k.bond_failures;
-    w.prepared_ = k.prepared;
-    w.dirty_ = k.dirty;
-    w.edot_ = k.edot;
-    w.cell_strain_ = k.cell_strain;
-    w.cell_len_ref_ = k.cell_len_ref;
-    w.next_id_ = k.next_id;
-    w.next_wall_id_ = k.next_wall_id;
-    w.e_damp_ = k.e_damp;
-    w.max_disp2_ = k.max_disp2;
-    w.e_slip_dead_ = k.e_slip_dead;
-    w.e_soft_dead_ = k.e_soft_dead;
+    w.set_counters(k);
     w.pt_ = std::move(pt);
     // Scratch: the pair set's per-thread force buffers are re-created (all zero) by the next pass.
     w.pairs_->reset(std::move(pc));

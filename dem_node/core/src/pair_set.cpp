@@ -146,7 +146,7 @@ void PairSet::rebuild(SetContext& cx) {
         q.bond.push_back(pc.bond[k]);
         appended = true;
       },
-      cx.e_slip_dead, cx.e_soft_dead);
+      cx.e_slip_dead, cx.e_soft_dead, [&](std::size_t k) { return !G || !G[pc.a[k]]; });
   if (appended) {  // restore the (a, b) order
     std::vector<std::uint32_t> perm(q.a.size());
     std::iota(perm.begin(), perm.end(), 0u);

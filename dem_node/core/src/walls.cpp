@@ -396,7 +396,7 @@ void WallSet<Kind>::rebuild(SetContext& cx) {
         q.h.push_back(old.h[c]);
         q.bond.push_back(old.bond[c]);
       },
-      cx.e_slip_dead, cx.e_soft_dead);
+      cx.e_slip_dead, cx.e_soft_dead, [](std::size_t) { return true; });  // a ghost row has no wall contact
   if (q.ball.size() > kept) sort_by_ball(q);
   const std::size_t m = q.ball.size();
   q.F.assign(m, {});
@@ -653,6 +653,14 @@ bool World::has_footing() const { return footing_->kind.ft.enabled; }
 void World::set_footing_velocity(const Vec3& v) { footing_->kind.ft.p.velocity = v; }
 const Footing& World::footing() const { return footing_->kind.ft; }
 Vec3 World::footing_reaction() const { return footing_->kind.ft.reaction; }
+
+void World::copy_walls(const World& o) {
+  if (o.num_planes() != num_planes() || o.num_facet_walls() != num_facet_walls())
+    throw std::invalid_argument("World::copy_walls: the worlds have different walls");
+  planes_->kind.walls = o.planes_->kind.walls;
+  facets_->kind.walls = o.facets_->kind.walls;
+  footing_->kind.ft = o.footing_->kind.ft;
+}
 
 void World::wall_sum_records(std::vector<WallSumRec>& out) const {
   const SetContext cx = const_cast<World*>(this)->context();

@@ -294,7 +294,7 @@ template <bool Energy>
 // Rows without fixity (nearly all) take a straight-line path; the arithmetic and the order
 // of the energy sum are the same on both paths.
 template <bool Energy, bool Periodic>
-void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3& sc, double& ed, double& dmax) {
+void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3& sc, double& ed_own, double& dmax) {
   const double alpha = p_.local_damping;
   const Vec3 o = p_.periodic.origin;
   Vec3* __restrict__ X = pt_.x.data();
@@ -308,7 +308,12 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
   const double* __restrict__ Ms = pt_.m.data();
   const double* __restrict__ Is = pt_.inertia.data();
   const std::uint8_t* __restrict__ Fx = pt_.fix.data();
+  // A rank's world: a ghost row moves too (its owner's state replaces it), but its damping work
+  // is its owner's to count.
+  const std::uint8_t* __restrict__ G = ghost_.empty() ? nullptr : ghost_.data();
+  double e_ghost = 0.0;
   auto row = [&](std::size_t i) __attribute__((always_inline)) {
+    double& ed = (Energy && G && G[i]) ? e_ghost : ed_own;
     const Vec3 F = Fc[i] + Fa[i];
     const Vec3 T = Tc[i] + Ta[i];
     const std::uint8_t fx = Fx[i];
@@ -352,7 +357,8 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
       mk(ctx, i, out);
       for (std::size_t l = 0; l < K; ++l) {
         if constexpr (Energy) {
-          for (int q = 0; q < 6; ++q) ed -= out.e[q][l];
+          if (!G || !G[i + l])
+            for (int q = 0; q < 6; ++q) ed_own -= out.e[q][l];
         }
         dmax = std::max(dmax, out.d2[l]);
       }
@@ -518,6 +524,21 @@ void World::swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts,
   std::swap(footing_->contacts, wall[2]);
   std::swap(ghost_, ghost);
   dirty_ = true;
+}
+
+World::Counters World::counters() const {
+  return Counters{time_,  dt_,          skin_,          step_,    rebuilds_,    last_dt_step_,
+                  bond_failures_, prepared_, dirty_, edot_, cell_strain_, cell_len_ref_,
+                  next_id_, next_wall_id_, e_damp_, max_disp2_, e_slip_dead_, e_soft_dead_};
+}
+
+void World::set_counters(const Counters& k) {
+  time_ = k.time, dt_ = k.dt, skin_ = k.skin;
+  step_ = k.step, rebuilds_ = k.rebuilds, last_dt_step_ = k.last_dt_step, bond_failures_ = k.bond_failures;
+  prepared_ = k.prepared, dirty_ = k.dirty;
+  edot_ = k.edot, cell_strain_ = k.cell_strain, cell_len_ref_ = k.cell_len_ref;
+  next_id_ = k.next_id, next_wall_id_ = k.next_wall_id;
+  e_damp_ = k.e_damp, max_disp2_ = k.max_disp2, e_slip_dead_ = k.e_slip_dead, e_soft_dead_ = k.e_soft_dead;
 }
 
 void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }

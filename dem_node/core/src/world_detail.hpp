@@ -58,15 +58,16 @@ class HistoryCarry {
     return found;
   }
   /// After the last take: for each old contact no one took, in order, keep(c) when it is
-  /// bonded, else its energies go to the dead totals.
-  template <class Keep>
+  /// bonded, else its energies go to the dead totals if counts(c) (a rank's world: the rank that
+  /// owns the contact's ball A counts it, docs/scaling.md).
+  template <class Keep, class Counts>
   void rest(const std::vector<ContactHist>& h, const std::vector<BondHist>& bond, bool has_bond, Keep keep,
-            double& e_slip_dead, double& e_soft_dead) const {
+            double& e_slip_dead, double& e_soft_dead, Counts counts) const {
     for (std::size_t c = 0; c < n_; ++c) {
       if (used_[c]) continue;
       if (has_bond && bonded(bond[c].state)) {
         keep(c);
-      } else {
+      } else if (counts(c)) {
         e_slip_dead += h[c].e_slip;
         if (has_bond) e_soft_dead += bond[c].e_soft;
       }

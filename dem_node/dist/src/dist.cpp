@@ -326,7 +326,13 @@ void DistDem::load(const World& full) {
     w_->facet_wall(w_->add_facet_wall(v, t)) = f;
   }
   if (full.has_footing()) w_->set_footing(full.footing().p);
+  w_->copy_walls(full);  // every field, the walls' ids too (histories are carried by them)
   w_->swap_balls(pt, pc, wc, ghost);
+  // One World's counters (time, step, the step's schedule, ...). The counts and energies that
+  // are sums over the ranks' contacts start from the full world's on rank 0 and from 0 elsewhere.
+  World::Counters k = full.counters();
+  if (rank_ != 0) k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
+  w_->set_counters(k);
   // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
   w_->set_step_reduction([this](double dt) {
     double g = dt;
@@ -987,6 +993,171 @@ DistDem::Balls DistDem::gather() const {
     out.t.push_back(r.t);
   }
   return out;
+}
+
+
+// ------------------------------------------------------------------------------------------
+// unload: one World from the ranks' parts
+
+namespace {
+
+// One wall contact with every field one World holds (its candidate facets follow the record).
+struct WallFullRec {
+  std::uint64_t id;
+  std::uint32_t wall, ncand;
+  std::int32_t facet;
+  std::uint8_t kind;
+  ContactHist h;
+  BondHist b;
+  Vec3 F, M, TA, xc, bary;
+};
+
+template <class T>
+void put_recs(std::vector<char>& out, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  out.insert(out.end(), reinterpret_cast<const char*>(&n), reinterpret_cast<const char*>(&n) + sizeof n);
+  out.insert(out.end(), reinterpret_cast<const char*>(v.data()), reinterpret_cast<const char*>(v.data() + v.size()));
+}
+
+template <class T>
+const char* get_recs(const char* q, std::vector<T>& v) {
+  std::uint64_t n = 0;
+  std::memcpy(&n, q, sizeof n);
+  q += sizeof n;
+  const std::size_t at = v.size();
+  v.resize(at + n);
+  std::memcpy(static_cast<void*>(v.data() + at), q, n * sizeof(T));
+  return q + n * sizeof(T);
+}
+
+}  // namespace
+
+void DistDem::unload(World& full) const {
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
+  // this rank's part: its balls, the pairs whose ball A it owns, its balls' wall contacts
+  std::vector<BallRec> balls;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (owned_row(i)) balls.push_back(ball_rec(pt, i));
+  std::vector<PairRec> pairs;
+  const PairContacts& pc = w_->pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (owned_row(pc.a[c]))
+      pairs.push_back(PairRec{pt.id[pc.a[c]], pt.id[pc.b[c]], pc.shift[c], pc.h[c], pc.bond.empty() ? BondHist{} : pc.bond[c]});
+  std::vector<WallFullRec> walls;
+  std::vector<std::uint32_t> cands;
+  const auto lists = wall_lists(*w_);
+  for (int kind = 0; kind < 3; ++kind) {
+    const WallContacts& wc = *lists[static_cast<std::size_t>(kind)];
+    for (std::size_t c = 0; c < wc.size(); ++c) {
+      const std::uint32_t c0 = wc.cand_off.empty() ? 0 : wc.cand_off[c], c1 = wc.cand_off.empty() ? 0 : wc.cand_off[c + 1];
+      walls.push_back(WallFullRec{pt.id[wc.ball[c]], wc.wall[c], c1 - c0, wc.facet[c], static_cast<std::uint8_t>(kind),
+                                  wc.h[c], wc.bond.empty() ? BondHist{} : wc.bond[c], wc.F[c], wc.M[c], wc.TA[c],
+                                  wc.xc[c], wc.bary[c]});
+      cands.insert(cands.end(), wc.cand.begin() + c0, wc.cand.begin() + c1);
+    }
+  }
+  const World::Counters mine = w_->counters();
+  const std::vector<double> sums{mine.e_damp, mine.e_slip_dead, mine.e_soft_dead};
+  std::vector<char> out;
+  put_recs(out, balls);
+  put_recs(out, pairs);
+  put_recs(out, walls);
+  put_recs(out, cands);
+  put_recs(out, sums);
+  put_recs(out, std::vector<std::int64_t>{mine.bond_failures});
+  // every rank gets every part
+  const int bytes = static_cast<int>(out.size());
+  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_) + 1, 0);
+  MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
+  for (int r = 0; r < size_; ++r)
+    displ[static_cast<std::size_t>(r) + 1] = displ[static_cast<std::size_t>(r)] + counts[static_cast<std::size_t>(r)];
+  std::vector<char> in(static_cast<std::size_t>(displ.back()));
+  MPI_Allgatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), displ.data(), MPI_BYTE, comm_);
+  double run = run_disp2_, max_disp2 = 0.0;
+  MPI_Allreduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, comm_);
+
+  std::vector<BallRec> ab;
+  std::vector<PairRec> ap;
+  std::vector<WallFullRec> aw;
+  std::vector<std::uint32_t> ac;
+  World::Counters k = mine;
+  k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
+  std::vector<std::size_t> cand_at;  // per wall record: where its candidates start in ac
+  for (int r = 0; r < size_; ++r) {
+    const char* q = in.data() + displ[static_cast<std::size_t>(r)];
+    q = get_recs(q, ab);
+    q = get_recs(q, ap);
+    const std::size_t w0 = aw.size();
+    q = get_recs(q, aw);
+    const std::size_t c0 = ac.size();
+    q = get_recs(q, ac);
+    std::size_t at = c0;
+    for (std::size_t j = w0; j < aw.size(); ++j) cand_at.push_back(at), at += aw[j].ncand;
+    std::vector<double> e;
+    q = get_recs(q, e);
+    std::vector<std::int64_t> f;
+    get_recs(q, f);
+    // the ranks' energies in rank order (not one World's order: docs/scaling.md)
+    k.e_damp += e[0], k.e_slip_dead += e[1], k.e_soft_dead += e[2];
+    k.bond_failures += f[0];
+  }
+  // One World's orders: balls by id, pairs by (A, B) id, wall contacts by (kind, ball id, wall).
+  std::sort(ab.begin(), ab.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
+  std::sort(ap.begin(), ap.end(), [](const PairRec& x, const PairRec& y) { return std::tie(x.ia, x.ib) < std::tie(y.ia, y.ib); });
+  std::vector<std::uint32_t> wo(aw.size());
+  std::iota(wo.begin(), wo.end(), 0u);
+  std::sort(wo.begin(), wo.end(), [&](std::uint32_t x, std::uint32_t y) {
+    return std::tie(aw[x].kind, aw[x].id, aw[x].wall) < std::tie(aw[y].kind, aw[y].id, aw[y].wall);
+  });
+  Particles np;
+  std::vector<std::uint64_t> ids;
+  for (const BallRec& b : ab) push_ball(np, b), ids.push_back(b.id);
+  auto row_of = [&](std::uint64_t id) {
+    return static_cast<std::uint32_t>(std::lower_bound(ids.begin(), ids.end(), id) - ids.begin());
+  };
+  PairContacts npc;
+  const bool pair_bonds = law_has_bond(w_->params().ball_ball.model);
+  for (const PairRec& c : ap) {
+    npc.a.push_back(row_of(c.ia));
+    npc.b.push_back(row_of(c.ib));
+    npc.shift.push_back(c.s);
+    npc.h.push_back(c.h);
+    if (pair_bonds) npc.bond.push_back(c.b);
+  }
+  std::array<WallContacts, 3> nwc;
+  for (std::uint32_t j : wo) {
+    const WallFullRec& c = aw[j];
+    WallContacts& wc = nwc[c.kind];
+    if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+    wc.ball.push_back(row_of(c.id));
+    wc.wall.push_back(c.wall);
+    wc.facet.push_back(c.facet);
+    wc.cand.insert(wc.cand.end(), ac.begin() + static_cast<std::ptrdiff_t>(cand_at[j]),
+                   ac.begin() + static_cast<std::ptrdiff_t>(cand_at[j] + c.ncand));
+    wc.cand_off.push_back(static_cast<std::uint32_t>(wc.cand.size()));
+    wc.h.push_back(c.h);
+    if (kind_bonds(w_->params(), c.kind)) wc.bond.push_back(c.b);
+    wc.F.push_back(c.F), wc.M.push_back(c.M), wc.TA.push_back(c.TA), wc.xc.push_back(c.xc), wc.bary.push_back(c.bary);
+  }
+  // A list without contacts keeps the form the World gives it.
+  for (int kind = 0; kind < 3; ++kind)
+    if (nwc[static_cast<std::size_t>(kind)].ball.empty() && lists[static_cast<std::size_t>(kind)]->cand_off.empty())
+      nwc[static_cast<std::size_t>(kind)].cand_off.clear();
+  std::vector<std::uint8_t> ghost;
+  full.swap_balls(np, npc, nwc, ghost);
+  full.copy_walls(*w_);
+  // The full world's own parameters, but the step and the cell of the stepped one.
+  const WorldParams own = full.params();
+  full.mutable_params() = w_->params();
+  full.mutable_params().threads = own.threads;
+  full.mutable_params().thread_independent = own.thread_independent;
+  full.mutable_params().skin = own.skin;
+  const World::Counters before = full.counters();
+  k.next_id = before.next_id, k.next_wall_id = before.next_wall_id;
+  k.max_disp2 = max_disp2;
+  full.set_counters(k);
 }
 
 }  // namespace demfdm::dem

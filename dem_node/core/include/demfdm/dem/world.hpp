@@ -273,6 +273,24 @@ class World {
   /// Rows that are ghosts, copies of balls another rank owns (1 = ghost; empty: none): a pair
   /// of two ghosts is not kept in the list (it acts on ghosts only).
   const std::vector<std::uint8_t>& ghost_rows() const { return ghost_; }
+  /// The state's counters and flags (time, step, the cached step and its recompute counter, the
+  /// rebuild test's reference, the energies of local damping and of dropped contacts, ...): what
+  /// a checkpoint saves besides the arrays (checkpoint.cpp), and what DistDem::unload sets when
+  /// it assembles one World from the ranks' parts.
+  struct Counters {
+    double time = 0.0, dt = 0.0, skin = 0.0;
+    std::int64_t step = 0, rebuilds = 0, last_dt_step = -1, bond_failures = 0;
+    bool prepared = false, dirty = true;
+    Vec3 edot{}, cell_strain{}, cell_len_ref{};
+    std::uint64_t next_id = 0, next_wall_id = 1;
+    double e_damp = 0.0, max_disp2 = 0.0, e_slip_dead = 0.0, e_soft_dead = 0.0;
+  };
+  Counters counters() const;
+  void set_counters(const Counters& k);
+  /// Every field of the walls of `o` (planes, facet walls, the footing, their last pass's sums
+  /// too), a World with the same walls in the same order (DistDem::unload: each rank moves every
+  /// wall itself, so a rank's walls are every rank's).
+  void copy_walls(const World& o);
   /// Replace every ball, the ball-ball list and the wall contacts of each kind (planes, facets,
   /// footing; all in the rows of `pt`) and the ghost rows by exchange, e.g. after balls moved
   /// between ranks: the arguments get the World's previous arrays (a caller that refills them

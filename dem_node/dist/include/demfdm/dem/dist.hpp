@@ -96,6 +96,15 @@ class DistDem {
   /// same way, not stepped since its last prepare): each rank keeps its own balls, their ghosts
   /// and their pairs, in id order, and prepares its World (as `full.prepare()` would).
   void load(const World& full);
+  /// One World holding every ball, on every rank (collective): `full` gets the state one World
+  /// stepped as this one was would have (balls, contact lists in that World's orders with their
+  /// histories and last forces, wall contacts with their candidates, the walls, the counters), so
+  /// that it steps on with the same bits, is saved, measured or written as output, or set up for
+  /// the next stage and loaded again. `full` must be the World this one was loaded from (its
+  /// parameters and ids of walls and balls are kept where the ranks do not change them). Not the
+  /// same bits as one World: the energies of local damping and of dropped contacts, summed rank by
+  /// rank (docs/scaling.md).
+  void unload(World& full) const;
   /// n steps; the walls' sums are those of the last (within the call nothing reads them).
   void step(std::int64_t n = 1);
 
