@@ -10,6 +10,7 @@
 // stage's STAGE_BEGIN with their own budgets from the scene; the stage's grants then only
 // cycle. Gravity (if the scene has [gravity]) is switched on by the first stage that is not a
 // specimen-generation stage (generate, servo, bond, replicate): a periodic REV has no weight.
+#include <mpi.h>
 #include <omp.h>
 
 #include <algorithm>
@@ -20,10 +21,16 @@
 #include <map>
 #include <optional>
 #include <sstream>
+#include <thread>
+#include <type_traits>
+#include <cstring>
+#include <cstdlib>
+#include <cstdio>
 
 #include <spdlog/spdlog.h>
 
 #include "demfdm/dem/checkpoint.hpp"
+#include "demfdm/dem/dist.hpp"
 #include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/procedures.hpp"
@@ -45,6 +52,20 @@ using Block = dem::scene::Block;
 // Specimen preparation (the stage-action table, schema::actions()): the periodic REV on its own
 // step rule, no gravity, before model time 0.
 bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind).preparation; }
+
+// The DEM on MPI ranks (dem.ranks > 1, started by launch/run under mpirun; docs/scaling.md).
+// Rank 0 speaks on the bus and tells the other ranks every call it gets (RankedParticipant);
+// each rank runs the same adapter. Every rank holds the whole World for the stages' set-up
+// (specimen procedures, walls, the footing, the interface bonds: the same calls on the same
+// state, so the same bits) and steps the stages that are not specimen preparation on a
+// dem::DistDem, its slab of the block; at a stage's end, a checkpoint or a frame the ranks'
+// parts are assembled into the whole World again (DistDem::unload). Only rank 0 writes files.
+struct Ranks {
+  MPI_Comm comm = MPI_COMM_NULL;
+  int rank = 0, size = 1;
+  bool root_dir = false;  // rank 0 has a run folder (writes results)
+};
+Ranks g_ranks;
 
 class DemParticipant : public node::Participant {
  public:
@@ -75,6 +96,12 @@ class DemParticipant : public node::Participant {
     history_every_ = s_.integer("dem.output.history_every");
     gravity_level_ = s_.has("gravity") ? s_.real("gravity.level") : 0.0;
     if (!ctx.options.run_dir.empty()) dir_ = ctx.options.run_dir;
+    // Whether rank 0 writes results (a call that needs every rank, e.g. the measurements of a
+    // history row, is made on every rank when it does).
+    outputs_ = g_ranks.size > 1 ? g_ranks.root_dir : !dir_.empty();
+    if (g_ranks.size > 1 && s_.integer("dem.ranks") != g_ranks.size)
+      s_.fail("dem.ranks", std::to_string(g_ranks.size) + ", the ranks mpirun started",
+              std::to_string(s_.integer("dem.ranks")));
     // Frame times (docs/output.md "Time"): the model time of io::ModelClock, 0 at the
     // beginning of the first stage that is not specimen preparation. The footing's surface
     // (footing.xmf) is written when a stage places a footing.
@@ -144,7 +171,8 @@ class DemParticipant : public node::Participant {
       kicked_, energy_pending_, footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_);
   }
   void save(const fs::path& dir, io::StateWriter& w, const io::StateMeta& meta) override {
-    dem::save_state_file(world_, dir / "dem.world.state", meta);
+    sync_full();
+    if (g_ranks.rank == 0) dem::save_state_file(world_, dir / "dem.world.state", meta);
     w.begin("dem_node");
     for (double v : {block_.origin.x, block_.origin.y, block_.origin.z, block_.cell.x, block_.cell.y, block_.cell.z}) w.f64(v);
     for (int n : {block_.nx, block_.ny, block_.nz}) w.i32(n);
@@ -159,6 +187,8 @@ class DemParticipant : public node::Participant {
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
+    // A ranked run loads the whole World on every rank; its next step cuts it into slabs again.
+    dist_live_ = false;
     dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = schema::run_threads(s_);
@@ -212,20 +242,20 @@ class DemParticipant : public node::Participant {
   // A user dt_fixed (checked against the critical step at every stage begin) is the node's
   // step; else dt_safety x critical. The coordinator grants the smallest dt_stable of the nodes.
   double dt_stable() const override {
-    if (world_.num_balls() == 0) return 0.0;
+    if (world_.num_balls() == 0) return 0.0;  // the whole World's count: the same on the ranks
     if (user_dt_ > 0 && !preparing_) return interval_ * user_dt_;
     return interval_ * safe_dt();
   }
   // dt_safety x the critical step of 1.8 [s], computed once per state (O(contacts)).
   double safe_dt() const {
     if (safe_dt_key() != safe_dt_key_) {
-      safe_dt_ = world_.contact_scan(true, false).dt;
+      safe_dt_ = dist_live_ ? dist_->safe_step() : world_.contact_scan(true, false).dt;
       safe_dt_key_ = safe_dt_key();
     }
     return safe_dt_;
   }
   std::array<std::int64_t, 3> safe_dt_key() const {
-    return {world_.step_count(), world_.rebuild_count(), static_cast<std::int64_t>(world_.num_balls())};
+    return {live().step_count(), live().rebuild_count(), static_cast<std::int64_t>(world_.num_balls())};
   }
   // Upper bound of the critical step of 1.8 [s] for a packing of the scene's PSD (upscaled) that
   // holds a ball of the smallest size (dem::largest_critical_step).
@@ -236,15 +266,17 @@ class DemParticipant : public node::Participant {
   }
   // Critical step of 1.8 without the safety factor [s].
   double critical_dt() const { return safe_dt() / world_.params().dt_safety; }
-  double time() const override { return world_.time(); }
+  double time() const override { return live().time(); }
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
+    leave_dist();  // the set-up acts on the whole World
     open_outputs();
     begin_model_time(st);
     stage_ratio_ = st.view.real("ratio");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
+    has_ranked_phases_ = false;
     preparing_ = is_generation(st);
     {  // Step factor and local damping of this stage (docs/theory.md 1.3, 4.11). Specimen
        // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
@@ -303,13 +335,28 @@ class DemParticipant : public node::Participant {
   // kinetic-energy jump.
   std::optional<node::HealthReport> check_health(std::int64_t) override {
     node::Timed t(effect_s_["guard"]);
-    if (auto f = dem::check_finite(world_)) return node::HealthReport{f->cause, f->detail};
-    if (escape_margin_ > 0 && !world_.periodic()) {
-      auto [lo, hi] = domain();
-      if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
+    if (dist_live_) {
+      // Each rank tests its rows; a finding is reported from the whole World (its neighbourhood
+      // and the same words as one process), assembled only then.
+      int bad = dem::check_finite(live()).has_value() ? 1 : 0;
+      if (!bad && escape_margin_ > 0 && !world_.periodic()) {
+        auto [lo, hi] = domain();
+        bad = dem::check_escape(live(), lo, hi, escape_margin_).has_value() ? 1 : 0;
+      }
+      int any = 0;
+      MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, g_ranks.comm);
+      if (any) sync_full();
     }
-    const double ke = world_.kinetic_energy();
+    if (!dist_live_ || synced_) {
+      if (auto f = dem::check_finite(world_)) return node::HealthReport{f->cause, f->detail};
+      if (escape_margin_ > 0 && !world_.periodic()) {
+        auto [lo, hi] = domain();
+        if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
+      }
+    }
+    const double ke = kinetic_energy();
     if (auto jump = energy_jump_.check(ke)) {
+      sync_full();
       const auto f = dem::energy_jump_finding(world_, *jump);
       return node::HealthReport{f.cause, f.detail};
     }
@@ -319,58 +366,69 @@ class DemParticipant : public node::Participant {
   void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
     if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
-    if (penetrating_) {
-      if (values.empty()) throw std::runtime_error("penetrate: the coordinator sent no footing speed");
-      world_.set_footing_velocity({0.0, 0.0, -values[0]});
-    }
     if (energy_pending_) {
       // Energy balance of the stage (docs/stability.md) from the state before its first step,
       // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN).
       energy_pending_ = false;
       energy_.begin(world_);
     }
+    enter_dist();
+    dem::World& w = live();
+    if (penetrating_) {
+      if (values.empty()) throw std::runtime_error("penetrate: the coordinator sent no footing speed");
+      w.set_footing_velocity({0.0, 0.0, -values[0]});
+    }
     // A user dt_fixed must stay below the critical step as contacts change (O(contacts) per
     // step, only when dem.dt_fixed is set).
     if (user_dt_ > 0 && !preparing_ && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
     // Exactly 'interval' DEM steps per coupling step of length dt.
-    if (dt > 0) world_.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
-    const double node_before = world_.time();
-    world_.step(interval_);  // its phases are reported by add_phase_times()
-    clock_.advanced(node_before, dt, world_.time());
-    energy_.add_work(world_, interval_);
-    if (history_ && history_every_ > 0 && step % history_every_ == 0) {
-      node::Timed t(effect_s_["output.history"]);
-      auto fz = world_.has_footing() ? world_.footing_reaction().z : 0.0;
-      auto facet = world_.num_facet_walls() > 0 ? world_.facet_walls_total_force().z : 0.0;
-      history_->append({static_cast<double>(step), world_.time(), ratio(), world_.kinetic_energy(), fz,
-                        footing_disp(), facet});
+    if (dt > 0) w.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
+    const double node_before = w.time();
+    synced_ = false;
+    if (dist_live_) {
+      dist_->step(interval_);
+    } else {
+      world_.step(interval_);  // its phases are reported by add_phase_times()
     }
-    if (out_ && frame_every_ > 0 && step % frame_every_ == 0) write_frame(step);
+    clock_.advanced(node_before, dt, w.time());
+    energy_.add_work(w, interval_);
+    // A history row's measurements need every rank: made wherever rank 0 writes one.
+    if (outputs_ && s_.has("dem.output") && history_every_ > 0 && step % history_every_ == 0) {
+      node::Timed t(effect_s_["output.history"]);
+      auto fz = w.has_footing() ? w.footing_reaction().z : 0.0;
+      auto facet = w.num_facet_walls() > 0 ? w.facet_walls_total_force().z : 0.0;
+      const std::vector<double> row{static_cast<double>(step), w.time(), ratio(), kinetic_energy(), fz, footing_disp(), facet};
+      if (history_) history_->append(row);
+    }
+    if (outputs_ && s_.has("dem.output") && frame_every_ > 0 && step % frame_every_ == 0) {
+      sync_full();
+      if (out_) write_frame(step);
+    }
   }
 
   proto::Values step_values() override {
     // The report of this step needs both O(contacts) measurements of the state (the ratios'
     // mean contact force and, for dt_stable, the critical step): one pass over the contacts.
-    if (!fc_valid_ && safe_dt_key() != safe_dt_key_ && world_.num_balls() > 0) {
+    if (!dist_live_ && !fc_valid_ && safe_dt_key() != safe_dt_key_ && world_.num_balls() > 0) {
       const auto scan = world_.contact_scan(true, true);
       safe_dt_ = scan.dt;
       safe_dt_key_ = safe_dt_key();
       fc_ = scan.fc;
       fc_valid_ = true;
     }
-    proto::Values v{{"ratio", ratio()}, {"dt_s", world_.dt()}, {"dt_critical_s", critical_dt()}};
+    proto::Values v{{"ratio", ratio()}, {"dt_s", live().dt()}, {"dt_critical_s", critical_dt()}};
     if (world_.gravity_on()) {
       auto sk = skeleton();
       v.push_back({"ratio_skeleton", sk.ratio});
       v.push_back({"rattlers", static_cast<double>(sk.rattlers)});
       v.push_back({"weight_N", weight()});
     }
-    if (world_.has_footing()) {
-      v.push_back({"footing_fz_N", world_.footing_reaction().z});
+    if (live().has_footing()) {
+      v.push_back({"footing_fz_N", live().footing_reaction().z});
       v.push_back({"footing_disp_m", footing_disp()});
       // Ball-ball bonds that have left the intact state so far (a cumulative count of the contact
       // pass, O(1) here): the end of the footing's elastic branch (k_e, docs/paper-study.md).
-      v.push_back({"bond_failures", static_cast<double>(world_.bond_failures())});
+      v.push_back({"bond_failures", static_cast<double>(dist_live_ ? dist_->bond_failures() : world_.bond_failures())});
     }
     return v;
   }
@@ -380,6 +438,7 @@ class DemParticipant : public node::Participant {
     return (world_.gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
+    leave_dist();  // the whole World again, on every rank
     if (out_) write_frame(last);
     if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
     const double crit = world_.num_balls() > 0 ? critical_dt() : 0.0;
@@ -416,6 +475,7 @@ class DemParticipant : public node::Participant {
 
   // Coupling (DEM role).
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
+    leave_dist();
     ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
     wall_ = world_.add_facet_wall(m.positions, m.triangles);
     n_iface_ = m.n_points();
@@ -435,21 +495,72 @@ class DemParticipant : public node::Participant {
   void set_interface_kinematics(const proto::Kinematics& k) override {
     node::Timed t(effect_s_["coupling"]);
     if (wall_ < 0) throw std::runtime_error("interface kinematics before the interface mesh");
-    world_.set_vertex_kinematics(wall_, k.positions, k.velocities);
+    live().set_vertex_kinematics(wall_, k.positions, k.velocities);
   }
   proto::Forces interface_forces() override {
     node::Timed timed(effect_s_["coupling"]);
     proto::Forces f;
-    auto vf = world_.vertex_forces(wall_);
-    auto vk = world_.vertex_stiffness(wall_);
+    // the walls' sums: those of the whole World on every rank (DistDem::step)
+    auto vf = live().vertex_forces(wall_);
+    auto vk = live().vertex_stiffness(wall_);
     f.forces.assign(vf.begin(), vf.end());
     f.stiffness.assign(vk.begin(), vk.end());
-    auto t = world_.facet_wall_force(wall_);
+    auto t = live().facet_wall_force(wall_);
     f.total = {t.x, t.y, t.z};
     return f;
   }
 
  private:
+  // The World that steps: a rank's slab while the ranks step, else the whole World.
+  dem::World& live() { return dist_live_ ? dist_->world() : world_; }
+  const dem::World& live() const { return dist_live_ ? dist_->world() : world_; }
+  double kinetic_energy() const { return dist_live_ ? dist_->kinetic_energy() : world_.kinetic_energy(); }
+  // At the first step of a stage that is not specimen preparation, on more than one rank: the
+  // whole World, set up, cut into slabs along the block's longest axis.
+  void enter_dist() {
+    if (g_ranks.size <= 1 || dist_live_ || preparing_) return;
+    dem::BrickGrid g;
+    if (world_.periodic()) {
+      g.lo = world_.cell_origin();
+      g.len = world_.cell_length();
+      g.periodic[0] = g.periodic[1] = g.periodic[2] = true;
+    } else {
+      g.lo = block_.origin;
+      g.len = {block_.width_x(), block_.width_y(), block_.height()};
+    }
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+      if (g.len[k] > g.len[axis]) axis = k;
+    g.n[axis] = g_ranks.size;
+    dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
+    dist_->load(world_);
+    dist_live_ = true;
+    synced_ = false;
+    safe_dt_key_ = {-1, -1, -1};
+  }
+  // The ranks' state into world_ on every rank (a checkpoint, a frame, a guard finding).
+  void sync_full() {
+    if (!dist_live_ || synced_) return;
+    node::Timed t(effect_s_["ranks.unload"]);
+    dist_->unload(world_);
+    synced_ = true;
+  }
+  // The end of the ranks' steps: world_ is the state from here on.
+  void leave_dist() {
+    if (!dist_live_) return;
+    sync_full();
+    const auto& t = dist_->times();  // the ranks' communication, as effects of the stage
+    effect_s_["ranks.forward"] += t.forward;
+    effect_s_["ranks.reduce"] += t.reduce;
+    effect_s_["ranks.exchange"] += t.exchange;
+    effect_s_["ranks.walls"] += t.walls;
+    ranked_phases_ = dist_->world().phase_times();
+    has_ranked_phases_ = true;
+    dist_live_ = false;
+    dist_.reset();
+    safe_dt_key_ = {-1, -1, -1};
+  }
+
   dem::WorldParams world_params() {
     dem::WorldParams p = dem::scene::world(s_, block_);
     omp_set_num_threads(p.threads);
@@ -467,6 +578,7 @@ class DemParticipant : public node::Participant {
     const double crit = critical_dt();
     if (user_dt_ <= crit) {
       world_.mutable_params().dt_fixed = user_dt_;
+      live().mutable_params().dt_fixed = user_dt_;
       return;
     }
     const double safe = world_.params().dt_safety * crit;
@@ -479,12 +591,13 @@ class DemParticipant : public node::Participant {
     spdlog::warn("dem: {}; reduced to dt_safety x critical = {} s (dem.dt_above_critical = \"reduce\")", os.str(), safe);
     user_dt_ = safe;
     world_.mutable_params().dt_fixed = safe;
+    live().mutable_params().dt_fixed = safe;
   }
 
   // The engine's phase times of the stage (its set-up procedures included) as effects: only
   // the phases present in this world (no wall, facet or footing pass without one).
   void add_phase_times() {
-    const auto& t = world_.phase_times();
+    const auto& t = has_ranked_phases_ ? ranked_phases_ : world_.phase_times();  // a rank's own, on ranks
     if (t.steps == 0) return;
     effect_s_["neighbour"] = t.rebuild;
     effect_s_[std::string("contacts.ball_ball.") + t.pair_model] = t.pair;
@@ -572,7 +685,7 @@ class DemParticipant : public node::Participant {
     return {{"footing_z0_m", best}};
   }
   double footing_disp() const {
-    return world_.has_footing() ? footing_z0_ - world_.footing().p.bottom_centre.z : 0.0;
+    return live().has_footing() ? footing_z0_ - live().footing().p.bottom_centre.z : 0.0;
   }
 
   proto::Values ucs(const schema::Stage& st) {
@@ -627,7 +740,7 @@ class DemParticipant : public node::Participant {
   // contact force).
   double ratio() {
     if (!ratio_valid_) {
-      ratio_ = world_.unbalanced_ratio(mean_contact_force());
+      ratio_ = dist_live_ ? dist_->unbalanced_ratio(mean_contact_force()) : world_.unbalanced_ratio(mean_contact_force());
       ratio_valid_ = true;
     }
     return ratio_;
@@ -635,14 +748,14 @@ class DemParticipant : public node::Participant {
   // The mean contact force of the current state (both ratios divide by it; O(contacts)).
   double mean_contact_force() {
     if (!fc_valid_) {
-      fc_ = world_.mean_contact_force();
+      fc_ = dist_live_ ? dist_->mean_contact_force() : world_.mean_contact_force();
       fc_valid_ = true;
     }
     return fc_;
   }
   const dem::SkeletonRatio& skeleton() {
     if (!skeleton_valid_) {
-      skeleton_ = dem::skeleton_ratio(world_, mean_contact_force());
+      skeleton_ = dist_live_ ? dist_->skeleton_ratio(mean_contact_force()) : dem::skeleton_ratio(world_, mean_contact_force());
       skeleton_valid_ = true;
     }
     return skeleton_;
@@ -751,12 +864,330 @@ class DemParticipant : public node::Participant {
   mutable std::array<std::int64_t, 3> safe_dt_key_{-1, -1, -1};
   mutable double safe_dt_ = 0;
   dem::StageEnergy energy_;  // the stage's energy balance (docs/stability.md)
+  // The DEM on ranks: the slabs that step (between a stage's first step and its end), whether
+  // they step now, and whether world_ holds their current state.
+  std::unique_ptr<dem::DistDem> dist_;
+  bool dist_live_ = false, synced_ = false;
+  bool outputs_ = false;  // rank 0 writes results
+  dem::PhaseTimes ranked_phases_;  // the phases of this rank's slab in the stage
+  bool has_ranked_phases_ = false;
   bool energy_pending_ = false;  // the balance begins at the stage's first step (after its set-up)
 };
+
+// ------------------------------------------------------------------------------------------
+// Ranks: rank 0 tells the others each call it gets (one broadcast per call), then makes it.
+
+// A call and its arguments as bytes.
+class Wire {
+ public:
+  template <class T>
+  void put(const T& v) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    append(&v, sizeof v);
+  }
+  template <class T>
+  void put_vec(const std::vector<T>& v) {
+    put<std::uint64_t>(v.size());
+    append(v.data(), v.size() * sizeof(T));
+  }
+  void append(const void* p, std::size_t n) {
+    const std::size_t at = b_.size();
+    b_.resize(at + n);
+    if (n) std::memcpy(b_.data() + at, p, n);
+  }
+  void put_str(const std::string& v) { put_vec(std::vector<char>(v.begin(), v.end())); }
+  template <class T>
+  T get() {
+    T v;
+    std::memcpy(&v, b_.data() + at_, sizeof v);
+    at_ += sizeof v;
+    return v;
+  }
+  template <class T>
+  std::vector<T> get_vec() {
+    const auto n = get<std::uint64_t>();
+    std::vector<T> v(n);
+    std::memcpy(static_cast<void*>(v.data()), b_.data() + at_, n * sizeof(T));
+    at_ += n * sizeof(T);
+    return v;
+  }
+  std::string get_str() {
+    auto v = get_vec<char>();
+    return {v.begin(), v.end()};
+  }
+  // Rank 0 sends, the others receive (collective). A rank waiting for the next call (rank 0
+  // may wait on the bus for long) sleeps between tests instead of spinning: the ranks share the
+  // machine's cores with the continuum and the coordinator.
+  void bcast() {
+    std::uint64_t n = b_.size();
+    MPI_Request req;
+    MPI_Ibcast(&n, 1, MPI_UINT64_T, 0, g_ranks.comm, &req);
+    if (g_ranks.rank == 0) {
+      MPI_Wait(&req, MPI_STATUS_IGNORE);
+    } else {
+      for (int k = 0;; ++k) {
+        int done = 0;
+        MPI_Test(&req, &done, MPI_STATUS_IGNORE);
+        if (done) break;
+        if (k > 200) std::this_thread::sleep_for(std::chrono::microseconds(k > 20000 ? 1000 : 20));
+      }
+    }
+    b_.resize(n);
+    MPI_Bcast(b_.data(), static_cast<int>(n), MPI_BYTE, 0, g_ranks.comm);
+    at_ = 0;
+  }
+  bool empty() const { return b_.empty(); }
+
+ private:
+  std::vector<char> b_;
+  std::size_t at_ = 0;
+};
+
+enum class Op : std::int32_t {
+  kQuit, kDtStable, kStageBegin, kAdvance, kStepValues, kCriterion, kStageEnd, kFinish, kHealth, kSave, kRestore,
+  kMesh, kKin
+};
+
+Wire call(Op op) {
+  Wire w;
+  w.put(op);
+  return w;
+}
+
+// Rank 0's participant: every call that the ranks make together is sent to them first.
+class RankedParticipant : public node::Participant {
+ public:
+  explicit RankedParticipant(const node::Context& ctx) : stages_(schema::stages(ctx.scene)) {
+    Wire w;  // the scene and the run, for the other ranks' adapters
+    w.put_str(ctx.scene.text());
+    w.put_str(ctx.scene.origin());
+    w.put(ctx.options.run_id);
+    w.put<std::uint8_t>(!ctx.options.run_dir.empty());
+    w.bcast();
+    g_ranks.root_dir = !ctx.options.run_dir.empty();
+    p_ = std::make_unique<DemParticipant>(ctx);
+  }
+  double dt_stable() const override {
+    auto w = call(Op::kDtStable);
+    w.bcast();
+    return p_->dt_stable();
+  }
+  double time() const override { return p_->time(); }
+  proto::Values stage_begin(const schema::Stage& st, std::int64_t first) override {
+    auto w = call(Op::kStageBegin);
+    w.put(index(st));
+    w.put(first);
+    w.bcast();
+    return p_->stage_begin(st, first);
+  }
+  void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
+    auto w = call(Op::kAdvance);
+    w.put(index(st));
+    w.put(step);
+    w.put(dt);
+    w.put_vec(values);
+    w.bcast();
+    p_->advance(st, step, dt, values);
+  }
+  proto::Values step_values() override {
+    call(Op::kStepValues).bcast();
+    return p_->step_values();
+  }
+  bool criterion_met(const schema::Stage& st) override {
+    auto w = call(Op::kCriterion);
+    w.put(index(st));
+    w.bcast();
+    return p_->criterion_met(st);
+  }
+  proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
+    auto w = call(Op::kStageEnd);
+    w.put(index(st));
+    w.put(last);
+    w.bcast();
+    return p_->stage_end(st, last);
+  }
+  void finish() override {
+    if (finished_) return;
+    finished_ = true;
+    call(Op::kFinish).bcast();
+    p_->finish();
+  }
+  std::optional<node::HealthReport> check_health(std::int64_t step) override {
+    auto w = call(Op::kHealth);
+    w.put(step);
+    w.bcast();
+    return p_->check_health(step);
+  }
+  bool can_checkpoint() const override { return true; }
+  void save(const fs::path& dir, io::StateWriter& sw, const io::StateMeta& meta) override {
+    auto w = call(Op::kSave);
+    w.put_str(dir.string());
+    w.put(meta.scene_hash);
+    w.bcast();
+    p_->save(dir, sw, meta);
+  }
+  void restore(io::StateReader& r, const node::Restore& how) override {
+    auto w = call(Op::kRestore);
+    w.put_str(how.dir.string());
+    w.put(how.saved_scene_hash);
+    w.put<std::uint8_t>(how.branch);
+    w.bcast();
+    p_->restore(r, how);
+  }
+  void set_interface_mesh(const proto::InterfaceMesh& m) override {
+    auto w = call(Op::kMesh);
+    w.put_vec(m.positions);
+    w.put_vec(m.triangles);
+    w.bcast();
+    p_->set_interface_mesh(m);
+  }
+  void set_interface_kinematics(const proto::Kinematics& k) override {
+    auto w = call(Op::kKin);
+    w.put_vec(k.positions);
+    w.put_vec(k.velocities);
+    w.bcast();
+    p_->set_interface_kinematics(k);
+  }
+  // The walls' sums are the same on every rank: rank 0 answers alone.
+  proto::Forces interface_forces() override { return p_->interface_forces(); }
+
+ private:
+  std::int32_t index(const schema::Stage& st) const {
+    for (std::size_t i = 0; i < stages_.size(); ++i)
+      if (stages_[i].view.prefix() == st.view.prefix()) return static_cast<std::int32_t>(i);
+    throw std::logic_error("stage '" + st.name + "' is not one of the scene's");
+  }
+  std::vector<schema::Stage> stages_;
+  std::unique_ptr<DemParticipant> p_;
+  bool finished_ = false;
+};
+
+// A rank other than 0: the adapter without bus or files, making the calls rank 0 sends.
+int follow() {
+  spdlog::set_level(spdlog::level::warn);  // rank 0 logs the run
+  Wire w;
+  w.bcast();
+  if (w.empty()) return 0;  // rank 0 ended before it had a scene
+  const std::string text = w.get_str(), origin = w.get_str();
+  node::Context ctx{node::Options{}, config::Scene::parse(text, origin, schema::scene_schema()), "dem"};
+  ctx.options.run_id = w.get<std::int64_t>();
+  g_ranks.root_dir = w.get<std::uint8_t>() != 0;
+  DemParticipant p(ctx);
+  const auto stages = schema::stages(ctx.scene);
+  for (;;) {
+    Wire c;
+    c.bcast();
+    if (c.empty()) return 0;
+    const Op op = c.get<Op>();
+    switch (op) {
+      case Op::kQuit: return 0;
+      case Op::kDtStable: p.dt_stable(); break;
+      case Op::kStageBegin: {
+        const auto i = c.get<std::int32_t>();
+        p.stage_begin(stages[static_cast<std::size_t>(i)], c.get<std::int64_t>());
+        break;
+      }
+      case Op::kAdvance: {
+        const auto i = c.get<std::int32_t>();
+        const auto step = c.get<std::int64_t>();
+        const auto dt = c.get<double>();
+        p.advance(stages[static_cast<std::size_t>(i)], step, dt, c.get_vec<double>());
+        break;
+      }
+      case Op::kStepValues: p.step_values(); break;
+      case Op::kCriterion: p.criterion_met(stages[static_cast<std::size_t>(c.get<std::int32_t>())]); break;
+      case Op::kStageEnd: {
+        const auto i = c.get<std::int32_t>();
+        p.stage_end(stages[static_cast<std::size_t>(i)], c.get<std::int64_t>());
+        break;
+      }
+      case Op::kFinish: p.finish(); break;
+      case Op::kHealth: p.check_health(c.get<std::int64_t>()); break;
+      case Op::kSave: {
+        const fs::path dir = c.get_str();
+        io::StateMeta meta;
+        meta.scene_hash = c.get<std::uint64_t>();
+        io::StateWriter sw("node", meta.code_version, meta.scene_hash);  // rank 0 writes the files
+        p.save(dir, sw, meta);
+        break;
+      }
+      case Op::kRestore: {
+        node::Restore how;
+        how.dir = c.get_str();
+        how.saved_scene_hash = c.get<std::uint64_t>();
+        how.branch = c.get<std::uint8_t>() != 0;
+        // the node file as rank 0 reads it: its runtime section first
+        const auto path = how.dir / "dem.state";
+        io::StateReader r(io::read_whole_file(path), path.string(), "node", how.saved_scene_hash);
+        auto rt = r.section("runtime");
+        (void)rt.str(), (void)rt.str(), (void)rt.i64(), (void)rt.i32(), (void)rt.b(), (void)rt.b(), (void)rt.i64();
+        rt.done();
+        p.restore(r, how);
+        r.finish();
+        break;
+      }
+      case Op::kMesh: {
+        proto::InterfaceMesh m;
+        m.positions = c.get_vec<double>();
+        m.triangles = c.get_vec<std::int32_t>();
+        p.set_interface_mesh(m);
+        break;
+      }
+      case Op::kKin: {
+        proto::Kinematics k;
+        k.positions = c.get_vec<double>();
+        k.velocities = c.get_vec<double>();
+        p.set_interface_kinematics(k);
+        break;
+      }
+    }
+  }
+}
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  return node::run_node(argc, argv, "dem", "dem_node",
-                        [](const node::Context& ctx) { return std::make_unique<DemParticipant>(ctx); });
+  const auto plain = [](const node::Context& ctx) { return std::make_unique<DemParticipant>(ctx); };
+  // Under mpirun (Open MPI sets OMPI_COMM_WORLD_SIZE): the DEM on ranks. Otherwise, and for
+  // --check, one process without MPI.
+  const char* ranks_env = std::getenv("OMPI_COMM_WORLD_SIZE");
+  bool check = false;
+  for (int i = 1; i < argc; ++i) check = check || std::string(argv[i]) == "--check";
+  if (!ranks_env || check) return node::run_node(argc, argv, "dem", "dem_node", plain);
+  int provided = 0;
+  MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
+  g_ranks.comm = MPI_COMM_WORLD;
+  MPI_Comm_rank(g_ranks.comm, &g_ranks.rank);
+  MPI_Comm_size(g_ranks.comm, &g_ranks.size);
+  int code = 0;
+  if (g_ranks.rank == 0) {
+    bool made = false;
+    code = node::run_node(argc, argv, "dem", "dem_node", [&](const node::Context& ctx) -> std::unique_ptr<node::Participant> {
+      made = true;
+      if (g_ranks.size == 1) return std::make_unique<DemParticipant>(ctx);
+      return std::make_unique<RankedParticipant>(ctx);
+    });
+    if (code != 0 && g_ranks.size > 1) {
+      // A failed run: the other ranks may wait in any call; the job ends here, with the code.
+      spdlog::default_logger()->flush();
+      MPI_Abort(g_ranks.comm, code);
+    }
+    if (g_ranks.size > 1) {
+      Wire quit;  // an empty message: the scene (none came) or the end of the calls
+      if (made) quit = call(Op::kQuit);
+      quit.bcast();
+    }
+  } else {
+    try {
+      code = follow();
+    } catch (const std::exception& e) {
+      // Rank 0 meets the same failure (the same calls on the same state) and reports it; if it
+      // does not within 2 s, this rank ends the job.
+      std::fprintf(stderr, "dem_node rank %d: %s\n", g_ranks.rank, e.what());
+      std::this_thread::sleep_for(std::chrono::seconds(2));
+      MPI_Abort(g_ranks.comm, 3);
+    }
+  }
+  MPI_Finalize();
+  return code;
 }

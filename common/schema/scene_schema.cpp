@@ -289,6 +289,12 @@ void declare_dem(config::Section& root) {
          "A ball whose centre leaves the DEM block (or the continuum's pocket) by more than this many d_max "
          "(upscaled) stops the run with an error naming it (docs/stability.md); 0: no check.")
       .min(0.0);
+  d.integer("ranks", "-", 1,
+            "MPI ranks of the DEM (docs/scaling.md): launch/run starts dem_node under mpirun with this many, "
+            "each owning a slab of the DEM block along its longest axis; results are the same bits at any "
+            "count. 1: one process, no MPI.")
+      .min(1)
+      .max(4096);
   d.reals("kick", "m/s", std::vector<double>{},
           "Stability studies: velocity [vx, vy, vz] given to the highest ball at the first stage that is not "
           "a specimen-generation stage; empty: none.");

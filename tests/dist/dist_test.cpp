@@ -42,7 +42,7 @@ double spacing(const Scene& sc) { return (sc.bonded ? 2.0 : 1.96) * kR; }
 
 // The packing of simd_kernel_test (a jittered lattice, random velocities and spins, pulled apart
 // by the cell or a radial field), with a fixed step. `final_prepare`: also prepare after the
-// velocities are set (the reference); DistDem::load prepares each rank's part itself.
+// velocities are set. The ranks load the prepared World as it is (DistDem::load).
 std::unique_ptr<World> build(const Scene& sc, bool final_prepare) {
   const double s = spacing(sc);
   WorldParams p;
@@ -87,7 +87,7 @@ BrickGrid grid(const Scene& sc) {
 // Runs the scene on the ranks; rank 0 compares with the reference. The verdict is shared, so
 // every rank passes or fails together.
 void check(const Scene& sc) {
-  std::unique_ptr<World> full = build(sc, false);
+  std::unique_ptr<World> full = build(sc, true);
   DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
   d.load(*full);
   d.step(sc.steps);

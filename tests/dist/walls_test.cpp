@@ -145,7 +145,7 @@ void run(World& w, const Floor& floor, int steps, std::vector<Vec3>& history, St
 
 void check(const WallScene& sc) {
   const Floor floor;
-  std::unique_ptr<World> full = build(sc, floor, false);
+  std::unique_ptr<World> full = build(sc, floor, true);  // prepared: taken as it is (the node's case)
   BrickGrid g;
   g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};  // cuts on planes of ball centres
   g.len = {kL, kL, kL};

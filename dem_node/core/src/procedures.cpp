@@ -12,29 +12,38 @@ namespace demfdm::dem {
 
 SkeletonRatio skeleton_ratio(const World& w) { return skeleton_ratio(w, w.mean_contact_force()); }
 
-SkeletonRatio skeleton_ratio(const World& w, double fc) {
-  SkeletonRatio r;
+bool is_rattler(const World& w, std::size_t i) {
   const auto& b = w.balls();
-  const Vec3 g = w.gravity();
-  // A rattler adds +0 to the sum of non-negative terms, which leaves it unchanged: the sum over
-  // every ball is the sum over the skeleton, bit for bit.
-  auto rattler = [&](std::size_t i) {
-    const Vec3 c = (b.f[i] + b.fa[i]) - b.m[i] * g;  // contact part of the force
-    return c.x == 0 && c.y == 0 && c.z == 0;
-  };
-  const double sum = w.ordered_ball_sum([&](std::size_t i) {
-    if (rattler(i)) return 0.0;
-    const Vec3 f = b.f[i] + b.fa[i];
-    double s2 = 0;
-    for (int k = 0; k < 3; ++k)
-      if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
-    return std::sqrt(s2);
-  });
-  // A count as a sum of ones: exact.
-  r.rattlers = static_cast<std::size_t>(w.ordered_ball_sum([&](std::size_t i) { return rattler(i) ? 1.0 : 0.0; }));
-  const std::size_t n = b.size() - r.rattlers;
+  const Vec3 c = (b.f[i] + b.fa[i]) - b.m[i] * w.gravity();  // contact part of the force
+  return c.x == 0 && c.y == 0 && c.z == 0;
+}
+
+double skeleton_term(const World& w, std::size_t i) {
+  if (is_rattler(w, i)) return 0.0;
+  const auto& b = w.balls();
+  const Vec3 f = b.f[i] + b.fa[i];
+  double s2 = 0;
+  for (int k = 0; k < 3; ++k)
+    if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
+  return std::sqrt(s2);
+}
+
+SkeletonRatio skeleton_ratio_of(double sum, std::size_t rattlers, std::size_t balls, double fc) {
+  SkeletonRatio r;
+  r.rattlers = rattlers;
+  const std::size_t n = balls - rattlers;
   r.ratio = n == 0 || fc <= 0 ? std::numeric_limits<double>::infinity() : sum / static_cast<double>(n) / fc;
   return r;
+}
+
+SkeletonRatio skeleton_ratio(const World& w, double fc) {
+  // A rattler adds +0 to the sum of non-negative terms, which leaves it unchanged: the sum over
+  // every ball is the sum over the skeleton, bit for bit.
+  const double sum = w.ordered_ball_sum([&](std::size_t i) { return skeleton_term(w, i); });
+  // A count as a sum of ones: exact.
+  const auto rattlers =
+      static_cast<std::size_t>(w.ordered_ball_sum([&](std::size_t i) { return is_rattler(w, i) ? 1.0 : 0.0; }));
+  return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
 }
 
 std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs) {

@@ -2,6 +2,7 @@
 #include "demfdm/dem/dist.hpp"
 
 #include "demfdm/dem/laws/registry.hpp"
+#include "demfdm/dem/procedures.hpp"
 
 #include <algorithm>
 #include <array>
@@ -308,9 +309,17 @@ void DistDem::load(const World& full) {
   for (int k = 0; k < 3; ++k) {
     const WallContacts& f = *fw[static_cast<std::size_t>(k)];
     for (std::size_t c = 0; c < f.size(); ++c)
-      if (own[f.ball[c]] == rank_)
-        push_wall(wc[static_cast<std::size_t>(k)], static_cast<std::uint32_t>(row[f.ball[c]]), f.wall[c], f.facet[c],
-                  f.h[c], f.bond.empty() ? nullptr : &f.bond[c]);
+      if (own[f.ball[c]] == rank_) {  // every field, its candidate facets and last forces too
+        WallContacts& d = wc[static_cast<std::size_t>(k)];
+        push_wall(d, static_cast<std::uint32_t>(row[f.ball[c]]), f.wall[c], f.facet[c], f.h[c],
+                  f.bond.empty() ? nullptr : &f.bond[c]);
+        if (!f.cand_off.empty()) {
+          d.cand.pop_back();
+          d.cand.insert(d.cand.end(), f.cand.begin() + f.cand_off[c], f.cand.begin() + f.cand_off[c + 1]);
+          d.cand_off.back() = static_cast<std::uint32_t>(d.cand.size());
+        }
+        d.F.back() = f.F[c], d.M.back() = f.M[c], d.TA.back() = f.TA[c], d.xc.back() = f.xc[c], d.bary.back() = f.bary[c];
+      }
   }
   w_ = std::make_unique<World>(p_);
   w_->set_pair_kernel(full.pair_kernel());
@@ -339,9 +348,17 @@ void DistDem::load(const World& full) {
     MPI_Allreduce(&dt, &g, 1, MPI_DOUBLE, MPI_MIN, comm_);
     return g;
   });
-  w_->prepare();
-  reduce_walls();
+  // A prepared World: its lists, histories and last forces are this rank's state as they are
+  // (a checkpoint's load is the same), so the ranks continue with one World's bits; preparing
+  // again would run another force pass, which is not the identity on every law's history.
+  // Otherwise: prepared here, as `full.prepare()` would.
   run_disp2_ = 0.0;
+  if (k.prepared) {
+    run_disp2_ = k.max_disp2;
+  } else {
+    w_->prepare();
+  }
+  reduce_walls();
   exchanges_ = 0;
   build_forward();
 }
@@ -927,6 +944,22 @@ double DistDem::ball_sum(Term term) const {
   for (std::size_t i = 0; i < pt.size(); ++i)
     if (g.empty() || !g[i]) t.push_back({0, pt.id[i], 0, term(i)});
   return ordered_sum(t);
+}
+
+SkeletonRatio DistDem::skeleton_ratio(double fc) const {
+  const double sum = ball_sum([this](std::size_t i) { return dem::skeleton_term(*w_, i); });
+  long long mine = 0, all = 0;  // an integer count: exact
+  const auto& g = w_->ghost_rows();
+  for (std::size_t i = 0; i < w_->num_balls(); ++i)
+    if ((g.empty() || !g[i]) && is_rattler(*w_, i)) ++mine;
+  MPI_Allreduce(&mine, &all, 1, MPI_LONG_LONG, MPI_SUM, comm_);
+  return skeleton_ratio_of(sum, static_cast<std::size_t>(all), num_balls(), fc);
+}
+
+double DistDem::safe_step() const {
+  double dt = w_->contact_scan(true, false).dt, g = dt;
+  MPI_Allreduce(&dt, &g, 1, MPI_DOUBLE, MPI_MIN, comm_);
+  return g;
 }
 
 double DistDem::kinetic_energy() const {

@@ -27,6 +27,12 @@ struct SkeletonRatio {
 SkeletonRatio skeleton_ratio(const World& w);
 /// The same with the mean contact force of this state given (World::mean_contact_force()).
 SkeletonRatio skeleton_ratio(const World& w, double mean_contact_force);
+/// Its parts, for sums formed elsewhere (DistDem::skeleton_ratio): whether ball i is a rattler
+/// (no contact force), its term (its unbalanced force, +0 for a rattler), and the ratio from the
+/// sum of the terms and the count of rattlers.
+bool is_rattler(const World& w, std::size_t i);
+double skeleton_term(const World& w, std::size_t i);
+SkeletonRatio skeleton_ratio_of(double sum, std::size_t rattlers, std::size_t balls, double mean_contact_force);
 
 /// One horizontal slab of a vertical stress profile: particle-based stress (region_stress) of the
 /// balls whose centres lie in the slab, depth measured down from the block top.

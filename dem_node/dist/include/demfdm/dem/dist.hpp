@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/world.hpp"
 
 namespace demfdm::dem {
@@ -93,8 +94,10 @@ class DistDem {
   ~DistDem();
 
   /// Take the balls and ball-ball contacts of `full`, the same World on every rank (built the
-  /// same way, not stepped since its last prepare): each rank keeps its own balls, their ghosts
-  /// and their pairs, in id order, and prepares its World (as `full.prepare()` would).
+  /// same way): each rank keeps its own balls, their ghosts and their pairs, in id order. A
+  /// prepared `full` (stepped or not since) is taken as it is, lists, histories, wall candidates
+  /// and last forces included, so the ranks step on as `full` would; an unprepared one is
+  /// prepared on the ranks, as `full.prepare()` would.
   void load(const World& full);
   /// One World holding every ball, on every rank (collective): `full` gets the state one World
   /// stepped as this one was would have (balls, contact lists in that World's orders with their
@@ -161,6 +164,12 @@ class DistDem {
   double kinetic_energy() const;
   double mean_contact_force() const;
   double unbalanced_ratio(double mean_contact_force) const;
+  /// The skeleton ratio (procedures.hpp) of one World, the same bits (collective).
+  SkeletonRatio skeleton_ratio(double mean_contact_force) const;
+  /// World::contact_scan's step (dt_safety x the critical step) of one World: the smallest over
+  /// the ranks; a ball's stiffness sums are complete on the rank that owns it and a ghost's
+  /// partial ones only give a longer step (collective).
+  double safe_step() const;
   /// The number of balls over every rank.
   std::size_t num_balls() const;
   /// Bond counts by state (measure.hpp's bond_counts) and World::bond_failures() of one World:

@@ -1,0 +1,94 @@
+#!/usr/bin/python3
+"""The reduced coupled footing (scenes/footing_small.toml, all six stages) with the DEM on MPI
+ranks, through launch/run as a user runs it (issue 17 items 3 and 4): dem.ranks = 1 (one process,
+no MPI), 2 and 3 (3 on 2 cores: oversubscribed), and 2 ranks of 2 threads each. Every CSV file of
+the run folders (histories of both nodes and of the coordinator, stress profiles, specimen stages)
+must be the same bytes as the one-process run's, and every dataset of dem.h5 and fdm.h5 the same
+bits; the interface balance holds to round-off; the ranked runs did step on ranks (the node's log
+names the ranks' communication in the stages' values).
+
+Usage: node_footing.py SOURCE_DIR BUILD_DIR WORK_DIR
+"""
+import os
+import re
+import shutil
+import subprocess
+import sys
+
+import h5py
+import numpy as np
+
+src, build, work = sys.argv[1:4]
+shutil.rmtree(work, ignore_errors=True)
+os.makedirs(work)
+
+runs = [("ranks1", 1, 1), ("ranks2", 2, 1), ("ranks3", 3, 1), ("ranks2_threads2", 2, 2)]
+env = dict(os.environ, DEMFDM_BUILD=build)
+for name, ranks, threads in runs:
+    out = os.path.join(work, name)
+    p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"),
+                        "--no-build", "--run-dir", out, "--set", "dem.ranks=%d" % ranks, "--set", "run.threads=%d" % threads,
+                        "--set", "output.traffic_log=false"],
+                       env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if p.returncode != 0:
+        print(p.stdout[-4000:])
+        sys.exit("FAIL: the run with %d ranks x %d threads ended with code %d" % (ranks, threads, p.returncode))
+    print("run %s: %d ranks x %d threads, code 0" % (name, ranks, threads))
+
+failures = []
+ref = os.path.join(work, "ranks1")
+csvs = sorted(n for n in os.listdir(ref) if n.endswith(".csv"))
+needed = {"dem_history.csv", "fdm_history.csv", "history_4_gravity.csv", "history_5_penetrate.csv",
+          "specimen_stages.csv", "dem_profile_penetrate.csv"}
+if not needed <= set(csvs):
+    failures.append("the reference run lacks %s" % sorted(needed - set(csvs)))
+
+
+def datasets(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, np.asarray(o[()])) if isinstance(o, h5py.Dataset) else None)
+    return out
+
+
+ref_h5 = {n: datasets(os.path.join(ref, n)) for n in ("dem.h5", "fdm.h5")}
+for name, ranks, threads in runs[1:]:
+    d = os.path.join(work, name)
+    for n in csvs:
+        a = open(os.path.join(ref, n), "rb").read()
+        p = os.path.join(d, n)
+        b = open(p, "rb").read() if os.path.exists(p) else b""
+        if a != b:
+            al, bl = a.decode().split("\n"), b.decode().split("\n")
+            i = next((k for k in range(min(len(al), len(bl))) if al[k] != bl[k]), min(len(al), len(bl)))
+            failures.append("%s: %s differs from one process's at line %d" % (name, n, i + 1))
+    for n, want in ref_h5.items():
+        got = datasets(os.path.join(d, n))
+        if set(got) != set(want):
+            failures.append("%s: %s has other datasets" % (name, n))
+            continue
+        bad = [k for k in want if want[k].tobytes() != got[k].tobytes() or want[k].dtype != got[k].dtype]
+        if bad:
+            failures.append("%s: %s datasets differ: %s" % (name, n, bad[:5]))
+    log = open(os.path.join(d, "dem.log")).read()
+    m = re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.exchange=([0-9.e+-]+)", log)
+    if not m:
+        failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
+    print("%s: %d CSV files and %d + %d datasets compared with one process's" %
+          (name, len(csvs), len(ref_h5["dem.h5"]), len(ref_h5["fdm.h5"])))
+
+# The interface balance (continuum.iface_imbalance, docs/theory.md 6.4) at round-off in every step.
+hist = open(os.path.join(work, "ranks3", "history_5_penetrate.csv")).read().split("\n")
+cols = hist[0].split(",")
+k = cols.index("continuum.iface_imbalance")
+worst = max(abs(float(l.split(",")[k])) for l in hist[1:] if l)
+print("largest interface imbalance in the penetration on 3 ranks: %.3e" % worst)
+if not worst < 1e-12:
+    failures.append("interface imbalance %.3e is not round-off" % worst)
+rows = len(hist) - 2
+if rows < 1000:
+    failures.append("the penetration has only %d steps" % rows)
+
+for f in failures:
+    print("FAIL:", f)
+sys.exit(1 if failures else 0)
