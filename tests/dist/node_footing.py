@@ -5,7 +5,8 @@ no MPI), 2 and 3 (3 on 2 cores: oversubscribed), and 2 ranks of 2 threads each. 
 the run folders (histories of both nodes and of the coordinator, stress profiles, specimen stages)
 must be the same bytes as the one-process run's, and every dataset of dem.h5 and fdm.h5 the same
 bits; the interface balance holds to round-off; the ranked runs did step on ranks (the node's log
-names the ranks' communication in the stages' values).
+names the ranks' communication in the stages' values); a branch on 3 ranks from the 3-rank run's
+gravity checkpoint repeats the one-process penetration byte for byte.
 
 Usage: node_footing.py SOURCE_DIR BUILD_DIR WORK_DIR
 """
@@ -76,6 +77,24 @@ for name, ranks, threads in runs[1:]:
         failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
     print("%s: %d CSV files and %d + %d datasets compared with one process's" %
           (name, len(csvs), len(ref_h5["dem.h5"]), len(ref_h5["fdm.h5"])))
+
+# A branch from the 3-rank run's checkpoint at the end of the gravity stage (saved from the ranks'
+# parts assembled into one World), run on 3 ranks: its penetration is the one-process run's.
+branch = os.path.join(work, "branch_ranks3")
+p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"),
+                    "--no-build", "--from", os.path.join(work, "ranks3", "checkpoints", "gravity-460-end"), "--run-dir",
+                    branch, "--set", "dem.ranks=3", "--set", "output.traffic_log=false"],
+                   env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+if p.returncode != 0:
+    failures.append("the branch from the 3-rank gravity checkpoint ended with code %d\n%s" % (p.returncode, p.stdout[-3000:]))
+else:
+    same = 0
+    for n in ("history_5_penetrate.csv", "dem_profile_penetrate.csv", "fdm_profile_penetrate.csv"):
+        if open(os.path.join(ref, n), "rb").read() != open(os.path.join(branch, n), "rb").read():
+            failures.append("branch_ranks3: %s differs from one process's" % n)
+        else:
+            same += 1
+    print("branch on 3 ranks from the 3-rank gravity checkpoint: %d of 3 penetration files the same bytes" % same)
 
 # The interface balance (continuum.iface_imbalance, docs/theory.md 6.4) at round-off in every step.
 hist = open(os.path.join(work, "ranks3", "history_5_penetrate.csv")).read().split("\n")

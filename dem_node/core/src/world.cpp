@@ -526,6 +526,12 @@ void World::swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts,
   dirty_ = true;
 }
 
+std::vector<std::string> World::effect_names() const {
+  std::vector<std::string> out;
+  for (const auto& e : effects_) out.emplace_back(e->name());
+  return out;
+}
+
 World::Counters World::counters() const {
   return Counters{time_,  dt_,          skin_,          step_,    rebuilds_,    last_dt_step_,
                   bond_failures_, prepared_, dirty_, edot_, cell_strain_, cell_len_ref_,

@@ -260,6 +260,12 @@ void DistDem::load(const World& full) {
   const std::size_t n = fp.size();
   for (std::size_t i = 1; i < n; ++i)
     if (!(fp.id[i - 1] < fp.id[i])) throw std::invalid_argument("DistDem::load: the rows must be in id order.");
+  // Gravity comes with the parameters; no other effect runs on the ranks yet (a servo reads the
+  // walls' sums every step, which the ranks form at the end of step(n) only).
+  for (const std::string& e : full.effect_names())
+    if (e != "gravity")
+      throw std::invalid_argument("DistDem::load: the world has the effect '" + e +
+                                  "', which the DEM on MPI ranks cannot run yet (docs/scaling.md); run it on one rank.");
   p_ = full.params();
   p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
   // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
@@ -321,6 +327,8 @@ void DistDem::load(const World& full) {
         d.F.back() = f.F[c], d.M.back() = f.M[c], d.TA.back() = f.TA[c], d.xc.back() = f.xc[c], d.bary.back() = f.bary[c];
       }
   }
+  for (WallContacts& d : wc)  // a list without contacts has its one offset, as a World's has
+    if (d.cand_off.empty()) d.cand_off.push_back(0);
   w_ = std::make_unique<World>(p_);
   w_->set_pair_kernel(full.pair_kernel());
   w_->set_cell(full.cell_origin(), full.cell_length());
@@ -1174,10 +1182,9 @@ void DistDem::unload(World& full) const {
     if (kind_bonds(w_->params(), c.kind)) wc.bond.push_back(c.b);
     wc.F.push_back(c.F), wc.M.push_back(c.M), wc.TA.push_back(c.TA), wc.xc.push_back(c.xc), wc.bary.push_back(c.bary);
   }
-  // A list without contacts keeps the form the World gives it.
-  for (int kind = 0; kind < 3; ++kind)
-    if (nwc[static_cast<std::size_t>(kind)].ball.empty() && lists[static_cast<std::size_t>(kind)]->cand_off.empty())
-      nwc[static_cast<std::size_t>(kind)].cand_off.clear();
+  // A list without contacts has its one offset, as a World's has.
+  for (WallContacts& wc : nwc)
+    if (wc.cand_off.empty()) wc.cand_off.push_back(0);
   std::vector<std::uint8_t> ghost;
   full.swap_balls(np, npc, nwc, ghost);
   full.copy_walls(*w_);

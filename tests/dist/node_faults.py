@@ -1,0 +1,114 @@
+#!/usr/bin/python3
+"""Faults with the DEM on MPI ranks, through launch/run (issue 17 item 3): on
+scenes/footing_small.toml with dem.ranks = 2,
+
+1. the blow-up guard: the top ball kicked out of the block at the gravity stage (dem.kick) stops
+   the run with exit code 3 and the same report (blowup_dem.txt, byte for byte) as on one
+   process: the ranks find it and the whole World reports it;
+2. a dead rank: rank 1 of the DEM killed with SIGKILL in the penetration ends the run with exit
+   code 3 within 5 s, launch/run naming the DEM and the coordinator naming node 'dem'.
+
+Usage: node_faults.py SOURCE_DIR BUILD_DIR WORK_DIR
+"""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+src, build, work = sys.argv[1:4]
+shutil.rmtree(work, ignore_errors=True)
+os.makedirs(work)
+env = dict(os.environ, DEMFDM_BUILD=build)
+failures = []
+
+
+def launch(name, sets):
+    args = ["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"), "--no-build",
+            "--run-dir", os.path.join(work, name), "--set", "output.traffic_log=false"]
+    for s in sets:
+        args += ["--set", s]
+    return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+# 1. The guard.
+reports = {}
+for ranks in (1, 2):
+    name = "kick_ranks%d" % ranks
+    p = launch(name, ["dem.ranks=%d" % ranks, "dem.kick=[0.0, 0.0, 200.0]"])
+    out, _ = p.communicate(timeout=300)
+    path = os.path.join(work, name, "blowup_dem.txt")
+    print("%s: exit code %d, report %s" % (name, p.returncode, "written" if os.path.exists(path) else "missing"))
+    if p.returncode != 3:
+        failures.append("%s: exit code %d, expected 3\n%s" % (name, p.returncode, out[-3000:]))
+    if not os.path.exists(path):
+        failures.append("%s: no blowup_dem.txt" % name)
+        continue
+    reports[ranks] = open(path, "rb").read()
+    if b"left the DEM domain" not in reports[ranks]:
+        failures.append("%s: the report does not name a ball leaving the domain" % name)
+if len(reports) == 2:
+    if reports[1] != reports[2]:
+        failures.append("the blow-up report on 2 ranks differs from one process's")
+    else:
+        print("blow-up report on 2 ranks: the same %d bytes as on one process (%s)" %
+              (len(reports[2]), reports[2].split(b"\n")[0].decode()[:120]))
+
+
+# 2. A dead rank.
+def rank_pid(run_dir, rank):
+    """The pid of the DEM's rank `rank` of the run in `run_dir` (its environment says its rank)."""
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit():
+            continue
+        try:
+            cmd = open("/proc/%s/cmdline" % pid, "rb").read()
+            if b"dem_node" not in cmd or ("--run-dir=" + run_dir).encode() not in cmd:
+                continue
+            envs = open("/proc/%s/environ" % pid, "rb").read().split(b"\0")
+        except OSError:
+            continue
+        if ("OMPI_COMM_WORLD_RANK=%d" % rank).encode() in envs:
+            return int(pid)
+    return None
+
+
+name = "dead_rank"
+run_dir = os.path.join(work, name)
+p = launch(name, ["dem.ranks=2", "stage.penetrate.depth_ratio=1.0", "stage.penetrate.steps=400000"])
+log = os.path.join(run_dir, "dem.log")
+deadline = time.time() + 120
+while time.time() < deadline and p.poll() is None:
+    if os.path.exists(log) and "stage 5 'penetrate' (penetrate) begins" in open(log).read():
+        break
+    time.sleep(0.1)
+time.sleep(1.0)
+pid = rank_pid(os.path.realpath(run_dir), 1)
+if p.poll() is not None or pid is None:
+    failures.append("dead rank: the run ended before the kill or rank 1 was not found (pid %s)" % pid)
+    p.kill()
+else:
+    t0 = time.time()
+    os.kill(pid, signal.SIGKILL)
+    try:
+        out, _ = p.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        p.kill()
+        out, _ = p.communicate()
+    took = time.time() - t0
+    coord = open(os.path.join(run_dir, "coordinator.log")).read()
+    print("rank 1 of the DEM killed in the penetration: the run ended with code %d after %.2f s" % (p.returncode, took))
+    print("  " + "\n  ".join(l for l in out.split("\n") if "launch/run: dem" in l or "node 'dem'" in l))
+    if p.returncode != 3:
+        failures.append("dead rank: exit code %d, expected 3\n%s" % (p.returncode, out[-3000:]))
+    if took >= 5.0:
+        failures.append("dead rank: the run ended %.2f s after the kill, not within 5 s" % took)
+    if "launch/run: dem (pid" not in out:
+        failures.append("dead rank: launch/run does not name the DEM\n" + out[-2000:])
+    if "node 'dem'" not in coord:
+        failures.append("dead rank: the coordinator does not name node 'dem'\n" + coord[-2000:])
+
+for f in failures:
+    print("FAIL:", f)
+sys.exit(1 if failures else 0)
