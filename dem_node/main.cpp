@@ -64,8 +64,16 @@ struct Ranks {
   MPI_Comm comm = MPI_COMM_NULL;
   int rank = 0, size = 1;
   bool root_dir = false;  // rank 0 has a run folder (writes results)
+  int local = 1;          // ranks of this job on this host
 };
 Ranks g_ranks;
+
+// The DEM's threads: run.threads; "auto" on ranks shares the host's CPUs among its ranks.
+int dem_threads(const config::Scene& s) {
+  const int n = schema::run_threads(s);
+  if (g_ranks.size > 1 && !s.integer_or_word("run.threads")) return std::max(1, n / g_ranks.local);
+  return n;
+}
 
 class DemParticipant : public node::Participant {
  public:
@@ -191,7 +199,7 @@ class DemParticipant : public node::Participant {
     dist_live_ = false;
     dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
-    world_.mutable_params().threads = schema::run_threads(s_);
+    world_.mutable_params().threads = dem_threads(s_);
     world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
     omp_set_num_threads(world_.params().threads);
     auto sec = r.section("dem_node");
@@ -563,6 +571,7 @@ class DemParticipant : public node::Participant {
 
   dem::WorldParams world_params() {
     dem::WorldParams p = dem::scene::world(s_, block_);
+    p.threads = dem_threads(s_);
     omp_set_num_threads(p.threads);
     return p;
   }
@@ -1159,6 +1168,12 @@ int main(int argc, char** argv) {
   g_ranks.comm = MPI_COMM_WORLD;
   MPI_Comm_rank(g_ranks.comm, &g_ranks.rank);
   MPI_Comm_size(g_ranks.comm, &g_ranks.size);
+  {
+    MPI_Comm host;
+    MPI_Comm_split_type(g_ranks.comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &host);
+    MPI_Comm_size(host, &g_ranks.local);
+    MPI_Comm_free(&host);
+  }
   int code = 0;
   if (g_ranks.rank == 0) {
     bool made = false;

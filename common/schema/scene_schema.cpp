@@ -291,8 +291,10 @@ void declare_dem(config::Section& root) {
       .min(0.0);
   d.integer("ranks", "-", 1,
             "MPI ranks of the DEM (docs/scaling.md): launch/run starts dem_node under mpirun with this many, "
-            "each owning a slab of the DEM block along its longest axis; results are the same bits at any "
-            "count. 1: one process, no MPI.")
+            "each stepping a slab of the DEM block along its longest axis. The ranks sum in the one-thread "
+            "order: the results are one process's bits at any rank count when run.thread_independent is on "
+            "or run.threads = 1. run.threads = \"auto\" shares a host's CPUs among its ranks. 1: one "
+            "process, no MPI.")
       .min(1)
       .max(4096);
   d.reals("kick", "m/s", std::vector<double>{},

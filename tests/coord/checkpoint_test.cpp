@@ -468,11 +468,12 @@ TEST_F(Checkpoint, DropFilesAfterRefusesAShorterOrMissingLedgerFile) {
 namespace {
 struct SceneText {
   std::string seed = "3", threads = "1", dem_damping = "", diameter = "0.4e-3", interval = "1", size_near = "0.5e-3",
-              servo_steps = "1", inertial = "1e-2";
+              servo_steps = "1", inertial = "1e-2", dem_ranks = "";
   bool last_stage = true;
   std::string text() const {
     std::string t = "[run]\nname = \"b\"\nseed = " + seed + "\nthreads = " + threads + "\n[gravity]\nlevel = 100\n[dem]\n" +
                     (dem_damping.empty() ? "" : "damping = " + dem_damping + "\n") +
+                    (dem_ranks.empty() ? "" : "ranks = " + dem_ranks + "\n") +
                     "[dem.specimen]\nscale = 1.5\ncell = [1e-3, 1e-3, 1e-3]\nreplicate = [1, 1, 2]\nporosity = 0.52\n"
                     "[dem.footing]\ndiameter = " + diameter + "\nheight = 0.2e-3\n"
                     "[continuum]\n[continuum.mesh]\nsize = [4e-3, 4e-3, 4e-3]\ninner_size = [1e-3, 1e-3, 2e-3]\n"
@@ -542,6 +543,7 @@ TEST_F(Checkpoint, BranchMayChangeLaterStagesAndFreeKeys) {
   fr.dem_damping = "0.5";
   fr.interval = "2";
   fr.threads = "4";
+  fr.dem_ranks = "3";  // the DEM's rank count changes no bit (docs/scaling.md)
   EXPECT_TRUE(b.conflicts(fr).empty()) << joined(b.conflicts(fr));
 }
 
