@@ -68,9 +68,10 @@ void contact_weights(const World& w, std::vector<std::int64_t>& wt);
 /// j/n of the total, at least one bin per slab (DistDem's balancing, bench_dist's model grids).
 std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int n, double len);
 
-/// Every rank's records on rank 0, in rank order (the other ranks get an empty array). Collective.
+/// Every rank's records on rank 0, in rank order (the other ranks get an empty array); `starts`
+/// (rank 0): where each rank's records begin, and their end. Collective.
 template <class T>
-std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine) {
+std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine, std::vector<std::size_t>* starts = nullptr) {
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
@@ -81,6 +82,11 @@ std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine) {
   for (int r = 0; r < size; ++r) {
     displ[static_cast<std::size_t>(r)] = total;
     total += counts[static_cast<std::size_t>(r)];
+  }
+  if (starts && rank == 0) {
+    starts->clear();
+    for (int r = 0; r < size; ++r) starts->push_back(static_cast<std::size_t>(displ[static_cast<std::size_t>(r)]) / sizeof(T));
+    starts->push_back(static_cast<std::size_t>(total) / sizeof(T));
   }
   std::vector<T> all(rank == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
   MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm);
