@@ -223,7 +223,7 @@ class DemParticipant : public node::Participant {
     const auto frames = o.frames, bytes = o.bytes, rows = o.rows;
     sec.done();
     clock_.set_state(c);
-    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     safe_dt_key_ = {-1, -1, -1};
     if (how.branch) {
       // A new run folder: new result files from the branch point on.
@@ -281,7 +281,7 @@ class DemParticipant : public node::Participant {
     open_outputs();
     begin_model_time(st);
     stage_ratio_ = st.view.real("ratio");
-    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
     has_ranked_phases_ = false;
@@ -373,7 +373,7 @@ class DemParticipant : public node::Participant {
 
   void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
     if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
-    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     if (energy_pending_) {
       // Energy balance of the stage (docs/stability.md) from the state before its first step,
       // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN).
@@ -484,7 +484,7 @@ class DemParticipant : public node::Participant {
   // Coupling (DEM role).
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
     leave_dist();
-    ratio_valid_ = skeleton_valid_ = fc_valid_ = false;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     wall_ = world_.add_facet_wall(m.positions, m.triangles);
     n_iface_ = m.n_points();
     spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
@@ -522,7 +522,15 @@ class DemParticipant : public node::Participant {
   // The World that steps: a rank's slab while the ranks step, else the whole World.
   dem::World& live() { return dist_live_ ? dist_->world() : world_; }
   const dem::World& live() const { return dist_live_ ? dist_->world() : world_; }
-  double kinetic_energy() const { return dist_live_ ? dist_->kinetic_energy() : world_.kinetic_energy(); }
+  // The kinetic energy of the current state, computed once per state (the history row and the
+  // guard both read it; on ranks it is a gather).
+  double kinetic_energy() {
+    if (!ke_valid_) {
+      ke_ = dist_live_ ? dist_->kinetic_energy() : world_.kinetic_energy();
+      ke_valid_ = true;
+    }
+    return ke_;
+  }
   // At the first step of a stage that is not specimen preparation, on more than one rank: the
   // whole World, set up, cut into slabs along the block's longest axis.
   void enter_dist() {
@@ -865,6 +873,8 @@ class DemParticipant : public node::Participant {
   bool skeleton_valid_ = false;
   double fc_ = 0.0;            // mean contact force of the state (mean_contact_force())
   bool fc_valid_ = false;
+  double ke_ = 0.0;            // kinetic energy of the state (kinetic_energy())
+  bool ke_valid_ = false;
   node::EnergyJump energy_jump_;
   double user_dt_ = 0, escape_margin_ = 0;
   std::vector<double> kick_;

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """The reduced coupled footing (scenes/footing_small.toml, all six stages) with the DEM on MPI
 ranks, through launch/run as a user runs it (issue 17 items 3 and 4): dem.ranks = 1 (one process,
-no MPI), 2 and 3 (3 on 2 cores: oversubscribed), and 2 ranks of 2 threads each. Every CSV file of
+no MPI), 2 and 3 (3 on 2 cores: oversubscribed), and 2 ranks of 2 threads each, with frames inside
+the stages every 700 steps (the ranks' parts assembled, then stepping on). Every CSV file of
 the run folders (histories of both nodes and of the coordinator, stress profiles, specimen stages)
 must be the same bytes as the one-process run's, and every dataset of dem.h5 and fdm.h5 the same
 bits; the interface balance holds to round-off; the ranked runs did step on ranks (the node's log
@@ -29,7 +30,7 @@ for name, ranks, threads in runs:
     out = os.path.join(work, name)
     p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"),
                         "--no-build", "--run-dir", out, "--set", "dem.ranks=%d" % ranks, "--set", "run.threads=%d" % threads,
-                        "--set", "output.traffic_log=false"],
+                        "--set", "output.traffic_log=false", "--set", "dem.output.frame_every=700"],
                        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     if p.returncode != 0:
         print(p.stdout[-4000:])
