@@ -6,7 +6,9 @@ scenes/footing_small.toml with dem.ranks = 2,
    the run with exit code 3 and the same report (blowup_dem.txt, byte for byte) as on one
    process: the ranks find it and the whole World reports it;
 2. a dead rank: rank 1 of the DEM killed with SIGKILL in the penetration ends the run with exit
-   code 3 within 5 s, launch/run naming the DEM and the coordinator naming node 'dem'.
+   code 3 within 5 s, launch/run naming the DEM and the coordinator naming node 'dem';
+3. never losing a ranked run: checkpoints inside the penetration, rank 1 killed, `launch/run
+   --resume`: every CSV file the bytes of the one-process run.
 
 Usage: node_faults.py SOURCE_DIR BUILD_DIR WORK_DIR
 """
@@ -108,6 +110,59 @@ else:
         failures.append("dead rank: launch/run does not name the DEM\n" + out[-2000:])
     if "node 'dem'" not in coord:
         failures.append("dead rank: the coordinator does not name node 'dem'\n" + coord[-2000:])
+
+# 3. Never lose a ranked run: checkpoints inside the penetration every 0.2 s of wall time, rank 1
+# killed once two exist, `launch/run --resume`: the results of one process, byte for byte.
+def wait_run(p, name, timeout=300):
+    out, _ = p.communicate(timeout=timeout)
+    if p.returncode != 0:
+        failures.append("%s: exit code %d\n%s" % (name, p.returncode, out[-3000:]))
+    return out
+
+
+def inside(run_dir):
+    d = os.path.join(run_dir, "checkpoints")
+    if not os.path.isdir(d):
+        return []
+    return [n for n in os.listdir(d) if n.startswith("penetrate-") and not n.endswith("-end") and
+            os.path.exists(os.path.join(d, n, "manifest.txt"))]
+
+
+wait_run(launch("resume_ref", []), "resume_ref")
+name = "resumed"
+run_dir = os.path.join(work, name)
+p = launch(name, ["dem.ranks=2", "run.checkpoint_every_s=0.2"])
+deadline = time.time() + 120
+while time.time() < deadline and p.poll() is None and len(inside(run_dir)) < 2:
+    time.sleep(0.01)
+pid = rank_pid(os.path.realpath(run_dir), 1)
+if p.poll() is not None or pid is None or len(inside(run_dir)) < 2:
+    failures.append("resume: the run ended before two checkpoints inside the penetration (%s)" % inside(run_dir))
+    p.kill()
+    p.communicate()
+else:
+    at_kill = sorted(inside(run_dir))
+    os.kill(pid, signal.SIGKILL)
+    p.communicate(timeout=60)
+    if p.returncode == 0:
+        failures.append("resume: the run whose rank 1 was killed exited 0")
+    r = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), "--resume", run_dir, "--no-build"], env=env,
+                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if r.returncode != 0:
+        failures.append("resume: launch/run --resume ended with code %d\n%s" % (r.returncode, r.stdout[-3000:]))
+    else:
+        ref = os.path.join(work, "resume_ref")
+        csvs = sorted(n for n in os.listdir(ref) if n.endswith(".csv"))
+        differ = [n for n in csvs if open(os.path.join(ref, n), "rb").read() !=
+                  open(os.path.join(run_dir, n), "rb").read() if os.path.exists(os.path.join(run_dir, n))]
+        missing = [n for n in csvs if not os.path.exists(os.path.join(run_dir, n))]
+        log = open(os.path.join(run_dir, "coordinator.log")).read()
+        frm = [l for l in log.split("\n") if "resuming run" in l]
+        print("2 ranks killed after checkpoints %s, resumed (%s): %d of %d CSV files the bytes of one process" %
+              (at_kill, frm[-1].split(" from ")[-1] if frm else "?", len(csvs) - len(differ) - len(missing),
+               len(csvs)))
+        if differ or missing:
+            failures.append("resume: %s differ, %s missing" % (differ, missing))
 
 for f in failures:
     print("FAIL:", f)
