@@ -7,7 +7,8 @@ the run folders (histories of both nodes and of the coordinator, stress profiles
 must be the same bytes as the one-process run's, and every dataset of dem.h5 and fdm.h5 the same
 bits; the interface balance holds to round-off; the ranked runs did step on ranks (the node's log
 names the ranks' communication in the stages' values); a branch on 3 ranks from the 3-rank run's
-gravity checkpoint repeats the one-process penetration byte for byte.
+gravity checkpoint repeats the one-process penetration byte for byte; and the DEM-only footing in a
+box of five planes (scenes/accuracy_footing_box.toml, reduced) gives one process's bytes on 2 ranks.
 
 Usage: node_footing.py SOURCE_DIR BUILD_DIR WORK_DIR
 """
@@ -96,6 +97,27 @@ else:
         else:
             same += 1
     print("branch on 3 ranks from the 3-rank gravity checkpoint: %d of 3 penetration files the same bytes" % same)
+
+# DEM only, in a box of five planes (scenes/accuracy_footing_box.toml reduced to 1,904 balls):
+# 2 ranks give one process's bytes in every CSV file.
+box = {}
+for ranks in (1, 2):
+    d = os.path.join(work, "box_ranks%d" % ranks)
+    p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/accuracy_footing_box.toml"),
+                        "--no-build", "--run-dir", d, "--set", "dem.ranks=%d" % ranks, "--set",
+                        "dem.specimen.replicate=[1, 1, 2]", "--set", "stage.gravity.steps=400", "--set",
+                        "stage.penetrate.depth_ratio=0.03", "--set", "output.traffic_log=false"],
+                       env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    if p.returncode != 0:
+        failures.append("the DEM-only box on %d ranks ended with code %d\n%s" % (ranks, p.returncode, p.stdout[-3000:]))
+    box[ranks] = d
+if not failures or all(os.path.exists(os.path.join(d, "dem_history.csv")) for d in box.values()):
+    names = sorted(n for n in os.listdir(box[1]) if n.endswith(".csv"))
+    bad = [n for n in names if not os.path.exists(os.path.join(box[2], n)) or
+           open(os.path.join(box[1], n), "rb").read() != open(os.path.join(box[2], n), "rb").read()]
+    print("DEM-only box of planes on 2 ranks: %d of %d CSV files the bytes of one process" % (len(names) - len(bad), len(names)))
+    if bad or len(names) < 5:
+        failures.append("DEM-only box: %s differ (of %d)" % (bad, len(names)))
 
 # The interface balance (continuum.iface_imbalance, docs/theory.md 6.4) at round-off in every step.
 hist = open(os.path.join(work, "ranks3", "history_5_penetrate.csv")).read().split("\n")
