@@ -7,11 +7,13 @@ a message of m bytes costs alpha + m / beta). Bricks are cubes of n balls at the
 density; the ghost shell is the halo 2 R_max + skin around a brick. Prints, for each rank count,
 the time per step split by part and the weak-scaling efficiency T(1) / T(P), for two designs:
 
-  today: this code: the incremental exchange (measured), its collectives over every rank
-         (8 (P - 1) messages per rebuild); the forward exchange point to point; shifted cuts;
-         ghosts integrated; the walls' sums gathered on rank 0.
-  next:  the exchange's messages to the 26 neighbour bricks only, RCB cuts, ghosts not
-         integrated, the walls' sums as exact (order-free) accumulators in one allreduce.
+  today: this code: the incremental exchange (measured), its records in one message to and from
+         each neighbour brick (26 for cubic bricks) and one allreduce that confirms no record
+         goes further (else all-to-all, not modelled: after cuts moved far); the forward
+         exchange point to point; shifted cuts; ghosts integrated; the walls' sums gathered on
+         rank 0.
+  next:  the same exchange, RCB cuts, ghosts not integrated, the walls' sums as exact
+         (order-free) accumulators in one allreduce.
 
 Usage: project_scaling.py [--network ib|ethernet] [--balls N] [--csv]
 """
@@ -33,8 +35,9 @@ MEASURED = dict(
     exchange_us_per_ball=0.72,
     # rebuild interval of the strained bench (26 rebuilds in 600 steps)
     steps_per_rebuild=600 / 26,
-    # the exchange's collectives per rebuild (4 all-to-alls, each a count and a data exchange)
-    exchange_collectives=8,
+    # the exchange's messages per rebuild and neighbour brick (one each way, counted once: the
+    # send overlaps the receive)
+    exchange_messages=1,
     # packing density [balls / mm^3]: 25,835 balls in 3.551 x 3.551 x 1.775 mm
     density=25835 / (3.5504 * 3.5504 * 1.7752),
     # halo [mm]: 2 R_max + skin = 2 x 0.0905 + 0.0116
@@ -95,9 +98,9 @@ def step_time(P, n, m, net, design):
         parts["exchange"] = parts["forward"] = parts["reduce"] = parts["walls"] = 0.0
     else:
         local = n * (1.0 + g)
-        # per rebuild: the local work, the collectives (today: over every rank; next: the 26
-        # neighbours), the rows of the new ghosts and migrants
-        msgs = m["exchange_collectives"] * ((P - 1) if design == "today" else 26)
+        # per rebuild: the local work, one message per neighbour brick and the allreduce that
+        # decides it, the rows of the new ghosts and migrants
+        msgs = m["exchange_messages"] * min(26, P - 1) + 2 * math.log2(P)
         per_rebuild = (local * m["exchange_us_per_ball"] + msgs * a_us +
                        n * g * m["new_ghost_fraction"] * m["row_bytes"] / beta)
         parts["exchange"] = per_rebuild / m["steps_per_rebuild"]

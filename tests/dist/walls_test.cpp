@@ -40,6 +40,7 @@ struct WallScene {
   int steps = 800;
   int balance_every = 0;  // DistDem::Balance::every
   DistDem::Weight weight = DistDem::Weight::kContacts;
+  double reach = -1.0;  // DistDem::set_neighbour_reach (0: every exchange falls back to all-to-all)
 };
 
 // The floor: a 3 x 3 grid of vertices over the box's base (margin kS), 8 triangles facing +z.
@@ -153,6 +154,7 @@ void check(const WallScene& sc) {
   DistDem d(MPI_COMM_WORLD, full->params(), g);
   d.load(*full);
   d.set_balance({sc.balance_every, 2048, sc.weight});
+  d.set_neighbour_reach(sc.reach);
   std::vector<Vec3> hist;
   run(d.world(), floor, sc.steps, hist, [&] { d.step(1); });
   const DistDem::Balls got = d.gather();
@@ -172,9 +174,10 @@ void check(const WallScene& sc) {
     test::expect_same_measures(*ref, ke, fc, ratio);
     std::size_t bonded_floor = 0;
     for (const BondHist& b : ref->facet_contacts().bond) bonded_floor += bonded(b.state);
-    std::printf("%s on %d ranks: %lld exchanges, %lld migrations, reference %lld rebuilds; footing %.4g N, floor %.4g N, "
-                "%zu floor bonds intact\n",
-                sc.name.c_str(), g_size, static_cast<long long>(d.exchanges()), sum[1],
+    std::printf("%s on %d ranks: %lld exchanges (%lld with the neighbour bricks only), %lld migrations, reference %lld "
+                "rebuilds; footing %.4g N, floor %.4g N, %zu floor bonds intact\n",
+                sc.name.c_str(), g_size, static_cast<long long>(d.exchanges()),
+                static_cast<long long>(d.neighbour_exchanges()), sum[1],
                 static_cast<long long>(ref->rebuild_count()), ref->footing_reaction().z, ref->facet_wall_force(0).z,
                 bonded_floor);
     test::expect_same_balls(got, *ref, static_cast<std::size_t>(sum[0]));
@@ -189,6 +192,9 @@ void check(const WallScene& sc) {
     EXPECT_GT(ref->rebuild_count(), 10);
     if (g_size > 1) {
       EXPECT_GT(sum[1], 0) << "balls must cross brick faces";
+      // Every record of these runs goes to a brick within the halo and the skin: point to point
+      // with the neighbours only, unless the reach is 0 (every exchange then all-to-all).
+      EXPECT_EQ(d.neighbour_exchanges(), sc.reach == 0.0 ? 0 : d.exchanges());
     }
     // The unloaded World is the reference's state, field by field as a checkpoint holds it, but
     // for the energies the ranks sum in their order; with those set equal it steps on with the
@@ -242,6 +248,13 @@ TEST(DistWalls, BondedFloorCutAlongZSameBits) {
 TEST(DistWalls, BalancedCutsAlongZSameBits) {
   WallScene sc{"walls, linear floor, cut along z, balanced", ContactModel::kLinear, 2};
   sc.balance_every = 3;
+  check(sc);
+}
+// The neighbour exchange's fallback: with a reach of 0 no brick is a peer, so every exchange
+// finds records for a non-peer and all ranks take the all-to-all (the same bits).
+TEST(DistWalls, AllToAllFallbackSameBits) {
+  WallScene sc{"walls, linear floor, cut along x, all-to-all", ContactModel::kLinear, 0};
+  sc.reach = 0.0;
   check(sc);
 }
 // Balancing by measured time (the cuts differ from run to run; the bits do not).

@@ -557,6 +557,90 @@ void DistDem::forward() {
 // wall contact to its ball's new owner. The kept rows and the new ones are merged in id order,
 // the kept and new contacts in (ball id, partner id) order: the rows and lists of a full
 // re-distribution, so the same bits.
+// The bricks whose extent, grown by the halo and the skin, meets this rank's brick (periodic
+// axes: also across the cell's faces); ascending, without this rank. The relation is symmetric,
+// so two ranks agree on whether they exchange.
+const std::vector<int>& DistDem::peer_ranks() {
+  std::vector<int> ax[3];
+  const double reach = reach_ >= 0.0 ? reach_ : halo_ + p_.skin;
+  int me[3] = {rank_ % grid_.n[0], (rank_ / grid_.n[0]) % grid_.n[1], rank_ / (grid_.n[0] * grid_.n[1])};
+  for (int k = 0; k < 3; ++k) {
+    const double a0 = grid_.edge(k, me[k]), a1 = grid_.edge(k, me[k] + 1), len = grid_.len[k];
+    for (int i = 0; i < grid_.n[k]; ++i) {
+      const double b0 = grid_.edge(k, i) - reach, b1 = grid_.edge(k, i + 1) + reach;
+      bool meet = b0 < a1 && a0 < b1;
+      if (grid_.periodic[k]) meet = meet || (b0 - len < a1 && a0 < b1 - len) || (b0 + len < a1 && a0 < b1 + len);
+      if (meet) ax[k].push_back(i);
+    }
+  }
+  peers_.clear();
+  for (int k2 : ax[2])
+    for (int k1 : ax[1])
+      for (int k0 : ax[0]) {
+        const int r = k0 + grid_.n[0] * (k1 + grid_.n[1] * k2);
+        if (r != rank_) peers_.push_back(r);
+      }
+  std::sort(peers_.begin(), peers_.end());
+  peers_.erase(std::unique(peers_.begin(), peers_.end()), peers_.end());
+  return peers_;
+}
+
+namespace {
+template <class T>
+void put_run(std::vector<char>& out, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  const std::size_t at = out.size();
+  out.resize(at + sizeof n + n * sizeof(T));
+  std::memcpy(out.data() + at, &n, sizeof n);
+  if (n) std::memcpy(out.data() + at + sizeof n, v.data(), n * sizeof(T));
+}
+template <class T>
+const char* take_run(const char* q, std::vector<T>& v) {
+  std::uint64_t n = 0;
+  std::memcpy(&n, q, sizeof n);
+  q += sizeof n;
+  const std::size_t at = v.size();
+  v.resize(at + n);
+  if (n) std::memcpy(static_cast<void*>(v.data() + at), q, n * sizeof(T));
+  return q + n * sizeof(T);
+}
+// One message to and from each peer (possibly empty): the ids, rows, pairs and wall contacts for
+// it; what arrives is appended in ascending source rank, as the all-to-all gives it.
+void neighbour_exchange(MPI_Comm comm, const std::vector<int>& peers, const std::vector<std::vector<std::uint64_t>>& kout,
+                        const std::vector<std::vector<BallRec>>& bout, const std::vector<std::vector<PairRec>>& pout,
+                        const std::vector<std::vector<WallRec>>& wout, std::vector<std::uint64_t>& kin,
+                        std::vector<BallRec>& bin, std::vector<PairRec>& pin, std::vector<WallRec>& win,
+                        std::vector<std::vector<char>>& out, std::vector<char>& in) {
+  constexpr int kTag = 7302;
+  out.resize(peers.size());
+  std::vector<MPI_Request> req(peers.size());
+  for (std::size_t j = 0; j < peers.size(); ++j) {
+    const auto r = static_cast<std::size_t>(peers[j]);
+    out[j].clear();
+    put_run(out[j], kout[r]);
+    put_run(out[j], bout[r]);
+    put_run(out[j], pout[r]);
+    put_run(out[j], wout[r]);
+    MPI_Isend(out[j].data(), static_cast<int>(out[j].size()), MPI_BYTE, peers[j], kTag, comm, &req[j]);
+  }
+  kin.clear(), bin.clear(), pin.clear(), win.clear();
+  for (int src : peers) {
+    MPI_Status st;
+    MPI_Probe(src, kTag, comm, &st);
+    int bytes = 0;
+    MPI_Get_count(&st, MPI_BYTE, &bytes);
+    if (in.size() < static_cast<std::size_t>(bytes)) in.resize(static_cast<std::size_t>(bytes));
+    MPI_Recv(in.data(), bytes, MPI_BYTE, src, kTag, comm, MPI_STATUS_IGNORE);
+    const char* q = in.data();
+    q = take_run(q, kin);
+    q = take_run(q, bin);
+    q = take_run(q, pin);
+    take_run(q, win);
+  }
+  MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
+}
+}  // namespace
+
 void DistDem::exchange() {
   if (size_ == 1) {  // no ghosts and no other rank: the rows stay, the World's rebuild does the rest
     ++exchanges_;
@@ -673,10 +757,27 @@ void DistDem::exchange() {
   std::vector<PairRec>& pin = buf_->pin;
   std::vector<WallRec>& win = buf_->win;
   std::vector<std::uint64_t>& kin = buf_->kin;
-  all_to_all(comm_, kout, kin, sbuf_, rbuf_);
-  all_to_all(comm_, bout, bin, sbuf_, rbuf_);
-  all_to_all(comm_, pout, pin, sbuf_, rbuf_);
-  all_to_all(comm_, wout, win, sbuf_, rbuf_);
+  // Neighbour bricks only when every record goes to one (the usual case: a ball moves less than
+  // the skin between exchanges); else, after cuts moved far or for a bond stretched across a
+  // brick, every rank with every rank. One flag decides it for all ranks. Either way the records
+  // arrive in source-rank order, so the merge below sees the same input.
+  const std::vector<int>& peers = peer_ranks();
+  int far = 0;
+  for (std::size_t r = 0; r < P && !far; ++r) {
+    if (static_cast<int>(r) == rank_ || std::binary_search(peers.begin(), peers.end(), static_cast<int>(r))) continue;
+    far = !kout[r].empty() || !bout[r].empty() || !pout[r].empty() || !wout[r].empty();
+  }
+  int any_far = 0;
+  MPI_Allreduce(&far, &any_far, 1, MPI_INT, MPI_MAX, comm_);
+  if (any_far) {
+    all_to_all(comm_, kout, kin, sbuf_, rbuf_);
+    all_to_all(comm_, bout, bin, sbuf_, rbuf_);
+    all_to_all(comm_, pout, pin, sbuf_, rbuf_);
+    all_to_all(comm_, wout, win, sbuf_, rbuf_);
+  } else {
+    neighbour_exchange(comm_, peers, kout, bout, pout, wout, kin, bin, pin, win, nbr_out_, rbuf_);
+    ++sparse_exchanges_;
+  }
   // the rows kept: own rows that stay, and the rows some owner named
   for (std::uint64_t id : kin) {
     const auto it = std::lower_bound(pt.id.begin(), pt.id.end(), id);

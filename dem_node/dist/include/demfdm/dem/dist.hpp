@@ -145,6 +145,14 @@ class DistDem {
   std::size_t ghosts() const;
   /// Exchanges so far (one per rebuild step), and the balls this rank sent to a new owner in them.
   std::int64_t exchanges() const { return exchanges_; }
+  /// Of those, the ones made with the neighbour bricks only (point to point): every record went
+  /// to a brick within the halo and the skin of the sender's. The others were all-to-all.
+  std::int64_t neighbour_exchanges() const { return sparse_exchanges_; }
+  /// How far a brick reaches for the neighbour exchange [m]: its extent grown by this meets its
+  /// peers' (default, < 0: the halo plus the skin, which a ball's records never exceed between
+  /// two exchanges unless cuts moved or a bond is stretched across a brick). Smaller values make
+  /// more exchanges fall back to all-to-all (tests/dist checks that path with 0).
+  void set_neighbour_reach(double reach) { reach_ = reach; }
   std::int64_t migrated() const { return migrated_; }
 
   /// Wall time [s] of this rank's steps by part: the World's two halves (compute), the ghosts'
@@ -192,6 +200,7 @@ class DistDem {
 
  private:
   void exchange();  // migration, new ghosts, histories, forward lists; replaces the World's balls
+  const std::vector<int>& peer_ranks();  // the bricks within the halo and the skin of this one
   void forward();   // the ghosts' x, v, ω from their owners
   void build_forward();  // the forward lists of the current rows
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
@@ -210,7 +219,10 @@ class DistDem {
   std::unique_ptr<World> w_;
   double halo_ = 0.0;
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
-  std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0;
+  std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0, sparse_exchanges_ = 0;
+  std::vector<int> peers_;                   // peer_ranks()
+  double reach_ = -1.0;                      // set_neighbour_reach
+  std::vector<std::vector<char>> nbr_out_;   // neighbour_exchange's messages
   double compute_at_balance_ = 0.0;  // times_.compute() at the last balancing (Weight::kTime)
   Balance bal_;
   Times times_;
