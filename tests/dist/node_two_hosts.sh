@@ -27,34 +27,19 @@ if [ -z "${TWO_HOSTS_INNER:-}" ]; then
   exit $?
 fi
 work="$TWO_HOSTS_WORK"
-# host A: this namespace
-hostname hosta
-ip link set lo up
-unshare -n -u -- sh -c 'hostname hostb; exec sleep 3600' &
-bpid=$!
+# host A: this namespace; host B: a holder in its own; multicast routed over the pair
+. "$here/two_hosts_lib.sh"
 pids=()
-cleanup() { for p in "${pids[@]}" "$bpid"; do kill -KILL "$p" 2>/dev/null || true; done; }
+cleanup() { for p in "${pids[@]}" ${TWO_HOSTS_B_PID:-}; do kill -KILL "$p" 2>/dev/null || true; done; }
 trap cleanup EXIT
-for _ in $(seq 50); do  # until the holder is in its namespace
-  [ "$(readlink /proc/$bpid/ns/net)" != "$(readlink /proc/self/ns/net)" ] && break
-  sleep 0.1
-done
-if ! ip link add vA type veth peer name vB 2>/dev/null; then
-  echo "SKIP: cannot create a veth pair here"
-  exit 77
-fi
-ip link set vB netns "$bpid"
-ip addr add 10.77.1.1/24 dev vA
-ip link set vA up
+two_hosts_make 10.77.1 || exit $?
+bpid="$TWO_HOSTS_B_PID"
 ip route add 224.0.0.0/4 dev vA
-nsenter -t "$bpid" -n -- ip link set lo up
-nsenter -t "$bpid" -n -- ip addr add 10.77.1.2/24 dev vB
-nsenter -t "$bpid" -n -- ip link set vB up
 nsenter -t "$bpid" -n -- ip route add 224.0.0.0/4 dev vB
 # rank 0 in host B, rank 1 in host A
 printf '10.77.1.2 slots=1\n10.77.1.1 slots=1\n' > "$work/hosts"
 # mpirun runs in host B (its rank 0 is local to it) and starts its daemon in host A by the agent
-export TWO_HOSTS_B_PID="$bpid" TWO_HOSTS_B_ADDR=10.77.1.2 TWO_HOSTS_A_PID=$$ TWO_HOSTS_A_ADDR=10.77.1.1
+export TWO_HOSTS_A_PID=$$ TWO_HOSTS_A_ADDR=10.77.1.1
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1 OMP_WAIT_POLICY=passive
 mpi() {
   nsenter -t "$bpid" -n -u -- \

@@ -16,29 +16,12 @@ if [ -z "${TWO_HOSTS_INNER:-}" ]; then
   unshare -n -u true 2>/dev/null || { echo "SKIP: cannot create network namespaces here"; exit 77; }
   exec unshare -n -u -- env TWO_HOSTS_INNER=1 "$0" "$@"
 fi
-# host A: this namespace
-hostname hosta
-ip link set lo up
+# host A: this namespace; host B: a holder in its own
 work="$(mktemp -d)"
-unshare -n -u -- sh -c 'hostname hostb; exec sleep 3600' &
-bpid=$!
-trap 'kill $bpid 2>/dev/null || true; rm -rf "$work"' EXIT
-for _ in $(seq 50); do  # until the holder is in its namespace
-  [ "$(readlink /proc/$bpid/ns/net)" != "$(readlink /proc/self/ns/net)" ] && break
-  sleep 0.1
-done
-if ! ip link add vA type veth peer name vB 2>/dev/null; then
-  echo "SKIP: cannot create a veth pair here"
-  exit 77
-fi
-ip link set vB netns "$bpid"
-ip addr add 10.77.0.1/24 dev vA
-ip link set vA up
-nsenter -t "$bpid" -n -- ip link set lo up
-nsenter -t "$bpid" -n -- ip addr add 10.77.0.2/24 dev vB
-nsenter -t "$bpid" -n -- ip link set vB up
+. "$here/two_hosts_lib.sh"
+trap 'kill ${TWO_HOSTS_B_PID:-} 2>/dev/null || true; rm -rf "$work"' EXIT
+two_hosts_make 10.77.0 || exit $?
 printf '10.77.0.1 slots=1\n10.77.0.2 slots=1\n' > "$work/hosts"
-export TWO_HOSTS_B_PID="$bpid" TWO_HOSTS_B_ADDR=10.77.0.2
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMP_NUM_THREADS=1
 run() {
   mpirun -np 2 --map-by node --hostfile "$work/hosts" --mca plm_rsh_agent "$here/ns_agent.sh" \

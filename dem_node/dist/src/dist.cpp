@@ -105,6 +105,27 @@ struct WallRec {
   BondHist b;
 };
 
+// A run of records in a byte message: its count, then the records (read back by get_recs).
+template <class T>
+void put_recs(std::vector<char>& out, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  const std::size_t at = out.size();
+  out.resize(at + sizeof n + n * sizeof(T));
+  std::memcpy(out.data() + at, &n, sizeof n);
+  if (n) std::memcpy(out.data() + at + sizeof n, v.data(), n * sizeof(T));
+}
+
+template <class T>
+const char* get_recs(const char* q, std::vector<T>& v) {
+  std::uint64_t n = 0;
+  std::memcpy(&n, q, sizeof n);
+  q += sizeof n;
+  const std::size_t at = v.size();
+  v.resize(at + n);
+  if (n) std::memcpy(static_cast<void*>(v.data() + at), q, n * sizeof(T));
+  return q + n * sizeof(T);
+}
+
 bool by_kind_ball_wall(const WallSumRec& x, const WallSumRec& y) {
   if (x.kind != y.kind) return x.kind < y.kind;
   return x.ball != y.ball ? x.ball < y.ball : x.wall < y.wall;
@@ -586,24 +607,7 @@ const std::vector<int>& DistDem::peer_ranks() {
 }
 
 namespace {
-template <class T>
-void put_run(std::vector<char>& out, const std::vector<T>& v) {
-  const std::uint64_t n = v.size();
-  const std::size_t at = out.size();
-  out.resize(at + sizeof n + n * sizeof(T));
-  std::memcpy(out.data() + at, &n, sizeof n);
-  if (n) std::memcpy(out.data() + at + sizeof n, v.data(), n * sizeof(T));
-}
-template <class T>
-const char* take_run(const char* q, std::vector<T>& v) {
-  std::uint64_t n = 0;
-  std::memcpy(&n, q, sizeof n);
-  q += sizeof n;
-  const std::size_t at = v.size();
-  v.resize(at + n);
-  if (n) std::memcpy(static_cast<void*>(v.data() + at), q, n * sizeof(T));
-  return q + n * sizeof(T);
-}
+
 // One message to and from each peer (possibly empty): the ids, rows, pairs and wall contacts for
 // it; what arrives is appended in ascending source rank, as the all-to-all gives it.
 void neighbour_exchange(MPI_Comm comm, const std::vector<int>& peers, const std::vector<std::vector<std::uint64_t>>& kout,
@@ -617,10 +621,10 @@ void neighbour_exchange(MPI_Comm comm, const std::vector<int>& peers, const std:
   for (std::size_t j = 0; j < peers.size(); ++j) {
     const auto r = static_cast<std::size_t>(peers[j]);
     out[j].clear();
-    put_run(out[j], kout[r]);
-    put_run(out[j], bout[r]);
-    put_run(out[j], pout[r]);
-    put_run(out[j], wout[r]);
+    put_recs(out[j], kout[r]);
+    put_recs(out[j], bout[r]);
+    put_recs(out[j], pout[r]);
+    put_recs(out[j], wout[r]);
     MPI_Isend(out[j].data(), static_cast<int>(out[j].size()), MPI_BYTE, peers[j], kTag, comm, &req[j]);
   }
   kin.clear(), bin.clear(), pin.clear(), win.clear();
@@ -632,10 +636,10 @@ void neighbour_exchange(MPI_Comm comm, const std::vector<int>& peers, const std:
     if (in.size() < static_cast<std::size_t>(bytes)) in.resize(static_cast<std::size_t>(bytes));
     MPI_Recv(in.data(), bytes, MPI_BYTE, src, kTag, comm, MPI_STATUS_IGNORE);
     const char* q = in.data();
-    q = take_run(q, kin);
-    q = take_run(q, bin);
-    q = take_run(q, pin);
-    take_run(q, win);
+    q = get_recs(q, kin);
+    q = get_recs(q, bin);
+    q = get_recs(q, pin);
+    get_recs(q, win);
   }
   MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
 }
@@ -1164,23 +1168,6 @@ struct WallFullRec {
   Vec3 F, M, TA, xc, bary;
 };
 
-template <class T>
-void put_recs(std::vector<char>& out, const std::vector<T>& v) {
-  const std::uint64_t n = v.size();
-  out.insert(out.end(), reinterpret_cast<const char*>(&n), reinterpret_cast<const char*>(&n) + sizeof n);
-  out.insert(out.end(), reinterpret_cast<const char*>(v.data()), reinterpret_cast<const char*>(v.data() + v.size()));
-}
-
-template <class T>
-const char* get_recs(const char* q, std::vector<T>& v) {
-  std::uint64_t n = 0;
-  std::memcpy(&n, q, sizeof n);
-  q += sizeof n;
-  const std::size_t at = v.size();
-  v.resize(at + n);
-  std::memcpy(static_cast<void*>(v.data() + at), q, n * sizeof(T));
-  return q + n * sizeof(T);
-}
 
 }  // namespace
 
