@@ -549,6 +549,9 @@ class DemParticipant : public node::Participant {
       if (g.len[k] > g.len[axis]) axis = k;
     g.n[axis] = g_ranks.size;
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
+    dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
+                        s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime
+                                                                   : dem::DistDem::Weight::kContacts});
     dist_->load(world_);
     dist_live_ = true;
     synced_ = false;
@@ -565,6 +568,9 @@ class DemParticipant : public node::Participant {
   void leave_dist() {
     if (!dist_live_) return;
     sync_full();
+    if (dist_->rebalances() > 0)
+      spdlog::info("dem: {} rebalances of the ranks' cuts in the stage ({} exchanges)", dist_->rebalances(),
+                   dist_->exchanges());
     const auto& t = dist_->times();  // the ranks' communication, as effects of the stage
     effect_s_["ranks.forward"] += t.forward;
     effect_s_["ranks.reduce"] += t.reduce;

@@ -297,6 +297,14 @@ void declare_dem(config::Section& root) {
             "process, no MPI.")
       .min(1)
       .max(4096);
+  d.integer("balance_every", "-", 0,
+            "With dem.ranks > 1: move the cuts between the ranks' slabs every this many neighbour-list "
+            "rebuilds so that the slabs carry equal weight (LAMMPS's fix balance shift; docs/scaling.md). "
+            "Balancing moves balls between ranks, never a bit of the results. 0: even cuts.")
+      .min(0);
+  d.choice("balance_weight", {"contacts", "time"}, std::string("contacts"),
+           "What dem.balance_every weighs: a ball's listed contacts plus one (contacts), or its rank's "
+           "measured compute time shared by the rank's balls (time, LAMMPS's weight time).");
   d.reals("kick", "m/s", std::vector<double>{},
           "Stability studies: velocity [vx, vy, vz] given to the highest ball at the first stage that is not "
           "a specimen-generation stage; empty: none.");

@@ -545,7 +545,7 @@ std::vector<std::string> branch_conflicts(const config::Scene& saved, const conf
       return idx >= ran;
     }
     for (const char* p : {"dem.dt_safety", "dem.damping", "dem.dt_fixed", "dem.dt_above_critical", "dem.footing.",
-                          "dem.output.", "dem.escape_margin", "dem.ranks", "coupling.", "output.", "bus.", "run.threads",
+                          "dem.output.", "dem.escape_margin", "dem.ranks", "dem.balance_", "coupling.", "output.", "bus.", "run.threads",
                           "run.thread_independent", "run.name",
                           "run.description", "run.guard_", "run.checkpoint_", "continuum.output."})
       if (starts(k, p)) return true;

@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """The reduced coupled footing (scenes/footing_small.toml, all six stages) with the DEM on MPI
 ranks, through launch/run as a user runs it (issue 17 items 3 and 4): dem.ranks = 1 (one process,
-no MPI), 2 and 3 (3 on 2 cores: oversubscribed), and 2 ranks of 2 threads each, with frames inside
+no MPI), 2 and 3 (3 on 2 cores: oversubscribed; cuts balanced by contacts), and 2 ranks of 2
+threads each (cuts balanced by measured time), with frames inside
 the stages every 700 steps (the ranks' parts assembled, then stepping on). Every CSV file of
 the run folders (histories of both nodes and of the coordinator, stress profiles, specimen stages)
 must be the same bytes as the one-process run's, and every dataset of dem.h5 and fdm.h5 the same
@@ -25,13 +26,19 @@ src, build, work = sys.argv[1:4]
 shutil.rmtree(work, ignore_errors=True)
 os.makedirs(work)
 
-runs = [("ranks1", 1, 1), ("ranks2", 2, 1), ("ranks3", 3, 1), ("ranks2_threads2", 2, 2)]
+# (name, ranks, threads, more overrides): 3 ranks balance their cuts by contacts every 2nd
+# rebuild, 2 x 2 by measured time every 3rd (the cuts then differ from run to run, the bits not).
+runs = [("ranks1", 1, 1, []), ("ranks2", 2, 1, []), ("ranks3", 3, 1, ["dem.balance_every=2"]),
+        ("ranks2_threads2", 2, 2, ["dem.balance_every=3", "dem.balance_weight=time"])]
 env = dict(os.environ, DEMFDM_BUILD=build)
-for name, ranks, threads in runs:
+for name, ranks, threads, more in runs:
     out = os.path.join(work, name)
+    sets = []
+    for m in more:
+        sets += ["--set", m]
     p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"),
                         "--no-build", "--run-dir", out, "--set", "dem.ranks=%d" % ranks, "--set", "run.threads=%d" % threads,
-                        "--set", "output.traffic_log=false", "--set", "dem.output.frame_every=700"],
+                        "--set", "output.traffic_log=false", "--set", "dem.output.frame_every=700"] + sets,
                        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     if p.returncode != 0:
         print(p.stdout[-4000:])
@@ -55,7 +62,7 @@ def datasets(path):
 
 
 ref_h5 = {n: datasets(os.path.join(ref, n)) for n in ("dem.h5", "fdm.h5")}
-for name, ranks, threads in runs[1:]:
+for name, ranks, threads, more in runs[1:]:
     d = os.path.join(work, name)
     for n in csvs:
         a = open(os.path.join(ref, n), "rb").read()
@@ -77,6 +84,8 @@ for name, ranks, threads in runs[1:]:
     m = re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.exchange=([0-9.e+-]+)", log)
     if not m:
         failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
+    if more and not re.search(r"dem: [1-9][0-9]* rebalances of the ranks' cuts", log):
+        failures.append("%s: the ranks did not rebalance their cuts" % name)
     print("%s: %d CSV files and %d + %d datasets compared with one process's" %
           (name, len(csvs), len(ref_h5["dem.h5"]), len(ref_h5["fdm.h5"])))
 
