@@ -11,13 +11,10 @@ set -euo pipefail
 src="$1"
 build="$2"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+. "$here/two_hosts_lib.sh"
 bin="$build/bin"
 if [ -z "${TWO_HOSTS_INNER:-}" ]; then
-  for tool in unshare nsenter ip mpirun; do
-    command -v "$tool" >/dev/null || { echo "SKIP: '$tool' is not installed"; exit 77; }
-  done
-  [ "$(id -u)" -eq 0 ] || { echo "SKIP: network namespaces need root"; exit 77; }
-  unshare -n -u true 2>/dev/null || { echo "SKIP: cannot create network namespaces here"; exit 77; }
+  two_hosts_check
   work="$(mktemp -d)"
   trap 'rm -rf "$work"' EXIT
   # The reference: the scene through launch/run, one process.
@@ -28,7 +25,6 @@ if [ -z "${TWO_HOSTS_INNER:-}" ]; then
 fi
 work="$TWO_HOSTS_WORK"
 # host A: this namespace; host B: a holder in its own; multicast routed over the pair
-. "$here/two_hosts_lib.sh"
 pids=()
 cleanup() { for p in "${pids[@]}" ${TWO_HOSTS_B_PID:-}; do kill -KILL "$p" 2>/dev/null || true; done; }
 trap cleanup EXIT

@@ -8,17 +8,13 @@
 set -euo pipefail
 tests="$1"
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+. "$here/two_hosts_lib.sh"
 if [ -z "${TWO_HOSTS_INNER:-}" ]; then
-  for tool in unshare nsenter ip mpirun; do
-    command -v "$tool" >/dev/null || { echo "SKIP: '$tool' is not installed"; exit 77; }
-  done
-  [ "$(id -u)" -eq 0 ] || { echo "SKIP: network namespaces need root"; exit 77; }
-  unshare -n -u true 2>/dev/null || { echo "SKIP: cannot create network namespaces here"; exit 77; }
+  two_hosts_check
   exec unshare -n -u -- env TWO_HOSTS_INNER=1 "$0" "$@"
 fi
 # host A: this namespace; host B: a holder in its own
 work="$(mktemp -d)"
-. "$here/two_hosts_lib.sh"
 trap 'kill ${TWO_HOSTS_B_PID:-} 2>/dev/null || true; rm -rf "$work"' EXIT
 two_hosts_make 10.77.0 || exit $?
 printf '10.77.0.1 slots=1\n10.77.0.2 slots=1\n' > "$work/hosts"

@@ -1,4 +1,16 @@
-# Sourced by tests/dist/two_hosts.sh and node_two_hosts.sh. two_hosts_make NET: in this process's
+# Sourced by tests/dist/two_hosts.sh and node_two_hosts.sh.
+#
+# two_hosts_check: exits 77 (skipped) with a reason where two hosts cannot be made here (not root,
+# or no unshare, nsenter, ip or mpirun, or no namespaces allowed).
+two_hosts_check() {
+  for tool in unshare nsenter ip mpirun; do
+    command -v "$tool" >/dev/null || { echo "SKIP: '$tool' is not installed"; exit 77; }
+  done
+  [ "$(id -u)" -eq 0 ] || { echo "SKIP: network namespaces need root"; exit 77; }
+  unshare -n -u true 2>/dev/null || { echo "SKIP: cannot create network namespaces here"; exit 77; }
+}
+
+# two_hosts_make NET: in this process's
 # own network and UTS namespaces (host A, named hosta, lo up), start host B (a holder process in
 # new ones, named hostb, lo up) and join the two by a veth pair, NET.1 on vA in A and NET.2 on vB
 # in B. Sets TWO_HOSTS_B_PID (the holder, for nsenter) and TWO_HOSTS_B_ADDR. Returns 77 when a
