@@ -20,8 +20,10 @@
 //
 // What this version covers: balls, ball-ball and ball-wall contacts of every law, periodic cells
 // (also strained) and free space, gravity, the fixed or the automatic step (the smallest over
-// the ranks). Not yet: effects other than gravity (servos); the node's measurements, output and
-// checkpoints; specimen procedures; load balancing.
+// the ranks), dynamic balancing, the node's measurements, and one World again from the ranks'
+// parts (unload: output, checkpoints, the next stage's set-up). Not yet: effects other than
+// gravity (servos; load refuses them); specimen procedures (dem_node runs them on the whole
+// World on every rank).
 #pragma once
 
 #include <mpi.h>
