@@ -1141,14 +1141,11 @@ int follow() {
         how.dir = c.get_str();
         how.saved_scene_hash = c.get<std::uint64_t>();
         how.branch = c.get<std::uint8_t>() != 0;
-        // the node file as rank 0 reads it: its runtime section first
+        // The node file's adapter section only: rank 0's runtime reads the runtime section and
+        // checks that the file holds nothing else (StateReader::finish).
         const auto path = how.dir / "dem.state";
         io::StateReader r(io::read_whole_file(path), path.string(), "node", how.saved_scene_hash);
-        auto rt = r.section("runtime");
-        (void)rt.str(), (void)rt.str(), (void)rt.i64(), (void)rt.i32(), (void)rt.b(), (void)rt.b(), (void)rt.i64();
-        rt.done();
         p.restore(r, how);
-        r.finish();
         break;
       }
       case Op::kMesh: {
