@@ -415,6 +415,7 @@ class DemParticipant : public node::Participant {
   }
 
   proto::Values step_values() override {
+    node::Timed t(effect_s_["measurements"]);
     // The report of this step needs both O(contacts) measurements of the state (the ratios'
     // mean contact force and, for dt_stable, the critical step): one pass over the contacts.
     if (!dist_live_ && !fc_valid_ && safe_dt_key() != safe_dt_key_ && world_.num_balls() > 0) {

@@ -59,7 +59,9 @@ double reference_unbalanced_sum(const World& w) {
   return s;
 }
 
-double reference_dt(const World& w) {
+// kt_out, kr_out: every ball's stiffness sums (the scan must give their bits too, not only
+// those of the smallest step).
+double reference_dt(const World& w, std::vector<double>* kt_out = nullptr, std::vector<double>* kr_out = nullptr) {
   const Particles& pt = w.balls();
   const PairContacts& pc = w.pair_contacts();
   const WorldParams& p = w.params();
@@ -83,6 +85,8 @@ double reference_dt(const World& w) {
     if (kt[i] > 0.0) dt = std::min(dt, std::sqrt(pt.m[i] / kt[i]));
     if (kr[i] > 0.0) dt = std::min(dt, std::sqrt(pt.inertia[i] / kr[i]));
   }
+  if (kt_out) *kt_out = kt;
+  if (kr_out) *kr_out = kr;
   return p.dt_safety * dt;
 }
 
@@ -156,7 +160,17 @@ TEST(ContactScan, SameBitsAsTheSerialLoopsAtOneAndTwoThreads) {
       const World& cw = *w;
       const World::ContactScan both = cw.contact_scan(true, true);
       const std::string at = name(c) + " step " + std::to_string(k + 1);
-      ASSERT_TRUE(same_bits(both.dt, reference_dt(cw))) << at << ": critical step " << both.dt << " vs " << reference_dt(cw);
+      std::vector<double> kt, kr;
+      ASSERT_TRUE(same_bits(both.dt, reference_dt(cw, &kt, &kr))) << at << ": critical step " << both.dt << " vs " << reference_dt(cw);
+      // every ball's sums, at this thread count and (below) the other
+      auto same_sums = [&](const std::string& what) {
+        ASSERT_EQ(cw.stiffness_sums_translational().size(), kt.size()) << what;
+        for (std::size_t i = 0; i < kt.size(); ++i) {
+          ASSERT_TRUE(same_bits(cw.stiffness_sums_translational()[i], kt[i])) << what << ": k_t of row " << i;
+          ASSERT_TRUE(same_bits(cw.stiffness_sums_rotational()[i], kr[i])) << what << ": k_r of row " << i;
+        }
+      };
+      same_sums(at);
       ASSERT_TRUE(same_bits(both.fc, reference_fc(cw))) << at << ": mean contact force " << both.fc << " vs " << reference_fc(cw);
       ASSERT_GT(both.fc, 0.0) << at;
       // the separate calls, and the other thread count on the same state
@@ -164,6 +178,7 @@ TEST(ContactScan, SameBitsAsTheSerialLoopsAtOneAndTwoThreads) {
       EXPECT_TRUE(same_bits(w->mean_contact_force(), both.fc)) << at;
       w->mutable_params().threads = 3 - c.threads;
       const World::ContactScan other = cw.contact_scan(true, true);
+      same_sums(at + ": threads " + std::to_string(3 - c.threads));
       w->mutable_params().threads = c.threads;
       EXPECT_TRUE(same_bits(other.dt, both.dt) && same_bits(other.fc, both.fc)) << at << ": threads " << 3 - c.threads;
       // the O(balls) measurements of every step
@@ -180,5 +195,64 @@ TEST(ContactScan, SameBitsAsTheSerialLoopsAtOneAndTwoThreads) {
     if (law_has_bond(c.model)) {
       EXPECT_LT(bonded_after, bonded_before) << name(c) << ": no bond failed";
     }
+  }
+}
+
+// The pass writes every contact's force norm for the scan (it need not stream the histories
+// again). A history changed after the pass (through pair_contacts(), or by bonding) must be
+// seen by the next scan: the norms are then recomputed.
+TEST(ContactScan, HistoriesChangedAfterThePassAreSeen) {
+  for (ContactModel m : {ContactModel::kLinear, ContactModel::kSoftBond}) {
+    auto w = make_world({m, false, PairKernel::kAuto, 2});
+    w->step();
+    w->step();
+    const double before = w->mean_contact_force();
+    ASSERT_TRUE(same_bits(before, reference_fc(*w))) << law_name(m);
+    std::size_t c = 0;
+    while (c < w->pair_contacts().size() && !(w->pair_contacts().h[c].flags & ContactHist::kActive)) ++c;
+    ASSERT_LT(c, w->pair_contacts().size()) << law_name(m);
+    w->pair_contacts().h[c].fn *= 3.0;
+    const double after = w->mean_contact_force();
+    EXPECT_FALSE(same_bits(after, before)) << law_name(m);
+    EXPECT_TRUE(same_bits(after, reference_fc(*w))) << law_name(m) << ": " << after << " vs " << reference_fc(*w);
+    if (law_has_bond(m)) {  // bonding changes the histories too
+      w->bond_ball_ball(-1.0, 0.05 * 1e-4);
+      EXPECT_TRUE(same_bits(w->mean_contact_force(), reference_fc(*w))) << law_name(m) << " after bonding";
+    }
+  }
+}
+
+// The critical step's terms are kept across steps and redone only for the contacts whose active
+// flag or bond state a pass changed. What else they depend on, changed between two scans, must
+// make the next scan start again: a radius, the family's parameters, the list's histories.
+TEST(ContactScan, KeptStiffnessTermsFollowRadiiParametersAndHistories) {
+  for (ContactModel m : {ContactModel::kLinear, ContactModel::kSoftBond, ContactModel::kLinearPBond}) {
+    auto w = make_world({m, false, PairKernel::kAuto, 2});
+    auto check = [&](const std::string& what) {
+      std::vector<double> kt, kr;
+      const double ref = reference_dt(*w, &kt, &kr);
+      const double dt = static_cast<const World&>(*w).contact_scan(true, false).dt;
+      ASSERT_TRUE(same_bits(dt, ref)) << law_name(m) << " " << what;
+      for (std::size_t i = 0; i < kt.size(); ++i) {
+        ASSERT_TRUE(same_bits(w->stiffness_sums_translational()[i], kt[i])) << law_name(m) << " " << what << ": row " << i;
+        ASSERT_TRUE(same_bits(w->stiffness_sums_rotational()[i], kr[i])) << law_name(m) << " " << what << ": row " << i;
+      }
+    };
+    w->step();
+    check("after a step");
+    w->step();
+    check("after the next step (kept terms)");
+    w->set_radius(7, w->balls().r[7] * 1.01);
+    check("after a radius changed");
+    w->mutable_params().ball_ball.linear.emod *= 2.0;  // new contacts' stiffness; kept ones keep theirs
+    w->mutable_params().ball_ball.pbond.kratio *= 2.0;
+    check("after the family changed");
+    std::size_t c = 0;
+    while (c < w->pair_contacts().size() && !(w->pair_contacts().h[c].flags & ContactHist::kActive)) ++c;
+    ASSERT_LT(c, w->pair_contacts().size());
+    w->pair_contacts().h[c].kn *= 3.0;
+    check("after a history changed");
+    w->step();
+    check("after one more step");
   }
 }

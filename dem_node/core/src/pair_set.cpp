@@ -221,6 +221,23 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   BondHist* __restrict__ BD = contacts.bond.empty() ? nullptr : contacts.bond.data();
   const Vec3 L = cx.p.periodic.length;
   const Vec3 ed = cx.edot;
+  // Every contact's ||F|| as scan() computes it from the history the pass leaves (the mean
+  // contact force of the step's report), written while the record is at hand: scan() then need
+  // not stream the histories again (norm_ok_).
+  norm_ok_ = false;
+  norm_.resize(contacts.size());
+  double* __restrict__ SN = norm_.data();
+  // Marks the contacts whose active flag or bond state this pass changes, for scan()'s kept
+  // terms (a byte per contact, or-ed until a scan takes them; no branch in the loops).
+  if (chg_.size() != contacts.size()) {
+    chg_.assign(contacts.size(), 0);
+    terms_ok_ = false;  // the marks of earlier passes are gone
+  }
+  std::uint8_t* __restrict__ CH = chg_.data();
+  // The state a contact's stiffness terms depend on that a pass can change.
+  auto key = [=](std::int64_t c) __attribute__((always_inline)) -> unsigned {
+    return (H[c].flags & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
+  };
   std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
   const std::uint8_t* const G = cx.ghost;          // ghost rows (a rank's world), or null
   const double rgap = lc.rgap;
@@ -373,11 +390,18 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       double d2;
       branch_d(c, a, b, d, d2);
       if (idle(c, a, b, d2)) {
-        if (H[c].flags & ContactHist::kActive) H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
+        if (H[c].flags & ContactHist::kActive) {
+          H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
+          CH[c] = 1;
+        }
+        SN[c] = norm(Law::force(H[c], bond_at(c)));
         continue;
       }
+      const unsigned k0 = key(c);
       Vec3 F, TA, TB;
       law(c, a, b, d, d2, F, TA, TB);
+      SN[c] = norm(Law::force(H[c], bond_at(c)));
+      CH[c] |= key(c) != k0;
       if constexpr (Save) {
         while (*cur.c < static_cast<std::uint64_t>(c)) ++cur.c;
         if (*cur.c == static_cast<std::uint64_t>(c)) SV[cur.c - cur.c0] = {F, TB, stamp};
@@ -396,6 +420,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     BallSums<Save> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
     pairblock::In in;
     pairblock::Out out;
+    unsigned k0[K];  // each lane's key() before the law
     std::int64_t c = c0;
     while (c < c1) {
       int n = 0;
@@ -410,6 +435,9 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         const bool skip = idle(c, a, b, d2);
         const std::uint8_t fl = H[c].flags;
         H[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
+        if (skip) SN[c] = norm(Law::force(H[c], bond_at(c)));  // a live one's comes in stage 3
+        CH[c] |= skip & ((fl & ContactHist::kActive) != 0);
+        k0[n] = (fl & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
         in.c[n] = c;
         in.a[n] = a;
         in.b[n] = b;
@@ -443,6 +471,8 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
+        SN[cl] = norm(Law::force(H[cl], bond_at(cl)));
+        CH[cl] |= key(cl) != k0[l];
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
           if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};
@@ -461,6 +491,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
     std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
     run(std::false_type{}, 0, m, cx.pt.f.data(), cx.pt.t.data(), ChunkCursor{});
+    norm_ok_ = true, norm_gen_ = gen_;
     return;
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
@@ -561,6 +592,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       }
     }
   }
+  norm_ok_ = true, norm_gen_ = gen_;
 }
 
 // The plan of a threaded pass in `chunks` chunks (see pass_law): the chunk boundaries, the split
@@ -649,14 +681,51 @@ void PairSet::plan_split(std::size_t n, int chunks) {
 // stiffnesses); the sums over them then run in contact order, the additions and their order of
 // one serial loop: the same bits at any thread count.
 
+namespace {
+// One contact's terms of the critical step (Law::stiffness): translational to both balls,
+// rotational plus k_s R² to each; `live`: the contact counts.
+template <class L>
+[[gnu::always_inline]] inline void stiffness_terms(const ContactHist& h, const BondHist* b, const ContactFamilyParams& fam,
+                                                   double ra, double rb, double& k, double& ka, double& kb,
+                                                   std::uint8_t& live) {
+  live = (h.flags & ContactHist::kActive) || (b && bonded(b->state));
+  if (!live) return;
+  const ContactStiffness s = L::stiffness(h, b, fam, ra, rb);
+  k = s.k;
+  ka = s.krot + s.ks * ra * ra;
+  kb = s.krot + s.ks * rb * rb;
+}
+}  // namespace
+
 void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
   fc_ = want_fc;
   dt_ = want_dt;
+  terms_fresh_ = false;
   const std::int64_t m = static_cast<std::int64_t>(contacts.size());
   const int nt = cx.threads;
   const std::size_t um = contacts.size();
+  const std::size_t n = cx.pt.size();
+  const ContactFamilyParams& fam = cx.p.ball_ball;
+  // The norms the last pass wrote, if nothing changed the list or its histories since.
+  const bool fresh = want_fc && norm_ok_ && norm_gen_ == gen_ && norm_.size() == um;
+  // The kept terms of the critical step, if the list, the radii and the family are those they
+  // were computed for: only the contacts the passes since then changed are redone.
+  bool terms_loop = want_dt;
+  if (want_dt && terms_ok_ && terms_gen_ == gen_ && kt_pair_.size() == n && terms_r_.size() == n &&
+      std::memcmp(terms_r_.data(), cx.pt.r.data(), n * sizeof(double)) == 0 &&
+      std::memcmp(terms_fam_.data(), &fam, sizeof fam) == 0) {
+    visit_law(fam.model, [&](auto law) {
+      using L = decltype(law);
+      if constexpr (!L::kStiffnessVaries) {
+        terms_events<L>(cx);
+        terms_loop = false;
+        terms_fresh_ = true;
+      }
+    });
+  }
+  if (fresh && !terms_loop) return;
   if (want_fc) norm_.resize(um);
-  if (want_dt) {
+  if (terms_loop) {
     k_.resize(um);
     ka_.resize(um);
     kb_.resize(um);
@@ -669,45 +738,132 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
   const std::uint32_t* __restrict__ A = contacts.a.data();
   const std::uint32_t* __restrict__ B = contacts.b.data();
   const double* __restrict__ R = cx.pt.r.data();
-  double* __restrict__ SN = want_fc ? norm_.data() : nullptr;
-  double* __restrict__ SK = want_dt ? k_.data() : nullptr;
-  double* __restrict__ SKA = want_dt ? ka_.data() : nullptr;
-  double* __restrict__ SKB = want_dt ? kb_.data() : nullptr;
-  std::uint8_t* __restrict__ SL = want_dt ? live_.data() : nullptr;
-  const ContactFamilyParams& fam = cx.p.ball_ball;
+  double* __restrict__ SN = want_fc && !fresh ? norm_.data() : nullptr;
+  double* __restrict__ SK = terms_loop ? k_.data() : nullptr;
+  double* __restrict__ SKA = terms_loop ? ka_.data() : nullptr;
+  double* __restrict__ SKB = terms_loop ? kb_.data() : nullptr;
+  std::uint8_t* __restrict__ SL = terms_loop ? live_.data() : nullptr;
   visit_law(fam.model, [=, &fam](auto law) {
     using L = decltype(law);
     constexpr std::int64_t ahead = 16;
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
     for (std::int64_t c = 0; c < m; ++c) {
-      if (want_dt && c + ahead < m) __builtin_prefetch(R + B[c + ahead]);
+      if (SK && c + ahead < m) __builtin_prefetch(R + B[c + ahead]);
       const ContactHist& h = H[c];
       const BondHist* b = BD ? BD + c : nullptr;
-      if (want_fc) SN[c] = norm(L::force(h, b));
-      if (!want_dt) continue;
-      // Each counted contact adds the stiffnesses of its law (Law::stiffness): translational to
-      // both balls, rotational plus k_s R² to each.
-      const bool live = (h.flags & ContactHist::kActive) || (b && bonded(b->state));
-      SL[c] = live;
-      if (!live) continue;
-      const std::uint32_t a = A[c], bb = B[c];
-      const ContactStiffness s = L::stiffness(h, b, fam, R[a], R[bb]);
-      SK[c] = s.k;
-      SKA[c] = s.krot + s.ks * R[a] * R[a];
-      SKB[c] = s.krot + s.ks * R[bb] * R[bb];
+      if (SN) SN[c] = norm(L::force(h, b));
+      if (SK) stiffness_terms<L>(h, b, fam, R[A[c]], R[B[c]], SK[c], SKA[c], SKB[c], SL[c]);
     }
   });
+  if (terms_loop)
+    visit_law(fam.model, [&](auto law) {
+      using L = decltype(law);
+      if constexpr (!L::kStiffnessVaries) {
+        terms_full<L>(cx);
+        terms_fresh_ = true;
+      }
+    });
 }
 
-void PairSet::add_force_norms(double& sum, std::size_t& count) const {
+// The kept terms start again from the ones just computed for every contact: every ball's pair
+// sums (add_stiffness's serial loop), the per-ball index, and the keys they hold for.
+template <class L>
+void PairSet::terms_full(const SetContext& cx) {
+  const std::size_t n = cx.pt.size(), m = contacts.size();
+  kt_pair_.assign(n, 0.0);
+  kr_pair_.assign(n, 0.0);
+  stiffness_loop(kt_pair_.data(), kr_pair_.data());
+  const std::uint32_t* A = contacts.a.data();
+  const std::uint32_t* B = contacts.b.data();
+  bb_off_.assign(n + 1, 0u);
+  for (std::size_t c = 0; c < m; ++c) {
+    ++bb_off_[A[c] + 1];
+    ++bb_off_[B[c] + 1];
+  }
+  for (std::size_t i = 0; i < n; ++i) bb_off_[i + 1] += bb_off_[i];
+  bb_.resize(2 * m);
+  std::vector<std::uint32_t> at(bb_off_.begin(), bb_off_.end() - 1);
+  for (std::size_t c = 0; c < m; ++c) {  // ascending c: each ball's entries in contact order
+    const auto e = static_cast<std::uint32_t>(2 * c);
+    bb_[at[A[c]]++] = e;
+    bb_[at[B[c]]++] = e + 1;
+  }
+  terms_r_ = cx.pt.r;
+  const auto* fb = reinterpret_cast<const unsigned char*>(&cx.p.ball_ball);
+  terms_fam_.assign(fb, fb + sizeof(ContactFamilyParams));
+  terms_gen_ = gen_;
+  terms_ok_ = true;
+  chg_.assign(m, 0);
+  dirty_.assign(n, 0);
+}
+
+// The contacts the passes changed: their terms again, then each of their balls' sums from +0
+// over its contacts in ascending order (the serial loop's additions for that ball).
+template <class L>
+void PairSet::terms_events(const SetContext& cx) {
+  const ContactFamilyParams& fam = cx.p.ball_ball;
+  const double* R = cx.pt.r.data();
+  const std::uint32_t* A = contacts.a.data();
+  const std::uint32_t* B = contacts.b.data();
+  std::vector<std::uint32_t> balls;
   const std::size_t m = contacts.size();
   for (std::size_t c = 0; c < m; ++c) {
-    const double f = norm_[c];
-    if (f > 0.0) { sum += f; ++count; }
+    if (!chg_[c]) continue;
+    chg_[c] = 0;
+    const BondHist* b = contacts.bond.empty() ? nullptr : &contacts.bond[c];
+    stiffness_terms<L>(contacts.h[c], b, fam, R[A[c]], R[B[c]], k_[c], ka_[c], kb_[c], live_[c]);
+    for (std::uint32_t i : {A[c], B[c]})
+      if (!dirty_[i]) {
+        dirty_[i] = 1;
+        balls.push_back(i);
+      }
+  }
+  for (std::uint32_t i : balls) {
+    double kt = 0.0, kr = 0.0;
+    for (std::uint32_t e = bb_off_[i]; e < bb_off_[i + 1]; ++e) {
+      const std::uint32_t c = bb_[e] >> 1;
+      if (!live_[c]) continue;
+      kt += k_[c];
+      kr += (bb_[e] & 1u) ? kb_[c] : ka_[c];
+    }
+    kt_pair_[i] = kt;
+    kr_pair_[i] = kr;
+    dirty_[i] = 0;
   }
 }
 
-void PairSet::add_stiffness(const SetContext&, double* __restrict__ KT, double* __restrict__ KR) const {
+// Without a branch: a norm that is not > 0 (0, or NaN) adds +0, which leaves the sum's bits
+// unchanged (the sum starts at +0 and only grows), so the additions are those of the loop that
+// skips it.
+void PairSet::add_force_norms(double& sum, std::size_t& count) const {
+  const std::size_t m = contacts.size();
+  const double* __restrict__ f = norm_.data();
+  double s = sum;
+  std::size_t k = count;
+  for (std::size_t c = 0; c < m; ++c) {
+    const bool pos = f[c] > 0.0;
+    s += pos ? f[c] : 0.0;
+    k += pos;
+  }
+  sum = s;
+  count = k;
+}
+
+// The pairs come first in the cycle, so KT and KR are +0 here: adding a ball's kept pair sum
+// gives that sum, the bits of the serial loop.
+void PairSet::add_stiffness(const SetContext& cx, double* __restrict__ KT, double* __restrict__ KR) const {
+  if (terms_fresh_ && kt_pair_.size() == cx.pt.size()) {
+    const std::size_t n = kt_pair_.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      KT[i] += kt_pair_[i];
+      KR[i] += kr_pair_[i];
+    }
+    return;
+  }
+  stiffness_loop(KT, KR);
+}
+
+void PairSet::stiffness_loop(double* __restrict__ KT, double* __restrict__ KR) const {
   const std::int64_t m = static_cast<std::int64_t>(contacts.size());
   const std::uint32_t* __restrict__ A = contacts.a.data();
   const std::uint32_t* __restrict__ B = contacts.b.data();
@@ -747,6 +903,7 @@ void PairSet::remap(const std::vector<std::uint32_t>& newrow) {
 }
 
 void PairSet::refresh(const SetContext& cx) {
+  norm_ok_ = terms_ok_ = false;  // the histories change
   const bool bb = law_has_bond(cx.p.ball_ball.model);
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c)
@@ -791,6 +948,7 @@ void PairSet::append(std::uint32_t a, std::uint32_t b, const std::array<std::int
 }
 
 std::size_t PairSet::bond(const SetContext& cx, double lo, double hi) {
+  norm_ok_ = terms_ok_ = false;  // the histories change
   std::size_t cnt = 0;
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) {

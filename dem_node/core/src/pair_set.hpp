@@ -102,6 +102,29 @@ class PairSet final : public ContactSet {
   std::vector<RunSave> run_;
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   std::vector<double> norm_;             // per-contact ||F||
+  bool norm_ok_ = false;                 // norm_ is the last pass's, of the list of gen norm_gen_
+  std::uint64_t norm_gen_ = 0;
+  // The critical step's terms kept across steps (laws whose stiffness varies only with the
+  // contact's active flag and bond state, !kStiffnessVaries): k_, ka_, kb_, live_ and every
+  // ball's pair sums kt_pair_, kr_pair_ hold for the list of gen terms_gen_, the radii terms_r_
+  // and the family terms_fam_. The pass records the contacts whose flag or bond state changed
+  // (chg_); scan() recomputes only their terms and their balls' sums, each ball's in
+  // ascending contact order (the CSR bb_off_, bb_: entry 2 c + 1 where the ball is B), which are
+  // the additions of add_stiffness's serial loop.
+  bool terms_ok_ = false;
+  std::uint64_t terms_gen_ = 0;
+  std::vector<double> terms_r_;
+  std::vector<unsigned char> terms_fam_;
+  std::vector<double> kt_pair_, kr_pair_;
+  std::vector<std::uint32_t> bb_off_, bb_;
+  std::vector<std::uint8_t> chg_;        // per contact: a pass changed its key since the last scan
+  std::vector<std::uint8_t> dirty_;
+  bool terms_fresh_ = false;             // the last scan left kt_pair_/kr_pair_ for add_stiffness
+  void stiffness_loop(double* kt, double* kr) const;  // add_stiffness's serial loop
+  template <class L>
+  void terms_full(const SetContext& cx);
+  template <class L>
+  void terms_events(const SetContext& cx);
   std::vector<double> k_, ka_, kb_;      // per-contact k and rotational terms of A, B
   std::vector<std::uint8_t> live_;       // contact counted in the critical step
   bool fc_ = false, dt_ = false;         // what the last scan computed

@@ -12,14 +12,14 @@ namespace demfdm::dem {
 
 SkeletonRatio skeleton_ratio(const World& w) { return skeleton_ratio(w, w.mean_contact_force()); }
 
-bool is_rattler(const World& w, std::size_t i) {
+bool is_rattler(const World& w, std::size_t i, const Vec3& g) {
   const auto& b = w.balls();
-  const Vec3 c = (b.f[i] + b.fa[i]) - b.m[i] * w.gravity();  // contact part of the force
+  const Vec3 c = (b.f[i] + b.fa[i]) - b.m[i] * g;  // contact part of the force
   return c.x == 0 && c.y == 0 && c.z == 0;
 }
 
-double skeleton_term(const World& w, std::size_t i) {
-  if (is_rattler(w, i)) return 0.0;
+double skeleton_term(const World& w, std::size_t i, const Vec3& g) {
+  if (is_rattler(w, i, g)) return 0.0;
   const auto& b = w.balls();
   const Vec3 f = b.f[i] + b.fa[i];
   double s2 = 0;
@@ -27,6 +27,10 @@ double skeleton_term(const World& w, std::size_t i) {
     if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
   return std::sqrt(s2);
 }
+
+bool is_rattler(const World& w, std::size_t i) { return is_rattler(w, i, w.gravity()); }
+
+double skeleton_term(const World& w, std::size_t i) { return skeleton_term(w, i, w.gravity()); }
 
 SkeletonRatio skeleton_ratio_of(double sum, std::size_t rattlers, std::size_t balls, double fc) {
   SkeletonRatio r;
@@ -37,12 +41,27 @@ SkeletonRatio skeleton_ratio_of(double sum, std::size_t rattlers, std::size_t ba
 }
 
 SkeletonRatio skeleton_ratio(const World& w, double fc) {
+  // is_rattler and skeleton_term for every ball in one parallel pass (gravity read once), then
+  // the two sums in row order: the additions of the serial loops, at any thread count.
   // A rattler adds +0 to the sum of non-negative terms, which leaves it unchanged: the sum over
-  // every ball is the sum over the skeleton, bit for bit.
-  const double sum = w.ordered_ball_sum([&](std::size_t i) { return skeleton_term(w, i); });
-  // A count as a sum of ones: exact.
-  const auto rattlers =
-      static_cast<std::size_t>(w.ordered_ball_sum([&](std::size_t i) { return is_rattler(w, i) ? 1.0 : 0.0; }));
+  // every ball is the sum over the skeleton, bit for bit. The count is a sum of ones: exact.
+  const std::int64_t n = static_cast<std::int64_t>(w.num_balls());
+  const Vec3 g = w.gravity();
+  std::vector<double> term(static_cast<std::size_t>(n));
+  std::vector<std::uint8_t> rattler(static_cast<std::size_t>(n));
+  const int nt = w.thread_count();
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && n > 4096)
+  for (std::int64_t i = 0; i < n; ++i) {
+    const std::size_t u = static_cast<std::size_t>(i);
+    rattler[u] = is_rattler(w, u, g);
+    term[u] = rattler[u] ? 0.0 : skeleton_term(w, u, g);
+  }
+  double sum = 0.0;
+  std::size_t rattlers = 0;
+  for (std::int64_t i = 0; i < n; ++i) {
+    sum += term[static_cast<std::size_t>(i)];
+    rattlers += rattler[static_cast<std::size_t>(i)];
+  }
   return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
 }
 

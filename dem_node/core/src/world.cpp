@@ -413,18 +413,34 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
   // them run in set and contact order, the additions of one serial loop: the same bits at any
   // thread count.
   for (ContactSet* set : sets_) set->scan(cx, want_dt, want_fc);
-  if (want_fc) {
+  std::vector<double>& kt = scratch_kt_;
+  std::vector<double>& kr = scratch_kr_;
+  // Two serial loops, each in set and contact order: the sum of the force norms, and every
+  // ball's stiffness sums. They share nothing, so on two threads they run side by side.
+  auto force_sum = [&] {
     double sum = 0.0;
     std::size_t cnt = 0;
     for (const ContactSet* set : sets_) set->add_force_norms(sum, cnt);
     out.fc = cnt ? sum / double(cnt) : 0.0;
+  };
+  auto stiffness_sums = [&] {
+    kt.assign(n, 0.0);
+    kr.assign(n, 0.0);
+    for (const ContactSet* set : sets_) set->add_stiffness(cx, kt.data(), kr.data());
+  };
+  if (want_fc && want_dt && nt > 1 && n > 4096) {
+#pragma omp parallel sections num_threads(2)
+    {
+#pragma omp section
+      force_sum();
+#pragma omp section
+      stiffness_sums();
+    }
+  } else {
+    if (want_fc) force_sum();
+    if (want_dt) stiffness_sums();
   }
   if (!want_dt) return out;
-  std::vector<double>& kt = scratch_kt_;
-  std::vector<double>& kr = scratch_kr_;
-  kt.assign(n, 0.0);
-  kr.assign(n, 0.0);
-  for (const ContactSet* set : sets_) set->add_stiffness(cx, kt.data(), kr.data());
   // The smallest step over the balls (a minimum: exact in any order).
   double dt = std::numeric_limits<double>::infinity();
   const std::int64_t ni = static_cast<std::int64_t>(n);

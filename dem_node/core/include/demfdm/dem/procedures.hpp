@@ -32,6 +32,9 @@ SkeletonRatio skeleton_ratio(const World& w, double mean_contact_force);
 /// sum of the terms and the count of rattlers.
 bool is_rattler(const World& w, std::size_t i);
 double skeleton_term(const World& w, std::size_t i);
+/// The same with the World's gravity g = w.gravity() given (a loop over the balls reads it once).
+bool is_rattler(const World& w, std::size_t i, const Vec3& g);
+double skeleton_term(const World& w, std::size_t i, const Vec3& g);
 SkeletonRatio skeleton_ratio_of(double sum, std::size_t rattlers, std::size_t balls, double mean_contact_force);
 
 /// One horizontal slab of a vertical stress profile: particle-based stress (region_stress) of the

@@ -329,6 +329,10 @@ class World {
     double dt = 0.0, fc = 0.0;
   };
   ContactScan contact_scan(bool critical_step, bool mean_contact_force) const;
+  /// Every ball's stiffness sums (translational, rotational) of the last contact_scan that
+  /// computed the critical step, by row (tests compare them with a serial loop).
+  const std::vector<double>& stiffness_sums_translational() const { return scratch_kt_; }
+  const std::vector<double>& stiffness_sums_rotational() const { return scratch_kr_; }
   /// Force a neighbour rebuild and a force pass with zero increments (after edits).
   void prepare();
   std::int64_t rebuild_count() const { return rebuilds_; }
@@ -396,6 +400,8 @@ class World {
   /// callers that also need it elsewhere (the node's skeleton ratio): one contact loop per state.
   double unbalanced_ratio(double mean_contact_force) const;
   double max_unbalanced_force() const;
+  /// OpenMP threads of the passes: WorldParams::threads, or the OpenMP default when 0.
+  int thread_count() const { return p_.threads > 0 ? p_.threads : omp_get_max_threads(); }
   /// Σ term(i) over the balls in row order: the terms are computed in parallel (above 4,096
   /// balls), the sum runs in row order, so the bits are those of one serial loop at any thread
   /// count. For the O(balls) measurements of every step (kinetic energy, the ratios).
@@ -442,8 +448,6 @@ class World {
   void rebuild();
   bool need_rebuild() const;
   void force_pass(double dt);
-  /// OpenMP threads of the passes: WorldParams::threads, or the OpenMP default when 0.
-  int thread_count() const { return p_.threads > 0 ? p_.threads : omp_get_max_threads(); }
   /// What the contact sets see of this world for one call.
   SetContext context();
   void gather();  // add the wall-contact forces to the balls (serial, set and contact order)
