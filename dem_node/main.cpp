@@ -281,6 +281,7 @@ class DemParticipant : public node::Participant {
     open_outputs();
     begin_model_time(st);
     stage_ratio_ = st.view.real("ratio");
+    coupled_stage_ = st.coupled;
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
@@ -416,6 +417,16 @@ class DemParticipant : public node::Participant {
 
   proto::Values step_values() override {
     node::Timed t(effect_s_["measurements"]);
+    // In a coupled stage the continuum steps meanwhile (the forces went out first): on one
+    // thread the measurements leave it the other cores. Their bits do not depend on the thread
+    // count (ordered sums, tests/dem/contact_scan_test.cpp).
+    const int threads = world_.params().threads;
+    if (coupled_stage_ && !dist_live_) world_.mutable_params().threads = 1;
+    struct Restore {
+      dem::World& w;
+      int n;
+      ~Restore() { w.mutable_params().threads = n; }
+    } restore{world_, threads};
     // The report of this step needs both O(contacts) measurements of the state (the ratios'
     // mean contact force and, for dt_stable, the critical step): one pass over the contacts.
     if (!dist_live_ && !fc_valid_ && safe_dt_key() != safe_dt_key_ && world_.num_balls() > 0) {
@@ -857,6 +868,7 @@ class DemParticipant : public node::Participant {
   Block block_;
   dem::World world_;
   std::int64_t interval_ = 1, frame_every_ = 0, history_every_ = 1;
+  bool coupled_stage_ = false;  // the stage exchanges interface data (step_values: one thread)
   double gravity_level_ = 0, stage_ratio_ = 1e-5;
   fs::path dir_;
   std::optional<io::ParticleOutput> out_;

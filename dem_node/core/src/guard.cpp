@@ -143,10 +143,25 @@ std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours)
 std::optional<GuardFinding> check_escape(const World& w, const Vec3& lo, const Vec3& hi, double margin,
                                          std::size_t neighbours) {
   const auto& b = w.balls();
-  for (std::size_t i = 0; i < b.size(); ++i) {
+  // How far ball i lies outside the box (0 inside; a non-finite coordinate gives 0 here, the
+  // finite-value test names it).
+  auto outside = [&](std::size_t i) {
     const Vec3& x = b.x[i];
     double out = 0;
     for (int k = 0; k < 3; ++k) out = std::max({out, lo[k] - x[k], x[k] - hi[k]});
+    return out;
+  };
+  // The largest distance first (a maximum has no order: one parallel pass); the first ball in
+  // row order beyond the margin only when there is one.
+  const std::int64_t n = static_cast<std::int64_t>(b.size());
+  const int nt = w.thread_count();
+  double worst = 0;
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && n > 4096) reduction(max : worst)
+  for (std::int64_t i = 0; i < n; ++i) worst = std::max(worst, outside(static_cast<std::size_t>(i)));
+  if (!(worst > margin)) return std::nullopt;
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const Vec3& x = b.x[i];
+    const double out = outside(i);
     if (out > margin) {
       std::ostringstream os;
       os.precision(9);
