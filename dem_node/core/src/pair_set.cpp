@@ -221,12 +221,6 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   BondHist* __restrict__ BD = contacts.bond.empty() ? nullptr : contacts.bond.data();
   const Vec3 L = cx.p.periodic.length;
   const Vec3 ed = cx.edot;
-  // Every contact's ||F|| as scan() computes it from the history the pass leaves (the mean
-  // contact force of the step's report), written while the record is at hand: scan() then need
-  // not stream the histories again (norm_ok_).
-  norm_ok_ = false;
-  norm_.resize(contacts.size());
-  double* __restrict__ SN = norm_.data();
   // Marks the contacts whose active flag or bond state this pass changes, for scan()'s kept
   // terms (a byte per contact, or-ed until a scan takes them; no branch in the loops).
   if (chg_.size() != contacts.size()) {
@@ -394,13 +388,11 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
           CH[c] = 1;
         }
-        SN[c] = norm(Law::force(H[c], bond_at(c)));
         continue;
       }
       const unsigned k0 = key(c);
       Vec3 F, TA, TB;
       law(c, a, b, d, d2, F, TA, TB);
-      SN[c] = norm(Law::force(H[c], bond_at(c)));
       CH[c] |= key(c) != k0;
       if constexpr (Save) {
         while (*cur.c < static_cast<std::uint64_t>(c)) ++cur.c;
@@ -435,7 +427,6 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         const bool skip = idle(c, a, b, d2);
         const std::uint8_t fl = H[c].flags;
         H[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
-        if (skip) SN[c] = norm(Law::force(H[c], bond_at(c)));  // a live one's comes in stage 3
         CH[c] |= skip & ((fl & ContactHist::kActive) != 0);
         k0[n] = (fl & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
         in.c[n] = c;
@@ -471,7 +462,6 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
-        SN[cl] = norm(Law::force(H[cl], bond_at(cl)));
         CH[cl] |= key(cl) != k0[l];
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
@@ -491,7 +481,6 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
     std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
     run(std::false_type{}, 0, m, cx.pt.f.data(), cx.pt.t.data(), ChunkCursor{});
-    norm_ok_ = true, norm_gen_ = gen_;
     return;
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
@@ -592,7 +581,6 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       }
     }
   }
-  norm_ok_ = true, norm_gen_ = gen_;
 }
 
 // The plan of a threaded pass in `chunks` chunks (see pass_law): the chunk boundaries, the split
@@ -706,8 +694,6 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
   const std::size_t um = contacts.size();
   const std::size_t n = cx.pt.size();
   const ContactFamilyParams& fam = cx.p.ball_ball;
-  // The norms the last pass wrote, if nothing changed the list or its histories since.
-  const bool fresh = want_fc && norm_ok_ && norm_gen_ == gen_ && norm_.size() == um;
   // The kept terms of the critical step, if the list, the radii and the family are those they
   // were computed for: only the contacts the passes since then changed are redone.
   bool terms_loop = want_dt;
@@ -723,7 +709,7 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
       }
     });
   }
-  if (fresh && !terms_loop) return;
+  if (!want_fc && !terms_loop) return;
   if (want_fc) norm_.resize(um);
   if (terms_loop) {
     k_.resize(um);
@@ -738,7 +724,7 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
   const std::uint32_t* __restrict__ A = contacts.a.data();
   const std::uint32_t* __restrict__ B = contacts.b.data();
   const double* __restrict__ R = cx.pt.r.data();
-  double* __restrict__ SN = want_fc && !fresh ? norm_.data() : nullptr;
+  double* __restrict__ SN = want_fc ? norm_.data() : nullptr;
   double* __restrict__ SK = terms_loop ? k_.data() : nullptr;
   double* __restrict__ SKA = terms_loop ? ka_.data() : nullptr;
   double* __restrict__ SKB = terms_loop ? kb_.data() : nullptr;
@@ -903,7 +889,7 @@ void PairSet::remap(const std::vector<std::uint32_t>& newrow) {
 }
 
 void PairSet::refresh(const SetContext& cx) {
-  norm_ok_ = terms_ok_ = false;  // the histories change
+  terms_ok_ = false;  // the histories change
   const bool bb = law_has_bond(cx.p.ball_ball.model);
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c)
@@ -948,7 +934,7 @@ void PairSet::append(std::uint32_t a, std::uint32_t b, const std::array<std::int
 }
 
 std::size_t PairSet::bond(const SetContext& cx, double lo, double hi) {
-  norm_ok_ = terms_ok_ = false;  // the histories change
+  terms_ok_ = false;  // the histories change
   std::size_t cnt = 0;
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) {

@@ -102,8 +102,6 @@ class PairSet final : public ContactSet {
   std::vector<RunSave> run_;
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   std::vector<double> norm_;             // per-contact ||F||
-  bool norm_ok_ = false;                 // norm_ is the last pass's, of the list of gen norm_gen_
-  std::uint64_t norm_gen_ = 0;
   // The critical step's terms kept across steps (laws whose stiffness varies only with the
   // contact's active flag and bond state, !kStiffnessVaries): k_, ka_, kb_, live_ and every
   // ball's pair sums kt_pair_, kr_pair_ hold for the list of gen terms_gen_, the radii terms_r_
