@@ -428,7 +428,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         const std::uint8_t fl = H[c].flags;
         H[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
         CH[c] |= skip & ((fl & ContactHist::kActive) != 0);
-        k0[n] = (fl & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
+        k0[n] = key(c);  // a live lane's flags are still fl
         in.c[n] = c;
         in.a[n] = a;
         in.b[n] = b;
@@ -791,7 +791,8 @@ void PairSet::terms_events(const SetContext& cx) {
   const double* R = cx.pt.r.data();
   const std::uint32_t* A = contacts.a.data();
   const std::uint32_t* B = contacts.b.data();
-  std::vector<std::uint32_t> balls;
+  std::vector<std::uint32_t>& balls = dirty_list_;
+  balls.clear();
   const std::size_t m = contacts.size();
   for (std::size_t c = 0; c < m; ++c) {
     if (!chg_[c]) continue;

@@ -116,7 +116,8 @@ class PairSet final : public ContactSet {
   std::vector<double> kt_pair_, kr_pair_;
   std::vector<std::uint32_t> bb_off_, bb_;
   std::vector<std::uint8_t> chg_;        // per contact: a pass changed its key since the last scan
-  std::vector<std::uint8_t> dirty_;
+  std::vector<std::uint8_t> dirty_;      // terms_events: balls whose sums are redone (flag, list)
+  std::vector<std::uint32_t> dirty_list_;
   bool terms_fresh_ = false;             // the last scan left kt_pair_/kr_pair_ for add_stiffness
   void stiffness_loop(double* kt, double* kr) const;  // add_stiffness's serial loop
   template <class L>

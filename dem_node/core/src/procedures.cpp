@@ -54,7 +54,7 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   for (std::int64_t i = 0; i < n; ++i) {
     const std::size_t u = static_cast<std::size_t>(i);
     rattler[u] = is_rattler(w, u, g);
-    term[u] = rattler[u] ? 0.0 : skeleton_term(w, u, g);
+    term[u] = skeleton_term(w, u, g);  // +0 for a rattler
   }
   double sum = 0.0;
   std::size_t rattlers = 0;
