@@ -22,6 +22,7 @@
 #include <optional>
 #include <sstream>
 #include <thread>
+#include <tuple>
 #include <type_traits>
 #include <cstring>
 #include <cstdlib>
@@ -179,6 +180,7 @@ class DemParticipant : public node::Participant {
       kicked_, energy_pending_, footing_z0_, target_disp_, weight_, stage_ratio_, user_dt_);
   }
   void save(const fs::path& dir, io::StateWriter& w, const io::StateMeta& meta) override {
+    write_history_row();  // (none is due between grants; the checkpoint counts the rows written)
     sync_full();
     if (g_ranks.rank == 0) dem::save_state_file(world_, dir / "dem.world.state", meta);
     w.begin("dem_node");
@@ -195,6 +197,7 @@ class DemParticipant : public node::Participant {
     w.end();
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
+    history_due_ = -1;
     // A ranked run loads the whole World on every rank; its next step cuts it into slabs again.
     dist_live_ = false;
     dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
@@ -357,11 +360,20 @@ class DemParticipant : public node::Participant {
       if (any) sync_full();
     }
     if (!dist_live_ || synced_) {
-      if (auto f = dem::check_finite(world_)) return node::HealthReport{f->cause, f->detail};
-      if (escape_margin_ > 0 && !world_.periodic()) {
-        auto [lo, hi] = domain();
-        if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
+      // One pass over the balls for the finite test, the escape distance and the kinetic energy
+      // (dem::screen_balls); the reports only on a finding.
+      const bool box = escape_margin_ > 0 && !world_.periodic();
+      dem::Vec3 lo{}, hi{};
+      if (box) std::tie(lo, hi) = domain();
+      const dem::BallScreen sc = dem::screen_balls(world_, lo, hi, box, screen_scratch_);
+      if (!dist_live_ && !ke_valid_) {
+        ke_ = sc.kinetic;
+        ke_valid_ = true;
       }
+      if (!sc.finite)
+        if (auto f = dem::check_finite(world_)) return node::HealthReport{f->cause, f->detail};
+      if (box && sc.outside > escape_margin_)
+        if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
     }
     const double ke = kinetic_energy();
     if (auto jump = energy_jump_.check(ke)) {
@@ -401,21 +413,32 @@ class DemParticipant : public node::Participant {
     }
     clock_.advanced(node_before, dt, w.time());
     energy_.add_work(w, interval_);
-    // A history row's measurements need every rank: made wherever rank 0 writes one.
-    if (outputs_ && s_.has("dem.output") && history_every_ > 0 && step % history_every_ == 0) {
-      node::Timed t(effect_s_["output.history"]);
-      auto fz = w.has_footing() ? w.footing_reaction().z : 0.0;
-      auto facet = w.num_facet_walls() > 0 ? w.facet_walls_total_force().z : 0.0;
-      const std::vector<double> row{static_cast<double>(step), w.time(), ratio(), kinetic_energy(), fz, footing_disp(), facet};
-      if (history_) history_->append(row);
-    }
+    // The history row of this step is written by step_values, after the forces have gone out
+    // (its ratio needs the contact scan; the continuum steps meanwhile).
+    if (outputs_ && s_.has("dem.output") && history_every_ > 0 && step % history_every_ == 0) history_due_ = step;
     if (outputs_ && s_.has("dem.output") && frame_every_ > 0 && step % frame_every_ == 0) {
       sync_full();
       if (out_) write_frame(step);
     }
   }
 
+  // The history row of the last step, if it is due (advance): the state is still that step's
+  // (the guard and the interface forces only read it). A row's measurements need every rank:
+  // made wherever rank 0 writes one.
+  void write_history_row() {
+    if (history_due_ < 0) return;
+    const std::int64_t step = history_due_;
+    history_due_ = -1;
+    node::Timed t(effect_s_["output.history"]);
+    const dem::World& w = live();
+    auto fz = w.has_footing() ? w.footing_reaction().z : 0.0;
+    auto facet = w.num_facet_walls() > 0 ? w.facet_walls_total_force().z : 0.0;
+    const std::vector<double> row{static_cast<double>(step), w.time(), ratio(), kinetic_energy(), fz, footing_disp(), facet};
+    if (history_) history_->append(row);
+  }
+
   proto::Values step_values() override {
+    write_history_row();
     node::Timed t(effect_s_["measurements"]);
     // In a coupled stage the continuum steps meanwhile (the forces went out first): on one
     // thread the measurements leave it the other cores. Their bits do not depend on the thread
@@ -458,6 +481,7 @@ class DemParticipant : public node::Participant {
     return (world_.gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
+    write_history_row();
     leave_dist();  // the whole World again, on every rank
     if (out_) write_frame(last);
     if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
@@ -489,6 +513,9 @@ class DemParticipant : public node::Participant {
     return v;
   }
   void finish() override {
+    // A row still due (a run stopped between the step and its report, e.g. by the guard); not
+    // on ranks, where its measurements would wait on ranks that may have stopped.
+    if (!dist_live_) write_history_row();
     if (history_) history_->close();
     if (stages_) stages_->close();
   }
@@ -896,6 +923,8 @@ class DemParticipant : public node::Participant {
   bool ke_valid_ = false;
   node::EnergyJump energy_jump_;
   double user_dt_ = 0, escape_margin_ = 0;
+  std::int64_t history_due_ = -1;  // the step whose history row step_values writes (-1: none)
+  std::vector<double> screen_scratch_;  // check_health: dem::screen_balls's per-ball terms
   std::vector<double> kick_;
   bool kicked_ = false;
   std::map<std::string, double> effect_s_;

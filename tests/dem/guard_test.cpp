@@ -160,3 +160,55 @@ TEST(Guard, BallPushedHalfARadiusIntoAWallIsExpelledConservingEnergy) {
   EXPECT_GT(r, 0.75);
   EXPECT_LT(r, 1.25);
 }
+
+// dem::screen_balls, the node's per-step pass (docs/stability.md): its finite flag trips on a
+// NaN or an infinity in any component of x, v, ω, F and T, its escape distance is the largest
+// of a serial loop over the balls, and its kinetic energy has World::kinetic_energy()'s bits, on
+// the serial path (one thread) and the parallel one (two threads, more than 4,096 balls).
+TEST(Guard, ScreenBallsMatchesTheSeparateTests) {
+  World w(WorldParams{});
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> j(-0.02 * kR, 0.02 * kR);
+  for (int k = 0; k < 16; ++k)
+    for (int y = 0; y < 16; ++y)
+      for (int x = 0; x < 20; ++x) w.add_ball({1.99 * kR * x + j(rng), 1.99 * kR * y + j(rng), 1.99 * kR * k + j(rng)}, kR);
+  ASSERT_GT(w.num_balls(), 4096u);
+  w.prepare();
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (std::size_t i = 0; i < w.num_balls(); ++i) w.balls().v[i] = {u(rng), u(rng), u(rng)};
+  w.step(5);
+  const Vec3 lo{0, 0, 0}, hi{38 * kR, 30 * kR, 30 * kR};
+  // A ball well outside, another slightly: the largest distance wins.
+  w.balls().x[100].x = hi.x + 3.3 * kR;
+  w.balls().x[4000].z = lo.z - 1.7 * kR;
+  double expect_out = 0;
+  for (std::size_t i = 0; i < w.num_balls(); ++i)
+    for (int k = 0; k < 3; ++k) expect_out = std::max({expect_out, lo[k] - w.balls().x[i][k], w.balls().x[i][k] - hi[k]});
+  ASSERT_GT(expect_out, 3 * kR);
+  std::vector<double> scratch;
+  for (int threads : {1, 2}) {
+    SCOPED_TRACE("threads " + std::to_string(threads));
+    w.mutable_params().threads = threads;
+    const BallScreen sc = screen_balls(w, lo, hi, true, scratch);
+    EXPECT_TRUE(sc.finite);
+    EXPECT_EQ(sc.outside, expect_out);
+    EXPECT_EQ(sc.kinetic, w.kinetic_energy());  // the same bits, not a tolerance
+    EXPECT_TRUE(check_escape(w, lo, hi, 3 * kR).has_value());
+    EXPECT_FALSE(check_escape(w, lo, hi, sc.outside).has_value());
+    EXPECT_EQ(screen_balls(w, lo, hi, false, scratch).outside, 0.0);  // no box: not computed
+    const double bad[2] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity()};
+    std::vector<Vec3>* arrays[5] = {&w.balls().x, &w.balls().v, &w.balls().w, &w.balls().f, &w.balls().t};
+    for (int a = 0; a < 5; ++a)
+      for (int k = 0; k < 3; ++k)
+        for (double v : bad) {
+          const std::size_t row = 4500 + static_cast<std::size_t>(a * 3 + k);
+          Vec3& slot = (*arrays[a])[row];
+          const double keep = slot[k];
+          slot[k] = v;
+          EXPECT_FALSE(screen_balls(w, lo, hi, true, scratch).finite) << "array " << a << " component " << k;
+          EXPECT_TRUE(check_finite(w).has_value());
+          slot[k] = keep;
+        }
+    EXPECT_TRUE(screen_balls(w, lo, hi, true, scratch).finite);
+  }
+}

@@ -48,6 +48,17 @@ bool all_finite(const World& w) {
   return bad == 0;
 }
 
+// How far a centre lies outside the box [lo, hi] (0 inside; a non-finite coordinate gives 0
+// here, the finite-value test names it).
+[[gnu::always_inline]] inline double outside_box(const Vec3& x, const Vec3& lo, const Vec3& hi) {
+  double out = 0;
+  for (int k = 0; k < 3; ++k) out = std::max({out, lo[k] - x[k], x[k] - hi[k]});
+  return out;
+}
+
+// Or-able flag: some component of v is not finite (x * 0 is 0 for finite x, NaN otherwise).
+unsigned not_finite(const Vec3& v) { return !(v.x * 0.0 == 0.0) | !(v.y * 0.0 == 0.0) | !(v.z * 0.0 == 0.0); }
+
 GuardFinding finding(const World& w, std::size_t row, std::string cause, std::size_t neighbours) {
   GuardFinding f;
   f.row = row;
@@ -140,17 +151,38 @@ std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours)
   return std::nullopt;
 }
 
+BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box, std::vector<double>& scratch) {
+  const auto& b = w.balls();
+  const std::int64_t n = static_cast<std::int64_t>(b.size());
+  const int nt = w.thread_count();
+  unsigned bad = 0;
+  double worst = 0.0;
+  BallScreen out;
+  auto row = [&](std::size_t i, unsigned& bd, double& wo) __attribute__((always_inline)) {
+    bd |= not_finite(b.x[i]) | not_finite(b.v[i]) | not_finite(b.w[i]) | not_finite(b.f[i]) | not_finite(b.t[i]);
+    if (box) wo = std::max(wo, outside_box(b.x[i], lo, hi));
+    return w.kinetic_energy_of(i);
+  };
+  // World::ordered_ball_sum's two paths (the same additions in the same order).
+  if (nt <= 1 || n <= 4096) {
+    for (std::int64_t i = 0; i < n; ++i) out.kinetic += row(static_cast<std::size_t>(i), bad, worst);
+  } else {
+    scratch.resize(static_cast<std::size_t>(n));
+    double* __restrict__ t = scratch.data();
+#pragma omp parallel for schedule(static) num_threads(nt) reduction(| : bad) reduction(max : worst)
+    for (std::int64_t i = 0; i < n; ++i) t[i] = row(static_cast<std::size_t>(i), bad, worst);
+    for (std::int64_t i = 0; i < n; ++i) out.kinetic += t[i];
+  }
+  if (w.has_footing()) bad |= not_finite(w.footing_reaction());
+  out.finite = bad == 0;
+  out.outside = worst;
+  return out;
+}
+
 std::optional<GuardFinding> check_escape(const World& w, const Vec3& lo, const Vec3& hi, double margin,
                                          std::size_t neighbours) {
   const auto& b = w.balls();
-  // How far ball i lies outside the box (0 inside; a non-finite coordinate gives 0 here, the
-  // finite-value test names it).
-  auto outside = [&](std::size_t i) {
-    const Vec3& x = b.x[i];
-    double out = 0;
-    for (int k = 0; k < 3; ++k) out = std::max({out, lo[k] - x[k], x[k] - hi[k]});
-    return out;
-  };
+  auto outside = [&](std::size_t i) { return outside_box(b.x[i], lo, hi); };
   // The largest distance first (a maximum has no order: one parallel pass); the first ball in
   // row order beyond the margin only when there is one.
   const std::int64_t n = static_cast<std::int64_t>(b.size());

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "demfdm/dem/world.hpp"
 
@@ -29,6 +30,19 @@ std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours 
 /// First ball whose centre lies more than `margin` outside the box [lo, hi].
 std::optional<GuardFinding> check_escape(const World& w, const Vec3& lo, const Vec3& hi, double margin,
                                          std::size_t neighbours = 10);
+
+/// The guard's per-step tests and the kinetic energy in one parallel pass over the balls (the
+/// three read the same rows): `finite` is false where check_finite would find something (a ball
+/// value or the footing reaction), `outside` is the largest distance of a centre outside [lo, hi]
+/// (0 inside; not computed without `box`), and `kinetic` is World::kinetic_energy() with its bits
+/// (its terms, summed in row order from +0). `scratch` holds the per-ball terms between calls.
+/// The reports themselves come from check_finite and check_escape, called only on a finding.
+struct BallScreen {
+  bool finite = true;
+  double outside = 0.0;  // [m]
+  double kinetic = 0.0;  // [J]
+};
+BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box, std::vector<double>& scratch);
 
 /// The `k` balls nearest to ball `row` (minimum image in a periodic cell), one line each:
 /// id, distance, position, radius, velocity, force.
