@@ -709,6 +709,7 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
       }
     });
   }
+  summed_ = false;
   if (!want_fc && !terms_loop) return;
   if (want_fc) norm_.resize(um);
   if (terms_loop) {
@@ -729,18 +730,42 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
   double* __restrict__ SKA = terms_loop ? ka_.data() : nullptr;
   double* __restrict__ SKB = terms_loop ? kb_.data() : nullptr;
   std::uint8_t* __restrict__ SL = terms_loop ? live_.data() : nullptr;
-  visit_law(fam.model, [=, &fam](auto law) {
+  // On one thread the loop also sums the norms, in contact order from +0 as add_force_norms
+  // does (the same bits), so that add_force_norms need not read them again.
+  const bool serial = !(nt > 1 && m > 4096);
+  double fsum = 0.0;
+  std::size_t fcnt = 0;
+  visit_law(fam.model, [=, &fam, &fsum, &fcnt](auto law) {
     using L = decltype(law);
     constexpr std::int64_t ahead = 16;
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 4096)
-    for (std::int64_t c = 0; c < m; ++c) {
+    auto one = [=, &fam](std::int64_t c) __attribute__((always_inline)) {
       if (SK && c + ahead < m) __builtin_prefetch(R + B[c + ahead]);
       const ContactHist& h = H[c];
       const BondHist* b = BD ? BD + c : nullptr;
-      if (SN) SN[c] = norm(L::force(h, b));
+      double f = 0.0;
+      if (SN) SN[c] = f = norm(L::force(h, b));
       if (SK) stiffness_terms<L>(h, b, fam, R[A[c]], R[B[c]], SK[c], SKA[c], SKB[c], SL[c]);
+      return f;
+    };
+    if (serial && SN) {
+      double s = 0.0;
+      std::size_t k = 0;
+      for (std::int64_t c = 0; c < m; ++c) {
+        const double f = one(c);
+        const bool pos = f > 0.0;
+        s += pos ? f : 0.0;
+        k += pos;
+      }
+      fsum = s;
+      fcnt = k;
+    } else {
+#pragma omp parallel for schedule(static) num_threads(nt) if (!serial)
+      for (std::int64_t c = 0; c < m; ++c) one(c);
     }
   });
+  fsum_ = fsum;
+  fcnt_ = fcnt;
+  summed_ = serial && want_fc;
   if (terms_loop)
     visit_law(fam.model, [&](auto law) {
       using L = decltype(law);
@@ -823,6 +848,12 @@ void PairSet::terms_events(const SetContext& cx) {
 // unchanged (the sum starts at +0 and only grows), so the additions are those of the loop that
 // skips it.
 void PairSet::add_force_norms(double& sum, std::size_t& count) const {
+  if (summed_) {  // the serial scan's sum, from +0: valid as the first set's (World::contact_scan)
+    if (sum != 0.0 || count != 0) throw std::logic_error("PairSet::add_force_norms: the pairs must be the first set");
+    sum = fsum_;
+    count = fcnt_;
+    return;
+  }
   const std::size_t m = contacts.size();
   const double* __restrict__ f = norm_.data();
   double s = sum;

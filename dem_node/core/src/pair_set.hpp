@@ -102,6 +102,9 @@ class PairSet final : public ContactSet {
   std::vector<RunSave> run_;
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   std::vector<double> norm_;             // per-contact ||F||
+  bool summed_ = false;                  // the last scan summed norm_ (one thread): fsum_, fcnt_
+  double fsum_ = 0.0;                    // its sum of the positive norms, in contact order from +0
+  std::size_t fcnt_ = 0;                 // and their count
   // The critical step's terms kept across steps (laws whose stiffness varies only with the
   // contact's active flag and bond state, !kStiffnessVaries): k_, ka_, kb_, live_ and every
   // ball's pair sums kt_pair_, kr_pair_ hold for the list of gen terms_gen_, the radii terms_r_
