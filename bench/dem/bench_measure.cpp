@@ -1,14 +1,18 @@
-// A coupled DEM step's own work on a real state (issue 16 item 2): the engine's step and the
-// measurements the DEM node reports after every step (docs/speed.md, "The step's
-// measurements"): the contact scan (critical step and mean contact force), the unbalanced and
-// skeleton ratios, the kinetic energy and the guard's finite-value test.
+// A coupled DEM step's own work on a real state (issue 16 item 2): the engine's step, the guard
+// and the measurements the DEM node reports after every step (docs/speed.md, "The step's
+// measurements"). The guard (finite values, escape, kinetic energy) is timed as the node runs it,
+// in one pass (dem::screen_balls), and as the three separate tests it replaced; the measurements
+// are the contact scan (critical step and mean contact force) and the unbalanced and skeleton
+// ratios.
 //
-//   bench_measure CHECKPOINT_DIR [steps=300] [rounds=1]
+//   bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads]
 //
 // CHECKPOINT_DIR is a run's checkpoint folder (its dem.world.state and manifest.txt), e.g. the
 // default scene's gravity-end checkpoint (runs/<run>/checkpoints/gravity-<step>-end). The World
 // keeps the thread count it was saved with (OMP_NUM_THREADS does not change it). Each round
-// starts from the loaded state; one line per round, times in ms per step.
+// starts from the loaded state; one line per round, times in ms per step. `measure_threads`
+// runs the measurements (not the step) on that many threads, as the DEM node does in a coupled
+// stage (one thread, dem_node/main.cpp step_values).
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -42,42 +46,73 @@ double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::durati
 
 int main(int argc, char** argv) try {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: bench_measure CHECKPOINT_DIR [steps=300] [rounds=1]\n");
+    std::fprintf(stderr, "usage: bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads]\n");
     return 2;
   }
   const std::filesystem::path dir = argv[1];
   const int steps = argc > 2 ? std::stoi(argv[2]) : 300;
   const int rounds = argc > 3 ? std::stoi(argv[3]) : 1;
+  const int measure_threads = argc > 4 ? std::stoi(argv[4]) : 0;  // 0: the World's own
   const std::uint64_t hash = manifest_scene_hash(dir);
   for (int r = 0; r < rounds; ++r) {
     World w{WorldParams{}};
     load_state_file(w, dir / "dem.world.state", hash);
-    double t_step = 0, t_scan = 0, t_ratio = 0, t_skel = 0, t_ke = 0, t_guard = 0, sink = 0;
+    const int step_threads = w.params().threads;
+    const int mt = measure_threads > 0 ? measure_threads : step_threads;
+    // The escape test's box: the balls' extent at the start, one diameter wider.
+    Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
+    for (std::size_t i = 0; i < w.num_balls(); ++i)
+      for (int k = 0; k < 3; ++k) {
+        lo[k] = std::min(lo[k], w.balls().x[i][k] - 2 * w.balls().r[i]);
+        hi[k] = std::max(hi[k], w.balls().x[i][k] + 2 * w.balls().r[i]);
+      }
+    std::vector<double> scratch;
+    double t_step = 0, t_sep = 0, t_screen = 0, t_scan = 0, t_ratio = 0, t_skel = 0, sink = 0;
     for (int s = 0; s < steps; ++s) {
+      // The step and the guard on the World's threads (the node's guard runs before the forces
+      // go out), the measurements on `mt`.
+      w.mutable_params().threads = step_threads;
       const auto t0 = Clock::now();
       w.step();
       const auto t1 = Clock::now();
-      const World::ContactScan sc = static_cast<const World&>(w).contact_scan(true, true);
-      const auto t2 = Clock::now();
-      sink += w.unbalanced_ratio(sc.fc);
+      // The guard's tests one by one (the node before session 16) and in one pass (screen_balls),
+      // first the one, then the other on alternate steps (the second finds the rows in cache).
+      double ke = 0.0;
+      BallScreen bs;
+      double dt_sep = 0.0, dt_screen = 0.0;
+      for (int k = 0; k < 2; ++k) {
+        const auto a = Clock::now();
+        if ((k + s) % 2 == 0) {
+          sink += check_finite(w).has_value() ? 1.0 : 0.0;
+          sink += check_escape(w, lo, hi, 0.0).has_value() ? 1.0 : 0.0;
+          ke = w.kinetic_energy();
+          dt_sep = ms(a, Clock::now());
+        } else {
+          bs = screen_balls(w, lo, hi, true, scratch);
+          dt_screen = ms(a, Clock::now());
+        }
+      }
+      if (bs.kinetic != ke || !bs.finite) throw std::runtime_error("screen_balls disagrees with the separate tests");
+      sink += bs.kinetic + bs.outside;
+      w.mutable_params().threads = mt;
       const auto t3 = Clock::now();
-      if (w.gravity_on()) sink += skeleton_ratio(w, sc.fc).ratio;
+      const World::ContactScan sc = static_cast<const World&>(w).contact_scan(true, true);
       const auto t4 = Clock::now();
-      sink += w.kinetic_energy();
+      sink += w.unbalanced_ratio(sc.fc);
       const auto t5 = Clock::now();
-      sink += check_finite(w).has_value() ? 1.0 : 0.0;
+      if (w.gravity_on()) sink += skeleton_ratio(w, sc.fc).ratio;
       const auto t6 = Clock::now();
       sink += sc.dt;
-      t_step += ms(t0, t1), t_scan += ms(t1, t2), t_ratio += ms(t2, t3), t_skel += ms(t3, t4), t_ke += ms(t4, t5),
-          t_guard += ms(t5, t6);
+      t_step += ms(t0, t1), t_sep += dt_sep, t_screen += dt_screen, t_scan += ms(t3, t4), t_ratio += ms(t4, t5),
+          t_skel += ms(t5, t6);
     }
     const double n = steps;
     std::printf(
-        "bench_measure balls %zu pairs %zu threads %d steps %d | ms/step: step %.3f scan %.3f ratio %.3f skeleton %.3f "
-        "kinetic %.3f guard %.3f measurements %.3f total %.3f (checksum %.17g)\n",
-        w.num_balls(), w.pair_contacts().size(), w.params().threads, steps, t_step / n, t_scan / n, t_ratio / n,
-        t_skel / n, t_ke / n, t_guard / n, (t_scan + t_ratio + t_skel + t_ke + t_guard) / n,
-        (t_step + t_scan + t_ratio + t_skel + t_ke + t_guard) / n, sink);
+        "bench_measure balls %zu pairs %zu threads %d (measurements %d) steps %d | ms/step: step %.3f guard %.3f "
+        "(separate tests %.3f) scan %.3f ratio %.3f skeleton %.3f measurements %.3f total %.3f (checksum %.17g)\n",
+        w.num_balls(), w.pair_contacts().size(), step_threads, mt, steps, t_step / n, t_screen / n, t_sep / n,
+        t_scan / n, t_ratio / n, t_skel / n, (t_scan + t_ratio + t_skel) / n, (t_step + t_screen + t_scan + t_ratio + t_skel) / n,
+        sink);
   }
   return 0;
 } catch (const std::exception& e) {
