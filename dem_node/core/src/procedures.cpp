@@ -47,9 +47,28 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   // every ball is the sum over the skeleton, bit for bit. The count is a sum of ones: exact.
   const std::int64_t n = static_cast<std::int64_t>(w.num_balls());
   const Vec3 g = w.gravity();
+  const int nt = w.thread_count();
+  if (nt <= 1 || n <= 4096) {
+    // One thread (the DEM node measures a coupled step on one, dem_node/main.cpp): the same
+    // terms and the same sums in row order in one loop, without the two work arrays.
+    const auto& b = w.balls();
+    double sum = 0.0;
+    std::size_t rattlers = 0;
+    for (std::int64_t i = 0; i < n; ++i) {
+      const std::size_t u = static_cast<std::size_t>(i);
+      const Vec3 f = b.f[u] + b.fa[u];
+      const Vec3 c = f - b.m[u] * g;  // is_rattler's contact part
+      const bool r = c.x == 0 && c.y == 0 && c.z == 0;
+      double s2 = 0;
+      for (int k = 0; k < 3; ++k)
+        if (!(b.fix[u] & (1u << k))) s2 += f[k] * f[k];
+      sum += r ? 0.0 : std::sqrt(s2);  // skeleton_term: +0 for a rattler
+      rattlers += r;
+    }
+    return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
+  }
   std::vector<double> term(static_cast<std::size_t>(n));
   std::vector<std::uint8_t> rattler(static_cast<std::size_t>(n));
-  const int nt = w.thread_count();
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && n > 4096)
   for (std::int64_t i = 0; i < n; ++i) {
     const std::size_t u = static_cast<std::size_t>(i);
