@@ -407,9 +407,24 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   // untouched history).
   auto body_block = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
                         ChunkCursor cur) {
+    // Local copies of the closure's pointers and helpers: the byte stores below (a contact's
+    // flags, its change mark) may alias any object as far as GCC knows, the closure's members
+    // included, so that it reloaded every captured pointer after each of them; locals whose
+    // address is not taken stay in registers (the same operations, so the same bits).
+    // (No restrict on them: the helpers read the same records through their own copies.)
+    const std::uint32_t* const A_ = A;
+    const std::uint32_t* const B_ = B;
+    ContactHist* const H_ = H;
+    BondHist* const BD_ = BD;
+    std::uint8_t* const CH_ = CH;
+    const auto prefetch_ = prefetch;
+    const auto branch_d_ = branch_d;
+    const auto idle_ = idle;
+    const auto key_ = key;
+    const auto bond_at_ = bond_at;
     constexpr bool Save = decltype(save)::value;
     constexpr int K = pairblock::kLanes;
-    BallSums<Save> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
+    BallSums<Save> sums{f, t, c0 < c1 ? A_[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
     pairblock::In in;
     pairblock::Out out;
     unsigned k0[K];  // each lane's key() before the law
@@ -417,18 +432,18 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     while (c < c1) {
       int n = 0;
       for (; c < c1 && n < K; ++c) {
-        const std::uint32_t a = A[c], b = B[c];
-        prefetch(c, c1, f, t);
+        const std::uint32_t a = A_[c], b = B_[c];
+        prefetch_(c, c1, f, t);
         Vec3 d;
         double d2;
-        branch_d(c, a, b, d, d2);
+        branch_d_(c, a, b, d, d2);
         // Branch-free: the lane is written for every contact and kept (n advances) only for a
         // live one; an idle contact gets kActive and kSlip cleared (the same flags as `body`).
-        const bool skip = idle(c, a, b, d2);
-        const std::uint8_t fl = H[c].flags;
-        H[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
-        CH[c] |= skip & ((fl & ContactHist::kActive) != 0);
-        k0[n] = key(c);  // a live lane's flags are still fl
+        const bool skip = idle_(c, a, b, d2);
+        const std::uint8_t fl = H_[c].flags;
+        H_[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
+        CH_[c] |= skip & ((fl & ContactHist::kActive) != 0);
+        k0[n] = key_(c);  // a live lane's flags are still fl
         in.c[n] = c;
         in.a[n] = a;
         in.b[n] = b;
@@ -438,8 +453,8 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         in.d2[n] = d2;
         in.hasn[n] = (fl & ContactHist::kHasNormal) != 0;
         in.incr[n] = (fl & ContactHist::kIncremental) != 0;
-        in.scalar[n] = Law::lane_needs_scalar(bond_at(c));
-        if constexpr (Law::kBond) in.intact[n] = BD[c].state == BondState::kIntact;
+        in.scalar[n] = Law::lane_needs_scalar(bond_at_(c));
+        if constexpr (Law::kBond) in.intact[n] = BD_[c].state == BondState::kIntact;
         n += !skip;
       }
       if (n == 0) break;
@@ -457,12 +472,12 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         if (out.scalar[l]) {
           law_rare(cl, a, b, Vec3{in.dx[l], in.dy[l], in.dz[l]}, in.d2[l], F, TA, TB);
         } else {
-          Law::store_lane(H[cl], bond_at(cl), out, l);
+          Law::store_lane(H_[cl], bond_at_(cl), out, l);
           F = {out.F[0][l], out.F[1][l], out.F[2][l]};
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
-        CH[cl] |= key(cl) != k0[l];
+        CH_[cl] |= key_(cl) != k0[l];
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
           if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};
