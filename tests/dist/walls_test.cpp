@@ -193,8 +193,17 @@ void check(const WallScene& sc) {
     if (g_size > 1) {
       EXPECT_GT(sum[1], 0) << "balls must cross brick faces";
       // Every record of these runs goes to a brick within the halo and the skin: point to point
-      // with the neighbours only, unless the reach is 0 (every exchange then all-to-all).
-      EXPECT_EQ(d.neighbour_exchanges(), sc.reach == 0.0 ? 0 : d.exchanges());
+      // with the neighbours only, unless the reach is 0 (every exchange then all-to-all). Cuts
+      // balanced by measured time move by what the clock saw: a rebalance may move one far enough
+      // that the next exchange falls back to all-to-all (DistDem::exchange; the bits above hold
+      // either way), so there are at most as many fallbacks as rebalances (seen: 94 of 95
+      // exchanges with the neighbours only).
+      if (sc.reach == 0.0)
+        EXPECT_EQ(d.neighbour_exchanges(), 0);
+      else if (sc.weight == DistDem::Weight::kTime)
+        EXPECT_GE(d.neighbour_exchanges(), d.exchanges() - d.rebalances());
+      else
+        EXPECT_EQ(d.neighbour_exchanges(), d.exchanges());
     }
     // The unloaded World is the reference's state, field by field as a checkpoint holds it, but
     // for the energies the ranks sum in their order; with those set equal it steps on with the
