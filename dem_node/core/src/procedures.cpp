@@ -12,20 +12,32 @@ namespace demfdm::dem {
 
 SkeletonRatio skeleton_ratio(const World& w) { return skeleton_ratio(w, w.mean_contact_force()); }
 
-bool is_rattler(const World& w, std::size_t i, const Vec3& g) {
-  const auto& b = w.balls();
-  const Vec3 c = (b.f[i] + b.fa[i]) - b.m[i] * g;  // contact part of the force
+namespace {
+// The two formulas of the skeleton ratio, written once: whether ball i is a rattler (its contact
+// part of the force, F + F_a - m g, is zero; F + F_a left in f) and its term |F + F_a| over the
+// free axes.
+[[gnu::always_inline]] inline bool rattler_of(const Particles& b, std::size_t i, const Vec3& g, Vec3& f) {
+  f = b.f[i] + b.fa[i];
+  const Vec3 c = f - b.m[i] * g;  // contact part of the force
   return c.x == 0 && c.y == 0 && c.z == 0;
 }
-
-double skeleton_term(const World& w, std::size_t i, const Vec3& g) {
-  if (is_rattler(w, i, g)) return 0.0;
-  const auto& b = w.balls();
-  const Vec3 f = b.f[i] + b.fa[i];
+[[gnu::always_inline]] inline double term_of(const Particles& b, std::size_t i, const Vec3& f) {
   double s2 = 0;
   for (int k = 0; k < 3; ++k)
     if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
   return std::sqrt(s2);
+}
+}  // namespace
+
+bool is_rattler(const World& w, std::size_t i, const Vec3& g) {
+  Vec3 f;
+  return rattler_of(w.balls(), i, g, f);
+}
+
+double skeleton_term(const World& w, std::size_t i, const Vec3& g) {
+  Vec3 f;
+  if (rattler_of(w.balls(), i, g, f)) return 0.0;
+  return term_of(w.balls(), i, f);
 }
 
 bool is_rattler(const World& w, std::size_t i) { return is_rattler(w, i, w.gravity()); }
@@ -51,29 +63,26 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   if (nt <= 1 || n <= 4096) {
     // One thread (the DEM node measures a coupled step on one, dem_node/main.cpp): the same
     // terms and the same sums in row order in one loop, without the two work arrays.
-    const auto& b = w.balls();
+    const Particles& b = w.balls();
     double sum = 0.0;
     std::size_t rattlers = 0;
-    for (std::int64_t i = 0; i < n; ++i) {
-      const std::size_t u = static_cast<std::size_t>(i);
-      const Vec3 f = b.f[u] + b.fa[u];
-      const Vec3 c = f - b.m[u] * g;  // is_rattler's contact part
-      const bool r = c.x == 0 && c.y == 0 && c.z == 0;
-      double s2 = 0;
-      for (int k = 0; k < 3; ++k)
-        if (!(b.fix[u] & (1u << k))) s2 += f[k] * f[k];
-      sum += r ? 0.0 : std::sqrt(s2);  // skeleton_term: +0 for a rattler
+    for (std::size_t u = 0; u < static_cast<std::size_t>(n); ++u) {
+      Vec3 f;
+      const bool r = rattler_of(b, u, g, f);
       rattlers += r;
+      sum += r ? 0.0 : term_of(b, u, f);  // skeleton_term: +0 for a rattler
     }
     return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
   }
   std::vector<double> term(static_cast<std::size_t>(n));
   std::vector<std::uint8_t> rattler(static_cast<std::size_t>(n));
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && n > 4096)
+#pragma omp parallel for schedule(static) num_threads(nt)
   for (std::int64_t i = 0; i < n; ++i) {
     const std::size_t u = static_cast<std::size_t>(i);
-    rattler[u] = is_rattler(w, u, g);
-    term[u] = skeleton_term(w, u, g);  // +0 for a rattler
+    Vec3 f;
+    const bool r = rattler_of(w.balls(), u, g, f);
+    rattler[u] = r;
+    term[u] = r ? 0.0 : term_of(w.balls(), u, f);  // skeleton_term: +0 for a rattler
   }
   double sum = 0.0;
   std::size_t rattlers = 0;
