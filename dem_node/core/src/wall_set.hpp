@@ -18,6 +18,7 @@
 // Adding a wall kind is a kind struct here, its geometry in walls.cpp and one set in World.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -80,6 +81,19 @@ struct PlaneKind {
   double travel() const;
 };
 
+/// One facet contact's share of its wall's vertex sums (docs/theory.md 6.4, 6.5): its three
+/// equivalent vertex forces and stiffness shares, formed per contact (in parallel in the pass)
+/// and added in contact order (FacetKind::end).
+struct FacetTerm {
+  std::uint32_t wall = 0;
+  std::int32_t facet = 0;
+  bool active = false;  // it acts (carries a force or is bonded)
+  bool loaded = false;  // it carries a force or moment: vertex forces and the wall's total
+  std::array<Vec3, 3> f{};
+  Vec3 F{};
+  double k[3] = {0.0, 0.0, 0.0};
+};
+
 /// Interface facet walls (docs/theory.md 6.2-6.5): the nearest candidate facet of each contact
 /// (the history stays with the (ball, wall) contact, 1.4); equivalent vertex forces and vertex
 /// stiffness.
@@ -88,12 +102,13 @@ struct FacetKind {
   static constexpr bool kParallel = true;
   std::vector<FacetWall> walls;
   bool restore_linear = false;  // this pass: a broken interface bond becomes a linear contact
+  std::vector<FacetTerm> terms;  // this pass: each contact's share of the vertex sums
 
   bool present() const { return !walls.empty(); }
   void idle() {}
   void begin(const SetContext& cx, const WallContacts& wc);
   WallSurface surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const;
-  void after_law(const SetContext& cx, WallContacts& wc, std::int64_t c) const;
+  void after_law(const SetContext& cx, WallContacts& wc, std::int64_t c);
   static WallSumRec rec(const WallContacts&, std::int64_t) { return {}; }  // summed in end()
   void add(const WallSumRec&) {}
   void end(const SetContext& cx, WallContacts& wc);

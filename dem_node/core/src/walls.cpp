@@ -89,6 +89,7 @@ double PlaneKind::travel() const {
 void FacetKind::begin(const SetContext& cx, const WallContacts& wc) {
   restore_linear = cx.p.ball_facet.model == ContactModel::kLinearPBond && cx.p.ball_facet.pbond.zero_linear &&
                    !wc.bond.empty();
+  terms.resize(wc.size());
 }
 
 WallSurface FacetKind::surface(const Vec3& x, const WallContacts& wc, std::int64_t c) const {
@@ -113,37 +114,67 @@ WallSurface FacetKind::surface(const Vec3& x, const WallContacts& wc, std::int64
 // §2.6, §6.3: a bonded interface contact has no linear part (zero_linear); once its bond
 // breaks it is an ordinary linear contact again, from the configuration at the break (its
 // force starts at 0 and grows with further overlap), so the ball cannot cross the wall.
-void FacetKind::after_law(const SetContext& cx, WallContacts& wc, std::int64_t c) const {
+namespace {
+WallSumRec facet_rec(const SetContext& cx, const WallContacts& wc, std::int64_t c);
+FacetTerm facet_term(const std::vector<FacetWall>& walls, const WallSumRec& r);
+}  // namespace
+
+// (Then the contact's share of the vertex sums, from its final state of this pass.)
+void FacetKind::after_law(const SetContext& cx, WallContacts& wc, std::int64_t c) {
   if (restore_linear && wc.h[c].kn == 0.0 &&
       (wc.bond[c].state == BondState::kBrokenTension || wc.bond[c].state == BondState::kBrokenShear))
     detail::init_contact(cx.pt, wc.ball[c], 0, wc.h[c], &wc.bond[c], cx.p.ball_facet, true);
+  terms[static_cast<std::size_t>(c)] = facet_term(walls, facet_rec(cx, wc, c));
 }
 
 namespace {
 
-// §6.4 equivalent vertex forces and §6.5 stiffness, serial in contact order. `one(c)` gives a
-// contact's WallSumRec (its wall, facet, F, M, x_c, weights and K, whether it acts): the force
-// pass and World::set_wall_sums share this arithmetic.
-template <class One>
-void facet_sums(std::vector<FacetWall>& walls, std::int64_t m, One one) {
+// §6.4 equivalent vertex forces and §6.5 stiffness of one contact, from its WallSumRec (its
+// wall, facet, F, M, x_c, weights and K, whether it acts): the force pass and
+// World::set_wall_sums share this arithmetic.
+FacetTerm facet_term(const std::vector<FacetWall>& walls, const WallSumRec& r) {
+  FacetTerm t;
+  if (!r.active) return t;
+  t.active = true;
+  t.wall = r.wall;
+  t.facet = r.facet;
+  const FacetWall& fw = walls[r.wall];
+  const auto& tr = fw.tri[static_cast<std::size_t>(r.facet)];
+  t.loaded = norm2(r.F) > 0.0 || norm2(r.M) > 0.0;
+  if (t.loaded) {
+    facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, r.xc, r.F, r.M, t.f);
+    t.F = r.F;
+  }
+  for (int v = 0; v < 3; ++v) t.k[v] = r.bary[v] * r.k;
+  return t;
+}
+
+void facet_zero(std::vector<FacetWall>& walls) {
   for (auto& fw : walls) {
     std::fill(fw.vforce.begin(), fw.vforce.end(), Vec3{});
     std::fill(fw.vstiff.begin(), fw.vstiff.end(), 0.0);
     fw.total_force = Vec3{};
   }
-  for (std::int64_t c = 0; c < m; ++c) {
-    const WallSumRec r = one(c);
-    if (!r.active) continue;
-    FacetWall& fw = walls[r.wall];
-    const auto& tr = fw.tri[static_cast<std::size_t>(r.facet)];
-    if (norm2(r.F) > 0.0 || norm2(r.M) > 0.0) {
-      std::array<Vec3, 3> f;
-      facet_equivalent_forces({fw.pos[tr[0]], fw.pos[tr[1]], fw.pos[tr[2]]}, r.xc, r.F, r.M, f);
-      for (int v = 0; v < 3; ++v) fw.vforce[tr[v]] += f[v];
-      fw.total_force += r.F;
-    }
-    for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += r.bary[v] * r.k;
+}
+
+// A contact's share added to its wall's sums; in contact order, each sum's additions are those
+// of one serial loop over the contacts.
+void facet_add(std::vector<FacetWall>& walls, const FacetTerm& t) {
+  if (!t.active) return;
+  FacetWall& fw = walls[t.wall];
+  const auto& tr = fw.tri[static_cast<std::size_t>(t.facet)];
+  if (t.loaded) {
+    for (int v = 0; v < 3; ++v) fw.vforce[tr[v]] += t.f[v];
+    fw.total_force += t.F;
   }
+  for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += t.k[v];
+}
+
+// The sums over the records one(0) … one(m − 1), serial in that order.
+template <class One>
+void facet_sums(std::vector<FacetWall>& walls, std::int64_t m, One one) {
+  facet_zero(walls);
+  for (std::int64_t c = 0; c < m; ++c) facet_add(walls, facet_term(walls, one(c)));
 }
 
 // A facet contact's share: it acts while it carries a force or is bonded; K = K_n + K_s, plus
@@ -169,8 +200,10 @@ WallSumRec facet_rec(const SetContext& cx, const WallContacts& wc, std::int64_t 
 
 }  // namespace
 
-void FacetKind::end(const SetContext& cx, WallContacts& wc) {
-  facet_sums(walls, static_cast<std::int64_t>(wc.size()), [&](std::int64_t c) { return facet_rec(cx, wc, c); });
+// The shares formed by after_law, added in contact order.
+void FacetKind::end(const SetContext&, WallContacts& wc) {
+  facet_zero(walls);
+  for (std::size_t c = 0; c < wc.size(); ++c) facet_add(walls, terms[c]);
 }
 
 // every facet against every ball near its bounding box (sorted by x for a cheap sweep);
