@@ -82,6 +82,9 @@ class DemParticipant : public node::Participant {
       : ctx_(ctx), s_(ctx_.scene), block_(dem::scene::block(ctx.scene)), world_(world_params()), energy_jump_(ctx.scene) {
     interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
     spdlog::info("dem: {} OpenMP threads (run.threads)", world_.params().threads);
+    // The node measures the mean contact force after every step (step_values): the pass keeps
+    // the contacts' force norms for it (the same bits as reading the histories again).
+    world_.keep_force_norms(true);
     user_dt_ = s_.real("dem.dt_fixed");
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     kick_ = s_.reals("dem.kick");
@@ -204,6 +207,7 @@ class DemParticipant : public node::Participant {
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = dem_threads(s_);
     world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
+    world_.keep_force_norms(true);
     omp_set_num_threads(world_.params().threads);
     auto sec = r.section("dem_node");
     Block saved;

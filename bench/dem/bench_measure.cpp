@@ -5,16 +5,18 @@
 // are the contact scan (critical step and mean contact force) and the unbalanced and skeleton
 // ratios.
 //
-//   bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads]
+//   bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads] [step_threads]
 //
 // CHECKPOINT_DIR is a run's checkpoint folder (its dem.world.state and manifest.txt), e.g. the
 // default scene's gravity-end checkpoint (runs/<run>/checkpoints/gravity-<step>-end). The World
 // keeps the thread count it was saved with (OMP_NUM_THREADS does not change it). Each round
 // starts from the loaded state; one line per round, times in ms per step. `measure_threads`
 // runs the measurements (not the step) on that many threads, as the DEM node does in a coupled
-// stage (one thread, dem_node/main.cpp step_values).
+// stage (one thread, dem_node/main.cpp step_values); `step_threads` runs the step on that many. The line ends with the step's phases
+// (World::phase_times) and the wall-contact counts.
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -24,6 +26,7 @@
 #include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/world.hpp"
+#include "demfdm/io/state_file.hpp"
 
 using namespace demfdm::dem;
 using Clock = std::chrono::steady_clock;
@@ -46,17 +49,22 @@ double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::durati
 
 int main(int argc, char** argv) try {
   if (argc < 2) {
-    std::fprintf(stderr, "usage: bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads]\n");
+    std::fprintf(stderr, "usage: bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads] [step_threads]\n");
     return 2;
   }
   const std::filesystem::path dir = argv[1];
   const int steps = argc > 2 ? std::stoi(argv[2]) : 300;
   const int rounds = argc > 3 ? std::stoi(argv[3]) : 1;
   const int measure_threads = argc > 4 ? std::stoi(argv[4]) : 0;  // 0: the World's own
+  const int step_threads_arg = argc > 5 ? std::stoi(argv[5]) : 0;  // 0: the World's own
   const std::uint64_t hash = manifest_scene_hash(dir);
   for (int r = 0; r < rounds; ++r) {
     World w{WorldParams{}};
     load_state_file(w, dir / "dem.world.state", hash);
+    if (step_threads_arg > 0) w.mutable_params().threads = step_threads_arg;
+    // As the DEM node: the pass keeps the force norms for the scan (BENCH_MEASURE_NORMS=0: not).
+    const char* kn = std::getenv("BENCH_MEASURE_NORMS");
+    w.keep_force_norms(!(kn && std::string(kn) == "0"));
     const int step_threads = w.params().threads;
     const int mt = measure_threads > 0 ? measure_threads : step_threads;
     // The escape test's box: the balls' extent at the start, one diameter wider.
@@ -67,6 +75,7 @@ int main(int argc, char** argv) try {
         hi[k] = std::max(hi[k], w.balls().x[i][k] + 2 * w.balls().r[i]);
       }
     std::vector<double> scratch;
+    w.reset_phase_times();
     double t_step = 0, t_sep = 0, t_screen = 0, t_scan = 0, t_ratio = 0, t_skel = 0, sink = 0;
     for (int s = 0; s < steps; ++s) {
       // The step and the guard on the World's threads (the node's guard runs before the forces
@@ -107,12 +116,28 @@ int main(int argc, char** argv) try {
           t_skel += ms(t5, t6);
     }
     const double n = steps;
+    const PhaseTimes& ph = w.phase_times();
     std::printf(
         "bench_measure balls %zu pairs %zu threads %d (measurements %d) steps %d | ms/step: step %.3f guard %.3f "
-        "(separate tests %.3f) scan %.3f ratio %.3f skeleton %.3f measurements %.3f total %.3f (checksum %.17g)\n",
+        "(separate tests %.3f) scan %.3f ratio %.3f skeleton %.3f measurements %.3f total %.3f (checksum %.17g) | "
+        "step phases ms/step: rebuild %.3f pair %.3f facet %.3f footing %.3f plane %.3f gather %.3f motion %.3f "
+        "effects %.3f | facet contacts %zu footing contacts %zu\n",
         w.num_balls(), w.pair_contacts().size(), step_threads, mt, steps, t_step / n, t_screen / n, t_sep / n,
         t_scan / n, t_ratio / n, t_skel / n, (t_scan + t_ratio + t_skel) / n, (t_step + t_screen + t_scan + t_ratio + t_skel) / n,
-        sink);
+        sink, 1e3 * ph.rebuild / n, 1e3 * ph.pair / n, 1e3 * ph.facet / n, 1e3 * ph.footing / n, 1e3 * ph.plane / n,
+        1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
+        w.footing_contacts().size());
+    // The state after the steps, for comparing builds bit for bit: x, v, ω of every ball and the
+    // facet walls' vertex forces and stiffnesses.
+    std::uint64_t h = demfdm::io::fnv1a64(w.balls().x.data(), w.num_balls() * sizeof(Vec3));
+    h = demfdm::io::fnv1a64(w.balls().v.data(), w.num_balls() * sizeof(Vec3), h);
+    h = demfdm::io::fnv1a64(w.balls().w.data(), w.num_balls() * sizeof(Vec3), h);
+    for (int k = 0; k < w.num_facet_walls(); ++k) {
+      const FacetWall& fw = w.facet_wall(k);
+      h = demfdm::io::fnv1a64(fw.vforce.data(), fw.vforce.size() * sizeof(Vec3), h);
+      h = demfdm::io::fnv1a64(fw.vstiff.data(), fw.vstiff.size() * sizeof(double), h);
+    }
+    std::printf("bench_measure state hash %016llx\n", static_cast<unsigned long long>(h));
   }
   return 0;
 } catch (const std::exception& e) {

@@ -256,3 +256,55 @@ TEST(ContactScan, KeptStiffnessTermsFollowRadiiParametersAndHistories) {
     check("after one more step");
   }
 }
+
+// World::keep_force_norms: the pass writes every contact's ||F|| (the node measures after every
+// step), and the scan sums those instead of reading the histories. Every norm, idle entries
+// included, must be the bits of ||Law::force|| of the history, for every law, periodic and free,
+// after the scalar and the vector pass, at 1 and 2 threads, and after a new list; a change of
+// the histories outside the pass (bonding, mutable access) makes the scan read them again.
+TEST(ContactScan, PassForceNormsSameBitsAsTheHistories) {
+  for (const Case& c : cases()) {
+    auto w = make_world(c);
+    w->keep_force_norms(true);
+    EXPECT_FALSE(w->force_norms_kept()) << name(c) << ": before any pass";
+    std::size_t idle_seen = 0;
+    const std::int64_t rebuilds0 = w->rebuild_count();
+    for (int k = 0; k < 20; ++k) {
+      if (k == 10) {  // new rows and a new list: every entry's norm is written again
+        w->reorder_spatially();
+        w->prepare();
+      }
+      w->step();
+      const World& cw = *w;
+      const std::string at = name(c) + " step " + std::to_string(k + 1);
+      ASSERT_TRUE(cw.force_norms_kept()) << at;
+      std::vector<World::ContactTerm> terms;
+      cw.contact_force_norms(terms);
+      const PairContacts& pc = cw.pair_contacts();
+      ASSERT_GE(terms.size(), pc.size()) << at;
+      for (std::size_t j = 0; j < pc.size(); ++j) {
+        const double ref = norm(cw.pair_force(j));
+        ASSERT_TRUE(same_bits(terms[j].v, ref)) << at << ": contact " << j << " norm " << terms[j].v << " vs " << ref;
+        idle_seen += ref == 0.0;
+      }
+      const World::ContactScan s = cw.contact_scan(true, true);
+      ASSERT_TRUE(same_bits(s.fc, reference_fc(cw))) << at << ": mean contact force";
+      ASSERT_TRUE(same_bits(s.dt, reference_dt(cw))) << at << ": critical step";
+    }
+    EXPECT_GT(idle_seen, 0u) << name(c) << ": no contact with a zero force";
+    EXPECT_GT(w->rebuild_count(), rebuilds0) << name(c) << ": no new list";
+    // Histories changed outside the pass: the scan reads them again.
+    if (law_has_bond(c.model)) {
+      w->bond_ball_ball(-1.0, 0.02 * 1e-4);
+      EXPECT_FALSE(w->force_norms_kept()) << name(c) << ": after bonding";
+      const World& cw = *w;
+      EXPECT_TRUE(same_bits(cw.contact_scan(false, true).fc, reference_fc(cw))) << name(c) << ": after bonding";
+      w->step();
+    }
+    EXPECT_TRUE(w->force_norms_kept()) << name(c);
+    w->pair_contacts();  // mutable access: the caller may change histories
+    EXPECT_FALSE(w->force_norms_kept()) << name(c) << ": after mutable access";
+    const World& cw = *w;
+    EXPECT_TRUE(same_bits(cw.contact_scan(false, true).fc, reference_fc(cw))) << name(c) << ": after mutable access";
+  }
+}

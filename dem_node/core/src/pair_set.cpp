@@ -232,6 +232,14 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   auto key = [=](std::int64_t c) __attribute__((always_inline)) -> unsigned {
     return (H[c].flags & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
   };
+  // Every contact's ||F|| for the measurements (keep_force_norms): ||Law::force|| of its history
+  // after the update, the scan's formula; +0 for an idle one (F_n = 0 and so F_s = 0, and no
+  // bond force: the scan's value too).
+  if (keep_norms_ && norm_.size() != contacts.size()) norm_.resize(contacts.size());
+  double* __restrict__ SN = keep_norms_ ? norm_.data() : nullptr;
+  pn_ok_ = keep_norms_;  // (the pass writes every entry below)
+  pn_gen_ = gen_;
+  pn_model_ = cx.p.ball_ball.model;
   std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
   const std::uint8_t* const G = cx.ghost;          // ghost rows (a rank's world), or null
   const double rgap = lc.rgap;
@@ -388,12 +396,14 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
           CH[c] = 1;
         }
+        if (SN) SN[c] = 0.0;
         continue;
       }
       const unsigned k0 = key(c);
       Vec3 F, TA, TB;
       law(c, a, b, d, d2, F, TA, TB);
       CH[c] |= key(c) != k0;
+      if (SN) SN[c] = norm(Law::force(H[c], bond_at(c)));
       if constexpr (Save) {
         while (*cur.c < static_cast<std::uint64_t>(c)) ++cur.c;
         if (*cur.c == static_cast<std::uint64_t>(c)) SV[cur.c - cur.c0] = {F, TB, stamp};
@@ -417,6 +427,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     ContactHist* const H_ = H;
     BondHist* const BD_ = BD;
     std::uint8_t* const CH_ = CH;
+    double* const SN_ = SN;
     const auto prefetch_ = prefetch;
     const auto branch_d_ = branch_d;
     const auto idle_ = idle;
@@ -443,6 +454,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         const std::uint8_t fl = H_[c].flags;
         H_[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
         CH_[c] |= skip & ((fl & ContactHist::kActive) != 0);
+        if (SN_) SN_[c] = 0.0;  // a live lane's is written in stage 3
         k0[n] = key_(c);  // a live lane's flags are still fl
         in.c[n] = c;
         in.a[n] = a;
@@ -478,6 +490,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
         CH_[cl] |= key_(cl) != k0[l];
+        if (SN_) SN_[cl] = norm(Law::force(H_[cl], bond_at_(cl)));
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
           if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};
@@ -736,6 +749,8 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
     });
   }
   summed_ = false;
+  // The pass's norms hold for this state: add_force_norms sums them.
+  if (want_fc && pass_norms(fam.model)) want_fc = false;
   if (!want_fc && !terms_loop) return;
   if (want_fc) norm_.resize(um);
   if (terms_loop) {
@@ -948,6 +963,7 @@ void PairSet::remap(const std::vector<std::uint32_t>& newrow) {
 
 void PairSet::refresh(const SetContext& cx) {
   terms_ok_ = false;  // the histories change
+  pn_ok_ = false;
   const bool bb = law_has_bond(cx.p.ball_ball.model);
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c)
@@ -993,6 +1009,7 @@ void PairSet::append(std::uint32_t a, std::uint32_t b, const std::array<std::int
 
 std::size_t PairSet::bond(const SetContext& cx, double lo, double hi) {
   terms_ok_ = false;  // the histories change
+  pn_ok_ = false;
   std::size_t cnt = 0;
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) {

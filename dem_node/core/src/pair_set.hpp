@@ -42,6 +42,16 @@ class PairSet final : public ContactSet {
 
   /// ||F|| of every contact from the last scan(.., want_fc = true).
   const std::vector<double>& force_norms() const { return norm_; }
+  /// The pass writes every contact's ||F|| (World::keep_force_norms); a scan that follows it on
+  /// the same state takes them instead of reading the histories again.
+  void keep_force_norms(bool on) {
+    keep_norms_ = on;
+    pn_ok_ = false;
+  }
+  /// The pass's norms hold for the present list and histories under model m.
+  bool pass_norms(ContactModel m) const {
+    return pn_ok_ && pn_gen_ == gen_ && pn_model_ == m && norm_.size() == contacts.size();
+  }
   /// Force and moment on B of contact k, rebuilt from its history (World::pair_force).
   Vec3 force(std::size_t k, const ContactFamilyParams& fam) const;
   Vec3 moment(std::size_t k, const ContactFamilyParams& fam) const;
@@ -54,7 +64,10 @@ class PairSet final : public ContactSet {
   std::size_t bond(const SetContext& cx, double lo, double hi);
   /// The list's pairs (a, b) may have been changed from outside (World::pair_contacts): the
   /// threaded pass re-plans its split balls before the next pass.
-  void touch() { ++gen_; }
+  void touch() {
+    ++gen_;
+    pn_ok_ = false;  // the caller may change histories too
+  }
   /// A split ball's run sum (its contacts as A) in the threaded pass, and the pass that wrote it.
   struct RunSave {
     Vec3 f, t;
@@ -102,6 +115,12 @@ class PairSet final : public ContactSet {
   std::vector<RunSave> run_;
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   std::vector<double> norm_;             // per-contact ||F||
+  // The pass's norms (keep_norms_): norm_ holds ||Law::force|| of every contact for the list of
+  // gen pn_gen_ and the model pn_model_, unless a history changed since (pn_ok_ cleared).
+  bool keep_norms_ = false;
+  bool pn_ok_ = false;
+  std::uint64_t pn_gen_ = 0;
+  ContactModel pn_model_ = ContactModel::kLinear;
   bool summed_ = false;                  // the last scan summed norm_ (one thread): fsum_, fcnt_
   double fsum_ = 0.0;                    // its sum of the positive norms, in contact order from +0
   std::size_t fcnt_ = 0;                 // and their count

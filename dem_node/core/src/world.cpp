@@ -137,6 +137,10 @@ bool World::pair_kernel_available(PairKernel k) {
   }
 }
 
+void World::keep_force_norms(bool on) { pairs_->keep_force_norms(on); }
+
+bool World::force_norms_kept() const { return pairs_->pass_norms(p_.ball_ball.model); }
+
 void World::set_pair_kernel(PairKernel k) {
   if (!pair_kernel_available(k))
     throw std::invalid_argument("set_pair_kernel: this CPU lacks the instruction set of the requested kernel.");
@@ -441,14 +445,23 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
     if (want_dt) stiffness_sums();
   }
   if (!want_dt) return out;
-  // The smallest step over the balls (a minimum: exact in any order).
-  double dt = std::numeric_limits<double>::infinity();
+  // The smallest step over the balls (a minimum: exact in any order). The square root is
+  // monotonic and correctly rounded, so the root of the smallest ratio is the smallest root: one
+  // root instead of two per ball, and a branch-free loop that vectorises.
+  double q = std::numeric_limits<double>::infinity();
   const std::int64_t ni = static_cast<std::int64_t>(n);
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && ni > 4096) reduction(min : dt)
+  const double* __restrict__ M = pt_.m.data();
+  const double* __restrict__ I = pt_.inertia.data();
+  const double* __restrict__ KT = kt.data();
+  const double* __restrict__ KR = kr.data();
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+#pragma omp parallel for simd schedule(static) num_threads(nt) if (nt > 1 && ni > 4096) reduction(min : q)
   for (std::int64_t i = 0; i < ni; ++i) {
-    if (kt[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / kt[i]));
-    if (kr[i] > 0.0) dt = std::min(dt, std::sqrt(pt_.inertia[i] / kr[i]));
+    const double a = KT[i] > 0.0 ? M[i] / KT[i] : kInf;
+    const double b = KR[i] > 0.0 ? I[i] / KR[i] : kInf;
+    q = std::min(std::min(q, a), b);
   }
+  double dt = std::sqrt(q);
   if (!std::isfinite(dt)) {
     // No active contact: use one contact with an equal ball (the law's reference stiffness;
     // linear springs: k_n = π R E*/2, §7.2).

@@ -329,6 +329,13 @@ class World {
     double dt = 0.0, fc = 0.0;
   };
   ContactScan contact_scan(bool critical_step, bool mean_contact_force) const;
+  /// Have every ball–ball pass write each contact's ||F|| (off by default): a contact_scan of the
+  /// mean contact force right after a step then sums them instead of reading every contact's
+  /// history again (the same bits). For a caller that measures after every step (the DEM node);
+  /// it costs a square root per live contact in the pass.
+  void keep_force_norms(bool on);
+  /// Whether a contact_scan now would take the pass's force norms (tests).
+  bool force_norms_kept() const;
   /// Every ball's stiffness sums (translational, rotational) of the last contact_scan that
   /// computed the critical step, by row (tests compare them with a serial loop).
   const std::vector<double>& stiffness_sums_translational() const { return scratch_kt_; }
