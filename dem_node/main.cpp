@@ -83,7 +83,8 @@ class DemParticipant : public node::Participant {
     interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
     spdlog::info("dem: {} OpenMP threads (run.threads)", world_.params().threads);
     // The node measures the mean contact force after every step (step_values): the pass keeps
-    // the contacts' force norms for it (the same bits as reading the histories again).
+    // the contacts' force norms for it (the same bits as reading the histories again); not in
+    // specimen preparation, whose procedures measure seldom (stage_begin).
     world_.keep_force_norms(true);
     user_dt_ = s_.real("dem.dt_fixed");
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
@@ -207,7 +208,7 @@ class DemParticipant : public node::Participant {
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = dem_threads(s_);
     world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
-    world_.keep_force_norms(true);
+    world_.keep_force_norms(!preparing_);
     omp_set_num_threads(world_.params().threads);
     auto sec = r.section("dem_node");
     Block saved;
@@ -294,6 +295,7 @@ class DemParticipant : public node::Participant {
     world_.reset_phase_times();
     has_ranked_phases_ = false;
     preparing_ = is_generation(st);
+    world_.keep_force_norms(!preparing_);
     {  // Step factor and local damping of this stage (docs/theory.md 1.3, 4.11). Specimen
        // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
        // dem.damping and dem.dt_fixed change nothing before the first later stage.
