@@ -390,7 +390,43 @@ class DemParticipant : public node::Participant {
     return std::nullopt;
   }
 
+  // The first DEM step's motion needs no interface data (the facets' vertices only enter its
+  // rebuild decision and force pass): on one rank it runs here, while the continuum steps
+  // (World::step = step_motion, then step_forces; the same calls in the same order).
+  void advance_early(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
+    early_ = false;
+    if (g_ranks.size > 1 || world_.num_balls() == 0) return;
+    begin_step(st, values, dt);
+    if (dist_live_) return;
+    early_node_before_ = world_.time();
+    world_.step_motion();
+    early_ = true;
+    early_step_ = step;
+  }
+
   void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
+    if (early_ && early_step_ == step) {
+      early_ = false;
+      const double node_before = early_node_before_;
+      world_.step_forces_now();
+      world_.step(interval_ - 1);
+      end_step(step, dt, node_before);
+      return;
+    }
+    early_ = false;
+    begin_step(st, values, dt);
+    dem::World& w = live();
+    const double node_before = w.time();
+    if (dist_live_) {
+      dist_->step(interval_);
+    } else {
+      world_.step(interval_);  // its phases are reported by add_phase_times()
+    }
+    end_step(step, dt, node_before);
+  }
+
+  // What a coupling step does before its DEM steps.
+  void begin_step(const schema::Stage& st, const std::vector<double>& values, double dt) {
     if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     if (energy_pending_) {
@@ -410,13 +446,12 @@ class DemParticipant : public node::Participant {
     if (user_dt_ > 0 && !preparing_ && user_dt_ > critical_dt()) check_dt_fixed("a step of stage '" + st.name + "'");
     // Exactly 'interval' DEM steps per coupling step of length dt.
     if (dt > 0) w.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
-    const double node_before = w.time();
     synced_ = false;
-    if (dist_live_) {
-      dist_->step(interval_);
-    } else {
-      world_.step(interval_);  // its phases are reported by add_phase_times()
-    }
+  }
+
+  // What a coupling step does after its DEM steps.
+  void end_step(std::int64_t step, double dt, double node_before) {
+    dem::World& w = live();
     clock_.advanced(node_before, dt, w.time());
     energy_.add_work(w, interval_);
     // The history row of this step is written by step_values, after the forces have gone out
@@ -917,6 +952,9 @@ class DemParticipant : public node::Participant {
   std::size_t n_iface_ = 0;
   bool coupling_setup_pending_ = false, penetrating_ = false, box_done_ = false;
   bool preparing_ = false;  // a specimen-preparation stage (is_generation): its own step and damping
+  bool early_ = false;             // advance_early ran the first DEM step's motion of coupling step early_step_
+  std::int64_t early_step_ = -1;
+  double early_node_before_ = 0.0;  // the World's time before it
   double footing_z0_ = 0, target_disp_ = 0;
   double weight_ = -1;
   double ratio_ = 0;           // engine ratio of the current state (ratio())

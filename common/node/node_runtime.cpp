@@ -379,6 +379,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
         proto::Values last_values;
         for (std::int64_t k = step + 1; k <= c.header.step; ++k) {
           if (st.coupled && role == "dem" && kin_applied != k - 1) {
+            part->advance_early(st, k, c.dt, c.values);  // overlaps the continuum's step k - 1
             part->set_interface_kinematics(ep->wait_kin(k - 1));
             kin_applied = k - 1;
           }

@@ -126,6 +126,12 @@ class Participant {
   // One coupling step of length dt (values: the coordinator's kinematics for this step).
   virtual void advance(const schema::Stage& stage, std::int64_t step, double dt,
                        const std::vector<double>& values) = 0;
+  // In a coupled stage, the DEM role: called with the grant of `step` before the node waits for
+  // the continuum's interface data of step - 1, then advance() with the same arguments. A node
+  // may do here the part of the step that needs none of that data (the DEM: its balls' motion),
+  // so that it overlaps the continuum's step; the results must be those of advance() alone.
+  virtual void advance_early(const schema::Stage& /*stage*/, std::int64_t /*step*/, double /*dt*/,
+                             const std::vector<double>& /*values*/) {}
   // Values reported after each grant (e.g. footing force, unbalanced ratio).
   virtual proto::Values step_values() = 0;
   // With until = "done": has this node met the stage's exit criterion?

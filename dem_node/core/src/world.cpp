@@ -512,8 +512,10 @@ std::int64_t World::dt_interval() const {
 
 void World::step() {
   step_motion();
-  step_forces(need_rebuild());
+  step_forces_now();
 }
+
+void World::step_forces_now() { step_forces(need_rebuild()); }
 
 void World::step_motion() {
   if (!prepared_) prepare();

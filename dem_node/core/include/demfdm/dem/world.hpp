@@ -264,11 +264,13 @@ class World {
   void step();
   void step(std::int64_t n);
   /// step() in two halves, for a driver that acts between them (a rank of the DEM on MPI
-  /// ranks, dem_node/dist): step_motion() (time step, integration, wall motion), then
-  /// step_forces(rebuild) (the neighbour rebuild if asked, the force pass). step() is
-  /// step_motion(); step_forces(need_rebuild()).
+  /// ranks, dem_node/dist; the DEM node, which sets the facets' vertices in between):
+  /// step_motion() (time step, integration, wall motion), then step_forces(rebuild) (the
+  /// neighbour rebuild if asked, the force pass). step() is step_motion(); step_forces_now().
   void step_motion();
   void step_forces(bool rebuild);
+  /// step_forces with step()'s own rebuild test (the balls' displacement and the walls' travel).
+  void step_forces_now();
   /// The rebuild test of step() for a given largest squared displacement of a ball since the
   /// last rebuild (a rank passes the largest over every rank's own balls).
   bool need_rebuild(double max_disp2) const;
