@@ -82,10 +82,6 @@ class DemParticipant : public node::Participant {
       : ctx_(ctx), s_(ctx_.scene), block_(dem::scene::block(ctx.scene)), world_(world_params()), energy_jump_(ctx.scene) {
     interval_ = s_.has("coupling") ? s_.integer("coupling.interval") : 1;
     spdlog::info("dem: {} OpenMP threads (run.threads)", world_.params().threads);
-    // The node measures the mean contact force after every step (step_values): the pass keeps
-    // the contacts' force norms for it (the same bits as reading the histories again); not in
-    // specimen preparation, whose procedures measure seldom (stage_begin).
-    world_.keep_force_norms(true);
     user_dt_ = s_.real("dem.dt_fixed");
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     kick_ = s_.reals("dem.kick");
@@ -295,6 +291,9 @@ class DemParticipant : public node::Participant {
     world_.reset_phase_times();
     has_ranked_phases_ = false;
     preparing_ = is_generation(st);
+    // The node measures the mean contact force after every step (step_values): the pass keeps
+    // the contacts' force norms for it (the same bits as reading the histories again); not in
+    // specimen preparation, whose procedures measure seldom.
     world_.keep_force_norms(!preparing_);
     {  // Step factor and local damping of this stage (docs/theory.md 1.3, 4.11). Specimen
        // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
@@ -396,8 +395,7 @@ class DemParticipant : public node::Participant {
   void advance_early(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
     early_ = false;
     if (g_ranks.size > 1 || world_.num_balls() == 0) return;
-    begin_step(st, values, dt);
-    if (dist_live_) return;
+    begin_step(st, values, dt);  // (one rank: never on a DistDem)
     early_node_before_ = world_.time();
     world_.step_motion();
     early_ = true;

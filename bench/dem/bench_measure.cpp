@@ -12,8 +12,9 @@
 // keeps the thread count it was saved with (OMP_NUM_THREADS does not change it). Each round
 // starts from the loaded state; one line per round, times in ms per step. `measure_threads`
 // runs the measurements (not the step) on that many threads, as the DEM node does in a coupled
-// stage (one thread, dem_node/main.cpp step_values); `step_threads` runs the step on that many. The line ends with the step's phases
-// (World::phase_times) and the wall-contact counts.
+// stage (one thread, dem_node/main.cpp step_values); `step_threads` runs the step on that many.
+// The line ends with the step's phases (World::phase_times) and the wall-contact counts; a second
+// line gives a hash of the state after the steps (x, v, ω, the facet walls' vertex sums).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>

@@ -175,6 +175,13 @@ namespace {
 // the history stream is not kept in flight by the hardware prefetcher alone (+20 % measured).
 constexpr std::int64_t kPrefetchB = 12;  // contacts ahead for the B rows
 constexpr std::int64_t kPrefetchH = 24;  // contacts ahead for the history records
+
+// A contact's ||F|| from its history: the term of the mean contact force, formed by the scan or,
+// with keep_force_norms, by the pass (one formula, so the same bits).
+template <class L>
+[[gnu::always_inline]] inline double force_norm(const ContactHist& h, const BondHist* b) {
+  return norm(L::force(h, b));
+}
 }  // namespace
 
 void PairSet::pass(SetContext& cx, double dt) {
@@ -403,7 +410,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       Vec3 F, TA, TB;
       law(c, a, b, d, d2, F, TA, TB);
       CH[c] |= key(c) != k0;
-      if (SN) SN[c] = norm(Law::force(H[c], bond_at(c)));
+      if (SN) SN[c] = force_norm<Law>(H[c], bond_at(c));
       if constexpr (Save) {
         while (*cur.c < static_cast<std::uint64_t>(c)) ++cur.c;
         if (*cur.c == static_cast<std::uint64_t>(c)) SV[cur.c - cur.c0] = {F, TB, stamp};
@@ -490,7 +497,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
         CH_[cl] |= key_(cl) != k0[l];
-        if (SN_) SN_[cl] = norm(Law::force(H_[cl], bond_at_(cl)));
+        if (SN_) SN_[cl] = force_norm<Law>(H_[cl], bond_at_(cl));
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
           if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};
@@ -784,7 +791,7 @@ void PairSet::scan(const SetContext& cx, bool want_dt, bool want_fc) {
       const ContactHist& h = H[c];
       const BondHist* b = BD ? BD + c : nullptr;
       double f = 0.0;
-      if (SN) SN[c] = f = norm(L::force(h, b));
+      if (SN) SN[c] = f = force_norm<L>(h, b);
       if (SK) stiffness_terms<L>(h, b, fam, R[A[c]], R[B[c]], SK[c], SKA[c], SKB[c], SL[c]);
       return f;
     };
