@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 #include <mpi.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <random>
@@ -156,6 +158,63 @@ TEST(Dist, HertzPeriodicAutomaticStepSameBits) {
 }
 TEST(Dist, ParallelBondPeriodicTwoThreadsSameBits) {
   check({"pbond periodic, cut along x, 2 threads", ContactModel::kLinearPBond, true, true, 0, 600, 2});
+}
+
+// BrickGrid::near against its definition, brick by brick: every brick that, grown by the halo
+// (the end bricks of a free axis reaching to infinity), holds the point or a periodic image of
+// it; ascending, once each; the owner among them. Grids with one brick along an axis (periodic
+// and free, the exchange's shortcut), even and shifted cuts, points near faces and outside.
+TEST(Dist, NearIsEveryGrownBrickThatHoldsThePoint) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  struct Case {
+    int n[3];
+    bool periodic[3];
+    bool shifted;
+  };
+  const Case cases[] = {{{2, 1, 1}, {true, true, true}, false},  {{3, 2, 1}, {true, false, true}, true},
+                        {{1, 1, 1}, {false, false, false}, false}, {{1, 4, 2}, {false, true, false}, true},
+                        {{5, 1, 3}, {true, false, false}, false}};
+  std::size_t multi = 0;
+  for (const Case& cs : cases) {
+    BrickGrid g;
+    g.lo = {-1.0, 0.5, 2.0};
+    g.len = {4.0, 3.0, 2.5};
+    for (int k = 0; k < 3; ++k) {
+      g.n[k] = cs.n[k];
+      g.periodic[k] = cs.periodic[k];
+      if (cs.shifted && g.n[k] > 1)
+        for (int i = 1; i < g.n[k]; ++i) g.cuts[k].push_back(g.len[k] * (i + 0.3 * u01(rng) - 0.15) / g.n[k]);
+    }
+    const double halo = 0.2;
+    std::vector<int> got;
+    for (int t = 0; t < 4000; ++t) {
+      Vec3 x;
+      for (int k = 0; k < 3; ++k) x[k] = g.lo[k] + g.len[k] * (1.4 * u01(rng) - 0.2);
+      g.near(x, halo, got);
+      std::vector<int> want;
+      for (int r = 0; r < g.count(); ++r) {
+        const int idx[3] = {r % g.n[0], (r / g.n[0]) % g.n[1], r / (g.n[0] * g.n[1])};
+        bool in_all = true;
+        for (int k = 0; k < 3 && in_all; ++k) {
+          double u = x[k] - g.lo[k];
+          if (g.periodic[k]) u -= std::floor(u / g.len[k]) * g.len[k];
+          const int i = idx[k];
+          const double lo = (!g.periodic[k] && i == 0) ? -INFINITY : g.edge(k, i) - halo;
+          const double hi = (!g.periodic[k] && i == g.n[k] - 1) ? INFINITY : g.edge(k, i + 1) + halo;
+          bool in = u >= lo && u < hi;
+          if (g.periodic[k]) in = in || (u - g.len[k] >= lo && u - g.len[k] < hi) || (u + g.len[k] >= lo && u + g.len[k] < hi);
+          in_all = in;
+        }
+        if (in_all) want.push_back(r);
+      }
+      ASSERT_EQ(got, want) << "grid " << cs.n[0] << "x" << cs.n[1] << "x" << cs.n[2] << ", point " << x.x << " " << x.y
+                           << " " << x.z;
+      EXPECT_TRUE(std::binary_search(got.begin(), got.end(), g.owner(x)));
+      multi += got.size() > 1;
+    }
+  }
+  EXPECT_GT(multi, 1000u);  // points within the halo of a face, not only inside bricks
 }
 
 int main(int argc, char** argv) {

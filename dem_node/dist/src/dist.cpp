@@ -51,8 +51,14 @@ int BrickGrid::owner(const Vec3& x) const {
 
 void BrickGrid::near(const Vec3& x, double halo, std::vector<int>& out) const {
   out.clear();
-  std::vector<int> ax[3];
+  // per axis, the bricks that hold x (once per ball per exchange: no allocation once warm)
+  thread_local std::vector<int> ax[3];
   for (int k = 0; k < 3; ++k) {
+    ax[k].clear();
+    if (n[k] == 1) {  // one brick along the axis: it holds x (and its images)
+      ax[k].push_back(0);
+      continue;
+    }
     const double u = along(*this, x, k);
     for (int i = 0; i < n[k]; ++i) {
       // brick i grown by the halo; on a free axis the end bricks reach to infinity
@@ -66,6 +72,7 @@ void BrickGrid::near(const Vec3& x, double halo, std::vector<int>& out) const {
   for (int k2 : ax[2])
     for (int k1 : ax[1])
       for (int k0 : ax[0]) out.push_back(k0 + n[0] * (k1 + n[1] * k2));
+  if (out.size() < 2) return;
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
 }
@@ -171,6 +178,35 @@ bool kind_bonds(const WorldParams& p, int kind) {
   return law_has_bond(f.model);
 }
 
+// Rows j = 0 .. src.size() - 1 of `q`: row src[j] of `pt` where src[j] >= 0, else the record
+// bin[~src[j]]; one pass per array.
+template <class T, class FromRec>
+void fill_column(std::vector<T>& out, const std::vector<T>& in, const std::vector<BallRec>& bin,
+                 const std::vector<std::int64_t>& src, FromRec from_rec) {
+  out.resize(src.size());
+  T* o = out.data();
+  const T* a = in.data();
+  for (std::size_t j = 0; j < src.size(); ++j) {
+    const std::int64_t s = src[j];
+    o[j] = s >= 0 ? a[s] : from_rec(bin[static_cast<std::size_t>(~s)]);
+  }
+}
+void fill_rows(Particles& q, const Particles& pt, const std::vector<BallRec>& bin, const std::vector<std::int64_t>& src) {
+  fill_column(q.id, pt.id, bin, src, [](const BallRec& b) { return b.id; });
+  fill_column(q.x, pt.x, bin, src, [](const BallRec& b) { return b.x; });
+  fill_column(q.v, pt.v, bin, src, [](const BallRec& b) { return b.v; });
+  fill_column(q.w, pt.w, bin, src, [](const BallRec& b) { return b.w; });
+  fill_column(q.f, pt.f, bin, src, [](const BallRec& b) { return b.f; });
+  fill_column(q.t, pt.t, bin, src, [](const BallRec& b) { return b.t; });
+  fill_column(q.fa, pt.fa, bin, src, [](const BallRec& b) { return b.fa; });
+  fill_column(q.ta, pt.ta, bin, src, [](const BallRec& b) { return b.ta; });
+  fill_column(q.x_ref, pt.x_ref, bin, src, [](const BallRec& b) { return b.xr; });
+  fill_column(q.r, pt.r, bin, src, [](const BallRec& b) { return b.r; });
+  fill_column(q.m, pt.m, bin, src, [](const BallRec& b) { return b.m; });
+  fill_column(q.inertia, pt.inertia, bin, src, [](const BallRec& b) { return b.inertia; });
+  fill_column(q.fix, pt.fix, bin, src, [](const BallRec& b) { return b.fix; });
+}
+
 BallRec ball_rec(const Particles& pt, std::size_t i) {
   return BallRec{pt.id[i], pt.x[i], pt.v[i], pt.w[i], pt.f[i], pt.t[i], pt.fa[i], pt.ta[i], pt.x_ref[i],
                  pt.r[i],  pt.m[i], pt.inertia[i], pt.fix[i]};
@@ -241,6 +277,12 @@ struct FootingShare {
 };
 
 struct DistDem::Buffers {
+  // the exchange's per-row and per-destination arrays, kept from one exchange to the next (a
+  // fresh allocation of each cost page faults at every rebuild)
+  std::vector<int> own, old_owner, holders, dest, near_all;
+  std::vector<std::uint32_t> hold_off, off, near_off, fill;
+  std::vector<std::uint8_t> keep;
+  std::vector<std::int64_t> new_row, src, psrc;
   std::vector<std::vector<std::uint64_t>> kout;
   std::vector<std::uint64_t> kin;
   std::vector<std::uint32_t> order, order2;
@@ -655,20 +697,27 @@ void DistDem::exchange() {
   const auto& gh = w_->ghost_rows();
   auto mine = [&](std::size_t i) { return gh.empty() || !gh[i]; };
   const std::size_t P = static_cast<std::size_t>(size_);
-  std::vector<int> own(n), nb;
+  Buffers& bf = *buf_;
+  std::vector<int>& own = bf.own;
+  std::vector<int> nb;
+  own.resize(n);
   for (std::size_t i = 0; i < n; ++i) own[i] = grid_.owner(pt.x[i]);
   // the old owner of every row (this rank, or the rank that forwards the ghost's state) and the
   // ranks that hold each own row as a ghost
-  std::vector<int> old_owner(n, rank_);
-  std::vector<std::uint32_t> hold_off(n + 1, 0);
+  std::vector<int>& old_owner = bf.old_owner;
+  old_owner.assign(n, rank_);
+  std::vector<std::uint32_t>& hold_off = bf.hold_off;
+  hold_off.assign(n + 1, 0);
   for (std::size_t r = 0; r < P; ++r) {
     for (std::uint32_t i : recv_rows_[r]) old_owner[i] = static_cast<int>(r);
     for (std::uint32_t i : send_rows_[r]) ++hold_off[i + 1];
   }
   for (std::size_t i = 0; i < n; ++i) hold_off[i + 1] += hold_off[i];
-  std::vector<int> holders(hold_off[n]);
+  std::vector<int>& holders = bf.holders;
+  holders.resize(hold_off[n]);
   {
-    std::vector<std::uint32_t> f(hold_off.begin(), hold_off.end() - 1);
+    std::vector<std::uint32_t>& f = bf.fill;
+    f.assign(hold_off.begin(), hold_off.end() - 1);
     for (std::size_t r = 0; r < P; ++r)
       for (std::uint32_t i : send_rows_[r]) holders[f[i]++] = static_cast<int>(r);
   }
@@ -676,8 +725,12 @@ void DistDem::exchange() {
   // the owners of its contacts' partners.
   const PairContacts& pc = w_->pair_contacts();
   const bool has_bond = !pc.bond.empty();
-  std::vector<std::uint32_t> off(n + 1, 0), near_off(n + 1, 0);
-  std::vector<int> near_all;
+  std::vector<std::uint32_t>& off = bf.off;
+  std::vector<std::uint32_t>& near_off = bf.near_off;
+  off.assign(n + 1, 0);
+  near_off.assign(n + 1, 0);
+  std::vector<int>& near_all = bf.near_all;
+  near_all.clear();
   for (std::size_t i = 0; i < n; ++i) {
     if (mine(i)) {
       grid_.near(pt.x[i], halo_, nb);
@@ -691,8 +744,10 @@ void DistDem::exchange() {
     if (mine(pc.b[c])) ++off[pc.b[c] + 1];
   }
   for (std::size_t i = 0; i < n; ++i) off[i + 1] += off[i];
-  std::vector<int> dest(off[n]);
-  std::vector<std::uint32_t> fill(off.begin(), off.end() - 1);
+  std::vector<int>& dest = bf.dest;
+  dest.resize(off[n]);
+  std::vector<std::uint32_t>& fill = bf.fill;
+  fill.assign(off.begin(), off.end() - 1);
   for (std::size_t i = 0; i < n; ++i) {
     if (!mine(i)) continue;
     if (own[i] != rank_) ++migrated_;
@@ -724,11 +779,16 @@ void DistDem::exchange() {
   std::vector<std::vector<std::uint64_t>>& kout = buf_->kout;
   kout.resize(P);
   for (auto& o : kout) o.clear();
-  std::vector<std::uint8_t> keep(n, 0);
+  std::vector<std::uint8_t>& keep = bf.keep;
+  keep.assign(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
     if (!mine(i)) continue;
     int* d0 = dest.data() + off[i];
     int* d1 = dest.data() + off[i + 1];
+    if (std::all_of(d0, d1, [&](int d) { return d == rank_; })) {  // stays here, goes nowhere else
+      keep[i] = 1;
+      continue;
+    }
     std::sort(d0, d1);
     for (int* d = d0; d < d1; ++d) {
       if (d != d0 && *d == d[-1]) continue;
@@ -795,27 +855,25 @@ void DistDem::exchange() {
   bo.resize(bin.size());
   std::iota(bo.begin(), bo.end(), 0u);
   std::sort(bo.begin(), bo.end(), [&](std::uint32_t x, std::uint32_t y) { return bin[x].id < bin[y].id; });
-  // merge the kept rows and the new ones in id order; new_row[old row] for the kept
+  // merge the kept rows and the new ones in id order; new_row[old row] for the kept. First the
+  // order (src[j]: the old row of row j, or ~k for the new record bin[k]), then each array
+  // filled in one pass.
   Particles& q = q_;
-  clear_keep(q);
   std::vector<std::uint8_t>& ghost = ghost_buf_;
   ghost.clear();
-  std::vector<std::int64_t> new_row(n, -1);
+  std::vector<std::int64_t>& new_row = bf.new_row;
+  new_row.assign(n, -1);
+  std::vector<std::int64_t>& src = bf.src;
+  src.clear();
   std::size_t i = 0, k = 0;
   std::uint64_t last = 0;
   bool any = false;
-  auto take_new = [&](const BallRec& b) {
-    if (any && b.id == last) return;
-    push_ball(q, b);
-    ghost.push_back(grid_.owner(b.x) != rank_);
-    last = b.id, any = true;
-  };
   while (i < n || k < bo.size()) {
     while (i < n && !keep[i]) ++i;
     if (i >= n && k >= bo.size()) break;
     if (k >= bo.size() || (i < n && pt.id[i] < bin[bo[k]].id)) {
-      new_row[i] = static_cast<std::int64_t>(q.size());
-      push_ball(q, ball_rec(pt, i));
+      new_row[i] = static_cast<std::int64_t>(src.size());
+      src.push_back(static_cast<std::int64_t>(i));
       ghost.push_back(own[i] != rank_);
       last = pt.id[i], any = true;
       ++i;
@@ -823,10 +881,16 @@ void DistDem::exchange() {
       if (i < n && pt.id[i] == bin[bo[k]].id)
         throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got ball " +
                                std::to_string(pt.id[i]) + " whole, but holds it.");
-      take_new(bin[bo[k]]);
+      const BallRec& b = bin[bo[k]];
+      if (!(any && b.id == last)) {  // one copy per id
+        src.push_back(~static_cast<std::int64_t>(bo[k]));
+        ghost.push_back(grid_.owner(b.x) != rank_);
+        last = b.id, any = true;
+      }
       ++k;
     }
   }
+  fill_rows(q, pt, bin, src);
   const std::vector<std::uint64_t>& ids = q.id;
   auto row_of = [&](std::uint64_t id) -> std::int64_t {
     const auto it = std::lower_bound(ids.begin(), ids.end(), id);
@@ -840,16 +904,17 @@ void DistDem::exchange() {
   std::sort(po.begin(), po.end(), [&](std::uint32_t x, std::uint32_t y) {
     return pin[x].ia != pin[y].ia ? pin[x].ia < pin[y].ia : pin[x].ib < pin[y].ib;
   });
+  // First the list (rows a, b and psrc: the old contact, or ~k for the record pin[k]), then the
+  // shifts and histories copied in one pass per array.
   PairContacts& nc = nc_;
-  clear_keep(nc);
-  auto push_pair = [&](std::int64_t a, std::int64_t b, const std::array<std::int8_t, 4>& s, const ContactHist& h,
-                       const BondHist& bd) {
+  nc.a.clear(), nc.b.clear();
+  std::vector<std::int64_t>& psrc = bf.psrc;
+  psrc.clear();
+  auto push_pair = [&](std::int64_t a, std::int64_t b, std::int64_t from) {
     if (ghost[static_cast<std::size_t>(a)] && ghost[static_cast<std::size_t>(b)]) return;
     nc.a.push_back(static_cast<std::uint32_t>(a));
     nc.b.push_back(static_cast<std::uint32_t>(b));
-    nc.shift.push_back(s);
-    nc.h.push_back(h);
-    if (has_bond) nc.bond.push_back(bd);
+    psrc.push_back(from);
   };
   std::size_t c = 0, kk = 0;
   const PairRec* prev = nullptr;
@@ -870,18 +935,38 @@ void DistDem::exchange() {
       take_c = ia != r.ia ? ia < r.ia : ib < r.ib;
     }
     if (take_c) {
-      push_pair(new_row[pc.a[c]], new_row[pc.b[c]], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{});
+      push_pair(new_row[pc.a[c]], new_row[pc.b[c]], static_cast<std::int64_t>(c));
       ++c;
     } else {
-      const PairRec& r = pin[po[kk++]];
+      const std::uint32_t rk = po[kk++];
+      const PairRec& r = pin[rk];
       if (prev && r.ia == prev->ia && r.ib == prev->ib) continue;
       prev = &r;
       const std::int64_t a = row_of(r.ia), b = row_of(r.ib);
       if (a < 0 || b < 0)
         throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got a contact of ball " +
                                std::to_string(a < 0 ? r.ia : r.ib) + " without the ball.");
-      push_pair(a, b, r.s, r.h, r.b);
+      push_pair(a, b, ~static_cast<std::int64_t>(rk));
     }
+  }
+  {
+    const std::size_t m = psrc.size();
+    nc.shift.resize(m);
+    nc.h.resize(m);
+    nc.bond.resize(has_bond ? m : 0);
+    for (std::size_t j = 0; j < m; ++j) {
+      const std::int64_t sj = psrc[j];
+      nc.shift[j] = sj >= 0 ? pc.shift[static_cast<std::size_t>(sj)] : pin[static_cast<std::size_t>(~sj)].s;
+    }
+    for (std::size_t j = 0; j < m; ++j) {
+      const std::int64_t sj = psrc[j];
+      nc.h[j] = sj >= 0 ? pc.h[static_cast<std::size_t>(sj)] : pin[static_cast<std::size_t>(~sj)].h;
+    }
+    if (has_bond)
+      for (std::size_t j = 0; j < m; ++j) {
+        const std::int64_t sj = psrc[j];
+        nc.bond[j] = sj >= 0 ? pc.bond[static_cast<std::size_t>(sj)] : pin[static_cast<std::size_t>(~sj)].b;
+      }
   }
   // wall contacts: the kept ones (own balls that stay) merged with the received, by kind in
   // (ball id, wall) order
