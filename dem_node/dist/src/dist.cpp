@@ -139,13 +139,6 @@ bool by_kind_ball_wall(const WallSumRec& x, const WallSumRec& y) {
 }
 
 // Empty every array, keeping its memory (refilled at the next exchange).
-void clear_keep(Particles& p) {
-  p.x.clear(), p.v.clear(), p.w.clear(), p.f.clear(), p.t.clear(), p.fa.clear(), p.ta.clear(), p.x_ref.clear();
-  p.r.clear(), p.m.clear(), p.inertia.clear(), p.id.clear(), p.fix.clear();
-}
-void clear_keep(PairContacts& c) {
-  c.a.clear(), c.b.clear(), c.shift.clear(), c.h.clear(), c.bond.clear();
-}
 void clear_keep(WallContacts& c) {
   c.ball.clear(), c.wall.clear(), c.h.clear(), c.bond.clear(), c.facet.clear(), c.cand_off.clear(), c.cand.clear();
   c.F.clear(), c.M.clear(), c.TA.clear(), c.xc.clear(), c.bary.clear();
