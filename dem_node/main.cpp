@@ -84,7 +84,6 @@ class DemParticipant : public node::Participant {
     spdlog::info("dem: {} OpenMP threads (run.threads)", world_.params().threads);
     user_dt_ = s_.real("dem.dt_fixed");
     escape_margin_ = s_.real("dem.escape_margin") * s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
-    guard_every_ = s_.integer("run.guard_every");
     kick_ = s_.reals("dem.kick");
     if (!kick_.empty() && kick_.size() != 3) s_.fail("dem.kick", "an empty list or [vx, vy, vz] in m/s", std::to_string(kick_.size()) + " numbers");
     // dem.dt_fixed against the largest critical step a packing of this PSD that holds a ball of
@@ -371,19 +370,7 @@ class DemParticipant : public node::Participant {
       const bool box = escape_margin_ > 0 && !world_.periodic();
       dem::Vec3 lo{}, hi{};
       if (box) std::tie(lo, hi) = domain();
-      // The screen the motion formed (request_screen), else a pass of its own.
-      dem::BallScreen sc;
-      const dem::World::MotionScreen* ms = dist_live_ ? nullptr : world_.motion_screen();
-      if (ms && screen_box_ == box) {
-        const dem::Vec3 fr = world_.has_footing() ? world_.footing_reaction() : dem::Vec3{};
-        sc.finite = ms->finite && std::isfinite(fr.x) && std::isfinite(fr.y) && std::isfinite(fr.z);
-        sc.outside = ms->outside;
-        sc.kinetic = ms->kinetic;
-        ++screens_motion_;
-      } else {
-        sc = dem::screen_balls(world_, lo, hi, box, screen_scratch_);
-        ++screens_own_;
-      }
+      const dem::BallScreen sc = dem::screen_balls(world_, lo, hi, box, screen_scratch_);
       if (!dist_live_ && !ke_valid_) {
         ke_ = sc.kinetic;
         ke_valid_ = true;
@@ -409,7 +396,6 @@ class DemParticipant : public node::Participant {
     early_ = false;
     if (g_ranks.size > 1 || world_.num_balls() == 0) return;
     begin_step(st, values, dt);  // (one rank: never on a DistDem)
-    request_screen(step);
     early_node_before_ = world_.time();
     world_.step_motion();
     early_ = true;
@@ -427,7 +413,6 @@ class DemParticipant : public node::Participant {
     }
     early_ = false;
     begin_step(st, values, dt);
-    request_screen(step);
     dem::World& w = live();
     const double node_before = w.time();
     if (dist_live_) {
@@ -460,17 +445,6 @@ class DemParticipant : public node::Participant {
     // Exactly 'interval' DEM steps per coupling step of length dt.
     if (dt > 0) w.mutable_params().dt_fixed = dt / static_cast<double>(interval_);
     synced_ = false;
-  }
-
-  // The guard of this coupling step (check_health) takes the balls' screen from the motion
-  // (World::screen_motion) where it can: one process, a step the guard checks.
-  void request_screen(std::int64_t step) {
-    const bool box = escape_margin_ > 0 && !world_.periodic();
-    const bool due = !dist_live_ && guard_every_ > 0 && step % guard_every_ == 0;
-    dem::Vec3 lo{}, hi{};
-    if (box) std::tie(lo, hi) = domain();
-    world_.screen_motion(due, lo, hi, box);
-    screen_box_ = box;
   }
 
   // What a coupling step does after its DEM steps.
@@ -546,17 +520,6 @@ class DemParticipant : public node::Participant {
     return (world_.gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
-    if (screens_motion_ > 0) {
-      // The motion's screens see each force pass one step later: the stage's last one here.
-      const dem::BallScreen sc = dem::screen_balls(world_, {}, {}, false, screen_scratch_);
-      if (!sc.finite)
-        if (auto f = dem::check_finite(world_))
-          throw std::runtime_error("blow-up guard at the end of stage '" + st.name + "': " + f->cause);
-    }
-    if (screens_motion_ + screens_own_ > 0)
-      spdlog::info("dem: guard: {} ball screens formed by the motion, {} by a pass of their own", screens_motion_,
-                   screens_own_);
-    screens_motion_ = screens_own_ = 0;
     write_history_row();
     leave_dist();  // the whole World again, on every rank
     if (out_) write_frame(last);
@@ -1002,9 +965,6 @@ class DemParticipant : public node::Participant {
   bool ke_valid_ = false;
   node::EnergyJump energy_jump_;
   double user_dt_ = 0, escape_margin_ = 0;
-  std::int64_t guard_every_ = 1;
-  bool screen_box_ = false;  // request_screen: the screen asked for holds the escape distance
-  std::int64_t screens_motion_ = 0, screens_own_ = 0;  // check_health: the screens it took from where
   std::int64_t history_due_ = -1;  // the step whose history row step_values writes (-1: none)
   std::vector<double> screen_scratch_;  // check_health: dem::screen_balls's per-ball terms
   std::vector<double> kick_;

@@ -10,10 +10,8 @@
 #include <random>
 #include <set>
 #include <sstream>
-#include <utility>
 
 #include "demfdm/dem/guard.hpp"
-#include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
 
 using namespace demfdm::dem;
@@ -161,93 +159,6 @@ TEST(Guard, BallPushedHalfARadiusIntoAWallIsExpelledConservingEnergy) {
   const double r = expelled_energy_ratio(0.8);
   EXPECT_GT(r, 0.75);
   EXPECT_LT(r, 1.25);
-}
-
-// World::screen_motion, the guard's screen formed by the motion (docs/stability.md): after a step,
-// its finite flag, escape distance and kinetic energy are screen_balls's on the same state (the
-// same bits), on one and two threads, with the vector motion kernel where the machine has one
-// and without; a NaN applied force trips it through the velocity of the step that used it, and
-// the force pass that formed a NaN force through the next step (the force the motion used); it
-// ends with mutable access to the balls, at the next step without the request, and it is not
-// formed while an effect runs after the motion.
-TEST(Guard, MotionScreenIsScreenBallsOfTheStateItLeaves) {
-  for (PairKernel kern : {PairKernel::kScalar, PairKernel::kBlockAvx2, PairKernel::kBlockAvx512}) {
-    if (kern != PairKernel::kScalar && !World::pair_kernel_available(kern)) continue;
-    for (int threads : {1, 2}) {
-      SCOPED_TRACE("kernel " + std::to_string(static_cast<int>(kern)) + ", threads " + std::to_string(threads));
-      WorldParams p;
-      p.threads = threads;
-      World w(p);
-      w.set_pair_kernel(kern);
-      std::mt19937_64 rng(5);
-      std::uniform_real_distribution<double> j(-0.02 * kR, 0.02 * kR);
-      for (int k = 0; k < 16; ++k)
-        for (int y = 0; y < 16; ++y)
-          for (int x = 0; x < 20; ++x) w.add_ball({1.99 * kR * x + j(rng), 1.99 * kR * y + j(rng), 1.99 * kR * k + j(rng)}, kR);
-      ASSERT_GT(w.num_balls(), 4096u);
-      w.prepare();
-      std::uniform_real_distribution<double> u(-1.0, 1.0);
-      for (std::size_t i = 0; i < w.num_balls(); ++i) {
-        w.balls().v[i] = {u(rng), u(rng), u(rng)};
-        w.balls().w[i] = {u(rng) / kR, u(rng) / kR, u(rng) / kR};
-      }
-      w.balls().x[77].x += 40 * kR;  // far outside the box below
-      const Vec3 lo{0, 0, 0}, hi{38 * kR, 30 * kR, 30 * kR};
-      std::vector<double> scratch;
-      w.screen_motion(true, lo, hi, true);
-      for (int s = 0; s < 4; ++s) {
-        w.step();
-        const World::MotionScreen* ms = w.motion_screen();
-        ASSERT_NE(ms, nullptr) << "step " << s;
-        const BallScreen sc = screen_balls(std::as_const(w), lo, hi, true, scratch);
-        EXPECT_TRUE(ms->finite);
-        EXPECT_EQ(ms->outside, sc.outside);
-        EXPECT_GT(ms->outside, 30 * kR);
-        EXPECT_EQ(ms->kinetic, sc.kinetic);  // the same bits, not a tolerance
-        EXPECT_EQ(ms->kinetic, w.kinetic_energy());
-      }
-      // a NaN applied force on the lone ball 77: the velocity of the step that uses it
-      const Vec3 x77 = w.balls().x[77];
-      w.balls().fa[77].y = std::numeric_limits<double>::quiet_NaN();
-      w.step();
-      ASSERT_NE(w.motion_screen(), nullptr);
-      EXPECT_FALSE(w.motion_screen()->finite);
-      EXPECT_FALSE(screen_balls(std::as_const(w), lo, hi, true, scratch).finite);
-      w.balls().fa[77] = w.balls().v[77] = w.balls().f[77] = Vec3{};
-      w.balls().x[77] = x77;
-      w.step();
-      ASSERT_NE(w.motion_screen(), nullptr);
-      EXPECT_TRUE(w.motion_screen()->finite);
-      // a non-finite force formed by a pass (here put in its place): the next motion uses it
-      w.balls().f[77].z = std::numeric_limits<double>::infinity();
-      EXPECT_EQ(w.motion_screen(), nullptr);  // mutable access ended the screen
-      w.step_motion();
-      ASSERT_NE(w.motion_screen(), nullptr);
-      EXPECT_FALSE(w.motion_screen()->finite);
-      // without the request: no screen
-      w.screen_motion(false);
-      w.step();
-      EXPECT_EQ(w.motion_screen(), nullptr);
-    }
-  }
-}
-
-TEST(Guard, MotionScreenIsNotFormedWhileAnEffectRunsAfterTheMotion) {
-  World w(WorldParams{});
-  for (int x = 0; x < 4; ++x) w.add_ball({2.5 * kR * x, 0.0, kR}, kR);
-  PlaneWallParams pw;
-  pw.point = {0, 0, 0};
-  pw.normal = {0, 0, 1};
-  const int wall = w.add_plane(pw);
-  w.prepare();
-  w.screen_motion(true);
-  w.step();
-  EXPECT_NE(w.motion_screen(), nullptr);
-  PlatenServoParams sp;
-  sp.wall = wall;
-  w.add_effect(std::make_unique<PlatenServo>(sp));  // a kinematics effect: after the motion
-  w.step();
-  EXPECT_EQ(w.motion_screen(), nullptr);
 }
 
 // dem::screen_balls, the node's per-step pass (docs/stability.md): its finite flag trips on a

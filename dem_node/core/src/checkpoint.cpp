@@ -34,7 +34,7 @@ static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
 static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
 static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
-static_assert(sizeof(World) == 2112, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state), ghost rows (refused), step reduction (a rank driver's), the guard's motion screen (derived; its request is the driver's)
+static_assert(sizeof(World) == 2000, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state), ghost rows (refused), step reduction (a rank driver's)
 // The contact sets: vtable, phase, contacts, the kind's walls (PairSet: + pass and measurement scratch, not state).
 static_assert(sizeof(PairSet) == 952, "PairSet changed: is the new member state? update the checkpoint");  // + the threaded pass plan, the kept stiffness terms, the serial scan's norm sum (derived), the pass's force norms (derived)
 static_assert(sizeof(WallSet<PlaneKind>) == 328, "WallSet<PlaneKind> changed: update the checkpoint");
@@ -685,7 +685,6 @@ struct CheckpointAccess {
     w.facets_->kind.walls = std::move(fwalls);
     w.footing_->kind.ft = footing;
     w.chunk_e_.clear();
-    w.screen_ = World::MotionScreen{};  // the guard's screen was of the old balls
     if (w.gravity_) w.remove_effect(w.gravity_);
     if (gravity_on) w.gravity_ = w.add_effect(std::make_unique<GravityEffect>(g));
     // The saved platen servos replace the target's.

@@ -371,23 +371,6 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
   for (; i < i1; ++i) row(i);
 }
 
-// The guard's screen of rows [i0, i1) just moved (screen_motion): the same tests and terms as
-// dem::screen_balls, with the force and torque the motion used.
-void World::screen_rows(std::size_t i0, std::size_t i1, double& bad, double& outside) {
-  auto nf = [](const Vec3& v) { return !(v.x * 0.0 == 0.0) | !(v.y * 0.0 == 0.0) | !(v.z * 0.0 == 0.0); };
-  unsigned b = 0;
-  double wo = 0.0;
-  double* ke = scratch_ball_.data();
-  for (std::size_t i = i0; i < i1; ++i) {
-    b |= nf(pt_.x[i]) | nf(pt_.v[i]) | nf(pt_.w[i]) | nf(pt_.f[i]) | nf(pt_.t[i]);
-    if (screen_box_)
-      for (int k = 0; k < 3; ++k) wo = std::max({wo, screen_lo_[k] - pt_.x[i][k], pt_.x[i][k] - screen_hi_[k]});
-    ke[i] = kinetic_energy_of(i);
-  }
-  bad = b ? 1.0 : 0.0;
-  outside = wo;
-}
-
 void World::integrate(double dt) {
   const std::size_t n = pt_.size();
   const bool per = p_.periodic.enabled;
@@ -399,13 +382,6 @@ void World::integrate(double dt) {
   // One instantiation per (energy, periodic): no flag tests inside the row loop.
   auto rows = energy ? (per ? &World::integrate_rows<true, true> : &World::integrate_rows<true, false>)
                      : (per ? &World::integrate_rows<false, true> : &World::integrate_rows<false, false>);
-  // The guard's screen (screen_motion): only where nothing after the motion can move a ball.
-  const bool screen = screen_on_ && by_phase_[2].empty() && by_phase_[3].empty();
-  screen_.step = -1;
-  if (screen) {
-    chunk_screen_.assign(2 * nch, 0.0);
-    scratch_ball_.resize(n);
-  }
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && nch > 1)
   for (std::int64_t ch = 0; ch < static_cast<std::int64_t>(nch); ++ch) {
     double ed = 0.0, dmax = 0.0;
@@ -413,20 +389,6 @@ void World::integrate(double dt) {
     (this->*rows)(i0, i1, dt, sc, ed, dmax);
     chunk_e_[2 * static_cast<std::size_t>(ch)] = ed;
     chunk_e_[2 * static_cast<std::size_t>(ch) + 1] = dmax;
-    if (screen) screen_rows(i0, i1, chunk_screen_[2 * static_cast<std::size_t>(ch)],
-                            chunk_screen_[2 * static_cast<std::size_t>(ch) + 1]);
-  }
-  if (screen) {
-    MotionScreen& r = screen_;
-    r = MotionScreen{};
-    for (std::size_t ch = 0; ch < nch; ++ch) {
-      r.finite = r.finite && chunk_screen_[2 * ch] == 0.0;
-      r.outside = std::max(r.outside, chunk_screen_[2 * ch + 1]);
-    }
-    const double* t = scratch_ball_.data();
-    for (std::size_t i = 0; i < n; ++i) r.kinetic += t[i];  // row order, from +0
-    // step_motion counts the step after the integration: the screen is of that count
-    r.step = step_ + 1;
   }
   for (std::size_t ch = 0; ch < nch; ++ch) {  // fixed-order reduction
     e_damp_ += chunk_e_[2 * ch];

@@ -210,11 +210,7 @@ class World {
   // ---- particles ----
   /// Add a ball; density from params unless `density` > 0. Returns its row.
   std::size_t add_ball(const Vec3& x, double radius, double density = 0.0);
-  /// The rows (mutable access also ends the motion's screen, motion_screen()).
-  Particles& balls() {
-    screen_.step = -1;
-    return pt_;
-  }
+  Particles& balls() { return pt_; }
   const Particles& balls() const { return pt_; }
   std::size_t num_balls() const { return pt_.size(); }
   /// Recompute mass and inertia from radius and density (after a radius change).
@@ -273,29 +269,6 @@ class World {
   /// neighbour rebuild if asked, the force pass). step() is step_motion(); step_forces_now().
   void step_motion();
   void step_forces(bool rebuild);
-  /// The blow-up guard's screen of the balls, formed by the motion (docs/stability.md). While
-  /// on, each step_motion screens the rows it has just moved, chunk by chunk while they are in
-  /// cache, so that the guard needs no pass of its own over the balls: x, v and ω finite, and
-  /// the force and torque the motion used (those of the previous force pass, so a non-finite
-  /// force is found through them one step after the pass that formed it), the largest distance
-  /// of a centre outside [lo, hi] (box), and the kinetic energy (the terms kinetic_energy_of
-  /// added in row order: the bits of an ordered sum over the balls).
-  struct MotionScreen {
-    bool finite = true;
-    double outside = 0.0;
-    double kinetic = 0.0;
-    std::int64_t step = -1;  // step_count() after the motion that formed it
-  };
-  void screen_motion(bool on, const Vec3& lo = {}, const Vec3& hi = {}, bool box = false) {
-    screen_on_ = on;
-    screen_lo_ = lo;
-    screen_hi_ = hi;
-    screen_box_ = box;
-  }
-  /// The screen of the last step_motion while it describes the balls: no motion since, no
-  /// mutable balls() since, and no effect after the motion that could move them (end-of-step
-  /// and kinematics effects: none formed then); nullptr otherwise.
-  const MotionScreen* motion_screen() const { return screen_.step == step_ ? &screen_ : nullptr; }
   /// step_forces with step()'s own rebuild test (the balls' displacement and the walls' travel).
   void step_forces_now();
   /// The rebuild test of step() for a given largest squared displacement of a ball since the
@@ -488,7 +461,6 @@ class World {
   SetContext context();
   void gather();  // add the wall-contact forces to the balls (serial, set and contact order)
   void integrate(double dt);
-  void screen_rows(std::size_t i0, std::size_t i1, double& bad, double& outside);
   template <bool Energy, bool Periodic>
   void integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3& sc, double& ed, double& dmax);
   std::int64_t dt_interval() const;  // steps between recomputations of the critical step
@@ -517,10 +489,6 @@ class World {
   std::uint64_t next_id_ = 0, next_wall_id_ = 1;
   double e_damp_ = 0.0;
   std::vector<double> chunk_e_;
-  bool screen_on_ = false, screen_box_ = false;  // screen_motion
-  Vec3 screen_lo_{}, screen_hi_{};
-  MotionScreen screen_;
-  std::vector<double> chunk_screen_;  // per chunk: not finite (0/1), largest distance outside
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
   std::function<double(double)> step_reduction_;  // set_step_reduction
