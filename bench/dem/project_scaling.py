@@ -15,13 +15,16 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
   next:  the same exchange, RCB cuts, ghosts not integrated, the walls' sums as exact
          (order-free) accumulators in one allreduce.
 
-Usage: project_scaling.py [--network ib|ethernet] [--balls N] [--csv]
+Two sets of measured figures (--machine): "avx2", session 14 (AMD EPYC, 2 vCPUs, AVX2, the
+exchange of that session), and "avx512", session 19 (AMD EPYC, 2 vCPUs, AVX-512, the exchange of
+ad830ea). The efficiency falls where the compute per ball is faster and the network is not.
+Usage: project_scaling.py [--machine avx2|avx512] [--network ib|ethernet] [--balls N] [--csv]
 """
 import argparse
 import math
 
-# Measured on this machine (AMD EPYC, 2 vCPUs, AVX2), bench_dist, the bench packing, linear law:
-MEASURED = dict(
+# Measured on an AMD EPYC, 2 vCPUs, AVX2 (session 14), bench_dist, the bench packing, linear law:
+MEASURED_AVX2 = dict(
     # compute per ball-step, one rank (no exchange), strong mode, 600 steps, 3 rounds of
     # bench_dist runs (docs/scaling.md, the table of the incremental exchange): motion 0.643 ms + forces
     # 5.907 ms per step for 25,835 balls
@@ -67,6 +70,22 @@ MEASURED = dict(
     # 3 words each
     wall_values=1623,
 )
+
+# Measured on an AMD EPYC, 2 vCPUs, AVX-512 (session 19, after ad830ea), bench_dist, the bench
+# packing, linear law, 600 steps, three rounds each (docs/scaling.md, "the exchange, cheaper");
+# the figures that do not depend on the machine are those above.
+MEASURED_AVX512 = dict(
+    MEASURED_AVX2,
+    # one rank, strong: motion 0.316 ms + forces 3.122 ms per step for 25,835 balls
+    compute_us=(0.316 + 3.122) * 1e3 / 25835,
+    motion_us=0.316 * 1e3 / 25835,
+    # two ranks, strong: forces 1.736 ms against 3.122 / 2, at 0.236 ghosts per owned ball
+    ghost_pair_coeff=(1.736 / (3.122 / 2) - 1.0) / 0.2364,
+    # two ranks, strong: exchange 0.168 ms per step, 26 rebuilds in 600 steps, 15,971 local balls
+    # per rank (12,918 owned, 0.236 ghosts each) -> 0.24 us per local ball and rebuild
+    exchange_us_per_ball=0.168e3 * (600 / 26) / 15971,
+)
+MACHINES = {"avx2": MEASURED_AVX2, "avx512": MEASURED_AVX512}
 
 NETWORKS = {
     # InfiniBand HDR class: 2 us latency, 10 GB/s
@@ -119,12 +138,13 @@ def step_time(P, n, m, net, design):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--machine", choices=sorted(MACHINES), default="avx512")
     ap.add_argument("--network", choices=sorted(NETWORKS), default="ib")
     ap.add_argument("--balls", type=int, default=25835, help="balls per rank (weak scaling)")
     ap.add_argument("--csv", action="store_true")
     args = ap.parse_args()
-    m, net = MEASURED, NETWORKS[args.network]
-    print(f"# network {args.network}: alpha {net['alpha_us']} us, beta {net['beta_gbs']} GB/s; "
+    m, net = MACHINES[args.machine], NETWORKS[args.network]
+    print(f"# machine {args.machine}; network {args.network}: alpha {net['alpha_us']} us, beta {net['beta_gbs']} GB/s; "
           f"{args.balls} balls per rank; ghosts per owned ball in a cubic brick: "
           f"{ghosts_per_ball(args.balls, m):.3f}")
     hdr = "design,ranks,compute_ms,exchange_ms,forward_ms,reduce_ms,walls_ms,total_ms,efficiency"
