@@ -18,6 +18,7 @@
 
 #include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/dist.hpp"
+#include "demfdm/dem/specimen.hpp"
 #include "tests/dem/lattice.hpp"
 #include "tests/dist/dist_util.hpp"
 
@@ -41,6 +42,8 @@ struct WallScene {
   int balance_every = 0;  // DistDem::Balance::every
   DistDem::Weight weight = DistDem::Weight::kContacts;
   double reach = -1.0;  // DistDem::set_neighbour_reach (0: every exchange falls back to all-to-all)
+  bool servo = false;   // a platen servo pushes the side plane x = 0 (its stress target above the block's)
+  int per_call = 1;     // DEM steps per call of step(n) (the floor's vertices are set once per call)
 };
 
 // The floor: a 3 x 3 grid of vertices over the box's base (margin kS), 8 triangles facing +z.
@@ -92,6 +95,14 @@ std::unique_ptr<World> build(const WallScene& sc, const Floor& floor, bool final
   w->add_plane({{h, 0, h}, {0, 1, 0}});
   w->add_plane({{h, kL, h}, {0, -1, 0}});
   w->add_facet_wall(floor.base, floor.tri);
+  if (sc.servo) {
+    PlatenServoParams sp;
+    sp.wall = 0;
+    sp.stress = 2e6;  // [Pa], near the block's lateral stress: the wall follows the reaction
+    sp.area = kL * kL;
+    sp.vmax = 5.0;  // [m/s], not reached
+    w->add_effect(std::make_unique<PlatenServo>(sp));
+  }
   FootingParams fp;
   fp.diameter = 0.5 * kL;
   fp.height = 0.3 * kL;
@@ -156,7 +167,7 @@ void check(const WallScene& sc) {
   d.set_balance({sc.balance_every, 2048, sc.weight});
   d.set_neighbour_reach(sc.reach);
   std::vector<Vec3> hist;
-  run(d.world(), floor, sc.steps, hist, [&] { d.step(1); });
+  run(d.world(), floor, sc.steps / sc.per_call, hist, [&] { d.step(sc.per_call); });
   const DistDem::Balls got = d.gather();
   const Sums got_sums = sums(d.world(), hist);
   // the node's measurements, collective
@@ -169,7 +180,7 @@ void check(const WallScene& sc) {
   if (g_rank == 0) {
     std::unique_ptr<World> ref = build(sc, floor, true);
     std::vector<Vec3> rh;
-    run(*ref, floor, sc.steps, rh, [&] { ref->step(); });
+    run(*ref, floor, sc.steps / sc.per_call, rh, [&] { ref->step(sc.per_call); });
     const Sums want = sums(*ref, rh);
     test::expect_same_measures(*ref, ke, fc, ratio);
     std::size_t bonded_floor = 0;
@@ -190,6 +201,15 @@ void check(const WallScene& sc) {
     EXPECT_GT(ref->footing_reaction().z, 0.0) << "the balls push the footing up";
     EXPECT_LT(ref->facet_wall_force(0).z, 0.0) << "the balls press on the floor";
     EXPECT_GT(ref->rebuild_count(), 10);
+    if (sc.servo) {  // the servo moved its wall, and on the ranks by the same steps
+      const double v = ref->plane(0).p.velocity.x;
+      std::printf("  servo: plane 0 at x = %.6g R, velocity %.4g m/s, reaction %.4g N\n", ref->plane(0).p.point.x / kR, v,
+                  ref->plane(0).reaction.x);
+      EXPECT_NE(ref->plane(0).p.point.x, 0.0);
+      EXPECT_LT(std::abs(v), 5.0) << "the servo must follow the sums, not its speed limit";
+      EXPECT_EQ(full->plane(0).p.point.x, ref->plane(0).p.point.x);
+      EXPECT_EQ(full->plane(0).p.velocity.x, v);
+    }
     if (g_size > 1) {
       EXPECT_GT(sum[1], 0) << "balls must cross brick faces";
       // Every record of these runs goes to a brick within the halo and the skin: point to point
@@ -250,6 +270,32 @@ void check(const WallScene& sc) {
 }  // namespace
 
 TEST(DistWalls, LinearFloorCutAlongXSameBits) { check({"walls, linear floor, cut along x"}); }
+// An effect the ranks cannot run yet (the periodic servo reads the whole cell's stress every
+// step) is refused by name, on every rank.
+TEST(DistWalls, PeriodicServoIsRefusedByName) {
+  const Floor floor;
+  std::unique_ptr<World> full = build({"refusal"}, floor, true);
+  full->add_effect(std::make_unique<PeriodicServo>(ServoParams{}, kR));
+  BrickGrid g;
+  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
+  g.len = {kL, kL, kL};
+  g.n[0] = g_size;
+  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  try {
+    d.load(*full);
+    ADD_FAILURE() << "load took a world with a periodic servo";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'periodic_servo'"), std::string::npos) << e.what();
+  }
+}
+
+TEST(DistWalls, PlatenServoCutAlongYSameBits) {
+  WallScene sc{"walls, a platen servo on a side, cut along y, 4 steps per call"};
+  sc.servo = true;
+  sc.axis = 1;  // the servo's wall (x = 0) meets every brick
+  sc.per_call = 4;  // the servo reads the walls' sums inside step(n)
+  check(sc);
+}
 TEST(DistWalls, BondedFloorCutAlongZSameBits) {
   check({"walls, bonded floor, cut along z", ContactModel::kLinearPBond, 2});
 }

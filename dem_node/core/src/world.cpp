@@ -563,6 +563,12 @@ std::vector<std::string> World::effect_names() const {
   return out;
 }
 
+std::vector<const Effect*> World::effects() const {
+  std::vector<const Effect*> out;
+  for (const auto& e : effects_) out.push_back(e.get());
+  return out;
+}
+
 World::Counters World::counters() const {
   return Counters{time_,  dt_,          skin_,          step_,    rebuilds_,    last_dt_step_,
                   bond_failures_, prepared_, dirty_, edot_, cell_strain_, cell_len_ref_,

@@ -3,6 +3,7 @@
 
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/procedures.hpp"
+#include "demfdm/dem/specimen.hpp"
 
 #include <algorithm>
 #include <array>
@@ -316,12 +317,19 @@ void DistDem::load(const World& full) {
   const std::size_t n = fp.size();
   for (std::size_t i = 1; i < n; ++i)
     if (!(fp.id[i - 1] < fp.id[i])) throw std::invalid_argument("DistDem::load: the rows must be in id order.");
-  // Gravity comes with the parameters; no other effect runs on the ranks yet (a servo reads the
-  // walls' sums every step, which the ranks form at the end of step(n) only).
-  for (const std::string& e : full.effect_names())
-    if (e != "gravity")
-      throw std::invalid_argument("DistDem::load: the world has the effect '" + e +
-                                  "', which the DEM on MPI ranks cannot run yet (docs/scaling.md); run it on one rank.");
+  // Gravity comes with the parameters. A platen servo runs on every rank: it reads its wall's
+  // reaction and stiffness sum, which the ranks then reduce after every step (step), so every
+  // rank sets the same wall velocity as one World. No other effect runs on the ranks yet.
+  std::vector<PlatenServoParams> platens;
+  for (const Effect* e : full.effects()) {
+    if (std::string(e->name()) == "gravity") continue;
+    if (const auto* ps = dynamic_cast<const PlatenServo*>(e)) {
+      platens.push_back(ps->params());
+      continue;
+    }
+    throw std::invalid_argument("DistDem::load: the world has the effect '" + std::string(e->name()) +
+                                "', which the DEM on MPI ranks cannot run yet (docs/scaling.md); run it on one rank.");
+  }
   p_ = full.params();
   p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
   // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
@@ -400,6 +408,8 @@ void DistDem::load(const World& full) {
   }
   if (full.has_footing()) w_->set_footing(full.footing().p);
   w_->copy_walls(full);  // every field, the walls' ids too (histories are carried by them)
+  for (const PlatenServoParams& ps : platens) w_->add_effect(std::make_unique<PlatenServo>(ps));
+  walls_every_step_ = !platens.empty();
   w_->swap_balls(pt, pc, wc, ghost);
   // One World's counters (time, step, the step's schedule, ...). The counts and energies that
   // are sums over the ranks' contacts start from the full world's on rank 0 and from 0 elsewhere.
@@ -544,10 +554,16 @@ void DistDem::step(std::int64_t n) {
     t0 = MPI_Wtime();
     times_.exchange += t0 - t1;
     w_->step_forces(rebuild);
-    times_.forces += MPI_Wtime() - t0;
+    t1 = MPI_Wtime();
+    times_.forces += t1 - t0;
+    if (walls_every_step_) {  // a platen servo reads them at the next step's kinematics
+      reduce_walls();
+      times_.walls += MPI_Wtime() - t1;
+    }
   }
-  // The walls' sums of the last step only: within the call nothing reads them (the effects on
-  // ranks, gravity, do not).
+  if (walls_every_step_) return;
+  // The walls' sums of the last step only: within the call nothing else reads them (gravity
+  // does not).
   const double t0 = MPI_Wtime();
   reduce_walls();
   times_.walls += MPI_Wtime() - t0;

@@ -255,6 +255,8 @@ class World {
   void remove_effect(const Effect* e);
   /// The names of the effects present, in the order they were added (gravity included).
   std::vector<std::string> effect_names() const;
+  /// The effects present, in the order they were added (gravity included).
+  std::vector<const Effect*> effects() const;
   /// Turn the gravity effect on or off (g = (0,0,−N g0), §0.1).
   void set_gravity(bool on, double g_level);
   bool gravity_on() const { return gravity_ != nullptr; }

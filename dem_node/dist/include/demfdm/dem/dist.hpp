@@ -21,8 +21,9 @@
 // What this version covers: balls, ball-ball and ball-wall contacts of every law, periodic cells
 // (also strained) and free space, gravity, the fixed or the automatic step (the smallest over
 // the ranks), dynamic balancing, the node's measurements, and one World again from the ranks'
-// parts (unload: output, checkpoints, the next stage's set-up). Not yet: effects other than
-// gravity (servos; load refuses them); specimen procedures (dem_node runs them on the whole
+// parts (unload: output, checkpoints, the next stage's set-up), platen servos (every rank runs
+// them on the walls' sums, reduced after every step then). Not yet: the other effects (the
+// periodic servo; load refuses them); specimen procedures (dem_node runs them on the whole
 // World on every rank).
 #pragma once
 
@@ -116,7 +117,8 @@ class DistDem {
   /// same bits as one World: the energies of local damping and of dropped contacts, summed rank by
   /// rank (docs/scaling.md).
   void unload(World& full) const;
-  /// n steps; the walls' sums are those of the last (within the call nothing reads them).
+  /// n steps; the walls' sums are those of the last (reduced after every step where a platen
+  /// servo reads them at the next one, else once at the end: within the call nothing reads them).
   void step(std::int64_t n = 1);
 
   /// Dynamic balancing (as LAMMPS's `fix balance ... shift`): at every `every`-th exchange (0:
@@ -220,6 +222,7 @@ class DistDem {
   WorldParams p_;
   std::unique_ptr<World> w_;
   double halo_ = 0.0;
+  bool walls_every_step_ = false;  // a platen servo: the walls' sums reduced after every step (load)
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0, sparse_exchanges_ = 0;
   std::vector<int> peers_;                   // peer_ranks()
