@@ -277,6 +277,7 @@ int main(int argc, char** argv) {
   }
   d.step(20);  // warm-up
   d.reset_times();
+  d.world().reset_phase_times();
   const std::int64_t ex0 = d.exchanges(), mig0 = d.migrated();
   MPI_Barrier(MPI_COMM_WORLD);
   const double t0 = MPI_Wtime();
@@ -288,10 +289,12 @@ int main(int argc, char** argv) {
   MPI_Barrier(MPI_COMM_WORLD);
   const double wall = MPI_Wtime() - t0;
   const DistDem::Times& t = d.times();
-  double mine[8] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
-                    double(t.forwarded)};
-  double sum[8], cmax = 0.0;
-  MPI_Reduce(mine, sum, 8, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+  // the forces phase split: the neighbour rebuild and the ball-ball pass of the rank's World
+  const PhaseTimes& pt = d.world().phase_times();
+  double mine[10] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
+                     double(t.forwarded), pt.rebuild, pt.pair};
+  double sum[10], cmax = 0.0;
+  MPI_Reduce(mine, sum, 10, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
   const double comp = t.compute();
   MPI_Reduce(&comp, &cmax, 1, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
   long long mig = d.migrated() - mig0, mig_sum = 0, own = static_cast<long long>(d.owned()), own_min = 0, own_max = 0;
@@ -306,14 +309,15 @@ int main(int argc, char** argv) {
     const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5];
     std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
                 "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
-                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N\n");
-    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g\n",
+                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N,rebuild_ms,pair_ms\n");
+    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g,"
+                "%.4f,%.4f\n",
                 P, mode.c_str(), model.c_str(), full.num_balls(), steps, wall,
                 double(full.num_balls()) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
                 sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5]) / total, cmax / ((sum[0] + sum[1]) / P),
                 sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - ex0), mig_sum,
                 static_cast<long long>(d.rebalances()), own_min, own_max, double(wgt_max) / (double(wgt_sum) / P),
-                d.world().footing_reaction().z);
+                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms);
   }
   if (const char* mg = std::getenv("BENCH_DIST_MODEL_GRID")) model_grid(d, g, mg);
   MPI_Finalize();

@@ -244,6 +244,15 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
 std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, const std::vector<double>& rad,
                                                 double skin, const PeriodicParams& periodic, std::size_t reserve,
                                                 SearchIsa isa) {
+  std::vector<PairCandidate> np;
+  find_pair_candidates(pos, rad, skin, periodic, reserve, isa, np);
+  return np;
+}
+
+void find_pair_candidates(const std::vector<Vec3>& pos, const std::vector<double>& rad, double skin,
+                          const PeriodicParams& periodic, std::size_t reserve, SearchIsa isa,
+                          std::vector<PairCandidate>& np) {
+  np.clear();
   const std::size_t n = pos.size();
   const bool per = periodic.enabled;
   const Vec3 o = periodic.origin, L = periodic.length;
@@ -364,8 +373,7 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   };
   // candidate pairs (i < j), row by row. Positions are wrapped, so the minimum image needs at
   // most one cell shift per axis.
-  std::vector<PairCandidate> np;
-  np.reserve(reserve);
+  if (np.capacity() < reserve) np.reserve(reserve + reserve / 4);  // room to grow: see PairSet::rebuild
   RowArgs ra{};
   ra.s = &s;
   ra.L = L;
@@ -427,7 +435,6 @@ std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& pos, co
   if (ncell > 8 * n + 65536) {
     for (auto* v : {&s.cell_start, &s.cell_last, &scratch.fill}) std::vector<std::uint32_t>().swap(*v);
   }
-  return np;
 }
 
 }  // namespace demfdm::dem

@@ -74,7 +74,8 @@ void PairSet::rebuild(SetContext& cx) {
   const bool per = cx.p.periodic.enabled;
   const Vec3 L = cx.p.periodic.length;
   PairContacts& pc = contacts;
-  const std::vector<PairCandidate> np = find_pair_candidates(pt.x, pt.r, cx.skin, cx.p.periodic, pc.size() + n * 4);
+  std::vector<PairCandidate>& np = cand_;
+  find_pair_candidates(pt.x, pt.r, cx.skin, cx.p.periodic, pc.size() + n * 4, SearchIsa::kBest, np);
   // merge the history keyed by (id_A, id_B): a contact's history follows the pair
   const bool has_bond = law_has_bond(cx.p.ball_ball.model);
   // The old list's rows are current (remap keeps them so). A rebuild leaves it sorted by
@@ -98,12 +99,17 @@ void PairSet::rebuild(SetContext& cx) {
     const auto k = sorted ? std::make_pair(std::uint64_t(a), std::uint64_t(b)) : id_key(a, b);
     return carry.take(k.first, k.second);
   };
-  PairContacts q;
-  q.a.reserve(np.size());
-  q.b.reserve(np.size());
-  q.shift.reserve(np.size());
-  q.h.reserve(np.size());
-  if (has_bond) q.bond.reserve(np.size());
+  // The new list in the arrays of the list before last (spare_): their memory is kept from
+  // rebuild to rebuild.
+  PairContacts& q = spare_;
+  q.a.clear(), q.b.clear(), q.shift.clear(), q.h.clear(), q.bond.clear();
+  // with a quarter more room when it must grow: a list a few pairs longer than the last would
+  // otherwise take fresh memory at every rebuild
+  auto room = [&](auto& v) {
+    if (v.capacity() < np.size()) v.reserve(np.size() + np.size() / 4);
+  };
+  room(q.a), room(q.b), room(q.shift), room(q.h);
+  if (has_bond) room(q.bond);
   auto push = [&](std::uint32_t a, std::uint32_t b, const std::array<std::int8_t, 4>& s) {
     q.a.push_back(a);
     q.b.push_back(b);
@@ -163,7 +169,7 @@ void PairSet::rebuild(SetContext& cx) {
     }
     q = std::move(r);
   }
-  pc = std::move(q);
+  std::swap(pc, q);  // the old list's arrays are the next rebuild's
   ++gen_;
 }
 

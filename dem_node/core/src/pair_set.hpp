@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "contact_set.hpp"
+#include "demfdm/dem/neighbour_grid.hpp"
 
 namespace demfdm::dem {
 
@@ -30,6 +31,7 @@ class PairSet final : public ContactSet {
   void refresh(const SetContext& cx) override;
   void clear() override {
     contacts = PairContacts{};
+    spare_ = PairContacts{};
     ++gen_;
   }
   /// Take a loaded contact list (a checkpoint); the scratch is dropped.
@@ -96,6 +98,8 @@ class PairSet final : public ContactSet {
                                               // all zero between passes
   std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each chunk
   std::uint64_t gen_ = 0;                     // bumped whenever the pairs (a, b) may change
+  PairContacts spare_;                        // rebuild: the list before last, its memory kept for the next
+  std::vector<PairCandidate> cand_;           // rebuild: the candidates, memory kept
   std::uint64_t plan_gen_ = ~std::uint64_t{0};
   int plan_chunks_ = 0;
   bool plan_ok_ = false;                      // the list is sorted: the scheme applies

@@ -41,5 +41,10 @@ bool search_isa_available(SearchIsa isa);
 /// find_pair_candidates with the candidate test's instruction set chosen.
 std::vector<PairCandidate> find_pair_candidates(const std::vector<Vec3>& x, const std::vector<double>& r, double skin,
                                                 const PeriodicParams& periodic, std::size_t reserve, SearchIsa isa);
+/// The same into `out` (cleared; its memory is kept from call to call by a caller that rebuilds
+/// often: a fresh array of this size costs page faults at every rebuild).
+void find_pair_candidates(const std::vector<Vec3>& x, const std::vector<double>& r, double skin,
+                          const PeriodicParams& periodic, std::size_t reserve, SearchIsa isa,
+                          std::vector<PairCandidate>& out);
 
 }  // namespace demfdm::dem
