@@ -17,7 +17,7 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
 
 Two sets of measured figures (--machine): "avx2", session 14 (AMD EPYC, 2 vCPUs, AVX2, the
 exchange of that session), and "avx512", session 19 (AMD EPYC, 2 vCPUs, AVX-512, the exchange of
-ad830ea). The efficiency falls where the compute per ball is faster and the network is not.
+ad830ea and the rebuild of eec388e). The efficiency falls where the compute per ball is faster and the network is not.
 Usage: project_scaling.py [--machine avx2|avx512] [--network ib|ethernet] [--balls N] [--csv]
 """
 import argparse
@@ -71,19 +71,19 @@ MEASURED_AVX2 = dict(
     wall_values=1623,
 )
 
-# Measured on an AMD EPYC, 2 vCPUs, AVX-512 (session 19, after ad830ea), bench_dist, the bench
-# packing, linear law, 600 steps, three rounds each (docs/scaling.md, "the exchange, cheaper");
-# the figures that do not depend on the machine are those above.
+# Measured on an AMD EPYC, 2 vCPUs, AVX-512 (session 19, after eec388e: the exchange of ad830ea,
+# the rebuild without page faults), bench_dist, the bench packing, linear law, 600 steps, three
+# rounds each (docs/scaling.md); the figures that do not depend on the machine are those above.
 MEASURED_AVX512 = dict(
     MEASURED_AVX2,
-    # one rank, strong: motion 0.316 ms + forces 3.122 ms per step for 25,835 balls
-    compute_us=(0.316 + 3.122) * 1e3 / 25835,
-    motion_us=0.316 * 1e3 / 25835,
-    # two ranks, strong: forces 1.736 ms against 3.122 / 2, at 0.236 ghosts per owned ball
-    ghost_pair_coeff=(1.736 / (3.122 / 2) - 1.0) / 0.2364,
-    # two ranks, strong: exchange 0.168 ms per step, 26 rebuilds in 600 steps, 15,971 local balls
-    # per rank (12,918 owned, 0.236 ghosts each) -> 0.24 us per local ball and rebuild
-    exchange_us_per_ball=0.168e3 * (600 / 26) / 15971,
+    # one rank, strong: motion 0.349 ms + forces 3.163 ms per step for 25,835 balls
+    compute_us=(0.349 + 3.163) * 1e3 / 25835,
+    motion_us=0.349 * 1e3 / 25835,
+    # two ranks, strong: forces 1.686 ms against 3.163 / 2, at 0.236 ghosts per owned ball
+    ghost_pair_coeff=(1.686 / (3.163 / 2) - 1.0) / 0.2364,
+    # two ranks, strong: exchange 0.187 ms per step, 26 rebuilds in 600 steps, 15,971 local balls
+    # per rank (12,918 owned, 0.236 ghosts each) -> 0.27 us per local ball and rebuild
+    exchange_us_per_ball=0.187e3 * (600 / 26) / 15971,
 )
 MACHINES = {"avx2": MEASURED_AVX2, "avx512": MEASURED_AVX512}
 
