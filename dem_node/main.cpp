@@ -393,25 +393,24 @@ class DemParticipant : public node::Participant {
   // rebuild decision and force pass): on one rank it runs here, while the continuum steps
   // (World::step = step_motion, then step_forces; the same calls in the same order).
   void advance_early(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
-    early_ = false;
+    early_step_ = -1;
     if (g_ranks.size > 1 || world_.num_balls() == 0) return;
     begin_step(st, values, dt);  // (one rank: never on a DistDem)
     early_node_before_ = world_.time();
     world_.step_motion();
-    early_ = true;
     early_step_ = step;
   }
 
   void advance(const schema::Stage& st, std::int64_t step, double dt, const std::vector<double>& values) override {
-    if (early_ && early_step_ == step) {
-      early_ = false;
+    if (early_step_ == step) {
+      early_step_ = -1;
       const double node_before = early_node_before_;
       world_.step_forces_now();
       world_.step(interval_ - 1);
       end_step(step, dt, node_before);
       return;
     }
-    early_ = false;
+    early_step_ = -1;
     begin_step(st, values, dt);
     dem::World& w = live();
     const double node_before = w.time();
@@ -950,8 +949,7 @@ class DemParticipant : public node::Participant {
   std::size_t n_iface_ = 0;
   bool coupling_setup_pending_ = false, penetrating_ = false, box_done_ = false;
   bool preparing_ = false;  // a specimen-preparation stage (is_generation): its own step and damping
-  bool early_ = false;             // advance_early ran the first DEM step's motion of coupling step early_step_
-  std::int64_t early_step_ = -1;
+  std::int64_t early_step_ = -1;    // advance_early ran the first DEM step's motion of this coupling step (-1: none)
   double early_node_before_ = 0.0;  // the World's time before it
   double footing_z0_ = 0, target_disp_ = 0;
   double weight_ = -1;

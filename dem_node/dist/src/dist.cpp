@@ -172,33 +172,29 @@ bool kind_bonds(const WorldParams& p, int kind) {
   return law_has_bond(f.model);
 }
 
-// Rows j = 0 .. src.size() - 1 of `q`: row src[j] of `pt` where src[j] >= 0, else the record
-// bin[~src[j]]; one pass per array.
-template <class T, class FromRec>
-void fill_column(std::vector<T>& out, const std::vector<T>& in, const std::vector<BallRec>& bin,
-                 const std::vector<std::int64_t>& src, FromRec from_rec) {
+// Entries j = 0 .. src.size() - 1 of `out`: in[src[j]] where src[j] >= 0, else the field `m`
+// of the record recs[~src[j]]; one pass per array (the exchange's merges).
+template <class T, class Rec>
+void fill_column(std::vector<T>& out, const std::vector<T>& in, const std::vector<Rec>& recs,
+                 const std::vector<std::int64_t>& src, T Rec::*m) {
   out.resize(src.size());
   T* o = out.data();
   const T* a = in.data();
   for (std::size_t j = 0; j < src.size(); ++j) {
     const std::int64_t s = src[j];
-    o[j] = s >= 0 ? a[s] : from_rec(bin[static_cast<std::size_t>(~s)]);
+    o[j] = s >= 0 ? a[s] : recs[static_cast<std::size_t>(~s)].*m;
   }
 }
 void fill_rows(Particles& q, const Particles& pt, const std::vector<BallRec>& bin, const std::vector<std::int64_t>& src) {
-  fill_column(q.id, pt.id, bin, src, [](const BallRec& b) { return b.id; });
-  fill_column(q.x, pt.x, bin, src, [](const BallRec& b) { return b.x; });
-  fill_column(q.v, pt.v, bin, src, [](const BallRec& b) { return b.v; });
-  fill_column(q.w, pt.w, bin, src, [](const BallRec& b) { return b.w; });
-  fill_column(q.f, pt.f, bin, src, [](const BallRec& b) { return b.f; });
-  fill_column(q.t, pt.t, bin, src, [](const BallRec& b) { return b.t; });
-  fill_column(q.fa, pt.fa, bin, src, [](const BallRec& b) { return b.fa; });
-  fill_column(q.ta, pt.ta, bin, src, [](const BallRec& b) { return b.ta; });
-  fill_column(q.x_ref, pt.x_ref, bin, src, [](const BallRec& b) { return b.xr; });
-  fill_column(q.r, pt.r, bin, src, [](const BallRec& b) { return b.r; });
-  fill_column(q.m, pt.m, bin, src, [](const BallRec& b) { return b.m; });
-  fill_column(q.inertia, pt.inertia, bin, src, [](const BallRec& b) { return b.inertia; });
-  fill_column(q.fix, pt.fix, bin, src, [](const BallRec& b) { return b.fix; });
+  fill_column(q.id, pt.id, bin, src, &BallRec::id);
+  for (auto [p, m] : {std::pair{&Particles::x, &BallRec::x}, {&Particles::v, &BallRec::v}, {&Particles::w, &BallRec::w},
+                      {&Particles::f, &BallRec::f}, {&Particles::t, &BallRec::t}, {&Particles::fa, &BallRec::fa},
+                      {&Particles::ta, &BallRec::ta}, {&Particles::x_ref, &BallRec::xr}})
+    fill_column(q.*p, pt.*p, bin, src, m);
+  for (auto [p, m] : {std::pair{&Particles::r, &BallRec::r}, {&Particles::m, &BallRec::m},
+                      {&Particles::inertia, &BallRec::inertia}})
+    fill_column(q.*p, pt.*p, bin, src, m);
+  fill_column(q.fix, pt.fix, bin, src, &BallRec::fix);
 }
 
 BallRec ball_rec(const Particles& pt, std::size_t i) {
@@ -958,25 +954,11 @@ void DistDem::exchange() {
       push_pair(a, b, ~static_cast<std::int64_t>(rk));
     }
   }
-  {
-    const std::size_t m = psrc.size();
-    nc.shift.resize(m);
-    nc.h.resize(m);
-    nc.bond.resize(has_bond ? m : 0);
-    for (std::size_t j = 0; j < m; ++j) {
-      const std::int64_t sj = psrc[j];
-      nc.shift[j] = sj >= 0 ? pc.shift[static_cast<std::size_t>(sj)] : pin[static_cast<std::size_t>(~sj)].s;
-    }
-    for (std::size_t j = 0; j < m; ++j) {
-      const std::int64_t sj = psrc[j];
-      nc.h[j] = sj >= 0 ? pc.h[static_cast<std::size_t>(sj)] : pin[static_cast<std::size_t>(~sj)].h;
-    }
-    if (has_bond)
-      for (std::size_t j = 0; j < m; ++j) {
-        const std::int64_t sj = psrc[j];
-        nc.bond[j] = sj >= 0 ? pc.bond[static_cast<std::size_t>(sj)] : pin[static_cast<std::size_t>(~sj)].b;
-      }
-  }
+  fill_column(nc.shift, pc.shift, pin, psrc, &PairRec::s);
+  fill_column(nc.h, pc.h, pin, psrc, &PairRec::h);
+  if (has_bond) fill_column(nc.bond, pc.bond, pin, psrc, &PairRec::b);
+  else nc.bond.clear();
+
   // wall contacts: the kept ones (own balls that stay) merged with the received, by kind in
   // (ball id, wall) order
   std::sort(win.begin(), win.end(), [](const WallRec& x, const WallRec& y) {
