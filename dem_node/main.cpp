@@ -609,7 +609,8 @@ class DemParticipant : public node::Participant {
     return ke_;
   }
   // At the first step of a stage that is not specimen preparation, on more than one rank: the
-  // whole World, set up, cut into slabs along the block's longest axis.
+  // whole World, set up, cut into bricks (dem.decomposition: RCB, or slabs across the block's
+  // longest axis).
   void enter_dist() {
     if (g_ranks.size <= 1 || dist_live_ || preparing_) return;
     dem::BrickGrid g;
@@ -621,10 +622,14 @@ class DemParticipant : public node::Participant {
       g.lo = block_.origin;
       g.len = {block_.width_x(), block_.width_y(), block_.height()};
     }
-    int axis = 0;
-    for (int k = 1; k < 3; ++k)
-      if (g.len[k] > g.len[axis]) axis = k;
-    g.n[axis] = g_ranks.size;
+    if (s_.string("dem.decomposition") == "rcb") {
+      g.set_rcb(g_ranks.size);
+    } else {
+      int axis = 0;
+      for (int k = 1; k < 3; ++k)
+        if (g.len[k] > g.len[axis]) axis = k;
+      g.n[axis] = g_ranks.size;
+    }
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
                         s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime

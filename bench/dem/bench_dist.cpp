@@ -14,6 +14,8 @@
 //            BENCH_DIST_REPLICATE=K: K x K x K copies of the periodic packing first (a wider block).
 //   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts);
 //            BENCH_DIST_WEIGHT=time weighs balls by their rank's measured time, not contacts.
+// BENCH_DIST_DECOMP=rcb: recursive coordinate bisection (BrickGrid::set_rcb) instead of the cut
+// along one axis; `balance` then moves every cut of the tree.
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
@@ -51,7 +53,8 @@ namespace {
 // bricks over the same box, three ways: even cuts; shifted cuts (DistDem's balancing: per axis,
 // equal-weight slabs from a 2,048-bin histogram); recursive coordinate bisection (RCB, LAMMPS's
 // tiled balance: the longest side halved at the weighted median, recursively; any brick count).
-// Prints the largest brick weight over the mean for each.
+// Prints the largest brick weight over the mean for each, and for RCB as DistDem cuts it
+// (rcb_cuts: each cut at the end of one of 2,048 bins, imbalance_rcb_code).
 struct WB {
   Vec3 x;
   std::int64_t w;
@@ -134,8 +137,21 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
     self(self, m, hi, parts - left);
   };
   bisect(bisect, 0, v.size(), B);
-  std::printf("model_grid,%dx%dx%d,balls,%zu,balls_per_brick,%.0f,imbalance_even,%.4f,imbalance_shift,%.4f,imbalance_rcb,%.4f\n",
-              n[0], n[1], n[2], all.size(), double(all.size()) / B, imbalance(even), imbalance(shift), imbalance(rcb));
+  // RCB as DistDem cuts (rcb_cuts: 2,048 bins per node, the cut at a bin end)
+  BrickGrid g;
+  g.lo = lo;
+  g.len = len;
+  g.set_rcb(B);
+  std::vector<Vec3> xs;
+  std::vector<std::int64_t> ws;
+  for (const WB& b : all) xs.push_back(b.x), ws.push_back(b.w);
+  rcb_cuts(g, xs, ws, {}, 2048, [](std::vector<std::int64_t>&) {});
+  std::vector<std::int64_t> code(static_cast<std::size_t>(B), 0);
+  for (const WB& b : all) code[static_cast<std::size_t>(g.owner(b.x))] += b.w;
+  std::printf("model_grid,%dx%dx%d,balls,%zu,balls_per_brick,%.0f,imbalance_even,%.4f,imbalance_shift,%.4f,imbalance_rcb,%.4f,"
+              "imbalance_rcb_code,%.4f\n",
+              n[0], n[1], n[2], all.size(), double(all.size()) / B, imbalance(even), imbalance(shift), imbalance(rcb),
+              imbalance(code));
 }
 
 // `bench_dist --state FILE SCENE_HASH nx,ny,nz`: the model grid over a World saved in a
@@ -255,8 +271,12 @@ int main(int argc, char** argv) {
   BrickGrid g;
   g.lo = p.periodic.origin;
   g.len = p.periodic.length;
-  g.n[footing ? 2 : 0] = P;
   for (bool& per : g.periodic) per = !footing;
+  const char* decomp = std::getenv("BENCH_DIST_DECOMP");
+  if (decomp && std::string(decomp) == "rcb")
+    g.set_rcb(P);
+  else
+    g.n[footing ? 2 : 0] = P;
   DistDem d(MPI_COMM_WORLD, p, g);
   d.load(full);
   DistDem::Balance bal;

@@ -291,16 +291,22 @@ void declare_dem(config::Section& root) {
       .min(0.0);
   d.integer("ranks", "-", 1,
             "MPI ranks of the DEM (docs/scaling.md): launch/run starts dem_node under mpirun with this many, "
-            "each stepping a slab of the DEM block along its longest axis. The ranks sum in the one-thread "
+            "each stepping one brick of the DEM block (dem.decomposition). The ranks sum in the one-thread "
             "order: the results are one process's bits at any rank count when run.thread_independent is on "
             "or run.threads = 1. run.threads = \"auto\" shares a host's CPUs among its ranks. 1: one "
             "process, no MPI.")
       .min(1)
       .max(4096);
+  d.choice("decomposition", {"rcb", "slabs"}, std::string("rcb"),
+           "With dem.ranks > 1, how the DEM block is cut into the ranks' bricks (docs/scaling.md): rcb, "
+           "recursive coordinate bisection (the block halved across its longest side, each half again, "
+           "until one brick per rank: compact bricks at any rank count, LAMMPS's balance rcb); slabs, "
+           "slabs across the block's longest side. The same bits either way.");
   d.integer("balance_every", "-", 0,
-            "With dem.ranks > 1: move the cuts between the ranks' slabs every this many neighbour-list "
-            "rebuilds so that the slabs carry equal weight (LAMMPS's fix balance shift; docs/scaling.md). "
-            "Balancing moves balls between ranks, never a bit of the results. 0: even cuts.")
+            "With dem.ranks > 1: move the cuts between the ranks' bricks every this many neighbour-list "
+            "rebuilds so that the bricks carry equal weight (rcb: every cut of the tree, LAMMPS's balance "
+            "rcb; slabs: LAMMPS's fix balance shift; docs/scaling.md). Balancing moves balls between ranks, "
+            "never a bit of the results. 0: the geometric cuts.")
       .min(0);
   d.choice("balance_weight", {"contacts", "time"}, std::string("contacts"),
            "What dem.balance_every weighs: a ball's listed contacts plus one (contacts), or its rank's "

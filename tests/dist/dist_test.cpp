@@ -9,9 +9,11 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <numeric>
 #include <random>
 #include <string>
 
@@ -35,6 +37,9 @@ struct Scene {
   int steps = 600;
   int threads = 1;
   bool auto_dt = false;  // the automatic step instead of a fixed one
+  bool rcb = false;      // recursive coordinate bisection instead of slabs along `axis`
+  int balance_every = 0;  // DistDem's balancing (contact weights) every this many exchanges
+  double tall = 1.0;      // the free cluster's grid: this many times as high as wide
 };
 
 constexpr int kSide = 12;  // kSide³ balls
@@ -80,10 +85,26 @@ BrickGrid grid(const Scene& sc) {
   g.lo = {0, 0, 0};
   g.len = {L, L, L};
   // The free cluster flies apart from its centre: cut it off-centre, so that balls cross the cuts.
-  if (!sc.periodic) g.len = {1.5 * L, 1.5 * L, 1.5 * L};
-  g.n[sc.axis] = g_size;
+  if (!sc.periodic) g.len = {1.5 * L, 1.5 * L, 1.5 * L * sc.tall};
   for (int k = 0; k < 3; ++k) g.periodic[k] = sc.periodic;
+  if (sc.rcb)
+    g.set_rcb(g_size);
+  else
+    g.n[sc.axis] = g_size;
   return g;
+}
+
+// The largest brick's balancing weight (1 + listed contacts per ball) over the mean, for the
+// balls of `w` cut by `g`.
+double weight_imbalance(const World& w, const BrickGrid& g) {
+  std::vector<std::int64_t> wt, per(static_cast<std::size_t>(g.count()), 0);
+  contact_weights(w, wt);
+  std::int64_t total = 0;
+  for (std::size_t i = 0; i < wt.size(); ++i) {
+    per[static_cast<std::size_t>(g.owner(w.balls().x[i]))] += wt[i];
+    total += wt[i];
+  }
+  return double(*std::max_element(per.begin(), per.end())) * g.count() / double(total);
 }
 
 // Runs the scene on the ranks; rank 0 compares with the reference. The verdict is shared, so
@@ -92,6 +113,7 @@ void check(const Scene& sc) {
   std::unique_ptr<World> full = build(sc, true);
   DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
   d.load(*full);
+  d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
   const double dt_end = d.world().dt();
@@ -135,6 +157,18 @@ void check(const Scene& sc) {
       EXPECT_GT(sum_ghosts, 0);
       EXPECT_GT(sum_migrated, 0) << "balls must cross brick faces";
     }
+    if (sc.rcb) {  // the final state's weights cut by the ranks' cuts and by the geometric ones
+      const double moved = weight_imbalance(*ref, d.grid()), geometric = weight_imbalance(*ref, grid(sc));
+      std::printf("  RCB, %lld rebalances: weight imbalance %.4f (geometric cuts %.4f); cuts (axis, at/L):",
+                  static_cast<long long>(d.rebalances()), moved, geometric);
+      for (const BrickGrid::Cut& c : d.grid().rcb) std::printf(" (%d, %.4f)", c.axis, c.at / (kSide * spacing(sc)));
+      std::printf("\n");
+      if (sc.balance_every > 0 && g_size > 1) {
+        EXPECT_EQ(d.rebalances(), d.exchanges() / sc.balance_every);
+        EXPECT_LT(moved, 1.05) << "the balanced bricks must carry equal weight";
+        EXPECT_GT(geometric, 1.5) << "the scene must need balancing";
+      }
+    }
   }
   test::share_verdict();
 }
@@ -158,6 +192,22 @@ TEST(Dist, HertzPeriodicAutomaticStepSameBits) {
 }
 TEST(Dist, ParallelBondPeriodicTwoThreadsSameBits) {
   check({"pbond periodic, cut along x, 2 threads", ContactModel::kLinearPBond, true, true, 0, 600, 2});
+}
+
+// RCB: the periodic cell cut into bricks of a tree (at 3 ranks the low third across x, the rest
+// halved across y), and the free cluster in a grid three times as high as the cluster, balanced
+// every 2nd exchange (the geometric cuts leave the top bricks nearly empty).
+TEST(Dist, LinearPeriodicRcbSameBits) {
+  Scene sc{"linear periodic, RCB", ContactModel::kLinear, true};
+  sc.rcb = true;
+  check(sc);
+}
+TEST(Dist, LinearFreeRcbBalancedSameBits) {
+  Scene sc{"linear free, RCB balanced", ContactModel::kLinear, false, false, 2, 200};
+  sc.rcb = true;
+  sc.balance_every = 2;
+  sc.tall = 3.0;
+  check(sc);
 }
 
 // BrickGrid::near against its definition, brick by brick: every brick that, grown by the halo
@@ -215,6 +265,136 @@ TEST(Dist, NearIsEveryGrownBrickThatHoldsThePoint) {
     }
   }
   EXPECT_GT(multi, 1000u);  // points within the halo of a face, not only inside bricks
+}
+
+// The same for RCB trees of 1-7 ranks, random axes and cuts, periodic and free axes: near()
+// against every brick grown by the halo (box(); a face of a free axis at 0 or len reaching to
+// infinity), the owner's brick holds the point, and the bricks tile the box (volumes add up).
+TEST(Dist, RcbNearIsEveryGrownBrickThatHoldsThePoint) {
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const bool per[4][3] = {{true, true, true}, {false, false, false}, {true, false, true}, {false, true, false}};
+  std::size_t multi = 0, deep = 0;
+  for (int parts = 1; parts <= 7; ++parts)
+    for (const auto& pc : per) {
+      BrickGrid g;
+      g.lo = {-1.0, 0.5, 2.0};
+      g.len = {4.0, 3.0, 2.5};
+      for (int k = 0; k < 3; ++k) g.periodic[k] = pc[k];
+      g.set_rcb(parts);
+      // random cuts inside each node's box, the tree's shape kept (preorder as set_rcb)
+      auto cut = [&](auto&& self, int i, int p, std::array<double, 3> a0, std::array<double, 3> a1) -> void {
+        if (p < 2) return;
+        const int k = static_cast<int>(u01(rng) * 3.0) % 3, left = p / 2;
+        const double at = a0[k] + (a1[k] - a0[k]) * (0.15 + 0.7 * u01(rng));
+        g.rcb[static_cast<std::size_t>(i)] = {k, at};
+        auto m1 = a1, m0 = a0;
+        m1[k] = at;
+        m0[k] = at;
+        self(self, i + 1, left, a0, m1);
+        self(self, i + left, p - left, m0, a1);
+      };
+      cut(cut, 0, parts, {0.0, 0.0, 0.0}, {g.len[0], g.len[1], g.len[2]});
+      double vol = 0.0;
+      for (int r = 0; r < parts; ++r) {
+        double a0[3], a1[3];
+        g.box(r, a0, a1);
+        vol += (a1[0] - a0[0]) * (a1[1] - a0[1]) * (a1[2] - a0[2]);
+      }
+      EXPECT_NEAR(vol, g.len[0] * g.len[1] * g.len[2], 1e-9) << parts << " parts: the bricks must tile the box";
+      const double halo = 0.2;
+      std::vector<int> got;
+      for (int t = 0; t < 1500; ++t) {
+        Vec3 x;
+        for (int k = 0; k < 3; ++k) x[k] = g.lo[k] + g.len[k] * (1.4 * u01(rng) - 0.2);
+        g.near(x, halo, got);
+        std::vector<int> want;
+        int holder = -1;
+        for (int r = 0; r < parts; ++r) {
+          double a0[3], a1[3];
+          g.box(r, a0, a1);
+          bool in_all = true, own = true;
+          for (int k = 0; k < 3; ++k) {
+            double u = x[k] - g.lo[k];
+            if (g.periodic[k]) u -= std::floor(u / g.len[k]) * g.len[k];
+            const double lo = (!g.periodic[k] && a0[k] == 0.0) ? -INFINITY : a0[k] - halo;
+            const double hi = (!g.periodic[k] && a1[k] == g.len[k]) ? INFINITY : a1[k] + halo;
+            bool in = u >= lo && u < hi;
+            if (g.periodic[k]) in = in || (u - g.len[k] >= lo && u - g.len[k] < hi) || (u + g.len[k] >= lo && u + g.len[k] < hi);
+            in_all = in_all && in;
+            own = own && u >= ((!g.periodic[k] && a0[k] == 0.0) ? -INFINITY : a0[k]) &&
+                  u < ((!g.periodic[k] && a1[k] == g.len[k]) ? INFINITY : a1[k]);
+          }
+          if (in_all) want.push_back(r);
+          if (own) {
+            EXPECT_EQ(holder, -1) << "two bricks own a point";
+            holder = r;
+          }
+        }
+        ASSERT_EQ(got, want) << parts << " parts, point " << x.x << " " << x.y << " " << x.z;
+        EXPECT_EQ(g.owner(x), holder);
+        multi += got.size() > 1;
+        deep += got.size() > 2;
+      }
+    }
+  EXPECT_GT(multi, 3000u);  // points within the halo of a cut
+  EXPECT_GT(deep, 300u);    // and of several
+}
+
+// rcb_cuts on one process (no reduction): points in a dense off-centre cluster over a sparse
+// background, weights 1-8. Every brick's weight is within a few bins' weight of the mean (the
+// geometric cuts are far off), and the root cut is the first bin end where the low side's weight
+// reaches its share, p / 2 of p, rounded up: reached at the cut, not reached one bin before.
+TEST(Dist, RcbCutsGiveEveryBrickItsShareOfTheWeight) {
+  std::mt19937_64 rng(13);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  std::vector<Vec3> x;
+  std::vector<std::int64_t> wt;
+  for (int i = 0; i < 60000; ++i) {
+    if (i % 5 == 0)
+      x.push_back({4.0 * u01(rng), 3.0 * u01(rng), 2.0 * u01(rng)});
+    else
+      x.push_back({1.0 + 0.3 * nd(rng), 2.2 + 0.2 * nd(rng), 0.5 + 0.25 * nd(rng)});
+    wt.push_back(1 + static_cast<std::int64_t>(u01(rng) * 8.0));
+  }
+  const std::int64_t total = std::accumulate(wt.begin(), wt.end(), std::int64_t{0});
+  for (int parts = 2; parts <= 9; ++parts) {
+    BrickGrid g;
+    g.lo = {0.0, 0.0, 0.0};
+    g.len = {4.0, 3.0, 2.0};
+    g.periodic[0] = true;  // a periodic axis and two free ones (points outside belong to the end bricks)
+    g.set_rcb(parts);
+    auto imbalance = [&](const BrickGrid& gg) {
+      std::vector<std::int64_t> per(static_cast<std::size_t>(parts), 0);
+      for (std::size_t i = 0; i < x.size(); ++i) per[static_cast<std::size_t>(gg.owner(x[i]))] += wt[i];
+      return double(*std::max_element(per.begin(), per.end())) * parts / double(total);
+    };
+    const double geometric = imbalance(g);
+    const int bins = 2048;
+    rcb_cuts(g, x, wt, {}, bins, [](std::vector<std::int64_t>&) {});
+    const double cut = imbalance(g);
+    std::printf("  RCB of %d parts: weight imbalance %.4f, geometric cuts %.4f\n", parts, cut, geometric);
+    // (a bin at the cluster's centre holds about 1.5 % of a brick's mean weight at 7 parts; each
+    // level's cut overshoots by less than one bin)
+    EXPECT_LT(cut, 1.03) << parts << " parts";
+    EXPECT_GT(geometric, 1.3) << parts << " parts";
+    // the root cut: across the box's longest side (x), at a bin end, the first to reach the share
+    const BrickGrid::Cut c = g.rcb[0];
+    EXPECT_EQ(c.axis, 0);
+    const double bw = g.len[0] / bins;
+    const double e = c.at / bw;
+    EXPECT_NEAR(e, std::round(e), 1e-9) << "the cut is not at a bin end";
+    std::int64_t low = 0, last = 0;
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      const double u = x[i].x - std::floor(x[i].x / g.len[0]) * g.len[0];
+      if (u < c.at) low += wt[i];
+      if (u < c.at && u >= c.at - bw) last += wt[i];
+    }
+    const std::int64_t target = (total * (parts / 2) + parts - 1) / parts;
+    EXPECT_GE(low, target) << parts << " parts: the low side short of its share";
+    EXPECT_LT(low - last, target) << parts << " parts: the share was reached before the cut";
+  }
 }
 
 int main(int argc, char** argv) {

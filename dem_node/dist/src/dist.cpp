@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <tuple>
 #include <numeric>
@@ -35,7 +36,73 @@ double along(const BrickGrid& g, const Vec3& x, int k) {
 
 }  // namespace
 
+// RCB: the inner nodes in preorder. A node of p ranks starting at rank r0, with index i: its low
+// child has p / 2 ranks from r0 and index i + 1, its high child p - p / 2 ranks from r0 + p / 2
+// and index i + p / 2 (after the low child's p / 2 - 1 inner nodes); a child of one rank is a leaf.
+
+void BrickGrid::set_rcb(int p) {
+  if (p < 1) throw std::invalid_argument("BrickGrid::set_rcb: at least one part");
+  parts = p;
+  rcb.assign(static_cast<std::size_t>(p - 1), Cut{});
+  auto build = [&](auto&& self, int i, int np, const double* a0, const double* a1) -> void {
+    if (np < 2) return;
+    int k = 0;
+    for (int j = 1; j < 3; ++j)
+      if (a1[j] - a0[j] > a1[k] - a0[k]) k = j;
+    const int left = np / 2;
+    const double at = a0[k] + (a1[k] - a0[k]) * left / np;
+    rcb[static_cast<std::size_t>(i)] = {k, at};
+    double m1[3] = {a1[0], a1[1], a1[2]}, m0[3] = {a0[0], a0[1], a0[2]};
+    m1[k] = at;
+    m0[k] = at;
+    self(self, i + 1, left, a0, m1);
+    self(self, i + left, np - left, m0, a1);
+  };
+  const double a0[3] = {0.0, 0.0, 0.0}, a1[3] = {len[0], len[1], len[2]};
+  build(build, 0, p, a0, a1);
+}
+
+void BrickGrid::box(int r, double a0[3], double a1[3]) const {
+  if (parts > 0) {
+    for (int k = 0; k < 3; ++k) a0[k] = 0.0, a1[k] = len[k];
+    int i = 0, r0 = 0, p = parts;
+    while (p > 1) {
+      const Cut& c = rcb[static_cast<std::size_t>(i)];
+      const int left = p / 2;
+      if (r < r0 + left) {
+        a1[c.axis] = c.at;
+        i += 1;
+        p = left;
+      } else {
+        a0[c.axis] = c.at;
+        i += left;
+        r0 += left;
+        p -= left;
+      }
+    }
+    return;
+  }
+  const int idx[3] = {r % n[0], (r / n[0]) % n[1], r / (n[0] * n[1])};
+  for (int k = 0; k < 3; ++k) a0[k] = edge(k, idx[k]), a1[k] = edge(k, idx[k] + 1);
+}
+
 int BrickGrid::owner(const Vec3& x) const {
+  if (parts > 0) {
+    int i = 0, r0 = 0, p = parts;
+    while (p > 1) {
+      const Cut& c = rcb[static_cast<std::size_t>(i)];
+      const int left = p / 2;
+      if (along(*this, x, c.axis) < c.at) {
+        i += 1;
+        p = left;
+      } else {
+        i += left;
+        r0 += left;
+        p -= left;
+      }
+    }
+    return r0;
+  }
   int idx[3];
   for (int k = 0; k < 3; ++k) {
     const double u = along(*this, x, k);
@@ -52,6 +119,44 @@ int BrickGrid::owner(const Vec3& x) const {
 
 void BrickGrid::near(const Vec3& x, double halo, std::vector<int>& out) const {
   out.clear();
+  if (parts > 0) {
+    // Per axis the point and, on a periodic axis, its images within the halo of the cell; every
+    // combination walks down the tree into each side whose brick, grown by the halo, holds it
+    // (a brick's bounds are its ancestors' cuts; the cell's faces bound only the images).
+    double im[3][3];
+    int ni[3];
+    for (int k = 0; k < 3; ++k) {
+      const double u = along(*this, x, k);
+      ni[k] = 0;
+      im[k][ni[k]++] = u;
+      if (periodic[k]) {
+        if (u - len[k] >= -halo) im[k][ni[k]++] = u - len[k];
+        if (u + len[k] < len[k] + halo) im[k][ni[k]++] = u + len[k];
+      }
+    }
+    auto walk = [&](auto&& self, const double* v, int i, int r0, int p) -> void {
+      if (p < 2) {
+        out.push_back(r0);
+        return;
+      }
+      const Cut& c = rcb[static_cast<std::size_t>(i)];
+      const int left = p / 2;
+      const double u = v[c.axis];
+      if (u < c.at + halo) self(self, v, i + 1, r0, left);
+      if (u >= c.at - halo) self(self, v, i + left, r0 + left, p - left);
+    };
+    for (int a = 0; a < ni[0]; ++a)
+      for (int b = 0; b < ni[1]; ++b)
+        for (int c = 0; c < ni[2]; ++c) {
+          const double v[3] = {im[0][a], im[1][b], im[2][c]};
+          walk(walk, v, 0, 0, parts);
+        }
+    if (out.size() > 1) {
+      std::sort(out.begin(), out.end());
+      out.erase(std::unique(out.begin(), out.end()), out.end());
+    }
+    return;
+  }
   // per axis, the bricks that hold x (once per ball per exchange: no allocation once warm)
   thread_local std::vector<int> ax[3];
   for (int k = 0; k < 3; ++k) {
@@ -629,27 +734,22 @@ void DistDem::forward() {
 // axes: also across the cell's faces); ascending, without this rank. The relation is symmetric,
 // so two ranks agree on whether they exchange.
 const std::vector<int>& DistDem::peer_ranks() {
-  std::vector<int> ax[3];
   const double reach = reach_ >= 0.0 ? reach_ : halo_ + p_.skin;
-  int me[3] = {rank_ % grid_.n[0], (rank_ / grid_.n[0]) % grid_.n[1], rank_ / (grid_.n[0] * grid_.n[1])};
-  for (int k = 0; k < 3; ++k) {
-    const double a0 = grid_.edge(k, me[k]), a1 = grid_.edge(k, me[k] + 1), len = grid_.len[k];
-    for (int i = 0; i < grid_.n[k]; ++i) {
-      const double b0 = grid_.edge(k, i) - reach, b1 = grid_.edge(k, i + 1) + reach;
-      bool meet = b0 < a1 && a0 < b1;
-      if (grid_.periodic[k]) meet = meet || (b0 - len < a1 && a0 < b1 - len) || (b0 + len < a1 && a0 < b1 + len);
-      if (meet) ax[k].push_back(i);
-    }
-  }
+  double a0[3], a1[3], b0[3], b1[3];
+  grid_.box(rank_, a0, a1);
   peers_.clear();
-  for (int k2 : ax[2])
-    for (int k1 : ax[1])
-      for (int k0 : ax[0]) {
-        const int r = k0 + grid_.n[0] * (k1 + grid_.n[1] * k2);
-        if (r != rank_) peers_.push_back(r);
-      }
-  std::sort(peers_.begin(), peers_.end());
-  peers_.erase(std::unique(peers_.begin(), peers_.end()), peers_.end());
+  for (int r = 0; r < grid_.count(); ++r) {
+    if (r == rank_) continue;
+    grid_.box(r, b0, b1);
+    bool meet = true;
+    for (int k = 0; k < 3 && meet; ++k) {
+      const double c0 = b0[k] - reach, c1 = b1[k] + reach, len = grid_.len[k];
+      bool m = c0 < a1[k] && a0[k] < c1;
+      if (grid_.periodic[k]) m = m || (c0 - len < a1[k] && a0[k] < c1 - len) || (c0 + len < a1[k] && a0[k] < c1 + len);
+      meet = m;
+    }
+    if (meet) peers_.push_back(r);
+  }
   return peers_;
 }
 
@@ -1051,6 +1151,13 @@ void DistDem::rebalance() {
     contact_weights(*w_, wt);
   }
   const int B = std::max(bal_.bins, 2);
+  if (grid_.parts > 0) {  // the owned balls' weights, summed over the ranks level by level
+    rcb_cuts(grid_, pt.x, wt, gh, B, [this](std::vector<std::int64_t>& h) {
+      MPI_Allreduce(MPI_IN_PLACE, h.data(), static_cast<int>(h.size()), MPI_INT64_T, MPI_SUM, comm_);
+    });
+    ++rebalances_;
+    return;
+  }
   std::vector<std::int64_t> h(static_cast<std::size_t>(B)), g(static_cast<std::size_t>(B));
   for (int k = 0; k < 3; ++k) {
     const int nk = grid_.n[k];
@@ -1067,6 +1174,77 @@ void DistDem::rebalance() {
     grid_.cuts[k] = equal_weight_cuts(g, nk, L);
   }
   ++rebalances_;
+}
+
+// RCB's cuts, one tree level at a time from the root: every inner node of the level cuts across
+// its box's longest side (as set_rcb); the weights of the points in each such node go into `bins`
+// even bins along that side, and `reduce` sums the bins of all the level's nodes over the ranks
+// (integers: exact, so every rank finds the same cuts); the cut goes to the end of the first bin
+// where the running weight reaches the low child's share, p / 2 of p (equal_weight_cuts over p
+// slabs: at least one bin per slab); then every point walks on into its child. A node without
+// weight takes the geometric cut (set_rcb's).
+void rcb_cuts(BrickGrid& g, const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt,
+              const std::vector<std::uint8_t>& skip, int bins, const std::function<void(std::vector<std::int64_t>&)>& reduce) {
+  const int P = g.parts, B = std::max(bins, 2);
+  if (P < 2) return;  // one brick: no cut
+  const std::size_t n = x.size();
+  struct Node {
+    int i, r0, p;
+    double a0[3], a1[3];
+    int axis;
+  };
+  std::vector<Node> level{{0, 0, P, {0.0, 0.0, 0.0}, {g.len[0], g.len[1], g.len[2]}, 0}};
+  std::vector<int> at(n, 0);  // each point's slot in `level`, -1 once in a leaf (or skipped)
+  for (std::size_t j = 0; j < n; ++j)
+    if (!skip.empty() && skip[j]) at[j] = -1;
+  std::vector<std::int64_t> h;
+  std::vector<Node> next;
+  std::vector<int> slot_low, slot_high;
+  while (!level.empty()) {
+    for (Node& nd : level) {
+      nd.axis = 0;
+      for (int k = 1; k < 3; ++k)
+        if (nd.a1[k] - nd.a0[k] > nd.a1[nd.axis] - nd.a0[nd.axis]) nd.axis = k;
+    }
+    const std::size_t L = level.size(), UB = static_cast<std::size_t>(B);
+    h.assign(L * UB, 0);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (at[j] < 0) continue;
+      const Node& nd = level[static_cast<std::size_t>(at[j])];
+      const double u = along(g, x[j], nd.axis);
+      const double side = nd.a1[nd.axis] - nd.a0[nd.axis];
+      const int b = std::clamp(static_cast<int>(std::floor((u - nd.a0[nd.axis]) / side * B)), 0, B - 1);
+      h[static_cast<std::size_t>(at[j]) * UB + static_cast<std::size_t>(b)] += wt[j];
+    }
+    reduce(h);
+    next.clear();
+    slot_low.assign(L, -1);
+    slot_high.assign(L, -1);
+    for (std::size_t s = 0; s < L; ++s) {
+      const Node& nd = level[s];
+      const int k = nd.axis, left = nd.p / 2;
+      const double side = nd.a1[k] - nd.a0[k];
+      const std::vector<std::int64_t> hs(h.begin() + static_cast<std::ptrdiff_t>(s * UB),
+                                         h.begin() + static_cast<std::ptrdiff_t>((s + 1) * UB));
+      std::int64_t total = 0;
+      for (std::int64_t v : hs) total += v;
+      const double cut = nd.a0[k] + (total > 0 ? equal_weight_cuts(hs, nd.p, side)[static_cast<std::size_t>(left - 1)]
+                                               : side * left / nd.p);
+      g.rcb[static_cast<std::size_t>(nd.i)] = {k, cut};
+      Node lo = nd, hi = nd;
+      lo.i = nd.i + 1, lo.p = left, lo.a1[k] = cut;
+      hi.i = nd.i + left, hi.r0 = nd.r0 + left, hi.p = nd.p - left, hi.a0[k] = cut;
+      if (lo.p > 1) slot_low[s] = static_cast<int>(next.size()), next.push_back(lo);
+      if (hi.p > 1) slot_high[s] = static_cast<int>(next.size()), next.push_back(hi);
+    }
+    for (std::size_t j = 0; j < n; ++j) {
+      if (at[j] < 0) continue;
+      const std::size_t s = static_cast<std::size_t>(at[j]);
+      const BrickGrid::Cut& c = g.rcb[static_cast<std::size_t>(level[s].i)];
+      at[j] = along(g, x[j], c.axis) < c.at ? slot_low[s] : slot_high[s];
+    }
+    level.swap(next);
+  }
 }
 
 // Forward lists: every rank asks each owner for the ghosts it holds, in id order (its rows' order).

@@ -30,6 +30,7 @@
 #include <mpi.h>
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -43,13 +44,32 @@ namespace demfdm::dem {
 /// i + n0 (j + n1 k). On a periodic axis a point is wrapped into the cell first; on a free axis a
 /// point outside [lo, lo + len) belongs to the nearest brick. The cuts along an axis are even
 /// unless `cuts` gives them (shifted by DistDem's balancing).
+///
+/// Or, with `parts` > 0, recursive coordinate bisection (RCB, as LAMMPS's `balance rcb`): the box
+/// [lo, lo + len) is cut in two across one axis, the low side taking the first p / 2 of the
+/// node's p ranks, and each side again, until every part is one rank. `rcb` holds the inner
+/// nodes' cuts in preorder: a node's low child (if inner) follows it, its high child comes after
+/// the low child's p / 2 - 1 inner nodes. A point at a cut belongs to the high side, as at a grid
+/// cut. `n` and `cuts` are then unused.
 struct BrickGrid {
   Vec3 lo{}, len{};
   int n[3] = {1, 1, 1};
   bool periodic[3] = {false, false, false};
   /// Per axis: empty (even cuts), or the n[k] - 1 inner cuts, increasing, in (0, len[k]) from lo.
   std::vector<double> cuts[3];
-  int count() const { return n[0] * n[1] * n[2]; }
+  struct Cut {
+    int axis = 0;
+    double at = 0.0;  // from lo, as `cuts`
+  };
+  std::vector<Cut> rcb;  // parts - 1 inner nodes, preorder (empty with parts == 0: the grid)
+  int parts = 0;
+  int count() const { return parts > 0 ? parts : n[0] * n[1] * n[2]; }
+  /// RCB over `p` ranks (p >= 1) with geometric cuts: each node cut across its box's longest side
+  /// (the lowest axis of equal ones) at the share of its low child, p / 2 of p.
+  void set_rcb(int p);
+  /// Rank r's brick along each axis, from lo: [a0[k], a1[k]) (on a free axis the end bricks also
+  /// own what lies beyond 0 and len[k]).
+  void box(int r, double a0[3], double a1[3]) const;
   /// Start of brick i along axis k, from lo (edge(k, 0) = 0, edge(k, n[k]) = len[k]).
   double edge(int k, int i) const {
     if (i <= 0) return 0.0;
@@ -70,6 +90,15 @@ void contact_weights(const World& w, std::vector<std::int64_t>& wt);
 /// `hist.size()` even bins: cut j at the end of the first bin where the running weight reaches
 /// j/n of the total, at least one bin per slab (DistDem's balancing, bench_dist's model grids).
 std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int n, double len);
+
+/// RCB cuts of `g` (g.parts > 0) by weight: each cut of the tree, level by level from the root,
+/// across the longest side of its node's box, at the end of the first of `bins` even bins along it
+/// where the weight of the points `x` (weights `wt`; `skip`, if not empty: points left out) in
+/// the node reaches the low child's share, p / 2 of p. `reduce` sums a level's bins over the
+/// ranks (an integer allreduce; nothing on one process), so every rank finds the same cuts.
+void rcb_cuts(BrickGrid& g, const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt,
+              const std::vector<std::uint8_t>& skip, int bins,
+              const std::function<void(std::vector<std::int64_t>&)>& reduce);
 
 /// Every rank's records on rank 0, in rank order (the other ranks get an empty array); `starts`
 /// (rank 0): where each rank's records begin, and their end. Collective.
@@ -127,6 +156,9 @@ class DistDem {
   ///   kContacts: 1 plus its listed contacts (the pair pass's work grows with them);
   ///   kTime: its rank's compute time (motion and forces) since the last balancing, shared
   ///          evenly by the rank's own balls (LAMMPS's `weight time`), in nanoseconds.
+  /// With RCB (BrickGrid::parts) every cut of the tree moves instead, level by level, so that each
+  /// node's low side carries its share p / 2 of p of the node's weight (rcb_cuts), and the
+  /// bricks, not only the slabs, carry equal weight.
   /// The cuts fall on the edges of `bins` even slabs per axis; the weights are integers, summed
   /// exactly, so every rank finds the same cuts. Balancing moves balls between ranks, never a
   /// bit of the results (rows stay in id order), even when the cuts follow measured times.
