@@ -59,7 +59,7 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // each rank runs the same adapter. Every rank holds the whole World for the stages' set-up
 // (specimen procedures, walls, the footing, the interface bonds: the same calls on the same
 // state, so the same bits) and steps the stages that are not specimen preparation on a
-// dem::DistDem, its slab of the block; at a stage's end, a checkpoint or a frame the ranks'
+// dem::DistDem, its brick of the block; at a stage's end, a checkpoint or a frame the ranks'
 // parts are assembled into the whole World again (DistDem::unload). Only rank 0 writes files.
 struct Ranks {
   MPI_Comm comm = MPI_COMM_NULL;
@@ -198,7 +198,7 @@ class DemParticipant : public node::Participant {
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
     history_due_ = -1;
-    // A ranked run loads the whole World on every rank; its next step cuts it into slabs again.
+    // A ranked run loads the whole World on every rank; its next step cuts it into bricks again.
     dist_live_ = false;
     dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
@@ -596,7 +596,7 @@ class DemParticipant : public node::Participant {
   }
 
  private:
-  // The World that steps: a rank's slab while the ranks step, else the whole World.
+  // The World that steps: a rank's brick while the ranks step, else the whole World.
   dem::World& live() { return dist_live_ ? dist_->world() : world_; }
   const dem::World& live() const { return dist_live_ ? dist_->world() : world_; }
   // The kinetic energy of the current state, computed once per state (the history row and the
@@ -630,6 +630,8 @@ class DemParticipant : public node::Participant {
         if (g.len[k] > g.len[axis]) axis = k;
       g.n[axis] = g_ranks.size;
     }
+    spdlog::info("dem: the block cut into {} bricks ({}){}", g_ranks.size,
+                 g.parts > 0 ? "recursive coordinate bisection" : "slabs", describe_cuts(g));
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
                         s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime
@@ -646,13 +648,21 @@ class DemParticipant : public node::Participant {
     dist_->unload(world_);
     synced_ = true;
   }
+  // The cuts of an RCB tree, each as its axis and its place along the block (a fraction), for a
+  // log line; empty for slabs or more than 16 bricks.
+  static std::string describe_cuts(const dem::BrickGrid& g) {
+    if (g.parts == 0 || g.parts > 16) return "";
+    std::string out = "; cuts";
+    for (const auto& c : g.rcb) out += fmt::format(" {} at {:.3f}", "xyz"[c.axis], c.at / g.len[c.axis]);
+    return out;
+  }
   // The end of the ranks' steps: world_ is the state from here on.
   void leave_dist() {
     if (!dist_live_) return;
     sync_full();
     if (dist_->rebalances() > 0)
-      spdlog::info("dem: {} rebalances of the ranks' cuts in the stage ({} exchanges)", dist_->rebalances(),
-                   dist_->exchanges());
+      spdlog::info("dem: {} rebalances of the ranks' cuts in the stage ({} exchanges){}", dist_->rebalances(),
+                   dist_->exchanges(), describe_cuts(dist_->grid()));
     const auto& t = dist_->times();  // the ranks' communication, as effects of the stage
     effect_s_["ranks.forward"] += t.forward;
     effect_s_["ranks.reduce"] += t.reduce;

@@ -10,9 +10,10 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
   today: this code: the incremental exchange (measured), its records in one message to and from
          each neighbour brick (26 for cubic bricks) and one allreduce that confirms no record
          goes further (else all-to-all, not modelled: after cuts moved far); the forward
-         exchange point to point; shifted cuts; ghosts integrated; the walls' sums gathered on
+         exchange point to point; RCB cuts balanced by rcb_cuts (2,048 bins per cut; session 20,
+         before it shifted cuts of a brick grid); ghosts integrated; the walls' sums gathered on
          rank 0.
-  next:  the same exchange, RCB cuts, ghosts not integrated, the walls' sums as exact
+  next:  the same exchange and RCB, ghosts not integrated, the walls' sums as exact
          (order-free) accumulators in one allreduce.
 
 Two sets of measured figures (--machine): "avx2", session 14 (AMD EPYC, 2 vCPUs, AVX2, the
@@ -58,6 +59,10 @@ MEASURED_AVX2 = dict(
     imbalance_even=1.20,
     imbalance_shift=1.09,
     imbalance_rcb=1.003,
+    # RCB as the code cuts it (rcb_cuts, 2,048 bins per cut; session 20, bench_dist --state on
+    # session 17's default-scene checkpoints, 4x4x4 = 64 bricks): 1.0088 at the end of gravity,
+    # 1.0066 at the end of penetration; the larger is used
+    imbalance_rcb_code=1.0088,
     # walls' sums on rank 0: wall contacts of the one-rank block (bench footing: 1,404 for five
     # box faces and the footing, 23,790 balls), growing with the block's surface, P^(2/3) in
     # weak scaling; root work per record (2 ranks: 0.016 ms for 1,404 records, sums and
@@ -109,9 +114,7 @@ def step_time(P, n, m, net, design):
     comp = n * m["compute_us"] * (1.0 + m["ghost_pair_coeff"] * g)
     if design == "today":
         comp += n * g * m["motion_us"]  # ghosts integrated too
-        imb = 1.0 if one else m["imbalance_shift"]
-    else:
-        imb = 1.0 if one else m["imbalance_rcb"]
+    imb = 1.0 if one else m["imbalance_rcb_code"]
     parts["compute"] = comp * imb
     if one:  # one rank: no exchange, no messages
         parts["exchange"] = parts["forward"] = parts["reduce"] = parts["walls"] = 0.0

@@ -1,8 +1,9 @@
-// The DEM on MPI ranks (issue 17; docs/scaling.md): space cut into a brick grid, one brick per
-// rank. A rank's World holds the balls whose centres lie in its brick (owned) and copies of the
-// balls within reach of it (ghosts), every row in ball-id order, and the ball-ball pairs that have
-// an owned ball. A pair of an owned ball and a ghost is computed on both ranks, from the same
-// inputs, so both keep the same history (LAMMPS's `newton off` for pairs).
+// The DEM on MPI ranks (issue 17; docs/scaling.md): space cut into bricks (a grid, or the leaves
+// of an RCB tree), one brick per rank. A rank's World holds the balls whose centres lie in its
+// brick (owned) and copies of the balls within reach of it (ghosts), every row in ball-id order,
+// and the ball-ball pairs that have an owned ball. A pair of an owned ball and a ghost is
+// computed on both ranks, from the same inputs, so both keep the same history (LAMMPS's
+// `newton off` for pairs).
 //
 // Every step: the World's first half (integration), then the ghosts' x, v, ω from their owners
 // (point to point with the ranks that share ghosts with this one), then the rebuild test over
