@@ -19,6 +19,7 @@
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
+// bench_dist --merge P N: rank 0's merge of the walls' shares, P runs of N (merge_bench below).
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
 // cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
 // the run. Ball ids follow a Morton order of the packing (rows in id order are then local in
@@ -38,6 +39,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <numeric>
+#include <random>
 #include <string>
 
 #include "demfdm/dem/checkpoint.hpp"
@@ -175,8 +177,77 @@ int model_state(const char* file, const char* hash, const char* spec) {
 
 }  // namespace
 
+// `bench_dist --merge P N`: rank 0's merge of the walls' shares (DistDem::reduce_walls) without
+// MPI: P sorted runs of N facet shares each (ball ids dealt to the runs at random), put in one
+// World's order by order_wall_shares (a radix order of the keys, as reduce_walls does), by
+// merge_runs (pairwise, O(n log P)) and, as the reference in the same run, by merging each run
+// into the growing front as reduce_walls did before session 20 (O(n P)). Prints the best of 5
+// of each, in ns per share.
+int merge_bench(int P, long N) {
+  std::mt19937_64 rng(5);
+  std::vector<std::vector<WallSumRec>> runs(static_cast<std::size_t>(P));
+  for (std::uint64_t id = 0; id < static_cast<std::uint64_t>(P) * static_cast<std::uint64_t>(N); ++id) {
+    WallSumRec r;
+    r.ball = id;
+    r.kind = 1;
+    r.F = {double(id), 1.0, 2.0};
+    runs[rng() % static_cast<std::uint64_t>(P)].push_back(r);
+  }
+  const auto less = [](const WallSumRec& x, const WallSumRec& y) {
+    return x.ball != y.ball ? x.ball < y.ball : x.wall < y.wall;
+  };
+  std::vector<WallSumRec> all, tmp;
+  std::vector<std::size_t> starts;
+  auto lay_out = [&] {
+    all.clear();
+    starts.clear();
+    for (const auto& r : runs) {
+      starts.push_back(all.size());
+      all.insert(all.end(), r.begin(), r.end());
+    }
+    starts.push_back(all.size());
+  };
+  double best_new = 1e30, best_old = 1e30, best_pair = 1e30;
+  for (int rep = 0; rep < 5; ++rep) {
+    lay_out();
+    double t0 = MPI_Wtime();
+    order_wall_shares(all, starts);
+    best_new = std::min(best_new, MPI_Wtime() - t0);
+    bool ok = std::is_sorted(all.begin(), all.end(), less);
+    lay_out();
+    t0 = MPI_Wtime();
+    merge_runs(all, starts, less);
+    best_pair = std::min(best_pair, MPI_Wtime() - t0);
+    ok = ok && std::is_sorted(all.begin(), all.end(), less);
+    // the reference: each run appended, then merged with the front through a buffer
+    all.clear();
+    t0 = MPI_Wtime();
+    for (const auto& r : runs) {
+      const std::size_t mid = all.size();
+      all.insert(all.end(), r.begin(), r.end());
+      if (mid > 0 && all.size() > mid) {
+        tmp.resize(all.size());
+        std::merge(all.begin(), all.begin() + static_cast<std::ptrdiff_t>(mid), all.begin() + static_cast<std::ptrdiff_t>(mid),
+                   all.end(), tmp.begin(), less);
+        std::copy(tmp.begin(), tmp.end(), all.begin());
+      }
+    }
+    best_old = std::min(best_old, MPI_Wtime() - t0);
+    if (!ok || !std::is_sorted(all.begin(), all.end(), less)) {
+      std::fprintf(stderr, "merge bench: not sorted\n");
+      return 1;
+    }
+  }
+  const double n = double(P) * double(N);
+  std::printf("merge,ranks,%d,shares,%.0f,bytes_per_share,%zu,radix_ns_per_share,%.2f,pairwise_ns_per_share,%.2f,"
+              "front_ns_per_share,%.2f,front_over_radix,%.2f\n",
+              P, n, sizeof(WallSumRec), best_new / n * 1e9, best_pair / n * 1e9, best_old / n * 1e9, best_old / best_new);
+  return 0;
+}
+
 int main(int argc, char** argv) {
   if (argc == 5 && std::string(argv[1]) == "--state") return model_state(argv[2], argv[3], argv[4]);
+  if (argc == 4 && std::string(argv[1]) == "--merge") return merge_bench(std::atoi(argv[2]), std::atol(argv[3]));
   MPI_Init(&argc, &argv);
   int rank = 0, P = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);

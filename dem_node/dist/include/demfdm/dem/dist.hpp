@@ -30,6 +30,7 @@
 
 #include <mpi.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -100,6 +101,34 @@ std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int
 void rcb_cuts(BrickGrid& g, const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt,
               const std::vector<std::uint8_t>& skip, int bins,
               const std::function<void(std::vector<std::int64_t>&)>& reduce);
+
+/// Merges the sorted runs v[starts[j], starts[j + 1]) (starts ascending, its last entry the end
+/// of the last run) into one sorted run, pairwise from the bottom up: O(n log runs), where
+/// merging each run into the growing front would cost O(n runs). Stable: equal keys keep the
+/// order of their runs. (Rank 0 merges the ranks' records in one World's order with it.)
+template <class T, class Less>
+void merge_runs(std::vector<T>& v, const std::vector<std::size_t>& starts, Less less) {
+  if (starts.size() < 3) return;
+  const std::size_t runs = starts.size() - 1;
+  for (std::size_t width = 1; width < runs; width *= 2)
+    for (std::size_t r = 0; r + width < runs; r += 2 * width) {
+      const std::size_t hi = std::min(r + 2 * width, runs);
+      std::inplace_merge(v.begin() + static_cast<std::ptrdiff_t>(starts[r]),
+                         v.begin() + static_cast<std::ptrdiff_t>(starts[r + width]),
+                         v.begin() + static_cast<std::ptrdiff_t>(starts[hi]), less);
+    }
+}
+
+/// The stable order of `keys` (order[j]: the index of the j-th smallest; equal keys in index
+/// order), by a least-significant-digit radix sort of 11-bit digits over the bits the largest key
+/// uses: O(n) per digit. (Rank 0 orders the walls' shares of every rank with it: merging the
+/// ranks' sorted runs cost 53 ns per share at 64 ranks and 120 ns at 1,024, docs/scaling.md.)
+void radix_order(const std::vector<std::uint64_t>& keys, std::vector<std::uint32_t>& order);
+
+/// The walls' shares v[starts.front(), starts.back()) of one kind, sorted runs that begin at
+/// `starts` (one per rank), put in one World's order, (ball id, wall), stably (radix_order; the
+/// walls' sums of reduce_walls).
+void order_wall_shares(std::vector<WallSumRec>& v, const std::vector<std::size_t>& starts);
 
 /// Every rank's records on rank 0, in rank order (the other ranks get an empty array); `starts`
 /// (rank 0): where each rank's records begin, and their end. Collective.
