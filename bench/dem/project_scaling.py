@@ -69,6 +69,12 @@ MEASURED_AVX2 = dict(
     # broadcast); bytes per record (a plane share)
     wall_records_one=1404,
     wall_root_us=0.016e3 / 1404,
+    # rank 0's ordering of the shares per share [us] against the rank count (session 20,
+    # bench_dist --merge P N, 351 shares per rank at 64: order_wall_shares, merged pairwise below
+    # 8 ranks, a radix order from 8); replaces wall_root_us where given. Before session 20 the
+    # shares were merged into a growing front: 0.190 us per share at 64 ranks, 4.43 at 1,024
+    # (the "front" column), which the flat 11 ns above did not see.
+    wall_root_us_at={2: 0.0050, 4: 0.0116, 8: 0.0112, 16: 0.0125, 64: 0.0184, 256: 0.0236, 1024: 0.0390},
     wall_record_bytes=48,
     # "next": exact (order-free) accumulators per wall value, one allreduce of the sums; values
     # per step: the bench's 5 planes x 4 + footing 3 (an interface of 400 vertices adds 1,600),
@@ -106,6 +112,22 @@ def ghosts_per_ball(n, m):
     return ((a + 2 * h) ** 3 - a ** 3) / a ** 3
 
 
+def wall_root_us(P, m):
+    """Rank 0's work per wall share at P ranks: the measured table, interpolated in log P."""
+    tab = m.get("wall_root_us_at")
+    if not tab:
+        return m["wall_root_us"]
+    ps = sorted(tab)
+    if P <= ps[0]:
+        return tab[ps[0]]
+    if P >= ps[-1]:
+        return tab[ps[-1]]
+    for lo, hi in zip(ps, ps[1:]):
+        if lo <= P <= hi:
+            f = (math.log(P) - math.log(lo)) / (math.log(hi) - math.log(lo))
+            return tab[lo] + f * (tab[hi] - tab[lo])
+
+
 def step_time(P, n, m, net, design):
     a_us, beta = net["alpha_us"], net["beta_gbs"] * 1e3  # bytes per us
     one = P == 1
@@ -132,7 +154,7 @@ def step_time(P, n, m, net, design):
         if design == "today":
             recs = m["wall_records_one"] * P ** (2.0 / 3.0)
             parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta +
-                              recs * m["wall_root_us"])
+                              recs * wall_root_us(P, m))
         else:
             parts["walls"] = 2 * math.log2(P) * (a_us + m["wall_values"] * 24 / beta)
     parts["total"] = sum(v for k, v in parts.items())
