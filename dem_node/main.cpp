@@ -204,6 +204,7 @@ class DemParticipant : public node::Participant {
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = dem_threads(s_);
     world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
+    world_.mutable_params().order_free_sums = s_.boolean("run.order_free_sums");
     world_.keep_force_norms(!preparing_);
     omp_set_num_threads(world_.params().threads);
     auto sec = r.section("dem_node");

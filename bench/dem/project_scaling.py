@@ -13,6 +13,9 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
          exchange point to point; RCB cuts balanced by rcb_cuts (2,048 bins per cut; session 20,
          before it shifted cuts of a brick grid); ghosts integrated; the walls' sums gathered on
          rank 0.
+  order-free: today with run.order_free_sums (session 20): the walls' sums folded on every
+         rank, a maximum-allreduce of one double and a sum-allreduce of four per wall value
+         (the node's measurements likewise, not modelled: they are not the engine's).
   next:  the same exchange and RCB, ghosts not integrated, the walls' sums as exact
          (order-free) accumulators in one allreduce.
 
@@ -134,7 +137,7 @@ def step_time(P, n, m, net, design):
     g = 0.0 if one else ghosts_per_ball(n, m)
     parts = {}
     comp = n * m["compute_us"] * (1.0 + m["ghost_pair_coeff"] * g)
-    if design == "today":
+    if design in ("today", "order-free"):
         comp += n * g * m["motion_us"]  # ghosts integrated too
     imb = 1.0 if one else m["imbalance_rcb_code"]
     parts["compute"] = comp * imb
@@ -155,6 +158,8 @@ def step_time(P, n, m, net, design):
             recs = m["wall_records_one"] * P ** (2.0 / 3.0)
             parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta +
                               recs * wall_root_us(P, m))
+        elif design == "order-free":  # two allreduces (recursive doubling): 1 and 4 doubles per value
+            parts["walls"] = 2 * math.log2(P) * (2 * a_us + m["wall_values"] * 5 * 8 / beta)
         else:
             parts["walls"] = 2 * math.log2(P) * (a_us + m["wall_values"] * 24 / beta)
     parts["total"] = sum(v for k, v in parts.items())
@@ -176,7 +181,7 @@ def main():
     print(hdr if args.csv else "| " + " | ".join(hdr.split(",")) + " |")
     if not args.csv:
         print("|" + "---|" * len(hdr.split(",")))
-    for design in ("today", "next"):
+    for design in ("today", "order-free", "next"):
         t1 = step_time(1, args.balls, m, net, design)["total"]
         for P in (1, 2, 8, 64, 256, 1024):
             p = step_time(P, args.balls, m, net, design)

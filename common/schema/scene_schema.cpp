@@ -74,6 +74,13 @@ void declare_run(config::Section& root) {
               "coupling scheme the nodes take turns, so each can use them all; the run summary reports the cores "
               "each node kept busy). The same bits need the same count, unless run.thread_independent is on.")
       .min(1).max(256).or_word("auto", false);
+  run.boolean("order_free_sums", false,
+              "The DEM's per-step measurements (kinetic energy, unbalanced and skeleton ratios, mean contact "
+              "force) as order-free sums: every term split against fixed power-of-two boundaries into parts that add "
+              "exactly in any order (docs/scaling.md), so the ranks of dem.ranks fold their own terms and combine "
+              "them in two allreduces instead of gathering every term on rank 0 each step. The same bits at any "
+              "thread and rank count; they differ from the default sums in the last bits (about 1e-16 relative), "
+              "so off by default (the golden data).");
   run.boolean("thread_independent", false,
               "Every thread count gives the same bits: the DEM's threaded ball-ball pass keeps the one-thread order "
               "of every ball's sums (docs/scaling.md; the continuum is independent of the count already). It costs "

@@ -545,8 +545,8 @@ std::vector<std::string> branch_conflicts(const config::Scene& saved, const conf
       return idx >= ran;
     }
     for (const char* p : {"dem.dt_safety", "dem.damping", "dem.dt_fixed", "dem.dt_above_critical", "dem.footing.",
-                          "dem.output.", "dem.escape_margin", "dem.ranks", "dem.balance_", "coupling.", "output.", "bus.", "run.threads",
-                          "run.thread_independent", "run.name",
+                          "dem.output.", "dem.escape_margin", "dem.ranks", "dem.decomposition", "dem.balance_", "coupling.",
+                          "output.", "bus.", "run.threads", "run.thread_independent", "run.order_free_sums", "run.name",
                           "run.description", "run.guard_", "run.checkpoint_", "continuum.output."})
       if (starts(k, p)) return true;
     if (starts(k, "continuum.")) return !took_part.count("continuum");

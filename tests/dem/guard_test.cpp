@@ -164,7 +164,8 @@ TEST(Guard, BallPushedHalfARadiusIntoAWallIsExpelledConservingEnergy) {
 // dem::screen_balls, the node's per-step pass (docs/stability.md): its finite flag trips on a
 // NaN or an infinity in any component of x, v, ω, F and T, its escape distance is the largest
 // of a serial loop over the balls, and its kinetic energy has World::kinetic_energy()'s bits, on
-// the serial path (one thread) and the parallel one (two threads, more than 4,096 balls).
+// the serial path (one thread) and the parallel one (two threads, more than 4,096 balls), with
+// the plain and with order-free sums.
 TEST(Guard, ScreenBallsMatchesTheSeparateTests) {
   World w(WorldParams{});
   std::mt19937_64 rng(11);
@@ -186,9 +187,12 @@ TEST(Guard, ScreenBallsMatchesTheSeparateTests) {
     for (int k = 0; k < 3; ++k) expect_out = std::max({expect_out, lo[k] - w.balls().x[i][k], w.balls().x[i][k] - hi[k]});
   ASSERT_GT(expect_out, 3 * kR);
   std::vector<double> scratch;
-  for (int threads : {1, 2}) {
-    SCOPED_TRACE("threads " + std::to_string(threads));
+  for (int mode = 0; mode < 4; ++mode) {
+    const int threads = 1 + mode % 2;
+    const bool order_free = mode >= 2;  // WorldParams::order_free_sums: the same sum as the World's
+    SCOPED_TRACE("threads " + std::to_string(threads) + (order_free ? ", order-free sums" : ""));
     w.mutable_params().threads = threads;
+    w.mutable_params().order_free_sums = order_free;
     const BallScreen sc = screen_balls(w, lo, hi, true, scratch);
     EXPECT_TRUE(sc.finite);
     EXPECT_EQ(sc.outside, expect_out);

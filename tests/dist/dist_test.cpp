@@ -41,6 +41,7 @@ struct Scene {
   bool rcb = false;      // recursive coordinate bisection instead of slabs along `axis`
   int balance_every = 0;  // DistDem's balancing (contact weights) every this many exchanges
   double tall = 1.0;      // the free cluster's grid: this many times as high as wide
+  bool order_free = false;  // WorldParams::order_free_sums: the measurements without a gather
 };
 
 constexpr int kSide = 12;  // kSide³ balls
@@ -56,6 +57,7 @@ std::unique_ptr<World> build(const Scene& sc, bool final_prepare) {
   WorldParams p;
   p.threads = sc.threads;
   p.thread_independent = true;  // what the ranks run with (DistDem::load)
+  p.order_free_sums = sc.order_free;
   p.periodic.enabled = sc.periodic;
   p.periodic.origin = {0, 0, 0};
   p.periodic.length = {kSide * s, kSide * s, kSide * s};
@@ -120,6 +122,7 @@ void check(const Scene& sc) {
   const double dt_end = d.world().dt();
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
+  const double skel = d.skeleton_ratio(fc).ratio;
   const BondCounts bonds = d.bond_counts();
   const std::int64_t failures = d.bond_failures();
   long long mine[3] = {static_cast<long long>(d.owned()), static_cast<long long>(d.ghosts()),
@@ -137,6 +140,18 @@ void check(const Scene& sc) {
     test::expect_same_balls(got, *ref, static_cast<std::size_t>(sum_owned));
     const double dt_ref = ref->dt();
     test::expect_same_measures(*ref, ke, fc, ratio);
+    const double skel_ref = skeleton_ratio(*ref, fc).ratio;
+    EXPECT_EQ(std::memcmp(&skel_ref, &skel, sizeof skel), 0) << "skeleton ratio " << skel << " vs " << skel_ref;
+    if (sc.order_free) {  // the plain sums of the same state: the last bits apart
+      World& plain = *ref;
+      plain.mutable_params().order_free_sums = false;
+      const double ke_p = plain.kinetic_energy(), fc_p = plain.mean_contact_force();
+      std::printf("  order-free against plain sums: kinetic energy %.17g / %.17g, mean contact force %.17g / %.17g\n",
+                  ke, ke_p, fc, fc_p);
+      EXPECT_NEAR(ke, ke_p, 1e-13 * ke_p);
+      EXPECT_NEAR(fc, fc_p, 1e-13 * fc_p);
+      plain.mutable_params().order_free_sums = true;
+    }
     EXPECT_EQ(std::memcmp(&dt_ref, &dt_end, sizeof dt_end), 0) << "the last step differs";
     EXPECT_GT(ref->rebuild_count(), 2) << "the run must rebuild its lists";
     if (sc.bonded) {  // bonds failed during the run (some across the cuts)
@@ -195,6 +210,14 @@ TEST(Dist, HertzPeriodicAutomaticStepSameBits) {
 }
 TEST(Dist, ParallelBondPeriodicTwoThreadsSameBits) {
   check({"pbond periodic, cut along x, 2 threads", ContactModel::kLinearPBond, true, true, 0, 600, 2});
+}
+
+// The measurements as order-free sums (order_free_sum.hpp): each rank folds its own terms, two
+// allreduces, no terms gathered; the same bits as one World summing the same way.
+TEST(Dist, SoftBondPeriodicOrderFreeSumsSameBits) {
+  Scene sc{"softbond periodic, order-free sums, cut along y", ContactModel::kSoftBond, true, true, 1};
+  sc.order_free = true;
+  check(sc);
 }
 
 // RCB: the periodic cell cut into bricks of a tree (at 3 ranks the low third across x, the rest

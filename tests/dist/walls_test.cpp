@@ -44,6 +44,7 @@ struct WallScene {
   double reach = -1.0;  // DistDem::set_neighbour_reach (0: every exchange falls back to all-to-all)
   bool servo = false;   // a platen servo pushes the side plane x = 0 (its stress target above the block's)
   int per_call = 1;     // DEM steps per call of step(n) (the floor's vertices are set once per call)
+  bool order_free = false;  // WorldParams::order_free_sums: the walls' sums and the measurements
 };
 
 // The floor: a 3 x 3 grid of vertices over the box's base (margin kS), 8 triangles facing +z.
@@ -77,6 +78,7 @@ std::unique_ptr<World> build(const WallScene& sc, const Floor& floor, bool final
   WorldParams p;
   p.threads = 1;
   p.thread_independent = true;
+  p.order_free_sums = sc.order_free;
   p.dt_fixed = kDt;
   p.gravity = true;
   p.g_level = 100.0;
@@ -197,6 +199,25 @@ void check(const WallScene& sc) {
     EXPECT_TRUE(test::same_bits(got_sums.vforce, want.vforce)) << "vertex forces, floor or footing force differ";
     EXPECT_TRUE(test::same_bits(got_sums.vstiff, want.vstiff)) << "vertex stiffness differs";
     EXPECT_TRUE(test::same_bits(got_sums.history, want.history)) << "the per-step histories differ";
+    if (sc.order_free) {  // the default sums of the same contacts: the last bits apart
+      std::vector<WallSumRec> recs;
+      ref->wall_sum_records(recs);
+      std::vector<double> of, plain;
+      ref->pack_wall_sums(of);
+      ref->set_wall_sums(recs);  // one World's records in its order: the default sums
+      ref->pack_wall_sums(plain);
+      ref->unpack_wall_sums(of);  // (the reference steps on below)
+      double worst = 0.0, rel = 0.0;
+      for (std::size_t k = 0; k < of.size(); ++k) {
+        const double d = std::abs(of[k] - plain[k]);
+        worst = std::max(worst, d);
+        if (plain[k] != 0.0) rel = std::max(rel, d / std::abs(plain[k]));
+        EXPECT_LE(d, 1e-12 * std::abs(plain[k])) << "wall sum " << k << ": " << of[k] << " against " << plain[k];
+      }
+      std::printf("  order-free walls' sums: %zu values, largest difference from the default sums %.3g, relative "
+                  "%.3g\n", of.size(), worst, rel);
+      EXPECT_GT(worst, 0.0) << "the option changed no wall sum";
+    }
     // the run exercises what it claims: the footing and the floor carry load, the lists rebuild
     EXPECT_GT(ref->footing_reaction().z, 0.0) << "the balls push the footing up";
     EXPECT_LT(ref->facet_wall_force(0).z, 0.0) << "the balls press on the floor";
@@ -294,6 +315,16 @@ TEST(DistWalls, PlatenServoCutAlongYSameBits) {
   sc.servo = true;
   sc.axis = 1;  // the servo's wall (x = 0) meets every brick
   sc.per_call = 4;  // the servo reads the walls' sums inside step(n)
+  check(sc);
+}
+// The walls' sums and the measurements as order-free sums (order_free_sum.hpp): every rank folds
+// its own shares, two allreduces; with the platen servo reading them every step.
+TEST(DistWalls, OrderFreeSumsWithAServoCutAlongYSameBits) {
+  WallScene sc{"walls, order-free sums, a platen servo, cut along y, 4 steps per call"};
+  sc.servo = true;
+  sc.axis = 1;
+  sc.per_call = 4;
+  sc.order_free = true;
   check(sc);
 }
 TEST(DistWalls, BondedFloorCutAlongZSameBits) {

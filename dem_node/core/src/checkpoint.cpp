@@ -26,7 +26,7 @@ static_assert(sizeof(ParallelBondParams) == 64, "ParallelBondParams changed: upd
 static_assert(sizeof(SoftBondParams) == 80, "SoftBondParams changed: update the checkpoint");
 static_assert(sizeof(HertzParams) == 16, "HertzParams changed: update the checkpoint");
 static_assert(sizeof(ContactFamilyParams) == 224, "ContactFamilyParams changed: update the checkpoint");
-static_assert(sizeof(WorldParams) == 1048, "WorldParams changed: update the checkpoint");  // + thread_independent (not saved: the scene's)
+static_assert(sizeof(WorldParams) == 1048, "WorldParams changed: update the checkpoint");  // + thread_independent, order_free_sums (not saved: the scene's)
 static_assert(sizeof(PlaneWallParams) == 112, "PlaneWallParams changed: update the checkpoint");
 static_assert(sizeof(PlaneWall) == 200, "PlaneWall changed: update the checkpoint");
 static_assert(sizeof(FacetWall) == 224, "FacetWall changed: update the checkpoint");
@@ -34,7 +34,7 @@ static_assert(sizeof(Footing) == 128, "Footing changed: update the checkpoint");
 static_assert(sizeof(Particles) == 13 * 24, "Particles changed: update the checkpoint");
 static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the checkpoint");
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
-static_assert(sizeof(World) == 2000, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state), ghost rows (refused), step reduction (a rank driver's)
+static_assert(sizeof(World) == 2128, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state; the order-free force norms and walls' sums too), ghost rows (refused), step reduction (a rank driver's)
 // The contact sets: vtable, phase, contacts, the kind's walls (PairSet: + pass and measurement scratch, not state).
 static_assert(sizeof(PairSet) == 1096, "PairSet changed: is the new member state? update the checkpoint");  // + the threaded pass plan, the kept stiffness terms, the serial scan's norm sum (derived), the pass's force norms (derived), the rebuild's kept arrays (scratch)
 static_assert(sizeof(WallSet<PlaneKind>) == 328, "WallSet<PlaneKind> changed: update the checkpoint");
@@ -670,9 +670,10 @@ struct CheckpointAccess {
     }
     r.finish();
 
-    // Commit (nothing below throws except on allocation failure). thread_independent is not
-    // saved: the target keeps its own (the scene's, like the thread count).
+    // Commit (nothing below throws except on allocation failure). thread_independent and
+    // order_free_sums are not saved: the target keeps its own (the scene's, like the thread count).
     p.thread_independent = w.p_.thread_independent;
+    p.order_free_sums = w.p_.order_free_sums;
     w.p_ = p;
     w.set_counters(k);
     w.pt_ = std::move(pt);

@@ -61,6 +61,18 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   const Vec3 g = w.gravity();
   const int nt = w.thread_count();
   if (nt <= 1 || n <= 4096) {
+    if (w.params().order_free_sums) {  // the terms kept, then their order-free sum
+      thread_local std::vector<double> term;  // (kept: a fresh array per step costs page faults)
+      term.resize(static_cast<std::size_t>(n));
+      std::size_t rattlers = 0;
+      for (std::size_t u = 0; u < static_cast<std::size_t>(n); ++u) {
+        Vec3 f;
+        const bool r = rattler_of(w.balls(), u, g, f);
+        rattlers += r;
+        term[u] = r ? 0.0 : term_of(w.balls(), u, f);
+      }
+      return skeleton_ratio_of(order_free_total(term.data(), term.size()), rattlers, w.num_balls(), fc);
+    }
     // One thread (the DEM node measures a coupled step on one, dem_node/main.cpp): the same
     // terms and the same sums in row order in one loop, without the two work arrays.
     const Particles& b = w.balls();
@@ -90,6 +102,7 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
     sum += term[static_cast<std::size_t>(i)];
     rattlers += rattler[static_cast<std::size_t>(i)];
   }
+  if (w.params().order_free_sums) sum = order_free_total(term.data(), term.size());
   return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
 }
 

@@ -57,6 +57,7 @@ WorldParams world(const config::Scene& s, const Block& b) {
   p.dt_fixed = 0.0;  // dem.dt_fixed is checked, then applied, at the first stage that begins with balls
   p.threads = schema::run_threads(s);
   p.thread_independent = s.boolean("run.thread_independent");
+  p.order_free_sums = s.boolean("run.order_free_sums");
   p.gravity = false;
   for (const auto& f : kFamilies) p.*f.member = family(s, f);
   // A scene that generates its specimen starts with the REV's periodic cell.

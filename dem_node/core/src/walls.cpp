@@ -736,6 +736,78 @@ void World::set_wall_sums(std::span<const WallSumRec> recs) {
   }
 }
 
+// The additions of set_wall_sums for this World's own wall contacts as (slot, value) terms, slots
+// in pack_wall_sums' order: the planes' and the footing's shares from their contacts, the facets'
+// from the terms the force pass formed (FacetKind::after_law), as FacetKind::end adds them.
+void World::wall_sum_terms(std::vector<WallTerm>& out) const {
+  const std::uint32_t planes = static_cast<std::uint32_t>(planes_->kind.walls.size());
+  auto put3 = [&](std::uint32_t slot, const Vec3& v) {
+    out.push_back({slot, v.x});
+    out.push_back({slot + 1, v.y});
+    out.push_back({slot + 2, v.z});
+  };
+  const WallContacts& pc = planes_->contacts;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const WallSumRec r = PlaneKind::rec(pc, static_cast<std::int64_t>(c));
+    put3(4 * r.wall, r.F);
+    if (r.active) out.push_back({4 * r.wall + 3, r.k});
+  }
+  std::uint32_t at = 4 * planes;
+  const auto& fws = facets_->kind.walls;
+  std::vector<std::uint32_t>& base = scratch_slots_;  // each facet wall's first slot
+  base.clear();
+  for (const FacetWall& fw : fws) {
+    base.push_back(at);
+    at += static_cast<std::uint32_t>(4 * fw.vforce.size() + 3);
+  }
+  if (facets_->present()) {
+    // (No pass yet, e.g. a World just loaded onto a rank: the terms from the contacts' records,
+    // facet_term of facet_rec, as after_law forms them.)
+    const std::vector<FacetTerm>& ft = facets_->kind.terms;
+    const WallContacts& wc = facets_->contacts;
+    const bool passed = ft.size() == wc.size();
+    const SetContext cx = const_cast<World*>(this)->context();
+    for (std::size_t c = 0; c < wc.size(); ++c) {
+      const FacetTerm t = passed ? ft[c] : facet_term(fws, facet_rec(cx, wc, static_cast<std::int64_t>(c)));
+      if (!t.active) continue;
+      const FacetWall& fw = fws[t.wall];
+      const auto& tr = fw.tri[static_cast<std::size_t>(t.facet)];
+      const std::uint32_t b = base[t.wall], nv = static_cast<std::uint32_t>(fw.vforce.size());
+      if (t.loaded) {
+        for (int v = 0; v < 3; ++v) put3(b + 3 * static_cast<std::uint32_t>(tr[v]), t.f[v]);
+        put3(b + 4 * nv, t.F);
+      }
+      for (int v = 0; v < 3; ++v) out.push_back({b + 3 * nv + static_cast<std::uint32_t>(tr[v]), t.k[v]});
+    }
+  }
+  const WallContacts& gc = footing_->contacts;
+  for (std::size_t c = 0; c < gc.size(); ++c) put3(at, FootingKind::rec(gc, static_cast<std::int64_t>(c)).F);
+}
+
+std::size_t World::wall_sum_slots() const {
+  std::size_t n = 4 * planes_->kind.walls.size() + (footing_->present() ? 3 : 0);
+  for (const FacetWall& fw : facets_->kind.walls) n += 4 * fw.vforce.size() + 3;
+  return n;
+}
+
+void World::order_free_wall_sums() {
+  if (!planes_->present() && !facets_->present() && !footing_->present()) return;
+  of_terms_.clear();
+  wall_sum_terms(of_terms_);
+  const std::size_t S = wall_sum_slots();
+  std::vector<double>& v = of_values_;
+  v.assign(S, 0.0);  // first the bounds, then the sums
+  for (const WallTerm& t : of_terms_) {
+    const double a = std::fabs(t.v);
+    v[t.slot] = (a > v[t.slot] || std::isnan(a)) ? a : v[t.slot];
+  }
+  of_sums_.clear();
+  for (double b : v) of_sums_.emplace_back(b);
+  for (const WallTerm& t : of_terms_) of_sums_[t.slot].add(t.v);
+  for (std::size_t k = 0; k < S; ++k) v[k] = of_sums_[k].result();
+  unpack_wall_sums(v);
+}
+
 void World::pack_wall_sums(std::vector<double>& out) const {
   out.clear();
   auto put = [&](const Vec3& v) { out.insert(out.end(), {v.x, v.y, v.z}); };

@@ -270,6 +270,7 @@ void World::force_pass(double dt) {
     set->pass(cx, dt);
     lap(times_.*(set->phase()));
   }
+  if (p_.order_free_sums && !wall_sums_by_caller_) order_free_wall_sums();
   Lap lap_gather;
   gather();
   lap_gather(times_.gather);
@@ -422,6 +423,26 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
   // Two serial loops, each in set and contact order: the sum of the force norms, and every
   // ball's stiffness sums. They share nothing, so on two threads they run side by side.
   auto force_sum = [&] {
+    if (p_.order_free_sums) {  // the norms > 0 (as add_force_norms counts them), order-free:
+      // the pairs' from the scan's array, the walls' gathered, folded against one bound
+      const std::vector<double>& pn = pairs_->force_norms();
+      const std::size_t m = ghost_.empty() ? pairs_->contacts.size() : 0;  // (a rank's: DistDem's)
+      std::vector<double>& v = scratch_fc_;
+      v.clear();
+      if (m == 0) {
+        force_norm_values(v);
+      } else {
+        const WallContacts* wl[3] = {&planes_->contacts, &facets_->contacts, &footing_->contacts};
+        for (const WallContacts* w : wl)
+          for (std::size_t c = 0; c < w->size(); ++c) v.push_back(norm(w->F[c]));
+      }
+      const double bound = std::max(max_positive_of(pn.data(), m), max_positive_of(v.data(), v.size()));
+      const std::size_t cnt = count_positive(pn.data(), m) + count_positive(v.data(), v.size());
+      OrderFreeSum sum = fold_terms(pn.data(), m, bound, true);
+      sum.merge(fold_terms(v.data(), v.size(), bound, true));
+      out.fc = cnt ? sum.result() / double(cnt) : 0.0;
+      return;
+    }
     double sum = 0.0;
     std::size_t cnt = 0;
     for (const ContactSet* set : sets_) set->add_force_norms(sum, cnt);
@@ -625,6 +646,16 @@ void World::contact_force_norms(std::vector<ContactTerm>& out) const {
   for (std::uint64_t k = 0; k < 3; ++k)
     for (std::size_t c = 0; c < wl[k]->size(); ++c)
       out.push_back({k + 1, pt_.id[wl[k]->ball[c]], wl[k]->wall[c], norm(wl[k]->F[c])});
+}
+
+void World::force_norm_values(std::vector<double>& out) const {
+  const PairContacts& pc = pairs_->contacts;
+  const std::vector<double>& f = pairs_->force_norms();
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (ghost_.empty() || !ghost_[pc.a[c]]) out.push_back(f[c]);
+  const WallContacts* wl[3] = {&planes_->contacts, &facets_->contacts, &footing_->contacts};
+  for (const WallContacts* w : wl)
+    for (std::size_t c = 0; c < w->size(); ++c) out.push_back(norm(w->F[c]));
 }
 
 Energy World::energy() const {

@@ -445,6 +445,10 @@ struct DistDem::Buffers {
   std::vector<PlaneShare> plane_shares;
   std::vector<WallSumRec> facet_shares;
   std::vector<std::size_t> run_starts;  // reduce_walls: where each rank's records of a kind begin
+  // reduce_walls with order-free sums: the terms, bounds, sums and folds
+  std::vector<World::WallTerm> of_terms;
+  std::vector<double> of_bound, of_folds;
+  std::vector<OrderFreeSum> of_sums;
   std::vector<FootingShare> footing_shares;
   std::vector<std::vector<BallRec>> bout;
   std::vector<std::vector<PairRec>> pout;
@@ -557,6 +561,7 @@ void DistDem::load(const World& full) {
   for (WallContacts& d : wc)  // a list without contacts has its one offset, as a World's has
     if (d.cand_off.empty()) d.cand_off.push_back(0);
   w_ = std::make_unique<World>(p_);
+  w_->set_wall_sums_by_caller(size_ > 1);  // reduce_walls forms them from every rank's shares
   w_->set_pair_kernel(full.pair_kernel());
   w_->set_cell(full.cell_origin(), full.cell_length());
   w_->set_strain_rate(full.strain_rate());
@@ -606,6 +611,38 @@ void DistDem::load(const World& full) {
 void DistDem::reduce_walls() {
   // one rank: its own sums are already those (the same contacts in the same order)
   if (size_ == 1 || (w_->num_planes() == 0 && w_->num_facet_walls() == 0 && !w_->has_footing())) return;
+  if (p_.order_free_sums) {  // every rank folds its own shares: two allreduces, no gather
+    std::vector<World::WallTerm>& terms = buf_->of_terms;
+    terms.clear();
+    w_->wall_sum_terms(terms);
+    const std::size_t S = w_->wall_sum_slots();
+    std::vector<double>& bound = buf_->of_bound;
+    bound.assign(S, 0.0);
+    for (const World::WallTerm& t : terms) {
+      const double a = std::fabs(t.v);
+      bound[t.slot] = (a > bound[t.slot] || std::isnan(a)) ? a : bound[t.slot];
+    }
+    MPI_Allreduce(MPI_IN_PLACE, bound.data(), static_cast<int>(S), MPI_DOUBLE, MPI_MAX, comm_);
+    std::vector<OrderFreeSum>& sums = buf_->of_sums;
+    sums.clear();
+    for (double b : bound) sums.emplace_back(b);
+    for (const World::WallTerm& t : terms) sums[t.slot].add(t.v);
+    constexpr int F = OrderFreeSum::kFolds;
+    std::vector<double>& folds = buf_->of_folds;
+    folds.resize(S * F);
+    for (std::size_t k = 0; k < S; ++k)
+      for (int j = 0; j < F; ++j) folds[k * F + static_cast<std::size_t>(j)] = sums[k].fold[j];
+    // each fold's sum over the ranks is exact in any order (order_free_sum.hpp)
+    MPI_Allreduce(MPI_IN_PLACE, folds.data(), static_cast<int>(folds.size()), MPI_DOUBLE, MPI_SUM, comm_);
+    std::vector<double>& v = buf_->packed;
+    v.resize(S);
+    for (std::size_t k = 0; k < S; ++k) {
+      for (int j = 0; j < F; ++j) sums[k].fold[j] = folds[k * F + static_cast<std::size_t>(j)];
+      v[k] = sums[k].result();
+    }
+    w_->unpack_wall_sums(v);
+    return;
+  }
   std::vector<WallSumRec>& mine = buf_->sums;
   mine.clear();
   w_->wall_sum_records(mine);
@@ -1337,8 +1374,34 @@ void DistDem::build_forward() {
     }
 }
 
+double DistDem::order_free_sum(const std::vector<double>& v, double* count) const {
+  double bound = count ? max_positive_of(v.data(), v.size()) : max_abs_of(v.data(), v.size());
+  MPI_Allreduce(MPI_IN_PLACE, &bound, 1, MPI_DOUBLE, MPI_MAX, comm_);  // a NaN anywhere: NaN here
+  const OrderFreeSum mine = fold_terms(v.data(), v.size(), bound, count != nullptr);
+  double f[OrderFreeSum::kFolds + 1];
+  for (int k = 0; k < OrderFreeSum::kFolds; ++k) f[k] = mine.fold[k];
+  f[OrderFreeSum::kFolds] = count ? *count : 0.0;  // an integer count below 2^53: exact
+  // each fold's sum over the ranks is exact in any order (order_free_sum.hpp)
+  MPI_Allreduce(MPI_IN_PLACE, f, OrderFreeSum::kFolds + 1, MPI_DOUBLE, MPI_SUM, comm_);
+  OrderFreeSum all(bound);
+  for (int k = 0; k < OrderFreeSum::kFolds; ++k) all.fold[k] = f[k];
+  if (count) *count = f[OrderFreeSum::kFolds];
+  return all.result();
+}
+
 double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count) const {
   using T = World::ContactTerm;
+  if (p_.order_free_sums) {  // the terms (with `count`: those > 0, as the mean counts them)
+    std::vector<double> v;
+    double c = 0.0;
+    for (const T& t : terms) {
+      c += t.v > 0.0;
+      v.push_back(t.v);  // (with `count`, order_free_sum takes a term that is not > 0 as +0)
+    }
+    const double s = order_free_sum(v, count ? &c : nullptr);
+    if (count) *count = static_cast<std::int64_t>(c);
+    return s;
+  }
   const auto key_less = [](const T& x, const T& y) { return std::tie(x.set, x.a, x.b) < std::tie(y.set, y.a, y.b); };
   // Each rank's terms in key order (they nearly always are: rows and lists in id order), then
   // rank 0 merges the ranks' runs pairwise: O(n log ranks), not a sort of every term per call.
@@ -1369,6 +1432,12 @@ template <class Term>
 double DistDem::ball_sum(Term term) const {
   const auto& g = w_->ghost_rows();
   const Particles& pt = w_->balls();
+  if (p_.order_free_sums) {  // every rank's folds, no terms gathered (order_free_sum.hpp)
+    std::vector<double> v;
+    for (std::size_t i = 0; i < pt.size(); ++i)
+      if (g.empty() || !g[i]) v.push_back(term(i));
+    return order_free_sum(v);
+  }
   std::vector<World::ContactTerm> t;
   for (std::size_t i = 0; i < pt.size(); ++i)
     if (g.empty() || !g[i]) t.push_back({0, pt.id[i], 0, term(i)});
@@ -1597,6 +1666,7 @@ void DistDem::unload(World& full) const {
   full.mutable_params() = w_->params();
   full.mutable_params().threads = own.threads;
   full.mutable_params().thread_independent = own.thread_independent;
+  full.mutable_params().order_free_sums = own.order_free_sums;
   full.mutable_params().skin = own.skin;
   const World::Counters before = full.counters();
   k.next_id = before.next_id, k.next_wall_id = before.next_wall_id;

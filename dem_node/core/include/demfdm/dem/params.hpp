@@ -214,6 +214,8 @@ struct WorldParams {
   int threads = 0;              // [-] OpenMP threads for the force loop; 0 = OpenMP default
   bool thread_independent = false;  // [-] same bits at any thread count (PairSet::pass_law); not
                                     // in checkpoints: the scene's, as threads
+  bool order_free_sums = false;  // [-] the measurements' sums order-free (order_free_sum.hpp): the
+                                 // same bits at any grouping; not in checkpoints: the scene's
   PeriodicParams periodic;      // periodic cell (§4.2)
   ContactFamilyParams ball_ball;     // family ball–ball
   ContactFamilyParams ball_wall;     // family ball–planar wall (platens, boxes)

@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "demfdm/dem/contact_kernels.hpp"
+#include "demfdm/dem/order_free_sum.hpp"
 #include "demfdm/dem/params.hpp"
 #include "demfdm/dem/particles.hpp"
 #include "demfdm/dem/vec3.hpp"
@@ -316,6 +317,20 @@ class World {
   /// others after set_wall_sums.
   void pack_wall_sums(std::vector<double>& out) const;
   void unpack_wall_sums(std::span<const double> in);
+  /// One term of the walls' sums: its slot in pack_wall_sums' array, and its value.
+  struct WallTerm {
+    std::uint32_t slot;
+    double v;
+  };
+  /// Every term that set_wall_sums would add for this World's own wall contacts (their
+  /// wall_sum_records), after a force pass, appended to `out` (in any order).
+  void wall_sum_terms(std::vector<WallTerm>& out) const;
+  /// The number of values pack_wall_sums gives.
+  std::size_t wall_sum_slots() const;
+  /// The walls' sums of this World's own contacts as order-free sums (WorldParams::
+  /// order_free_sums; order_free_sum.hpp): the force pass calls it after the sets' passes,
+  /// unless a caller forms them from several Worlds' contacts (a rank's World: DistDem).
+  void set_wall_sums_by_caller(bool by_caller) { wall_sums_by_caller_ = by_caller; }
   /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
   /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
   /// owner's). Collective for such a caller: every rank computes the step at the same steps.
@@ -416,10 +431,18 @@ class World {
   /// Σ term(i) over the balls in row order: the terms are computed in parallel (above 4,096
   /// balls), the sum runs in row order, so the bits are those of one serial loop at any thread
   /// count. For the O(balls) measurements of every step (kinetic energy, the ratios).
+  /// With WorldParams::order_free_sums, an order-free sum of the terms (order_free_sum.hpp).
   template <class Term>
   double ordered_ball_sum(Term term) const {
     const std::int64_t n = static_cast<std::int64_t>(pt_.size());
     const int nt = thread_count();
+    if (p_.order_free_sums) {
+      scratch_ball_.resize(static_cast<std::size_t>(n));
+      double* __restrict__ t = scratch_ball_.data();
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && n > 4096)
+      for (std::int64_t i = 0; i < n; ++i) t[i] = term(static_cast<std::size_t>(i));
+      return order_free_total(t, static_cast<std::size_t>(n));
+    }
     double s = 0.0;
     if (nt <= 1 || n <= 4096) {
       for (std::int64_t i = 0; i < n; ++i) s += term(static_cast<std::size_t>(i));
@@ -451,6 +474,9 @@ class World {
   /// ‖F‖ of every contact, the terms of mean_contact_force(), appended in set and contact order.
   /// With ghost rows, a pair whose ball A is a ghost is left out (its owner has it).
   void contact_force_norms(std::vector<ContactTerm>& out) const;
+  /// The same norms without their keys, after a scan of the force norms (contact_scan with
+  /// want_fc): the terms of an order-free mean contact force.
+  void force_norm_values(std::vector<double>& out) const;
   Vec3 cell_strain_since_reset() const { return cell_strain_; }
 
  private:
@@ -459,6 +485,7 @@ class World {
   void rebuild();
   bool need_rebuild() const;
   void force_pass(double dt);
+  void order_free_wall_sums();
   /// What the contact sets see of this world for one call.
   SetContext context();
   void gather();  // add the wall-contact forces to the balls (serial, set and contact order)
@@ -497,6 +524,13 @@ class World {
   double reduced_step(double dt) const;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
+  mutable std::vector<double> scratch_fc_;         // contact_scan, order-free: the force norms
+  // order_free_wall_sums: the records, terms, bounds and sums (kept from step to step)
+  std::vector<WallTerm> of_terms_;
+  mutable std::vector<std::uint32_t> scratch_slots_;
+  std::vector<double> of_values_;
+  std::vector<OrderFreeSum> of_sums_;
+  bool wall_sums_by_caller_ = false;
   mutable std::vector<double> scratch_kt_, scratch_kr_;  // critical step: per-ball k_t, k_r
   double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
   PhaseTimes times_;

@@ -272,7 +272,12 @@ class DistDem {
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
   double owned_max_disp2() const;
-  /// Σ of the terms of every rank in key order, on every rank; `count`: how many are > 0.
+  /// The order-free sum (order_free_sum.hpp) of every rank's terms `v`, on every rank: one
+  /// maximum-allreduce for the bound, one sum-allreduce of the folds; `count`, if given, is
+  /// summed over the ranks with them (collective).
+  double order_free_sum(const std::vector<double>& v, double* count = nullptr) const;
+  /// Σ of the terms of every rank in key order, on every rank; `count`: how many are > 0. With
+  /// WorldParams::order_free_sums, the order-free sum of the terms instead (no gather).
   double ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count = nullptr) const;
   /// The owned balls' terms keyed by id (set 0), in id order.
   template <class Term>

@@ -1,0 +1,157 @@
+// Order-free sums (docs/scaling.md, "Order-free sums"): a sum of doubles whose bits do not depend
+// on the order of its terms nor on how they are grouped (threads, MPI ranks). The method is the
+// error-free extraction of Rump, Ogita and Oishi (2008, "Accurate floating-point summation part
+// I", ExtractVector), used for reproducible sums by Demmel and Nguyen (2013, "Fast reproducible
+// floating-point summation"):
+//
+//   with |x| <= 2^e for every term and at most 2^32 - 2 terms, sigma_1 = 2^(e + 32); each term is
+//   split as q = (sigma_1 + x) - sigma_1 (exact), x <- x - q (exact). Every q is a multiple of
+//   2^-53 sigma_1 and any partial sum of them stays below sigma_1 in magnitude, so the q's add
+//   up exactly in any order and grouping: fold 1 is the same double however it is summed. The
+//   rest x is at most 2^-53 sigma_1, and is split again against sigma_2 = 2^-21 sigma_1, and so
+//   on for four folds. The result is ((T_1 + T_2) + T_3) + T_4; what is left after the fourth
+//   fold (at most 2^(e - 84) per term) is dropped: the error is below n 2^-84 max|x|, far below
+//   a double's rounding for a sum of terms of one sign (the measurements), not for a sum whose
+//   large terms cancel. (Bounds below 2^-1000 or above 2^968 take the plain sum; far from any
+//   physical measurement.)
+//
+// The bound e must be the same for every part: the largest |term| over all of them (one
+// maximum-allreduce on ranks), which is why a sum takes two passes over its terms. The folds of
+// several parts are added with plain double additions (an MPI sum): exact, hence order-free.
+// The result differs from the plain left-to-right sum in the last bits. A bound that is not
+// finite (a NaN or an infinite term) gives the plain sum of the terms in the order added.
+#pragma once
+
+#include <cmath>
+#include <cstddef>
+
+namespace demfdm::dem {
+
+struct OrderFreeSum {
+  static constexpr int kFolds = 4;
+  static constexpr int kCountBits = 32;  // at most 2^32 - 2 terms over all parts
+  double sigma[kFolds] = {0.0, 0.0, 0.0, 0.0};
+  double fold[kFolds] = {0.0, 0.0, 0.0, 0.0};
+  int folds = 0;       // boundaries in use (0: every term is 0)
+  bool plain = false;  // a bound that is not finite: fold[0] is the plain sum
+
+  /// The boundaries for terms with |x| <= max_abs (the largest over every part).
+  explicit OrderFreeSum(double max_abs) {
+    if (!std::isfinite(max_abs)) {
+      plain = true;
+      return;
+    }
+    if (!(max_abs > 0.0)) return;  // every term is +-0: the sum is +0
+    int e = 0;
+    std::frexp(max_abs, &e);  // max_abs = m 2^e, m in [0.5, 1): |x| <= 2^e
+    if (e + kCountBits > 1000 || e + kCountBits < -968) {  // beyond any physical sum: plain
+      plain = true;
+      return;
+    }
+    double s = std::ldexp(1.0, e + kCountBits);
+    for (int k = 0; k < kFolds && s >= 0x1p-968; ++k) {  // the q's (2^-53 sigma) stay normal
+      sigma[k] = s;
+      ++folds;
+      s = std::ldexp(s, kCountBits - 53);
+    }
+  }
+  [[gnu::always_inline]] void add(double x) {
+    if (plain) {
+      fold[0] += x;
+      return;
+    }
+    for (int k = 0; k < folds; ++k) {
+      const double q = (sigma[k] + x) - sigma[k];
+      fold[k] += q;
+      x -= q;
+    }
+  }
+  /// Another part's folds (the same boundaries).
+  void merge(const OrderFreeSum& o) {
+    for (int k = 0; k < kFolds; ++k) fold[k] += o.fold[k];
+  }
+  double result() const {
+    double s = fold[0];
+    for (int k = 1; k < kFolds; ++k) s += fold[k];
+    return s;
+  }
+};
+
+/// The largest |x| of the n terms; NaN if any is NaN (the bound of OrderFreeSum).
+inline double max_abs_of(const double* x, std::size_t n) {
+  double m = 0.0;
+  int nan = 0;
+#pragma omp simd reduction(max : m) reduction(| : nan)
+  for (std::size_t i = 0; i < n; ++i) {
+    const double a = std::fabs(x[i]);
+    nan |= a != a;
+    m = a > m ? a : m;
+  }
+  return nan ? std::nan("") : m;
+}
+
+/// The folds of n terms against the boundaries of `bound` (one part of a sum). Eight lanes of
+/// partial folds, added at the end: a grouping like any other, so the same bits, without the
+/// chain of dependent additions of one accumulator. `positive`: a term that is not > 0 (0, or
+/// NaN) counts as +0 (the mean contact force's rule).
+inline OrderFreeSum fold_terms(const double* x, std::size_t n, double bound, bool positive = false) {
+  OrderFreeSum s(bound);
+  auto term = [positive](double v) { return positive ? (v > 0.0 ? v : 0.0) : v; };
+  if (s.plain || s.folds < OrderFreeSum::kFolds) {
+    for (std::size_t i = 0; i < n; ++i) s.add(term(x[i]));
+    return s;
+  }
+  constexpr std::size_t L = 8;
+  const std::size_t nb = n - n % L;
+  const double s0 = s.sigma[0], s1 = s.sigma[1], s2 = s.sigma[2], s3 = s.sigma[3];
+  double a0[L] = {}, a1[L] = {}, a2[L] = {}, a3[L] = {};
+  for (std::size_t i = 0; i < nb; i += L) {
+#pragma omp simd
+    for (std::size_t l = 0; l < L; ++l) {
+      double v = x[i + l];
+      v = positive ? (v > 0.0 ? v : 0.0) : v;
+      const double q0 = (s0 + v) - s0;
+      v -= q0;
+      const double q1 = (s1 + v) - s1;
+      v -= q1;
+      const double q2 = (s2 + v) - s2;
+      v -= q2;
+      const double q3 = (s3 + v) - s3;
+      a0[l] += q0;
+      a1[l] += q1;
+      a2[l] += q2;
+      a3[l] += q3;
+    }
+  }
+  for (std::size_t l = 0; l < L; ++l) {
+    s.fold[0] += a0[l];
+    s.fold[1] += a1[l];
+    s.fold[2] += a2[l];
+    s.fold[3] += a3[l];
+  }
+  for (std::size_t i = nb; i < n; ++i) s.add(term(x[i]));
+  return s;
+}
+
+/// The largest term > 0 of n (0 and NaN count as 0: the bound of fold_terms(..., positive)).
+inline double max_positive_of(const double* x, std::size_t n) {
+  double m = 0.0;
+#pragma omp simd reduction(max : m)
+  for (std::size_t i = 0; i < n; ++i) m = x[i] > m ? x[i] : m;
+  return m;
+}
+
+/// How many of n terms are > 0.
+inline std::size_t count_positive(const double* x, std::size_t n) {
+  std::size_t c = 0;
+#pragma omp simd reduction(+ : c)
+  for (std::size_t i = 0; i < n; ++i) c += x[i] > 0.0;
+  return c;
+}
+
+/// The order-free sum of n terms held in one place.
+inline double order_free_total(const double* x, std::size_t n) {
+  return fold_terms(x, n, max_abs_of(x, n)).result();
+}
+
+}  // namespace demfdm::dem
