@@ -796,14 +796,8 @@ void World::order_free_wall_sums() {
   wall_sum_terms(of_terms_);
   const std::size_t S = wall_sum_slots();
   std::vector<double>& v = of_values_;
-  v.assign(S, 0.0);  // first the bounds, then the sums
-  for (const WallTerm& t : of_terms_) {
-    const double a = std::fabs(t.v);
-    v[t.slot] = (a > v[t.slot] || std::isnan(a)) ? a : v[t.slot];
-  }
-  of_sums_.clear();
-  for (double b : v) of_sums_.emplace_back(b);
-  for (const WallTerm& t : of_terms_) of_sums_[t.slot].add(t.v);
+  slot_bounds(of_terms_, S, v);  // first the bounds, then the sums
+  slot_folds(of_terms_, v, of_sums_);
   for (std::size_t k = 0; k < S; ++k) v[k] = of_sums_[k].result();
   unpack_wall_sums(v);
 }

@@ -617,16 +617,10 @@ void DistDem::reduce_walls() {
     w_->wall_sum_terms(terms);
     const std::size_t S = w_->wall_sum_slots();
     std::vector<double>& bound = buf_->of_bound;
-    bound.assign(S, 0.0);
-    for (const World::WallTerm& t : terms) {
-      const double a = std::fabs(t.v);
-      bound[t.slot] = (a > bound[t.slot] || std::isnan(a)) ? a : bound[t.slot];
-    }
+    slot_bounds(terms, S, bound);
     MPI_Allreduce(MPI_IN_PLACE, bound.data(), static_cast<int>(S), MPI_DOUBLE, MPI_MAX, comm_);
     std::vector<OrderFreeSum>& sums = buf_->of_sums;
-    sums.clear();
-    for (double b : bound) sums.emplace_back(b);
-    for (const World::WallTerm& t : terms) sums[t.slot].add(t.v);
+    slot_folds(terms, bound, sums);
     constexpr int F = OrderFreeSum::kFolds;
     std::vector<double>& folds = buf_->of_folds;
     folds.resize(S * F);

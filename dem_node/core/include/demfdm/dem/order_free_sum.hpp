@@ -24,6 +24,7 @@
 
 #include <cmath>
 #include <cstddef>
+#include <vector>
 
 namespace demfdm::dem {
 
@@ -147,6 +148,24 @@ inline std::size_t count_positive(const double* x, std::size_t n) {
 #pragma omp simd reduction(+ : c)
   for (std::size_t i = 0; i < n; ++i) c += x[i] > 0.0;
   return c;
+}
+
+/// Many order-free sums at once, from terms that name their sum (`t.slot`, value `t.v`): the
+/// bound of each of the S sums (the largest |v|; NaN if one is NaN), then every term folded
+/// into its sum (the walls' sums: one World's, or one rank's part of them).
+template <class Term>
+void slot_bounds(const std::vector<Term>& terms, std::size_t S, std::vector<double>& bound) {
+  bound.assign(S, 0.0);
+  for (const Term& t : terms) {
+    const double a = std::fabs(t.v);
+    bound[t.slot] = (a > bound[t.slot] || std::isnan(a)) ? a : bound[t.slot];
+  }
+}
+template <class Term>
+void slot_folds(const std::vector<Term>& terms, const std::vector<double>& bound, std::vector<OrderFreeSum>& sums) {
+  sums.clear();
+  for (double b : bound) sums.emplace_back(b);
+  for (const Term& t : terms) sums[t.slot].add(t.v);
 }
 
 /// The order-free sum of n terms held in one place.
