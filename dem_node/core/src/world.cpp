@@ -429,13 +429,7 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
       const std::size_t m = ghost_.empty() ? pairs_->contacts.size() : 0;  // (a rank's: DistDem's)
       std::vector<double>& v = scratch_fc_;
       v.clear();
-      if (m == 0) {
-        force_norm_values(v);
-      } else {
-        const WallContacts* wl[3] = {&planes_->contacts, &facets_->contacts, &footing_->contacts};
-        for (const WallContacts* w : wl)
-          for (std::size_t c = 0; c < w->size(); ++c) v.push_back(norm(w->F[c]));
-      }
+      force_norm_values(v, m == 0);
       const double bound = std::max(max_positive_of(pn.data(), m), max_positive_of(v.data(), v.size()));
       const std::size_t cnt = count_positive(pn.data(), m) + count_positive(v.data(), v.size());
       OrderFreeSum sum = fold_terms(pn.data(), m, bound, true);
@@ -648,10 +642,10 @@ void World::contact_force_norms(std::vector<ContactTerm>& out) const {
       out.push_back({k + 1, pt_.id[wl[k]->ball[c]], wl[k]->wall[c], norm(wl[k]->F[c])});
 }
 
-void World::force_norm_values(std::vector<double>& out) const {
+void World::force_norm_values(std::vector<double>& out, bool pairs) const {
   const PairContacts& pc = pairs_->contacts;
   const std::vector<double>& f = pairs_->force_norms();
-  for (std::size_t c = 0; c < pc.size(); ++c)
+  for (std::size_t c = 0; pairs && c < pc.size(); ++c)
     if (ghost_.empty() || !ghost_[pc.a[c]]) out.push_back(f[c]);
   const WallContacts* wl[3] = {&planes_->contacts, &facets_->contacts, &footing_->contacts};
   for (const WallContacts* w : wl)

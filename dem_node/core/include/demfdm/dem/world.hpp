@@ -475,8 +475,9 @@ class World {
   /// With ghost rows, a pair whose ball A is a ghost is left out (its owner has it).
   void contact_force_norms(std::vector<ContactTerm>& out) const;
   /// The same norms without their keys, after a scan of the force norms (contact_scan with
-  /// want_fc): the terms of an order-free mean contact force.
-  void force_norm_values(std::vector<double>& out) const;
+  /// want_fc): the terms of an order-free mean contact force; `pairs` false: the wall contacts'
+  /// only.
+  void force_norm_values(std::vector<double>& out, bool pairs = true) const;
   Vec3 cell_strain_since_reset() const { return cell_strain_; }
 
  private:
@@ -525,7 +526,8 @@ class World {
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
   mutable std::vector<double> scratch_fc_;         // contact_scan, order-free: the force norms
-  // order_free_wall_sums: the records, terms, bounds and sums (kept from step to step)
+  // order_free_wall_sums: the terms, the facet walls' first slots, the bounds (then the values)
+  // and the sums, kept from step to step
   std::vector<WallTerm> of_terms_;
   mutable std::vector<std::uint32_t> scratch_slots_;
   std::vector<double> of_values_;
