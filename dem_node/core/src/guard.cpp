@@ -165,20 +165,18 @@ BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box
   };
   // World::ordered_ball_sum's paths (the same additions in the same order; order-free: the terms
   // kept, then their order-free sum).
-  if (w.params().order_free_sums) {
-    scratch.resize(static_cast<std::size_t>(n));
-    double* __restrict__ t = scratch.data();
-#pragma omp parallel for schedule(static) num_threads(nt) reduction(| : bad) reduction(max : worst) if (nt > 1 && n > 4096)
-    for (std::int64_t i = 0; i < n; ++i) t[i] = row(static_cast<std::size_t>(i), bad, worst);
-    out.kinetic = order_free_total(t, static_cast<std::size_t>(n));
-  } else if (nt <= 1 || n <= 4096) {
+  const bool par = nt > 1 && n > 4096, order_free = w.params().order_free_sums;
+  if (!par && !order_free) {
     for (std::int64_t i = 0; i < n; ++i) out.kinetic += row(static_cast<std::size_t>(i), bad, worst);
   } else {
     scratch.resize(static_cast<std::size_t>(n));
     double* __restrict__ t = scratch.data();
-#pragma omp parallel for schedule(static) num_threads(nt) reduction(| : bad) reduction(max : worst)
+#pragma omp parallel for schedule(static) num_threads(nt) reduction(| : bad) reduction(max : worst) if (par)
     for (std::int64_t i = 0; i < n; ++i) t[i] = row(static_cast<std::size_t>(i), bad, worst);
-    for (std::int64_t i = 0; i < n; ++i) out.kinetic += t[i];
+    if (order_free)
+      out.kinetic = order_free_total(t, static_cast<std::size_t>(n));
+    else
+      for (std::int64_t i = 0; i < n; ++i) out.kinetic += t[i];
   }
   if (w.has_footing()) bad |= not_finite(w.footing_reaction());
   out.finite = bad == 0;

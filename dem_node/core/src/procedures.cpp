@@ -60,19 +60,8 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   const std::int64_t n = static_cast<std::int64_t>(w.num_balls());
   const Vec3 g = w.gravity();
   const int nt = w.thread_count();
-  if (nt <= 1 || n <= 4096) {
-    if (w.params().order_free_sums) {  // the terms kept, then their order-free sum
-      thread_local std::vector<double> term;  // (kept: a fresh array per step costs page faults)
-      term.resize(static_cast<std::size_t>(n));
-      std::size_t rattlers = 0;
-      for (std::size_t u = 0; u < static_cast<std::size_t>(n); ++u) {
-        Vec3 f;
-        const bool r = rattler_of(w.balls(), u, g, f);
-        rattlers += r;
-        term[u] = r ? 0.0 : term_of(w.balls(), u, f);
-      }
-      return skeleton_ratio_of(order_free_total(term.data(), term.size()), rattlers, w.num_balls(), fc);
-    }
+  const bool par = nt > 1 && n > 4096, order_free = w.params().order_free_sums;
+  if (!par && !order_free) {
     // One thread (the DEM node measures a coupled step on one, dem_node/main.cpp): the same
     // terms and the same sums in row order in one loop, without the two work arrays.
     const Particles& b = w.balls();
@@ -86,23 +75,27 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
     }
     return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
   }
-  std::vector<double> term(static_cast<std::size_t>(n));
-  std::vector<std::uint8_t> rattler(static_cast<std::size_t>(n));
-#pragma omp parallel for schedule(static) num_threads(nt)
+  thread_local std::vector<double> term;  // (kept: a fresh array per call costs page faults)
+  thread_local std::vector<std::uint8_t> rattler;
+  term.resize(static_cast<std::size_t>(n));
+  rattler.resize(static_cast<std::size_t>(n));
+  double* const tm = term.data();
+  std::uint8_t* const rt = rattler.data();
+#pragma omp parallel for schedule(static) num_threads(nt) if (par)
   for (std::int64_t i = 0; i < n; ++i) {
     const std::size_t u = static_cast<std::size_t>(i);
     Vec3 f;
     const bool r = rattler_of(w.balls(), u, g, f);
-    rattler[u] = r;
-    term[u] = r ? 0.0 : term_of(w.balls(), u, f);  // skeleton_term: +0 for a rattler
+    rt[u] = r;
+    tm[u] = r ? 0.0 : term_of(w.balls(), u, f);  // skeleton_term: +0 for a rattler
   }
   double sum = 0.0;
   std::size_t rattlers = 0;
   for (std::int64_t i = 0; i < n; ++i) {
-    sum += term[static_cast<std::size_t>(i)];
-    rattlers += rattler[static_cast<std::size_t>(i)];
+    if (!order_free) sum += tm[i];
+    rattlers += rt[i];
   }
-  if (w.params().order_free_sums) sum = order_free_total(term.data(), term.size());
+  if (order_free) sum = order_free_total(tm, term.size());  // (the order-free sum instead)
   return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
 }
 

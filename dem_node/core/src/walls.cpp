@@ -823,8 +823,7 @@ void World::unpack_wall_sums(std::span<const double> in) {
     v = {in[k], in[k + 1], in[k + 2]};
     k += 3;
   };
-  std::size_t need = 4 * planes_->kind.walls.size() + (footing_->present() ? 3 : 0);
-  for (const FacetWall& fw : facets_->kind.walls) need += 4 * fw.vforce.size() + 3;
+  const std::size_t need = wall_sum_slots();
   if (in.size() != need)
     throw std::invalid_argument("unpack_wall_sums: " + std::to_string(in.size()) + " values for walls that take " +
                                 std::to_string(need) + ".");

@@ -40,15 +40,46 @@ double along(const BrickGrid& g, const Vec3& x, int k) {
 // child has p / 2 ranks from r0 and index i + 1, its high child p - p / 2 ranks from r0 + p / 2
 // and index i + p / 2 (after the low child's p / 2 - 1 inner nodes); a child of one rank is a leaf.
 
+namespace {
+
+// The axis a node of RCB cuts: its box's longest side, the lowest axis of equal ones.
+int longest_axis(const double* a0, const double* a1) {
+  int k = 0;
+  for (int j = 1; j < 3; ++j)
+    if (a1[j] - a0[j] > a1[k] - a0[k]) k = j;
+  return k;
+}
+
+// From the root down to one leaf of g's RCB tree: at each inner node `low(cut, r0, left)` says
+// whether to take the low side (the node's ranks start at r0, its low child has `left`).
+// Returns the leaf's rank.
+template <class Low>
+int rcb_leaf(const BrickGrid& g, Low low) {
+  int i = 0, r0 = 0, p = g.parts;
+  while (p > 1) {
+    const BrickGrid::Cut& c = g.rcb[static_cast<std::size_t>(i)];
+    const int left = p / 2;
+    if (low(c, r0, left)) {
+      i += 1;
+      p = left;
+    } else {
+      i += left;
+      r0 += left;
+      p -= left;
+    }
+  }
+  return r0;
+}
+
+}  // namespace
+
 void BrickGrid::set_rcb(int p) {
   if (p < 1) throw std::invalid_argument("BrickGrid::set_rcb: at least one part");
   parts = p;
   rcb.assign(static_cast<std::size_t>(p - 1), Cut{});
   auto build = [&](auto&& self, int i, int np, const double* a0, const double* a1) -> void {
     if (np < 2) return;
-    int k = 0;
-    for (int j = 1; j < 3; ++j)
-      if (a1[j] - a0[j] > a1[k] - a0[k]) k = j;
+    const int k = longest_axis(a0, a1);
     const int left = np / 2;
     const double at = a0[k] + (a1[k] - a0[k]) * left / np;
     rcb[static_cast<std::size_t>(i)] = {k, at};
@@ -65,21 +96,11 @@ void BrickGrid::set_rcb(int p) {
 void BrickGrid::box(int r, double a0[3], double a1[3]) const {
   if (parts > 0) {
     for (int k = 0; k < 3; ++k) a0[k] = 0.0, a1[k] = len[k];
-    int i = 0, r0 = 0, p = parts;
-    while (p > 1) {
-      const Cut& c = rcb[static_cast<std::size_t>(i)];
-      const int left = p / 2;
-      if (r < r0 + left) {
-        a1[c.axis] = c.at;
-        i += 1;
-        p = left;
-      } else {
-        a0[c.axis] = c.at;
-        i += left;
-        r0 += left;
-        p -= left;
-      }
-    }
+    rcb_leaf(*this, [&](const Cut& c, int r0, int left) {
+      const bool lo = r < r0 + left;
+      (lo ? a1 : a0)[c.axis] = c.at;
+      return lo;
+    });
     return;
   }
   const int idx[3] = {r % n[0], (r / n[0]) % n[1], r / (n[0] * n[1])};
@@ -87,22 +108,7 @@ void BrickGrid::box(int r, double a0[3], double a1[3]) const {
 }
 
 int BrickGrid::owner(const Vec3& x) const {
-  if (parts > 0) {
-    int i = 0, r0 = 0, p = parts;
-    while (p > 1) {
-      const Cut& c = rcb[static_cast<std::size_t>(i)];
-      const int left = p / 2;
-      if (along(*this, x, c.axis) < c.at) {
-        i += 1;
-        p = left;
-      } else {
-        i += left;
-        r0 += left;
-        p -= left;
-      }
-    }
-    return r0;
-  }
+  if (parts > 0) return rcb_leaf(*this, [&](const Cut& c, int, int) { return along(*this, x, c.axis) < c.at; });
   int idx[3];
   for (int k = 0; k < 3; ++k) {
     const double u = along(*this, x, k);
@@ -621,19 +627,10 @@ void DistDem::reduce_walls() {
     MPI_Allreduce(MPI_IN_PLACE, bound.data(), static_cast<int>(S), MPI_DOUBLE, MPI_MAX, comm_);
     std::vector<OrderFreeSum>& sums = buf_->of_sums;
     slot_folds(terms, bound, sums);
-    constexpr int F = OrderFreeSum::kFolds;
-    std::vector<double>& folds = buf_->of_folds;
-    folds.resize(S * F);
-    for (std::size_t k = 0; k < S; ++k)
-      for (int j = 0; j < F; ++j) folds[k * F + static_cast<std::size_t>(j)] = sums[k].fold[j];
-    // each fold's sum over the ranks is exact in any order (order_free_sum.hpp)
-    MPI_Allreduce(MPI_IN_PLACE, folds.data(), static_cast<int>(folds.size()), MPI_DOUBLE, MPI_SUM, comm_);
+    sum_folds(sums.data(), S, nullptr);
     std::vector<double>& v = buf_->packed;
     v.resize(S);
-    for (std::size_t k = 0; k < S; ++k) {
-      for (int j = 0; j < F; ++j) sums[k].fold[j] = folds[k * F + static_cast<std::size_t>(j)];
-      v[k] = sums[k].result();
-    }
+    for (std::size_t k = 0; k < S; ++k) v[k] = sums[k].result();
     w_->unpack_wall_sums(v);
     return;
   }
@@ -1278,11 +1275,11 @@ void rcb_cuts(BrickGrid& g, const std::vector<Vec3>& x, const std::vector<std::i
   if (P < 2) return;  // one brick: no cut
   const std::size_t n = x.size();
   struct Node {
-    int i, r0, p;
+    int i, p;  // index in preorder, ranks
     double a0[3], a1[3];
     int axis;
   };
-  std::vector<Node> level{{0, 0, P, {0.0, 0.0, 0.0}, {g.len[0], g.len[1], g.len[2]}, 0}};
+  std::vector<Node> level{{0, P, {0.0, 0.0, 0.0}, {g.len[0], g.len[1], g.len[2]}, 0}};
   std::vector<int> at(n, 0);  // each point's slot in `level`, -1 once in a leaf (or skipped)
   for (std::size_t j = 0; j < n; ++j)
     if (!skip.empty() && skip[j]) at[j] = -1;
@@ -1290,11 +1287,7 @@ void rcb_cuts(BrickGrid& g, const std::vector<Vec3>& x, const std::vector<std::i
   std::vector<Node> next;
   std::vector<int> slot_low, slot_high;
   while (!level.empty()) {
-    for (Node& nd : level) {
-      nd.axis = 0;
-      for (int k = 1; k < 3; ++k)
-        if (nd.a1[k] - nd.a0[k] > nd.a1[nd.axis] - nd.a0[nd.axis]) nd.axis = k;
-    }
+    for (Node& nd : level) nd.axis = longest_axis(nd.a0, nd.a1);
     const std::size_t L = level.size(), UB = static_cast<std::size_t>(B);
     h.assign(L * UB, 0);
     for (std::size_t j = 0; j < n; ++j) {
@@ -1322,7 +1315,7 @@ void rcb_cuts(BrickGrid& g, const std::vector<Vec3>& x, const std::vector<std::i
       g.rcb[static_cast<std::size_t>(nd.i)] = {k, cut};
       Node lo = nd, hi = nd;
       lo.i = nd.i + 1, lo.p = left, lo.a1[k] = cut;
-      hi.i = nd.i + left, hi.r0 = nd.r0 + left, hi.p = nd.p - left, hi.a0[k] = cut;
+      hi.i = nd.i + left, hi.p = nd.p - left, hi.a0[k] = cut;
       if (lo.p > 1) slot_low[s] = static_cast<int>(next.size()), next.push_back(lo);
       if (hi.p > 1) slot_high[s] = static_cast<int>(next.size()), next.push_back(hi);
     }
@@ -1368,19 +1361,26 @@ void DistDem::build_forward() {
     }
 }
 
+void DistDem::sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const {
+  constexpr int F = OrderFreeSum::kFolds;
+  std::vector<double>& f = buf_->of_folds;
+  f.resize(S * F + 1);
+  for (std::size_t k = 0; k < S; ++k)
+    for (int j = 0; j < F; ++j) f[k * F + static_cast<std::size_t>(j)] = sums[k].fold[j];
+  f[S * F] = extra ? *extra : 0.0;
+  // each fold's sum over the ranks is exact in any order (order_free_sum.hpp)
+  MPI_Allreduce(MPI_IN_PLACE, f.data(), static_cast<int>(f.size()), MPI_DOUBLE, MPI_SUM, comm_);
+  for (std::size_t k = 0; k < S; ++k)
+    for (int j = 0; j < F; ++j) sums[k].fold[j] = f[k * F + static_cast<std::size_t>(j)];
+  if (extra) *extra = f[S * F];
+}
+
 double DistDem::order_free_sum(const std::vector<double>& v, double* count) const {
   double bound = count ? max_positive_of(v.data(), v.size()) : max_abs_of(v.data(), v.size());
   MPI_Allreduce(MPI_IN_PLACE, &bound, 1, MPI_DOUBLE, MPI_MAX, comm_);  // a NaN anywhere: NaN here
-  const OrderFreeSum mine = fold_terms(v.data(), v.size(), bound, count != nullptr);
-  double f[OrderFreeSum::kFolds + 1];
-  for (int k = 0; k < OrderFreeSum::kFolds; ++k) f[k] = mine.fold[k];
-  f[OrderFreeSum::kFolds] = count ? *count : 0.0;  // an integer count below 2^53: exact
-  // each fold's sum over the ranks is exact in any order (order_free_sum.hpp)
-  MPI_Allreduce(MPI_IN_PLACE, f, OrderFreeSum::kFolds + 1, MPI_DOUBLE, MPI_SUM, comm_);
-  OrderFreeSum all(bound);
-  for (int k = 0; k < OrderFreeSum::kFolds; ++k) all.fold[k] = f[k];
-  if (count) *count = f[OrderFreeSum::kFolds];
-  return all.result();
+  OrderFreeSum sum = fold_terms(v.data(), v.size(), bound, count != nullptr);
+  sum_folds(&sum, 1, count);  // (an integer count below 2^53 adds exactly)
+  return sum.result();
 }
 
 double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count) const {

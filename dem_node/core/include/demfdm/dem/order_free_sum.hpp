@@ -109,8 +109,7 @@ inline OrderFreeSum fold_terms(const double* x, std::size_t n, double bound, boo
   for (std::size_t i = 0; i < nb; i += L) {
 #pragma omp simd
     for (std::size_t l = 0; l < L; ++l) {
-      double v = x[i + l];
-      v = positive ? (v > 0.0 ? v : 0.0) : v;
+      double v = term(x[i + l]);
       const double q0 = (s0 + v) - s0;
       v -= q0;
       const double q1 = (s1 + v) - s1;

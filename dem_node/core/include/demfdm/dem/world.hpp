@@ -436,22 +436,17 @@ class World {
   double ordered_ball_sum(Term term) const {
     const std::int64_t n = static_cast<std::int64_t>(pt_.size());
     const int nt = thread_count();
-    if (p_.order_free_sums) {
-      scratch_ball_.resize(static_cast<std::size_t>(n));
-      double* __restrict__ t = scratch_ball_.data();
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && n > 4096)
-      for (std::int64_t i = 0; i < n; ++i) t[i] = term(static_cast<std::size_t>(i));
-      return order_free_total(t, static_cast<std::size_t>(n));
-    }
+    const bool par = nt > 1 && n > 4096;
     double s = 0.0;
-    if (nt <= 1 || n <= 4096) {
+    if (!par && !p_.order_free_sums) {
       for (std::int64_t i = 0; i < n; ++i) s += term(static_cast<std::size_t>(i));
       return s;
     }
     scratch_ball_.resize(static_cast<std::size_t>(n));
     double* __restrict__ t = scratch_ball_.data();
-#pragma omp parallel for schedule(static) num_threads(nt)
+#pragma omp parallel for schedule(static) num_threads(nt) if (par)
     for (std::int64_t i = 0; i < n; ++i) t[i] = term(static_cast<std::size_t>(i));
+    if (p_.order_free_sums) return order_free_total(t, static_cast<std::size_t>(n));
     for (std::int64_t i = 0; i < n; ++i) s += t[i];
     return s;
   }

@@ -276,6 +276,9 @@ class DistDem {
   /// maximum-allreduce for the bound, one sum-allreduce of the folds; `count`, if given, is
   /// summed over the ranks with them (collective).
   double order_free_sum(const std::vector<double>& v, double* count = nullptr) const;
+  /// The folds of the S sums (the same boundaries on every rank) added over the ranks, in place,
+  /// and `extra`, if given, with them: one sum-allreduce (collective).
+  void sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const;
   /// Σ of the terms of every rank in key order, on every rank; `count`: how many are > 0. With
   /// WorldParams::order_free_sums, the order-free sum of the terms instead (no gather).
   double ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count = nullptr) const;
