@@ -2,7 +2,9 @@
 // the scalar loops bit for bit: every lane performs the scalar operations in the same order,
 // the rare paths (soft-bond softening, breakage, shear break, large rotations, unbonded
 // contacts; parallel-bond breakage; rows with fixity) are redone by the scalar code, and sums keep their order. Checked on small random packings, linear and soft
-// bond, periodic (with a straining cell) and free, for every instruction set this CPU has.
+// bond, periodic (with a straining cell) and free, for every instruction set this CPU has; the
+// wall contacts' lane kernels (linear, parallel bond) on a slab between moving facets, platens
+// and the footing.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -281,3 +283,213 @@ TEST(SimdKernel, TwoThreadsBitIdentical) {
     check_scene(sc);
   }
 }
+
+// The wall contacts' lane kernels (pair_block.hpp WallIn): a slab of balls on a floor of facets
+// whose vertices move (the facets tilt, spin and stretch), bonded to it with interface parallel
+// bonds (linear part zero while bonded, restored at a break), between two side platens (linear)
+// under the footing (linear), which punches into it. The floor pulls away at one end and shears
+// at the other, so interface bonds break in tension and in shear within the run, with intact ones
+// left. Every ball, every wall contact's history and outputs, the vertex sums and the walls'
+// reactions must be the scalar pass's bits, at 1 and 2 threads (more than 256 facet contacts:
+// the facets' parallel loop runs).
+namespace {
+
+struct WallRun {
+  test::BallState balls;
+  std::vector<ContactHist> h[3];
+  std::vector<BondHist> bond;
+  std::vector<Vec3> F[3], M[3], TA[3], xc[3];
+  std::vector<double> vforce, vstiff;
+  Vec3 footing, plane0, plane1;
+  int count[5] = {0, 0, 0, 0, 0};
+};
+
+bool same_bytes(const void* a, const void* b, std::size_t n) { return std::memcmp(a, b, n) == 0; }
+
+template <class T>
+bool same_vec(const std::vector<T>& a, const std::vector<T>& b) {
+  return a.size() == b.size() && (a.empty() || same_bytes(a.data(), b.data(), a.size() * sizeof(T)));
+}
+
+// Histories field by field (their padding bytes are not state). Empty: the same bits; else the
+// first field that differs.
+std::string hist_diff(const std::vector<ContactHist>& a, const std::vector<ContactHist>& b) {
+  if (a.size() != b.size()) return "count";
+  for (std::size_t c = 0; c < a.size(); ++c) {
+    const ContactHist &x = a[c], &y = b[c];
+    const char* f = !same_bytes(&x.fs, &y.fs, sizeof(Vec3))         ? "fs"
+                    : !same_bytes(&x.fn, &y.fn, sizeof(double))     ? "fn"
+                    : !same_bytes(&x.n_old, &y.n_old, sizeof(Vec3)) ? "n_old"
+                    : !same_bytes(&x.kn, &y.kn, sizeof(double))     ? "kn"
+                    : !same_bytes(&x.ks, &y.ks, sizeof(double))     ? "ks"
+                    : !same_bytes(&x.mu, &y.mu, sizeof(double))     ? "mu"
+                    : !same_bytes(&x.e_slip, &y.e_slip, sizeof(double)) ? "e_slip"
+                    : x.flags != y.flags                            ? "flags"
+                                                                    : nullptr;
+    if (f) return std::string(f) + " of contact " + std::to_string(c);
+  }
+  return "";
+}
+
+std::string bond_diff(const std::vector<BondHist>& a, const std::vector<BondHist>& b) {
+  if (a.size() != b.size()) return "count";
+  for (std::size_t c = 0; c < a.size(); ++c) {
+    const BondHist &x = a[c], &y = b[c];
+    const char* f = !same_bytes(&x.fsb, &y.fsb, sizeof(Vec3))             ? "fsb"
+                    : !same_bytes(&x.nb, &y.nb, sizeof(double))           ? "nb"
+                    : !same_bytes(&x.mb, &y.mb, sizeof(Vec3))             ? "mb"
+                    : !same_bytes(&x.mt, &y.mt, sizeof(double))           ? "mt"
+                    : !same_bytes(&x.rb, &y.rb, sizeof(double))           ? "rb"
+                    : !same_bytes(&x.kn, &y.kn, sizeof(double))           ? "kn"
+                    : !same_bytes(&x.sigma_t, &y.sigma_t, sizeof(double)) ? "sigma_t"
+                    : !same_bytes(&x.e_soft, &y.e_soft, sizeof(double))   ? "e_soft"
+                    : x.state != y.state || x.slip_b != y.slip_b || x.slip_t != y.slip_t ? "state"
+                                                                                          : nullptr;
+    if (f) return std::string(f) + " of bond " + std::to_string(c);
+  }
+  return "";
+}
+
+WallRun run_walls(PairKernel kernel, int threads, int steps) {
+  WorldParams p;
+  p.threads = threads;
+  p.local_damping = 0.0;
+  p.ball_facet.model = ContactModel::kLinearPBond;
+  p.ball_facet.pbond.zero_linear = true;
+  p.ball_facet.pbond.ten = 2e7;
+  p.ball_facet.pbond.coh = 2e7;
+  World w(p);
+  w.set_pair_kernel(kernel);
+  const double R = 1e-4, s = 2.002 * R;
+  const int nx = 20, ny = 16, nz = 3;
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i)
+        w.add_ball({(i + 0.5) * s + 0.02 * R * u(rng), (j + 0.5) * s + 0.02 * R * u(rng), R + k * s + 0.01 * R * u(rng)},
+                   R * (1.0 + 0.002 * u(rng)));
+  // the floor: a grid of 8 x 6 squares, two facets each, at z = 0 (balls of the first layer touch it)
+  const int gx = 8, gy = 6;
+  const double Lx = nx * s, Ly = ny * s;
+  std::vector<double> pos;
+  std::vector<std::int32_t> tri;
+  for (int j = 0; j <= gy; ++j)
+    for (int i = 0; i <= gx; ++i) {
+      pos.push_back(-0.5 * s + i * (Lx + s) / gx);
+      pos.push_back(-0.5 * s + j * (Ly + s) / gy);
+      pos.push_back(0.0);
+    }
+  auto vid = [&](int i, int j) { return static_cast<std::int32_t>(j * (gx + 1) + i); };
+  for (int j = 0; j < gy; ++j)
+    for (int i = 0; i < gx; ++i) {
+      for (std::int32_t v : {vid(i, j), vid(i + 1, j), vid(i + 1, j + 1)}) tri.push_back(v);
+      for (std::int32_t v : {vid(i, j), vid(i + 1, j + 1), vid(i, j + 1)}) tri.push_back(v);
+    }
+  const int floor = w.add_facet_wall(pos, tri);
+  PlaneWallParams side;
+  side.point = {-0.5 * s, 0, 0};
+  side.normal = {1, 0, 0};
+  side.axis1 = {0, 1, 0};
+  w.add_plane(side);
+  side.point = {Lx + 0.5 * s, 0, 0};
+  side.normal = {-1, 0, 0};
+  side.velocity = {-0.02, 0, 0};  // closing in
+  w.add_plane(side);
+  FootingParams fp;
+  fp.diameter = 0.4 * Lx;
+  fp.height = 3 * R;
+  fp.bottom_centre = {0.5 * Lx, 0.5 * Ly, R + (nz - 1) * s + R + 0.2 * R};
+  fp.velocity = {0, 0, -0.3};
+  w.set_footing(fp);
+  w.prepare();
+  EXPECT_GT(w.bond_ball_facet(0.05 * R), 256u);
+  for (std::size_t i = 0; i < w.num_balls(); ++i) {
+    w.balls().v[i] = 0.001 * Vec3{u(rng), u(rng), u(rng)};
+    w.balls().w[i] = 5.0 * Vec3{u(rng), u(rng), u(rng)};
+  }
+  // the floor's vertices: down at the low-x end (tension), sideways at the high-x end (shear), a
+  // twist about z in between; positions advanced with the velocities each step
+  std::vector<double> vel(pos.size());
+  for (int j = 0; j <= gy; ++j)
+    for (int i = 0; i <= gx; ++i) {
+      const double fx = static_cast<double>(i) / gx, fy = static_cast<double>(j) / gy;
+      double* v = &vel[3 * static_cast<std::size_t>(vid(i, j))];
+      v[0] = 0.05 * (0.4 * fx * fx + 0.05 * (fy - 0.5));
+      v[1] = 0.05 * (0.05 * (0.5 - fx) + 0.2 * fx * fy);
+      v[2] = 0.05 * (-0.6 * (1.0 - fx) * (1.0 - fx) + 0.02 * fy);
+    }
+  for (int st = 0; st < steps; ++st) {
+    const double dt = w.dt();
+    for (std::size_t k = 0; k < pos.size(); ++k) pos[k] += dt * vel[k];
+    w.set_vertex_kinematics(floor, pos, vel);
+    w.step();
+  }
+  WallRun r;
+  r.balls = test::ball_state(w);
+  const WallContacts* lists[3] = {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()};
+  for (int k = 0; k < 3; ++k) {
+    r.h[k] = lists[k]->h;
+    r.F[k] = lists[k]->F;
+    r.M[k] = lists[k]->M;
+    r.TA[k] = lists[k]->TA;
+    r.xc[k] = lists[k]->xc;
+  }
+  r.bond = w.facet_contacts().bond;
+  for (const BondHist& b : r.bond) ++r.count[static_cast<int>(b.state)];
+  const auto vf = w.vertex_forces(floor), vk = w.vertex_stiffness(floor);
+  r.vforce.assign(vf.begin(), vf.end());
+  r.vstiff.assign(vk.begin(), vk.end());
+  r.footing = w.footing_reaction();
+  r.plane0 = w.plane(0).reaction;
+  r.plane1 = w.plane(1).reaction;
+  return r;
+}
+
+void check_walls(int threads, int steps) {
+  const WallRun ref = run_walls(PairKernel::kScalar, threads, steps);
+  std::printf("walls, %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds intact %d broken "
+              "tension %d shear %d; footing %.3e N\n",
+              threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(), ref.count[1], ref.count[3], ref.count[4],
+              ref.footing.z);
+  ASSERT_GT(ref.h[1].size(), 256u);
+  ASSERT_GT(ref.h[0].size(), 0u);
+  ASSERT_GT(ref.h[2].size(), 0u);
+  ASSERT_NE(ref.footing.z, 0.0);
+  ASSERT_NE(ref.plane1.x, 0.0);
+  for (PairKernel k : vector_kernels()) {
+    SCOPED_TRACE(std::string("walls kernel ") + kernel_name(k) + ", threads " + std::to_string(threads));
+    const WallRun r = run_walls(k, threads, steps);
+    EXPECT_TRUE(same_bits(r.balls.x, ref.balls.x)) << "x differs by " << rel_diff(r.balls.x, ref.balls.x);
+    EXPECT_TRUE(same_bits(r.balls.v, ref.balls.v)) << "v differs by " << rel_diff(r.balls.v, ref.balls.v);
+    EXPECT_TRUE(same_bits(r.balls.w, ref.balls.w)) << "w differs by " << rel_diff(r.balls.w, ref.balls.w);
+    EXPECT_TRUE(same_bits(r.balls.f, ref.balls.f)) << "f differs by " << rel_diff(r.balls.f, ref.balls.f);
+    EXPECT_TRUE(same_bits(r.balls.t, ref.balls.t)) << "t differs by " << rel_diff(r.balls.t, ref.balls.t);
+    for (int kind = 0; kind < 3; ++kind) {
+      SCOPED_TRACE("wall kind " + std::to_string(kind));
+      EXPECT_EQ(hist_diff(r.h[kind], ref.h[kind]), "");
+      EXPECT_TRUE(same_vec(r.F[kind], ref.F[kind]));
+      EXPECT_TRUE(same_vec(r.M[kind], ref.M[kind]));
+      EXPECT_TRUE(same_vec(r.TA[kind], ref.TA[kind]));
+      EXPECT_TRUE(same_vec(r.xc[kind], ref.xc[kind]));
+    }
+    EXPECT_EQ(bond_diff(r.bond, ref.bond), "");
+    EXPECT_TRUE(same_vec(r.vforce, ref.vforce));
+    EXPECT_TRUE(same_vec(r.vstiff, ref.vstiff));
+    EXPECT_TRUE(same_bytes(&r.footing, &ref.footing, sizeof(Vec3)));
+    EXPECT_TRUE(same_bytes(&r.plane0, &ref.plane0, sizeof(Vec3)));
+    EXPECT_TRUE(same_bytes(&r.plane1, &ref.plane1, sizeof(Vec3)));
+  }
+}
+
+}  // namespace
+
+TEST(SimdKernel, WallContactsBitIdentical) {
+  check_walls(1, 400);
+  const WallRun r = run_walls(PairKernel::kAuto, 1, 400);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kIntact)], 0);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kBrokenTension)], 0);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kBrokenShear)], 0);
+}
+
+TEST(SimdKernel, WallContactsTwoThreadsBitIdentical) { check_walls(2, 400); }

@@ -1,4 +1,4 @@
-// Stage 2 of the vectorised ball–ball pass (pair_block.hpp): the lane loops of
+// Stage 2 of the vectorised ball–ball and wall passes (pair_block.hpp): the lane loops of
 // pair_block_body.inc compiled for the baseline ISA, AVX2 and AVX-512, chosen at run time.
 // No FMA is enabled in any region (and -ffp-contract=off forbids contraction), so the three
 // builds give the same bits; tests/dem/simd_kernel_test.cpp checks this against the scalar pass.
@@ -72,6 +72,22 @@ Fn pbond_kernel(Isa isa) {
     case Isa::kAvx2: return &avx2::pbond_block;
     case Isa::kAvx512: return &avx512::pbond_block;
     default: return &baseline::pbond_block;
+  }
+}
+
+WallFn linear_wall_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::linear_wall_block;
+    case Isa::kAvx512: return &avx512::linear_wall_block;
+    default: return &baseline::linear_wall_block;
+  }
+}
+
+WallFn pbond_wall_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::pbond_wall_block;
+    case Isa::kAvx512: return &avx512::pbond_wall_block;
+    default: return &baseline::pbond_wall_block;
   }
 }
 

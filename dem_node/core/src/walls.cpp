@@ -480,6 +480,17 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
   WallContacts& wc = contacts;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
   kind.begin(cx, wc);
+  // Vectorised blocks (pair_block.hpp WallIn) where the law has a wall lane kernel: stage 1 finds
+  // each contact's surface (scalar), stage 2 runs the kinematics of wall_contact and the law per
+  // lane, stage 3 stores the lanes (a lane the kernel marks is redone by the scalar law from its
+  // untouched history) and runs after_law. Each contact writes only its own records, as below,
+  // so the results are the scalar loop's bits (tests/dem/simd_kernel_test.cpp).
+  pairblock::WallFn kern = nullptr;
+  {
+    pairblock::Isa isa;
+    if (detail::block_isa(cx.kernel, isa)) kern = Law::wall_lane_kernel(isa, lc);
+    if (Law::kBond && wc.bond.size() != wc.size()) kern = nullptr;
+  }
   auto one = [&](std::int64_t c) {
     const WallSurface s = kind.surface(cx.pt.x[wc.ball[c]], wc, c);
     wc.facet[c] = s.facet;
@@ -487,14 +498,72 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
     wall_contact<Law>(cx.pt, wc, c, s.n, s.dist, s.v, s.w, lc, dt);
     kind.after_law(cx, wc, c);
   };
+  constexpr int K = pairblock::kLanes;
+  const pairblock::WallCtx ctx{cx.pt.x.data(), cx.pt.v.data(), cx.pt.w.data(), cx.pt.r.data(), wc.h.data(),
+                               wc.bond.empty() ? nullptr : wc.bond.data(), lc, dt};
+  auto block = [&](std::int64_t c0) {
+    const int n = static_cast<int>(std::min<std::int64_t>(K, m - c0));
+    pairblock::WallIn in;
+    pairblock::Out out;
+    pairblock::WallOut wo;
+    in.n = n;
+    for (int l = 0; l < K; ++l) {
+      const std::int64_t c = c0 + (l < n ? l : 0);  // padding lanes repeat lane 0
+      const std::uint32_t i = wc.ball[c];
+      const std::uint8_t fl = wc.h[c].flags;
+      in.c[l] = c;
+      in.a[l] = i;
+      in.hasn[l] = (fl & ContactHist::kHasNormal) != 0;
+      in.incr[l] = (fl & ContactHist::kIncremental) != 0;
+      if constexpr (Law::kBond) in.intact[l] = wc.bond[c].state == BondState::kIntact;
+      else in.intact[l] = 0;
+      if (l >= n) {
+        in.nx[l] = in.nx[0], in.ny[l] = in.ny[0], in.nz[l] = in.nz[0], in.dist[l] = in.dist[0];
+        in.vx[l] = in.vx[0], in.vy[l] = in.vy[0], in.vz[l] = in.vz[0];
+        in.wx[l] = in.wx[0], in.wy[l] = in.wy[0], in.wz[l] = in.wz[0];
+        continue;
+      }
+      const WallSurface s = kind.surface(cx.pt.x[i], wc, c);
+      wc.facet[c] = s.facet;
+      wc.bary[c] = s.bary;
+      in.nx[l] = s.n.x, in.ny[l] = s.n.y, in.nz[l] = s.n.z, in.dist[l] = s.dist;
+      in.vx[l] = s.v.x, in.vy[l] = s.v.y, in.vz[l] = s.v.z;
+      in.wx[l] = s.w.x, in.wy[l] = s.w.y, in.wz[l] = s.w.z;
+    }
+    kern(ctx, in, out, wo);
+    for (int l = 0; l < n; ++l) {
+      const std::int64_t c = in.c[l];
+      if (out.scalar[l]) {
+        wall_contact<Law>(cx.pt, wc, c, Vec3{in.nx[l], in.ny[l], in.nz[l]}, in.dist[l],
+                          Vec3{in.vx[l], in.vy[l], in.vz[l]}, Vec3{in.wx[l], in.wy[l], in.wz[l]}, lc, dt);
+      } else {
+        Law::store_lane(wc.h[c], wc.bond.empty() ? nullptr : &wc.bond[c], out, l);
+        wc.F[c] = {out.F[0][l], out.F[1][l], out.F[2][l]};
+        wc.M[c] = {wo.M[0][l], wo.M[1][l], wo.M[2][l]};
+        wc.TA[c] = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
+        wc.xc[c] = {wo.xc[0][l], wo.xc[1][l], wo.xc[2][l]};
+      }
+      kind.after_law(cx, wc, c);
+    }
+  };
+  const std::int64_t nb = (m + K - 1) / K;
   if constexpr (Kind::kParallel) {
     const int nt = cx.threads;
     // Each contact writes only its own records, so the split changes no bit; a few hundred
     // contacts (the interface facets of a coupled block) already pay for the fork.
+    if (kern) {
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)
-    for (std::int64_t c = 0; c < m; ++c) one(c);
+      for (std::int64_t b = 0; b < nb; ++b) block(b * K);
+    } else {
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)
+      for (std::int64_t c = 0; c < m; ++c) one(c);
+    }
   } else {
-    for (std::int64_t c = 0; c < m; ++c) one(c);
+    if (kern) {
+      for (std::int64_t b = 0; b < nb; ++b) block(b * K);
+    } else {
+      for (std::int64_t c = 0; c < m; ++c) one(c);
+    }
   }
   for (std::int64_t c = 0; c < m; ++c) kind.add(Kind::rec(wc, c));
   kind.end(cx, wc);

@@ -66,6 +66,35 @@ struct Ctx {
 
 using Fn = void (*)(const Ctx&, const In&, Out&);
 
+/// Wall contacts (WallSet::pass_law, walls.cpp): ball A against a wall's surface point, the
+/// contact's B. Stage 1 (scalar) finds each contact's surface (normal, centre distance, the
+/// point's velocity and spin); stage 2 (here) runs the kinematics of walls.cpp's wall_contact
+/// and the law per lane; stage 3 stores the histories and runs the kind's after_law. Outputs in
+/// Out: F (force on the wall), TA (torque on the ball, ℓ × F − M), n (the normal) and the law's
+/// history fields; in WallOut the moment on the wall and the contact point.
+struct WallIn {
+  int n = 0;
+  std::int64_t c[kLanes], a[kLanes];                        // contact index, ball row
+  double nx[kLanes], ny[kLanes], nz[kLanes], dist[kLanes];  // unit normal ball → wall, centre distance
+  double vx[kLanes], vy[kLanes], vz[kLanes];                // the surface point's velocity
+  double wx[kLanes], wy[kLanes], wz[kLanes];                // and spin
+  std::int64_t hasn[kLanes], incr[kLanes], intact[kLanes];  // as In
+};
+struct WallCtx {
+  const Vec3* X;
+  const Vec3* V;
+  const Vec3* W;
+  const double* R;
+  const ContactHist* H;
+  const BondHist* BD;
+  LawConst lc;
+  double dt;
+};
+struct WallOut {
+  double M[3][kLanes], xc[3][kLanes];
+};
+using WallFn = void (*)(const WallCtx&, const WallIn&, Out&, WallOut&);
+
 /// Law of motion with local damping (World::integrate_rows, §1.2–1.3) for kLanes rows
 /// without fixity, lane by lane with the scalar operations. The damping-work terms are
 /// returned per row and component (v.x, ω.x, v.y, ω.y, v.z, ω.z: the order in which the caller
@@ -104,5 +133,9 @@ Fn hertz_kernel(Isa isa);
 /// Parallel bond: every lane (requires rescale).
 Fn pbond_kernel(Isa isa);
 MotionFn motion_kernel(Isa isa);
+/// Stage 2 of the wall contacts (WallIn): the linear law and the parallel bond (requires rescale;
+/// the parallel bond also a BondHist per contact).
+WallFn linear_wall_kernel(Isa isa);
+WallFn pbond_wall_kernel(Isa isa);
 
 }  // namespace demfdm::dem::pairblock

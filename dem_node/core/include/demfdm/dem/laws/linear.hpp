@@ -173,6 +173,10 @@ struct LinearLaw : LawDefaults {
 
   // Vectorised pass (pair_block.hpp): stage 1 marks lanes that need the scalar law, stage 3
   // stores a lane's results.
+  /// The wall contacts' lane kernel (pair_block.hpp WallIn), or null: scalar wall passes.
+  static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::linear_wall_kernel(isa) : nullptr;
+  }
   static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale ? pairblock::linear_kernel(isa) : nullptr;
   }

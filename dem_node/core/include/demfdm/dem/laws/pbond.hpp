@@ -179,6 +179,10 @@ struct PBondLaw : LawDefaults {
   }
   // Vectorised pass (pair_block.hpp): every contact has a lane; a breaking bond or a large
   // rotation sends its lane to the scalar law.
+  /// The wall contacts' lane kernel (pair_block.hpp WallIn), or null: scalar wall passes.
+  static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::pbond_wall_kernel(isa) : nullptr;
+  }
   static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale ? pairblock::pbond_kernel(isa) : nullptr;
   }
