@@ -4,7 +4,7 @@
 // contacts; parallel-bond breakage; rows with fixity) are redone by the scalar code, and sums keep their order. Checked on small random packings, linear and soft
 // bond, periodic (with a straining cell) and free, for every instruction set this CPU has; the
 // wall contacts' lane kernels (linear, parallel bond) on a slab between moving facets, platens
-// and the footing.
+// and the footing (linear and Hertz–Mindlin).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -350,9 +350,10 @@ std::string bond_diff(const std::vector<BondHist>& a, const std::vector<BondHist
   return "";
 }
 
-WallRun run_walls(PairKernel kernel, int threads, int steps) {
+WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls = ContactModel::kLinear) {
   WorldParams p;
   p.threads = threads;
+  p.ball_wall.model = p.ball_footing.model = walls;
   p.local_damping = 0.0;
   p.ball_facet.model = ContactModel::kLinearPBond;
   p.ball_facet.pbond.zero_linear = true;
@@ -446,11 +447,11 @@ WallRun run_walls(PairKernel kernel, int threads, int steps) {
   return r;
 }
 
-void check_walls(int threads, int steps) {
-  const WallRun ref = run_walls(PairKernel::kScalar, threads, steps);
-  std::printf("walls, %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds intact %d broken "
+void check_walls(int threads, int steps, ContactModel walls = ContactModel::kLinear) {
+  const WallRun ref = run_walls(PairKernel::kScalar, threads, steps, walls);
+  std::printf("walls (%s), %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds intact %d broken "
               "tension %d shear %d; footing %.3e N\n",
-              threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(), ref.count[1], ref.count[3], ref.count[4],
+              law_name(walls), threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(), ref.count[1], ref.count[3], ref.count[4],
               ref.footing.z);
   ASSERT_GT(ref.h[1].size(), 256u);
   ASSERT_GT(ref.h[0].size(), 0u);
@@ -459,7 +460,7 @@ void check_walls(int threads, int steps) {
   ASSERT_NE(ref.plane1.x, 0.0);
   for (PairKernel k : vector_kernels()) {
     SCOPED_TRACE(std::string("walls kernel ") + kernel_name(k) + ", threads " + std::to_string(threads));
-    const WallRun r = run_walls(k, threads, steps);
+    const WallRun r = run_walls(k, threads, steps, walls);
     EXPECT_TRUE(same_bits(r.balls.x, ref.balls.x)) << "x differs by " << rel_diff(r.balls.x, ref.balls.x);
     EXPECT_TRUE(same_bits(r.balls.v, ref.balls.v)) << "v differs by " << rel_diff(r.balls.v, ref.balls.v);
     EXPECT_TRUE(same_bits(r.balls.w, ref.balls.w)) << "w differs by " << rel_diff(r.balls.w, ref.balls.w);
@@ -493,3 +494,6 @@ TEST(SimdKernel, WallContactsBitIdentical) {
 }
 
 TEST(SimdKernel, WallContactsTwoThreadsBitIdentical) { check_walls(2, 400); }
+
+// Hertz–Mindlin platens and footing (R* = R against a wall).
+TEST(SimdKernel, HertzWallContactsBitIdentical) { check_walls(1, 400, ContactModel::kHertz); }

@@ -83,6 +83,14 @@ WallFn linear_wall_kernel(Isa isa) {
   }
 }
 
+WallFn hertz_wall_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::hertz_wall_block;
+    case Isa::kAvx512: return &avx512::hertz_wall_block;
+    default: return &baseline::hertz_wall_block;
+  }
+}
+
 WallFn pbond_wall_kernel(Isa isa) {
   switch (isa) {
     case Isa::kAvx2: return &avx2::pbond_wall_block;

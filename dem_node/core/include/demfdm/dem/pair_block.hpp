@@ -133,9 +133,10 @@ Fn hertz_kernel(Isa isa);
 /// Parallel bond: every lane (requires rescale).
 Fn pbond_kernel(Isa isa);
 MotionFn motion_kernel(Isa isa);
-/// Stage 2 of the wall contacts (WallIn): the linear law and the parallel bond (requires rescale;
-/// the parallel bond also a BondHist per contact).
+/// Stage 2 of the wall contacts (WallIn): the linear law, Hertz–Mindlin and the parallel bond
+/// (requires rescale; the parallel bond also a BondHist per contact).
 WallFn linear_wall_kernel(Isa isa);
+WallFn hertz_wall_kernel(Isa isa);
 WallFn pbond_wall_kernel(Isa isa);
 
 }  // namespace demfdm::dem::pairblock

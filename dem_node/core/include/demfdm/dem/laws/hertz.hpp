@@ -115,8 +115,10 @@ struct HertzLaw : LawDefaults {
   static void install_bond(ContactHist&, BondHist&, const ContactFamilyParams&) {
     throw std::logic_error("the Hertz-Mindlin law has no bond");
   }
-  /// No lane kernel for wall contacts (pair_block.hpp WallIn): the wall passes run the scalar law.
-  static pairblock::WallFn wall_lane_kernel(pairblock::Isa, const LawConst&) { return nullptr; }
+  /// The wall contacts' lane kernel (pair_block.hpp WallIn), or null: scalar wall passes.
+  static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::hertz_wall_kernel(isa) : nullptr;
+  }
   static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale ? pairblock::hertz_kernel(isa) : nullptr;
   }
