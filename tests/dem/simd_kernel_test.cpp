@@ -4,7 +4,7 @@
 // contacts; parallel-bond breakage; rows with fixity) are redone by the scalar code, and sums keep their order. Checked on small random packings, linear and soft
 // bond, periodic (with a straining cell) and free, for every instruction set this CPU has; the
 // wall contacts' lane kernels (linear, parallel bond) on a slab between moving facets, platens
-// and the footing (linear and Hertz–Mindlin).
+// and the footing (linear and Hertz–Mindlin; parallel-bond and soft-bond facets).
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -350,12 +350,15 @@ std::string bond_diff(const std::vector<BondHist>& a, const std::vector<BondHist
   return "";
 }
 
-WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls = ContactModel::kLinear) {
+WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls = ContactModel::kLinear,
+                  ContactModel facets = ContactModel::kLinearPBond) {
   WorldParams p;
   p.threads = threads;
   p.ball_wall.model = p.ball_footing.model = walls;
+  p.ball_facet.model = facets;
+  p.ball_facet.softbond.soft = 20.0;  // ζ: soft bonds break after a short softening branch
+  p.ball_facet.softbond.ten = p.ball_facet.softbond.coh = 2e7;
   p.local_damping = 0.0;
-  p.ball_facet.model = ContactModel::kLinearPBond;
   p.ball_facet.pbond.zero_linear = true;
   p.ball_facet.pbond.ten = 2e7;
   p.ball_facet.pbond.coh = 2e7;
@@ -447,20 +450,21 @@ WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls 
   return r;
 }
 
-void check_walls(int threads, int steps, ContactModel walls = ContactModel::kLinear) {
-  const WallRun ref = run_walls(PairKernel::kScalar, threads, steps, walls);
-  std::printf("walls (%s), %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds intact %d broken "
+void check_walls(int threads, int steps, ContactModel walls = ContactModel::kLinear,
+                 ContactModel facets = ContactModel::kLinearPBond) {
+  const WallRun ref = run_walls(PairKernel::kScalar, threads, steps, walls, facets);
+  std::printf("walls (%s, facets %s), %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds intact %d broken "
               "tension %d shear %d; footing %.3e N\n",
-              law_name(walls), threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(), ref.count[1], ref.count[3], ref.count[4],
+              law_name(walls), law_name(facets), threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(), ref.count[1], ref.count[3], ref.count[4],
               ref.footing.z);
   ASSERT_GT(ref.h[1].size(), 256u);
   ASSERT_GT(ref.h[0].size(), 0u);
   ASSERT_GT(ref.h[2].size(), 0u);
-  ASSERT_NE(ref.footing.z, 0.0);
+  if (facets == ContactModel::kLinearPBond) ASSERT_NE(ref.footing.z, 0.0);  // the footing pressed at the end
   ASSERT_NE(ref.plane1.x, 0.0);
   for (PairKernel k : vector_kernels()) {
     SCOPED_TRACE(std::string("walls kernel ") + kernel_name(k) + ", threads " + std::to_string(threads));
-    const WallRun r = run_walls(k, threads, steps, walls);
+    const WallRun r = run_walls(k, threads, steps, walls, facets);
     EXPECT_TRUE(same_bits(r.balls.x, ref.balls.x)) << "x differs by " << rel_diff(r.balls.x, ref.balls.x);
     EXPECT_TRUE(same_bits(r.balls.v, ref.balls.v)) << "v differs by " << rel_diff(r.balls.v, ref.balls.v);
     EXPECT_TRUE(same_bits(r.balls.w, ref.balls.w)) << "w differs by " << rel_diff(r.balls.w, ref.balls.w);
@@ -497,3 +501,15 @@ TEST(SimdKernel, WallContactsTwoThreadsBitIdentical) { check_walls(2, 400); }
 
 // Hertz–Mindlin platens and footing (R* = R against a wall).
 TEST(SimdKernel, HertzWallContactsBitIdentical) { check_walls(1, 400, ContactModel::kHertz); }
+
+// Soft-bond interface facets: bonded lanes in the kernel; softening, breakage and the unbonded
+// contacts by the scalar law.
+TEST(SimdKernel, SoftBondFacetContactsBitIdentical) {
+  check_walls(1, 400, ContactModel::kLinear, ContactModel::kSoftBond);
+  const WallRun r = run_walls(PairKernel::kAuto, 1, 400, ContactModel::kLinear, ContactModel::kSoftBond);
+  std::printf("soft-bond facets: intact %d softening %d broken tension %d shear %d\n", r.count[1], r.count[2],
+              r.count[3], r.count[4]);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kIntact)], 0);
+  EXPECT_GT(r.count[static_cast<int>(BondState::kBrokenTension)] + r.count[static_cast<int>(BondState::kBrokenShear)],
+            0);
+}

@@ -91,6 +91,14 @@ WallFn hertz_wall_kernel(Isa isa) {
   }
 }
 
+WallFn softbond_wall_kernel(Isa isa) {
+  switch (isa) {
+    case Isa::kAvx2: return &avx2::softbond_wall_block;
+    case Isa::kAvx512: return &avx512::softbond_wall_block;
+    default: return &baseline::softbond_wall_block;
+  }
+}
+
 WallFn pbond_wall_kernel(Isa isa) {
   switch (isa) {
     case Isa::kAvx2: return &avx2::pbond_wall_block;

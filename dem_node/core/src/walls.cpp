@@ -515,8 +515,10 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
       in.a[l] = i;
       in.hasn[l] = (fl & ContactHist::kHasNormal) != 0;
       in.incr[l] = (fl & ContactHist::kIncremental) != 0;
-      if constexpr (Law::kBond) in.intact[l] = wc.bond[c].state == BondState::kIntact;
+      const BondHist* bd = wc.bond.empty() ? nullptr : &wc.bond[c];
+      if constexpr (Law::kBond) in.intact[l] = bd->state == BondState::kIntact;
       else in.intact[l] = 0;
+      in.scalar[l] = Law::lane_needs_scalar(bd);
       if (l >= n) {
         in.nx[l] = in.nx[0], in.ny[l] = in.ny[0], in.nz[l] = in.nz[0], in.dist[l] = in.dist[0];
         in.vx[l] = in.vx[0], in.vy[l] = in.vy[0], in.vz[l] = in.vz[0];
@@ -533,7 +535,7 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
     kern(ctx, in, out, wo);
     for (int l = 0; l < n; ++l) {
       const std::int64_t c = in.c[l];
-      if (out.scalar[l]) {
+      if (in.scalar[l] || out.scalar[l]) {
         wall_contact<Law>(cx.pt, wc, c, Vec3{in.nx[l], in.ny[l], in.nz[l]}, in.dist[l],
                           Vec3{in.vx[l], in.vy[l], in.vz[l]}, Vec3{in.wx[l], in.wy[l], in.wz[l]}, lc, dt);
       } else {

@@ -1,5 +1,7 @@
-// Vectorised ball–ball pass and law of motion (issue 3 item 12): the contact law evaluated
-// for a block of kLanes live contacts at a time, the law of motion for kLanes rows at a time.
+// Vectorised ball–ball pass, wall passes and law of motion (issue 3 item 12, issue 16 item 1):
+// the contact law evaluated for a block of kLanes live contacts at a time, the law of motion for
+// kLanes rows at a time. The wall contacts (planes, facets, the footing; WallIn below) use the
+// same lane code for the laws (linear, Hertz–Mindlin, parallel bond) with their own kinematics.
 //
 // Stage 1 (PairSet::pass_law, scalar, contact order): idle test, branch vector d, lane list.
 // Stage 2 (here, one lane loop compiled for the baseline ISA, AVX2 and AVX-512, chosen at run
@@ -79,6 +81,7 @@ struct WallIn {
   double vx[kLanes], vy[kLanes], vz[kLanes];                // the surface point's velocity
   double wx[kLanes], wy[kLanes], wz[kLanes];                // and spin
   std::int64_t hasn[kLanes], incr[kLanes], intact[kLanes];  // as In
+  std::int64_t scalar[kLanes];  // lane known to need the scalar law (stage 1, Law::lane_needs_scalar)
 };
 struct WallCtx {
   const Vec3* X;
@@ -133,10 +136,11 @@ Fn hertz_kernel(Isa isa);
 /// Parallel bond: every lane (requires rescale).
 Fn pbond_kernel(Isa isa);
 MotionFn motion_kernel(Isa isa);
-/// Stage 2 of the wall contacts (WallIn): the linear law, Hertz–Mindlin and the parallel bond
-/// (requires rescale; the parallel bond also a BondHist per contact).
+/// Stage 2 of the wall contacts (WallIn): every law (requires rescale; the soft bond also
+/// SoftUnload::kElastic; the bonded laws a BondHist per contact).
 WallFn linear_wall_kernel(Isa isa);
 WallFn hertz_wall_kernel(Isa isa);
+WallFn softbond_wall_kernel(Isa isa);
 WallFn pbond_wall_kernel(Isa isa);
 
 }  // namespace demfdm::dem::pairblock

@@ -299,8 +299,10 @@ struct SoftBondLaw : LawDefaults {
   static Vec3 force(const ContactHist& h, const BondHist*) { return h.fn * h.n_old + h.fs; }
   static Vec3 moment(const ContactHist& h, const BondHist* b) { return b->mt * h.n_old + b->mb; }
   static void install_bond(ContactHist&, BondHist& b, const ContactFamilyParams& f) { b.sigma_t = f.softbond.ten; }
-  /// No lane kernel for wall contacts (pair_block.hpp WallIn): the wall passes run the scalar law.
-  static pairblock::WallFn wall_lane_kernel(pairblock::Isa, const LawConst&) { return nullptr; }
+  /// The wall contacts' lane kernel (pair_block.hpp WallIn), or null: scalar wall passes.
+  static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale && c.unload == SoftUnload::kElastic ? pairblock::softbond_wall_kernel(isa) : nullptr;
+  }
   static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale && c.unload == SoftUnload::kElastic ? pairblock::softbond_kernel(isa) : nullptr;
   }
