@@ -371,7 +371,8 @@ WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls 
   for (int k = 0; k < nz; ++k)
     for (int j = 0; j < ny; ++j)
       for (int i = 0; i < nx; ++i)
-        w.add_ball({(i + 0.5) * s + 0.02 * R * u(rng), (j + 0.5) * s + 0.02 * R * u(rng), R + k * s + 0.01 * R * u(rng)},
+        w.add_ball({(i + 0.5) * s + 0.02 * R * u(rng), (j + 0.5) * s + 0.02 * R * u(rng),
+                    R + k * s + 0.01 * R * u(rng)},
                    R * (1.0 + 0.002 * u(rng)));
   // the floor: a grid of 8 x 6 squares, two facets each, at z = 0 (balls of the first layer touch it)
   const int gx = 8, gy = 6;
@@ -453,14 +454,16 @@ WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls 
 void check_walls(int threads, int steps, ContactModel walls = ContactModel::kLinear,
                  ContactModel facets = ContactModel::kLinearPBond) {
   const WallRun ref = run_walls(PairKernel::kScalar, threads, steps, walls, facets);
-  std::printf("walls (%s, facets %s), %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds intact %d broken "
-              "tension %d shear %d; footing %.3e N\n",
-              law_name(walls), law_name(facets), threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(), ref.count[1], ref.count[3], ref.count[4],
-              ref.footing.z);
+  std::printf("walls (%s, facets %s), %d thread(s): %zu facet, %zu plane, %zu footing contacts; interface bonds "
+              "intact %d broken tension %d shear %d; footing %.3e N\n",
+              law_name(walls), law_name(facets), threads, ref.h[1].size(), ref.h[0].size(), ref.h[2].size(),
+              ref.count[1], ref.count[3], ref.count[4], ref.footing.z);
   ASSERT_GT(ref.h[1].size(), 256u);
   ASSERT_GT(ref.h[0].size(), 0u);
   ASSERT_GT(ref.h[2].size(), 0u);
-  if (facets == ContactModel::kLinearPBond) ASSERT_NE(ref.footing.z, 0.0);  // the footing pressed at the end
+  if (facets == ContactModel::kLinearPBond) {
+    ASSERT_NE(ref.footing.z, 0.0);  // the footing pressed at the end
+  }
   ASSERT_NE(ref.plane1.x, 0.0);
   for (PairKernel k : vector_kernels()) {
     SCOPED_TRACE(std::string("walls kernel ") + kernel_name(k) + ", threads " + std::to_string(threads));

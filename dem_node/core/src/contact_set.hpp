@@ -21,7 +21,7 @@ struct SetContext {
   double skin;            // [m] Verlet skin of the neighbour lists
   Vec3 edot;              // [1/s] strain rate of the periodic cell
   int threads;            // OpenMP threads of the passes
-  PairKernel kernel;      // implementation of the ball-ball pass
+  PairKernel kernel;      // implementation of the contact passes (ball-ball and walls)
   double& e_slip_dead;    // [J] slip energy of retired contacts (HistoryCarry::rest)
   double& e_soft_dead;    // [J] bond dissipation of retired contacts
   std::int64_t& bond_failures;  // ball-ball bonds that left the intact state

@@ -43,76 +43,44 @@ Isa best_isa() {
   return best;
 }
 
+namespace {
+// The kernel of one instruction set.
+template <class F>
+F pick(Isa isa, F base, F a2, F a512) {
+  switch (isa) {
+    case Isa::kAvx2: return a2;
+    case Isa::kAvx512: return a512;
+    default: return base;
+  }
+}
+}  // namespace
+
 Fn linear_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::linear_block;
-    case Isa::kAvx512: return &avx512::linear_block;
-    default: return &baseline::linear_block;
-  }
+  return pick<Fn>(isa, &baseline::linear_block, &avx2::linear_block, &avx512::linear_block);
 }
-
 Fn softbond_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::softbond_block;
-    case Isa::kAvx512: return &avx512::softbond_block;
-    default: return &baseline::softbond_block;
-  }
+  return pick<Fn>(isa, &baseline::softbond_block, &avx2::softbond_block, &avx512::softbond_block);
 }
-
 Fn hertz_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::hertz_block;
-    case Isa::kAvx512: return &avx512::hertz_block;
-    default: return &baseline::hertz_block;
-  }
+  return pick<Fn>(isa, &baseline::hertz_block, &avx2::hertz_block, &avx512::hertz_block);
 }
-
 Fn pbond_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::pbond_block;
-    case Isa::kAvx512: return &avx512::pbond_block;
-    default: return &baseline::pbond_block;
-  }
+  return pick<Fn>(isa, &baseline::pbond_block, &avx2::pbond_block, &avx512::pbond_block);
 }
-
 WallFn linear_wall_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::linear_wall_block;
-    case Isa::kAvx512: return &avx512::linear_wall_block;
-    default: return &baseline::linear_wall_block;
-  }
+  return pick<WallFn>(isa, &baseline::linear_wall_block, &avx2::linear_wall_block, &avx512::linear_wall_block);
 }
-
 WallFn hertz_wall_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::hertz_wall_block;
-    case Isa::kAvx512: return &avx512::hertz_wall_block;
-    default: return &baseline::hertz_wall_block;
-  }
+  return pick<WallFn>(isa, &baseline::hertz_wall_block, &avx2::hertz_wall_block, &avx512::hertz_wall_block);
 }
-
 WallFn softbond_wall_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::softbond_wall_block;
-    case Isa::kAvx512: return &avx512::softbond_wall_block;
-    default: return &baseline::softbond_wall_block;
-  }
+  return pick<WallFn>(isa, &baseline::softbond_wall_block, &avx2::softbond_wall_block, &avx512::softbond_wall_block);
 }
-
 WallFn pbond_wall_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::pbond_wall_block;
-    case Isa::kAvx512: return &avx512::pbond_wall_block;
-    default: return &baseline::pbond_wall_block;
-  }
+  return pick<WallFn>(isa, &baseline::pbond_wall_block, &avx2::pbond_wall_block, &avx512::pbond_wall_block);
 }
-
 MotionFn motion_kernel(Isa isa) {
-  switch (isa) {
-    case Isa::kAvx2: return &avx2::motion_block;
-    case Isa::kAvx512: return &avx512::motion_block;
-    default: return &baseline::motion_block;
-  }
+  return pick<MotionFn>(isa, &baseline::motion_block, &avx2::motion_block, &avx512::motion_block);
 }
 
 }  // namespace demfdm::dem::pairblock

@@ -499,8 +499,9 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
     kind.after_law(cx, wc, c);
   };
   constexpr int K = pairblock::kLanes;
-  const pairblock::WallCtx ctx{cx.pt.x.data(), cx.pt.v.data(), cx.pt.w.data(), cx.pt.r.data(), wc.h.data(),
-                               wc.bond.empty() ? nullptr : wc.bond.data(), lc, dt};
+  const pairblock::WallCtx ctx{{cx.pt.v.data(), cx.pt.w.data(), cx.pt.r.data(), wc.h.data(),
+                                wc.bond.empty() ? nullptr : wc.bond.data(), lc, dt, Vec3{}, false},
+                               cx.pt.x.data()};
   auto block = [&](std::int64_t c0) {
     const int n = static_cast<int>(std::min<std::int64_t>(K, m - c0));
     pairblock::WallIn in;

@@ -83,15 +83,8 @@ struct WallIn {
   std::int64_t hasn[kLanes], incr[kLanes], intact[kLanes];  // as In
   std::int64_t scalar[kLanes];  // lane known to need the scalar law (stage 1, Law::lane_needs_scalar)
 };
-struct WallCtx {
-  const Vec3* X;
-  const Vec3* V;
-  const Vec3* W;
-  const double* R;
-  const ContactHist* H;
-  const BondHist* BD;
-  LawConst lc;
-  double dt;
+struct WallCtx : Ctx {  // Ctx's balls, histories and law (no cell strain) and the positions
+  const Vec3* X = nullptr;
 };
 struct WallOut {
   double M[3][kLanes], xc[3][kLanes];

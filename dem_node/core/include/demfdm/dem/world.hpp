@@ -130,11 +130,11 @@ struct Footing {
   std::uint64_t id = 0;
 };
 
-/// Implementation of the ball–ball force pass and of the law of motion. All give bit-identical
-/// results (checked by tests/dem/simd_kernel_test.cpp). kAuto: vectorised blocks with the best
-/// instruction set of the CPU (pair_block.hpp); kScalar: one contact / row at a time (the
-/// reference); kBlock*: blocks with a given instruction set. The parallel-bond model,
-/// rescale_shear = false and the soft bond's secant unloading always use the scalar pass.
+/// Implementation of the contact passes (ball–ball and wall contacts) and of the law of motion.
+/// All give bit-identical results (checked by tests/dem/simd_kernel_test.cpp). kAuto: vectorised
+/// blocks with the best instruction set of the CPU (pair_block.hpp); kScalar: one contact / row
+/// at a time (the reference); kBlock*: blocks with a given instruction set. rescale_shear = false
+/// and the soft bond's secant unloading always use the scalar passes.
 enum class PairKernel : std::uint8_t { kAuto, kScalar, kBlockBaseline, kBlockAvx2, kBlockAvx512 };
 
 class World;
@@ -366,7 +366,7 @@ class World {
   /// pass since construction: a cumulative event count, O(1) to read (the footing's elastic
   /// branch ends at its first increase, docs/paper-study.md).
   std::int64_t bond_failures() const { return bond_failures_; }
-  /// Choose the implementation of the ball–ball pass and the law of motion (throws
+  /// Choose the implementation of the contact passes and the law of motion (throws
   /// std::invalid_argument if this CPU lacks the instruction set).
   void set_pair_kernel(PairKernel k);
   PairKernel pair_kernel() const { return kernel_; }
