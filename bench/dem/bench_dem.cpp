@@ -76,14 +76,7 @@ PairKernel kernel_from_env(std::string& name) {
   throw std::runtime_error("BENCH_DEM_KERNEL must be auto, scalar, baseline, avx2 or avx512, found '" + name + "'");
 }
 
-const char* isa_name(pairblock::Isa i) {
-  switch (i) {
-    case pairblock::Isa::kBaseline: return "baseline";
-    case pairblock::Isa::kAvx2: return "avx2";
-    case pairblock::Isa::kAvx512: return "avx512";
-  }
-  return "?";
-}
+using demfdm::simd::isa_name;
 
 // The instruction set the ball–ball pass runs with for a kernel choice (PairSet::pass_law: the
 // block kernels for the linear and soft-bond models with the default rescale and unloading).

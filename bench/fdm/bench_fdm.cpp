@@ -6,7 +6,10 @@
 //                    (cost of the yield check)
 //   mc-yielding      Mohr-Coulomb, c = 10 kPa: most tetrahedra are on the surface (eigen-
 //                    decomposition and return every step)
-// Usage: bench_fdm [zones_per_side=37] [steps=20]   (37^3 = 50653 zones)
+// The elastic case runs with the zone pass on vector lanes (ZoneKernel::kAuto, the instruction
+// set named in the output) and zone by zone (elastic-scalar), one after the other for `rounds`
+// rounds, and prints the ratio of the two per round.
+// Usage: bench_fdm [zones_per_side=37] [steps=20] [rounds=1]   (37^3 = 50653 zones)
 #include <omp.h>
 #include <sys/resource.h>
 
@@ -15,6 +18,7 @@
 #include <cstdlib>
 
 #include "demfdm/fdm/model.hpp"
+#include "demfdm/simd/isa.hpp"
 
 using namespace demfdm::fdm;
 
@@ -24,6 +28,7 @@ struct Case {
   const char* name;
   Constitutive law;
   double cohesion;
+  ZoneKernel kernel = ZoneKernel::kAuto;
 };
 
 double cpu_seconds() {
@@ -49,6 +54,7 @@ double run(const Case& c, int n, int steps, int threads, std::size_t& zones, dou
   p.mode = Mode::kDynamic;
   p.gravity_level = 50.0;
   Model model(p);
+  model.set_zone_kernel(c.kernel);
   model.set_geostatic_stress({kNaN, 0.2});
   zones = model.num_zones();
   model.step(2);  // warm-up
@@ -69,9 +75,21 @@ double run(const Case& c, int n, int steps, int threads, std::size_t& zones, dou
 int main(int argc, char** argv) {
   const int n = argc > 1 ? std::atoi(argv[1]) : 37;
   const int steps = argc > 2 ? std::atoi(argv[2]) : 20;
+  const int rounds = argc > 3 ? std::atoi(argv[3]) : 1;
   const Case cases[] = {{"elastic", Constitutive::kElastic, 0.0},
                         {"mc-elastic", Constitutive::kMohrCoulomb, 1e6},
                         {"mc-yielding", Constitutive::kMohrCoulomb, 1e4}};
+  const Case scalar{"elastic-scalar", Constitutive::kElastic, 0.0, ZoneKernel::kScalar};
+  std::printf("zone kernel of the elastic case: %s lanes (elastic-scalar: zone by zone)\n",
+              demfdm::simd::isa_name(demfdm::simd::best_isa()));
+  for (int r = 0; r < rounds; ++r) {
+    std::size_t zones = 0;
+    double plastic = 0.0, per_cpu = 0.0;
+    const double lanes = run(cases[0], n, steps, 1, zones, plastic, per_cpu);
+    const double one = run(scalar, n, steps, 1, zones, plastic, per_cpu);
+    std::printf("round %d, 1 thread: elastic %.3e, elastic-scalar %.3e zone-steps/s, lanes/scalar %.3f\n", r + 1, lanes,
+                one, lanes / one);
+  }
   // zone-steps/s: wall clock; per thread: divided by the thread count; per cpu-s: divided by
   // the CPU time the process used (user + system), which is what a thread costs when the
   // machine is shared and a thread does not get a whole core.

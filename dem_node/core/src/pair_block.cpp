@@ -26,34 +26,7 @@ namespace avx512 {
 }  // namespace avx512
 #pragma GCC pop_options
 
-bool isa_available(Isa isa) {
-  switch (isa) {
-    case Isa::kBaseline: return true;
-    case Isa::kAvx2: return __builtin_cpu_supports("avx2");
-    case Isa::kAvx512: return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
-                              __builtin_cpu_supports("avx512vl");
-  }
-  return false;
-}
-
-Isa best_isa() {
-  static const Isa best = isa_available(Isa::kAvx512) ? Isa::kAvx512
-                          : isa_available(Isa::kAvx2) ? Isa::kAvx2
-                                                      : Isa::kBaseline;
-  return best;
-}
-
-namespace {
-// The kernel of one instruction set.
-template <class F>
-F pick(Isa isa, F base, F a2, F a512) {
-  switch (isa) {
-    case Isa::kAvx2: return a2;
-    case Isa::kAvx512: return a512;
-    default: return base;
-  }
-}
-}  // namespace
+using simd::pick;
 
 Fn linear_kernel(Isa isa) {
   return pick<Fn>(isa, &baseline::linear_block, &avx2::linear_block, &avx512::linear_block);

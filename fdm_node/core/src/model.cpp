@@ -8,8 +8,10 @@
 #include <limits>
 #include <sstream>
 #include <stdexcept>
+#include <type_traits>
 
 #include "demfdm/fdm/tet.hpp"
+#include "zone_block.hpp"
 
 namespace demfdm::fdm {
 namespace {
@@ -18,19 +20,6 @@ namespace {
 // coupling step into n sub-steps lands within a few ulps of it); the safety factor of
 // docs/theory.md 5.7 covers it.
 constexpr double kDtTolerance = 1.0 + 1e-9;
-
-struct ElasticLaw {
-  static std::uint8_t update(const MaterialConstants& m, const double* de, double* s) {
-    elastic_update(m, de, s);
-    return 0;
-  }
-};
-
-struct MohrCoulombLaw {
-  static std::uint8_t update(const MaterialConstants& m, const double* de, double* s) {
-    return mohr_coulomb_update(m, de, s);
-  }
-};
 
 // Geometry of the 10 tetrahedra of a zone from its 8 corner positions: out[t*10 + 0..9] =
 // g2, g3, g4, V (tet.hpp).
@@ -43,15 +32,6 @@ inline void zone_geometry(const double (*p)[3], double* out) {
     const Vec3 p4{p[n[3]][0], p[n[3]][1], p[n[3]][2]};
     tet_gradients(p1, p2, p3, p4, out + 10 * t);
   }
-}
-
-// Velocity gradient L_ij = sum_{l=2..4} (v^l - v^1)_i g_l,j (tet.hpp).
-inline void tet_gradient(const double (*v)[3], const std::array<int, 4>& n, const double* g, double* L) {
-  double dv[3][3];
-  for (int l = 0; l < 3; ++l)
-    for (int i = 0; i < 3; ++i) dv[l][i] = v[n[l + 1]][i] - v[n[0]][i];
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) L[3 * i + j] = dv[0][i] * g[j] + dv[1][i] * g[3 + j] + dv[2][i] * g[6 + j];
 }
 
 }  // namespace
@@ -252,120 +232,47 @@ void Model::set_timestep(double dt) {
 
 template <class Law, bool Large, bool ZoneAvg>
 void Model::zone_kernel(std::span<const std::int32_t> zones, bool update_stress) {
-  const double dt = dt_;
   const std::ptrdiff_t count = static_cast<std::ptrdiff_t>(zones.size());
   const std::ptrdiff_t min_parallel = params_.parallel_threshold;
-  const std::int32_t* conn = mesh_.zones.data();
-  const double* vel = v_.data();
-  const double* pos = x_.data();
-  const double* geom = geom_.data();
-  double* stress = stress_.data();
-  double* slot = zone_slot_.data();
-  std::uint8_t* plastic = plastic_.data();
-  const MaterialConstants* mats = materials_.data();
-  const std::int32_t* zmat = zone_material_.data();
+  const zone::Ctx k{mesh_.zones.data(), v_.data(), geom_.data(), stress_.data(), zone_slot_.data(),
+                    plastic_.data(), materials_.data(), zone_material_.data(), dt_};
   const std::int32_t* list = zones.data();
-
-#pragma omp parallel for schedule(static) if (count >= min_parallel)
-  for (std::ptrdiff_t zi = 0; zi < count; ++zi) {
-    const std::int32_t z = list[zi];
-    const std::int32_t* c = conn + 8 * static_cast<std::size_t>(z);
-    double local_geom[100];
-    const double* G;
-    if constexpr (Large) {
-      double p[8][3];
-      for (int k = 0; k < 8; ++k)
-        for (int d = 0; d < 3; ++d) p[k][d] = pos[3 * static_cast<std::size_t>(c[k]) + d];
-      zone_geometry(p, local_geom);
-      G = local_geom;
-    } else {
-      G = geom + 100 * static_cast<std::size_t>(z);
+  // The lane kernel where there is one (elastic, small strain, stresses updated): kLanes zones
+  // at a time, the last count mod kLanes zone by zone; the same bits as zone by zone.
+  zone::Fn lanes = nullptr;
+  if constexpr (std::is_same_v<Law, zone::ElasticLaw> && !Large) {
+    if (update_stress && zone_kernel_ != ZoneKernel::kScalar) {
+      const simd::Isa isa = zone_kernel_ == ZoneKernel::kBaseline ? simd::Isa::kBaseline
+                            : zone_kernel_ == ZoneKernel::kAvx2   ? simd::Isa::kAvx2
+                            : zone_kernel_ == ZoneKernel::kAvx512 ? simd::Isa::kAvx512
+                                                                  : simd::best_isa();
+      if (!simd::isa_available(isa))
+        throw std::runtime_error(std::string("zone kernel: this CPU has no ") + simd::isa_name(isa));
+      lanes = zone::elastic_kernel(isa, ZoneAvg);
     }
-    double* S = stress + 60 * static_cast<std::size_t>(z);
-
-    if (update_stress) {
-      double vz[8][3];
-      for (int k = 0; k < 8; ++k)
-        for (int d = 0; d < 3; ++d) vz[k][d] = vel[3 * static_cast<std::size_t>(c[k]) + d];
-      const MaterialConstants& m = mats[zmat[z]];
-      double L[kTetsPerZone][9];
-      double tr[kTetsPerZone];
-      for (int t = 0; t < kTetsPerZone; ++t) {
-        tet_gradient(vz, kZoneTets[t], G + 10 * t, L[t]);
-        tr[t] = L[t][0] + L[t][4] + L[t][8];
-      }
-      // Mixed discretisation: volume-weighted mean volumetric strain rate (docs/theory.md 5.3).
-      double avg[2];
-      if constexpr (ZoneAvg) {
-        double vs = 0.0, ts = 0.0;
-        for (int t = 0; t < kTetsPerZone; ++t) {
-          vs += G[10 * t + 9];
-          ts += G[10 * t + 9] * tr[t];
-        }
-        avg[0] = avg[1] = ts / vs;
+  }
+  const std::ptrdiff_t blocks = lanes ? count / zone::kLanes : 0;
+  const std::ptrdiff_t rest = blocks * zone::kLanes;
+#pragma omp parallel if (count >= min_parallel)
+  {
+#pragma omp for schedule(static) nowait
+    for (std::ptrdiff_t bi = 0; bi < blocks; ++bi) lanes(k, list + bi * zone::kLanes);
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t zi = rest; zi < count; ++zi) {
+      const std::int32_t z = list[zi];
+      if constexpr (Large) {
+        const std::int32_t* c = k.conn + 8 * static_cast<std::size_t>(z);
+        double p[8][3];
+        for (int q = 0; q < 8; ++q)
+          for (int d = 0; d < 3; ++d) p[q][d] = x_[3 * static_cast<std::size_t>(c[q]) + d];
+        double local_geom[100];
+        zone_geometry(p, local_geom);
+        zone::zone_body<Law, Large, ZoneAvg>(zone::ZoneRef{k, z, local_geom}, k.dt, update_stress);
       } else {
-        for (int o = 0; o < 2; ++o) {
-          double vs = 0.0, ts = 0.0;
-          for (int t = 5 * o; t < 5 * o + 5; ++t) {
-            vs += G[10 * t + 9];
-            ts += G[10 * t + 9] * tr[t];
-          }
-          avg[o] = ts / vs;
-        }
-      }
-      std::uint8_t now = 0;
-      for (int t = 0; t < kTetsPerZone; ++t) {
-        const double* l = L[t];
-        double* s = S + 6 * t;
-        const double corr = (avg[t / 5] - tr[t]) / 3.0;
-        double de[6];
-        de[0] = (l[0] + corr) * dt;
-        de[1] = (l[4] + corr) * dt;
-        de[2] = (l[8] + corr) * dt;
-        de[3] = 0.5 * (l[1] + l[3]) * dt;
-        de[4] = 0.5 * (l[5] + l[7]) * dt;
-        de[5] = 0.5 * (l[2] + l[6]) * dt;
-        if constexpr (Large) {
-          // Jaumann correction sigma += (w sigma - sigma w) dt, w = (L - L^T)/2 (docs/theory.md 5.8).
-          const double w01 = 0.5 * (l[1] - l[3]) * dt, w02 = 0.5 * (l[2] - l[6]) * dt,
-                       w12 = 0.5 * (l[5] - l[7]) * dt;
-          const double sxx = s[0], syy = s[1], szz = s[2], sxy = s[3], syz = s[4], sxz = s[5];
-          // (w s - s w) is symmetric; with w = [[0,w01,w02],[-w01,0,w12],[-w02,-w12,0]]:
-          s[0] += 2.0 * (w01 * sxy + w02 * sxz);
-          s[1] += 2.0 * (-w01 * sxy + w12 * syz);
-          s[2] += 2.0 * (-w02 * sxz - w12 * syz);
-          s[3] += w01 * (syy - sxx) + w02 * syz + w12 * sxz;
-          s[4] += w12 * (szz - syy) - w01 * sxz - w02 * sxy;
-          s[5] += w02 * (szz - sxx) + w01 * syz - w12 * sxy;
-        }
-        now |= Law::update(m, de, s);
-      }
-      plastic[z] = static_cast<std::uint8_t>((plastic[z] & (kShearPast | kTensionPast)) | now | (now << 2));
-    }
-
-    // Nodal forces f^l = -V sigma g_l, averaged over the two overlays (docs/theory.md 5.5).
-    double f[8][3] = {};
-    for (int t = 0; t < kTetsPerZone; ++t) {
-      const double* g = G + 10 * t;
-      const double* s = S + 6 * t;
-      const double hv = -0.5 * g[9];
-      const auto& n = kZoneTets[t];
-      for (int l = 0; l < 3; ++l) {
-        const double* gl = g + 3 * l;
-        const double fx = hv * (s[0] * gl[0] + s[3] * gl[1] + s[5] * gl[2]);
-        const double fy = hv * (s[3] * gl[0] + s[1] * gl[1] + s[4] * gl[2]);
-        const double fz = hv * (s[5] * gl[0] + s[4] * gl[1] + s[2] * gl[2]);
-        f[n[l + 1]][0] += fx;
-        f[n[l + 1]][1] += fy;
-        f[n[l + 1]][2] += fz;
-        f[n[0]][0] -= fx;
-        f[n[0]][1] -= fy;
-        f[n[0]][2] -= fz;
+        zone::zone_body<Law, Large, ZoneAvg>(zone::ZoneRef{k, z, k.geom + 100 * static_cast<std::size_t>(z)}, k.dt,
+                                             update_stress);
       }
     }
-    double* out = slot + 24 * static_cast<std::size_t>(z);
-    for (int k = 0; k < 8; ++k)
-      for (int d = 0; d < 3; ++d) out[3 * k + d] = f[k][d];
   }
 }
 
@@ -381,8 +288,8 @@ void Model::zone_pass(bool update_stress) {
       else zone_kernel<Law, false, false>(list, update_stress);
     }
   };
-  run.template operator()<ElasticLaw>(elastic_zones_);
-  run.template operator()<MohrCoulombLaw>(mc_zones_);
+  run.template operator()<zone::ElasticLaw>(elastic_zones_);
+  run.template operator()<zone::MohrCoulombLaw>(mc_zones_);
   gather_zone_forces();
 }
 
@@ -725,7 +632,7 @@ std::vector<double> Model::tet_velocity_gradients() const {
       zone_geometry(p, local);
       G = local;
     }
-    for (int t = 0; t < kTetsPerZone; ++t) tet_gradient(vz, kZoneTets[t], G + 10 * t, &out[(z * kTetsPerZone + t) * 9]);
+    for (int t = 0; t < kTetsPerZone; ++t) zone::tet_gradient(vz, kZoneTets[t], G + 10 * t, &out[(z * kTetsPerZone + t) * 9]);
   }
   return out;
 }

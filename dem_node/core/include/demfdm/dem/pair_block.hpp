@@ -21,6 +21,7 @@
 #include <cstdint>
 
 #include "demfdm/dem/contact_state.hpp"
+#include "demfdm/simd/isa.hpp"
 #include "demfdm/dem/vec3.hpp"
 
 namespace demfdm::dem::pairblock {
@@ -116,11 +117,10 @@ struct MotionOut {
 };
 using MotionFn = void (*)(const MotionCtx&, std::size_t i0, MotionOut&);
 
-/// Instruction sets the lane loop is compiled for.
-enum class Isa { kBaseline, kAvx2, kAvx512 };
-bool isa_available(Isa isa);
-/// The best instruction set of this CPU.
-Isa best_isa();
+/// Instruction sets the lane loop is compiled for (common/simd).
+using simd::Isa;
+using simd::isa_available;
+using simd::best_isa;
 /// Stage 2 kernels. Linear: every lane. Soft bond: requires SoftUnload::kElastic and
 /// rescale (PairSet::pass_law falls back to the scalar pass otherwise).
 Fn linear_kernel(Isa isa);

@@ -59,6 +59,11 @@ struct HistoryRecord {
   std::array<double, 3> base_reaction{0.0, 0.0, 0.0};  // [N] sum of reactions at z = 0
 };
 
+/// How the zone pass runs the elastic small-strain zones: on vector lanes with the CPU's best
+/// instruction set (kAuto), a given one (tests and benches; a CPU without it is an error), or
+/// zone by zone (kScalar). Every choice gives the same bits.
+enum class ZoneKernel { kAuto, kScalar, kBaseline, kAvx2, kAvx512 };
+
 class Model {
  public:
   // Builds the mesh from params.mesh, assigns materials, applies the strongbox boundary if
@@ -70,6 +75,8 @@ class Model {
   // ---- stepping -------------------------------------------------------------------------
   void step();                  // one explicit step
   void step(std::int64_t n);    // n steps
+  void set_zone_kernel(ZoneKernel k) { zone_kernel_ = k; }
+  [[nodiscard]] ZoneKernel zone_kernel() const { return zone_kernel_; }
   [[nodiscard]] std::int64_t step_count() const { return step_; }
   [[nodiscard]] double time() const { return time_; }  // [s]; static mode: steps
   [[nodiscard]] double timestep() const { return dt_; }  // [s] in use (1 in static mode)
@@ -198,6 +205,7 @@ class Model {
   std::vector<std::int32_t> gp_zone_offset_;     // [n+1] CSR of (zone*8 + corner) around each gp
   std::vector<std::int32_t> gp_zone_entry_;
   std::vector<std::int32_t> base_points_;
+  ZoneKernel zone_kernel_ = ZoneKernel::kAuto;
   std::vector<std::int32_t> gp_interface_;       // [n] interface index of each gridpoint, -1: none
   std::vector<double> fcouple_;                  // [n_if,3]
   std::vector<double> kcouple_;                  // [n_if]
