@@ -856,10 +856,21 @@ class DemParticipant : public node::Participant {
   // contact force).
   double ratio() {
     if (!ratio_valid_) {
-      ratio_ = dist_live_ ? dist_->unbalanced_ratio(mean_contact_force()) : world_.unbalanced_ratio(mean_contact_force());
-      ratio_valid_ = true;
+      if (!dist_live_ && world_.gravity_on() && !skeleton_valid_) {
+        ball_ratios();  // the step's report reads both
+      } else {
+        ratio_ = dist_live_ ? dist_->unbalanced_ratio(mean_contact_force()) : world_.unbalanced_ratio(mean_contact_force());
+        ratio_valid_ = true;
+      }
     }
     return ratio_;
+  }
+  // Both ratios of the current state in one pass over the balls (dem::ball_ratios: their bits).
+  void ball_ratios() {
+    const dem::BallRatios r = dem::ball_ratios(world_, mean_contact_force());
+    ratio_ = r.unbalanced;
+    skeleton_ = r.skeleton;
+    ratio_valid_ = skeleton_valid_ = true;
   }
   // The mean contact force of the current state (both ratios divide by it; O(contacts)).
   double mean_contact_force() {
@@ -871,8 +882,12 @@ class DemParticipant : public node::Participant {
   }
   const dem::SkeletonRatio& skeleton() {
     if (!skeleton_valid_) {
-      skeleton_ = dist_live_ ? dist_->skeleton_ratio(mean_contact_force()) : dem::skeleton_ratio(world_, mean_contact_force());
-      skeleton_valid_ = true;
+      if (!dist_live_ && !ratio_valid_) {
+        ball_ratios();
+      } else {
+        skeleton_ = dist_live_ ? dist_->skeleton_ratio(mean_contact_force()) : dem::skeleton_ratio(world_, mean_contact_force());
+        skeleton_valid_ = true;
+      }
     }
     return skeleton_;
   }

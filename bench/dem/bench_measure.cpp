@@ -3,7 +3,8 @@
 // measurements"). The guard (finite values, escape, kinetic energy) is timed as the node runs it,
 // in one pass (dem::screen_balls), and as the three separate tests it replaced; the measurements
 // are the contact scan (critical step and mean contact force) and the unbalanced and skeleton
-// ratios.
+// ratios, timed one after the other and in one pass (dem::ball_ratios, as the node forms them;
+// `measurements` counts the one pass).
 //
 //   bench_measure CHECKPOINT_DIR [steps=300] [rounds=1] [measure_threads] [step_threads]
 //
@@ -77,7 +78,7 @@ int main(int argc, char** argv) try {
       }
     std::vector<double> scratch;
     w.reset_phase_times();
-    double t_step = 0, t_sep = 0, t_screen = 0, t_scan = 0, t_ratio = 0, t_skel = 0, sink = 0;
+    double t_step = 0, t_sep = 0, t_screen = 0, t_scan = 0, t_ratio = 0, t_skel = 0, t_both = 0, sink = 0;
     for (int s = 0; s < steps; ++s) {
       // The step and the guard on the World's threads (the node's guard runs before the forces
       // go out), the measurements on `mt`.
@@ -108,23 +109,38 @@ int main(int argc, char** argv) try {
       const auto t3 = Clock::now();
       const World::ContactScan sc = static_cast<const World&>(w).contact_scan(true, true);
       const auto t4 = Clock::now();
-      sink += w.unbalanced_ratio(sc.fc);
-      const auto t5 = Clock::now();
-      if (w.gravity_on()) sink += skeleton_ratio(w, sc.fc).ratio;
-      const auto t6 = Clock::now();
-      sink += sc.dt;
-      t_step += ms(t0, t1), t_sep += dt_sep, t_screen += dt_screen, t_scan += ms(t3, t4), t_ratio += ms(t4, t5),
-          t_skel += ms(t5, t6);
+      // The two ratios one after the other and in one pass (dem::ball_ratios, as the node forms
+      // them with gravity on), first the one, then the other on alternate steps.
+      double unb = 0.0, skel = 0.0;
+      BallRatios both;
+      for (int k = 0; k < 2; ++k) {
+        if ((k + s) % 2 == 0) {
+          const auto a = Clock::now();
+          unb = w.unbalanced_ratio(sc.fc);
+          const auto b = Clock::now();
+          if (w.gravity_on()) skel = skeleton_ratio(w, sc.fc).ratio;
+          t_ratio += ms(a, b), t_skel += ms(b, Clock::now());
+        } else if (w.gravity_on()) {
+          const auto a = Clock::now();
+          both = ball_ratios(w, sc.fc);
+          t_both += ms(a, Clock::now());
+        }
+      }
+      if (w.gravity_on() && (both.unbalanced != unb || both.skeleton.ratio != skel))
+        throw std::runtime_error("ball_ratios disagrees with the two ratios");
+      sink += unb + skel + sc.dt;
+      t_step += ms(t0, t1), t_sep += dt_sep, t_screen += dt_screen, t_scan += ms(t3, t4);
     }
     const double n = steps;
     const PhaseTimes& ph = w.phase_times();
     std::printf(
         "bench_measure balls %zu pairs %zu threads %d (measurements %d) steps %d | ms/step: step %.3f guard %.3f "
-        "(separate tests %.3f) scan %.3f ratio %.3f skeleton %.3f measurements %.3f total %.3f (checksum %.17g) | "
+        "(separate tests %.3f) scan %.3f ratio %.3f skeleton %.3f (both in one pass %.3f) measurements %.3f total %.3f "
+        "(checksum %.17g) | "
         "step phases ms/step: rebuild %.3f pair %.3f facet %.3f footing %.3f plane %.3f gather %.3f motion %.3f "
         "effects %.3f | facet contacts %zu footing contacts %zu\n",
         w.num_balls(), w.pair_contacts().size(), step_threads, mt, steps, t_step / n, t_screen / n, t_sep / n,
-        t_scan / n, t_ratio / n, t_skel / n, (t_scan + t_ratio + t_skel) / n, (t_step + t_screen + t_scan + t_ratio + t_skel) / n,
+        t_scan / n, t_ratio / n, t_skel / n, t_both / n, (t_scan + t_both) / n, (t_step + t_screen + t_scan + t_both) / n,
         sink, 1e3 * ph.rebuild / n, 1e3 * ph.pair / n, 1e3 * ph.facet / n, 1e3 * ph.footing / n, 1e3 * ph.plane / n,
         1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
         w.footing_contacts().size());

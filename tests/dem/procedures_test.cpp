@@ -6,6 +6,7 @@
 #include <cstring>
 #include <memory>
 #include <random>
+#include <string>
 
 #include <cmath>
 #include <stdexcept>
@@ -88,6 +89,48 @@ TEST(Procedures, SkeletonRatioSameBitsOnOneAndTwoThreads) {
     std::memcpy(&e, &ref.ratio, 8);
     EXPECT_EQ(a, e) << threads << " thread(s): " << s.ratio << " vs " << ref.ratio;
   }
+}
+
+// Both ratios in one pass (dem::ball_ratios, the DEM node's report of a coupled step) give the
+// bits of World::unbalanced_ratio and skeleton_ratio called one after the other: one and two
+// threads, with and without order-free sums, on the state of the test above (rattlers, fixed axes).
+TEST(Procedures, BallRatiosGiveTheBitsOfTheTwoRatios) {
+  World w(plain());
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  const double R = 1e-3;
+  for (int k = 0; k < 18; ++k)
+    for (int j = 0; j < 18; ++j)
+      for (int i = 0; i < 18; ++i) w.add_ball({3 * R * i, 3 * R * j, 3 * R * k}, R);
+  w.set_gravity(true, 1.0);
+  w.prepare();
+  auto& b = w.balls();
+  const Vec3 g = w.gravity();
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    b.f[i] = (i % 7 == 3) ? b.m[i] * g : Vec3{u(rng), u(rng), u(rng)};
+    b.fa[i] = (i % 7 == 3) ? Vec3{} : Vec3{u(rng), u(rng), u(rng)} * 1e-3;
+    b.fix[i] = (i % 11 == 5) ? static_cast<std::uint8_t>(kFixVz) : static_cast<std::uint8_t>(i % 13 == 2 ? kFixVel : 0);
+  }
+  auto bits = [](double v) {
+    std::uint64_t a;
+    std::memcpy(&a, &v, 8);
+    return a;
+  };
+  for (bool order_free : {false, true})
+    for (int threads : {1, 2}) {
+      w.mutable_params().threads = threads;
+      w.mutable_params().order_free_sums = order_free;
+      for (double fc : {0.37, 0.0}) {
+        const BallRatios r = ball_ratios(w, fc);
+        const SkeletonRatio s = skeleton_ratio(w, fc);
+        const std::string at = std::to_string(threads) + " thread(s), order-free " + std::to_string(order_free) +
+                               ", fc " + std::to_string(fc);
+        EXPECT_EQ(bits(r.unbalanced), bits(w.unbalanced_ratio(fc))) << at;
+        EXPECT_EQ(bits(r.skeleton.ratio), bits(s.ratio)) << at;
+        EXPECT_EQ(r.skeleton.rattlers, s.rattlers) << at;
+        EXPECT_GT(s.rattlers, 800u);
+      }
+    }
 }
 
 // The slabs tile the block from its top down; every ball centre inside the block is counted

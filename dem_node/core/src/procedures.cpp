@@ -99,6 +99,25 @@ SkeletonRatio skeleton_ratio(const World& w, double fc) {
   return skeleton_ratio_of(sum, rattlers, w.num_balls(), fc);
 }
 
+BallRatios ball_ratios(const World& w, double fc) {
+  const std::size_t n = w.num_balls();
+  const bool par = w.thread_count() > 1 && n > 4096;
+  if (n == 0 || par || w.params().order_free_sums) return {w.unbalanced_ratio(fc), skeleton_ratio(w, fc)};
+  const Particles& b = w.balls();
+  const Vec3 g = w.gravity();
+  double unb = 0.0, skel = 0.0;
+  std::size_t rattlers = 0;
+  for (std::size_t u = 0; u < n; ++u) {
+    Vec3 f;
+    const bool r = rattler_of(b, u, g, f);  // f = F + F_a, as World::unbalanced_force_of forms it
+    const double t = term_of(b, u, f);      // World::unbalanced_force_of(u), bit for bit
+    unb += t;
+    rattlers += r;
+    skel += r ? 0.0 : t;
+  }
+  return {World::unbalanced_ratio_of(unb, n, fc), skeleton_ratio_of(skel, rattlers, n, fc)};
+}
+
 std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs) {
   if (slabs < 1) throw std::invalid_argument("stress_profile: slabs must be >= 1");
   std::vector<ProfileSlab> out;

@@ -679,9 +679,12 @@ double World::unbalanced_ratio() const {
 
 double World::unbalanced_ratio(double fc) const {
   if (pt_.size() == 0) return 0.0;
-  const double s = ordered_ball_sum([this](std::size_t i) { return unbalanced_force_of(i); });
-  if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
-  return (s / double(pt_.size())) / fc;
+  return unbalanced_ratio_of(ordered_ball_sum([this](std::size_t i) { return unbalanced_force_of(i); }), pt_.size(), fc);
+}
+
+double World::unbalanced_ratio_of(double sum, std::size_t balls, double fc) {
+  if (fc <= 0.0) return sum > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
+  return (sum / double(balls)) / fc;
 }
 
 double World::max_unbalanced_force() const {

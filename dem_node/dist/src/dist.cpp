@@ -1490,9 +1490,7 @@ double DistDem::mean_contact_force() const {
 double DistDem::unbalanced_ratio(double fc) const {
   const std::size_t n = num_balls();
   if (n == 0) return 0.0;
-  const double s = ball_sum([this](std::size_t i) { return w_->unbalanced_force_of(i); });
-  if (fc <= 0.0) return s > 0.0 ? std::numeric_limits<double>::infinity() : 0.0;
-  return (s / double(n)) / fc;
+  return World::unbalanced_ratio_of(ball_sum([this](std::size_t i) { return w_->unbalanced_force_of(i); }), n, fc);
 }
 
 DistDem::Balls DistDem::gather() const {

@@ -37,6 +37,17 @@ bool is_rattler(const World& w, std::size_t i, const Vec3& g);
 double skeleton_term(const World& w, std::size_t i, const Vec3& g);
 SkeletonRatio skeleton_ratio_of(double sum, std::size_t rattlers, std::size_t balls, double mean_contact_force);
 
+/// The engine's unbalanced-force ratio (World::unbalanced_ratio) and the skeleton ratio of one
+/// state, with its mean contact force given. A ball's skeleton term is its unbalanced force (+0
+/// for a rattler), so on one thread, without order-free sums, one pass over the balls forms both
+/// sums, each in row order, with one root per ball: the bits of the two functions called one
+/// after the other (which is what the other cases do).
+struct BallRatios {
+  double unbalanced = 0.0;
+  SkeletonRatio skeleton;
+};
+BallRatios ball_ratios(const World& w, double mean_contact_force);
+
 /// One horizontal slab of a vertical stress profile: particle-based stress (region_stress) of the
 /// balls whose centres lie in the slab, depth measured down from the block top.
 struct ProfileSlab {

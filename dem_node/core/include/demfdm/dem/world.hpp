@@ -425,6 +425,8 @@ class World {
   /// The same ratio with the mean contact force given (mean_contact_force() of this state), for
   /// callers that also need it elsewhere (the node's skeleton ratio): one contact loop per state.
   double unbalanced_ratio(double mean_contact_force) const;
+  /// The ratio from the sum of the balls' unbalanced forces (its last step, written once).
+  static double unbalanced_ratio_of(double sum, std::size_t balls, double mean_contact_force);
   double max_unbalanced_force() const;
   /// OpenMP threads of the passes: WorldParams::threads, or the OpenMP default when 0.
   int thread_count() const { return p_.threads > 0 ? p_.threads : omp_get_max_threads(); }
