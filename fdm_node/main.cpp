@@ -33,11 +33,14 @@ fdm::ModelParams model_params(const config::Scene& s) {
   continuum::model_keys_from_scene(s, p);
   p.gravity_level = s.has("gravity") ? s.real("gravity.level") * s.real("gravity.g0") / fdm::kStandardGravity : 0.0;
   p.strongbox_boundary = s.string("continuum.boundary") == "strongbox";
-  // In a coupled run with the serial scheme the continuum steps while the DEM waits for it, so
-  // its loops are on the critical path and the machine's cores are free for them: split them
-  // from a few hundred zones (the 2,780 zones of the paper's box were below the engine's default
-  // of 4,096 and ran on one thread). Results do not depend on it (fdm/params.hpp).
-  p.parallel_threshold = 512;
+  // Alone, the continuum has the machine's cores: split its loops from a few hundred zones. In a
+  // coupled run the DEM node takes measurements on one thread while the continuum steps (its
+  // forces have gone out), so a second continuum thread competes with it for a core: there the
+  // engine's default (4,096) holds, and the paper's 2,780-zone box steps on one thread. Default
+  // scene, 3,000-step windows, 10 alternated pairs (docs/speed.md, session 22): the zone pass
+  // 0.70-0.90 ms per step on one thread against 0.79-1.25 ms on two, lower in every pair. Results
+  // do not depend on it (fdm/params.hpp).
+  if (!s.has("coupling")) p.parallel_threshold = 512;
   try {
     fdm::validate(p);
   } catch (const std::invalid_argument& e) {
