@@ -7,8 +7,6 @@
 // and the footing (linear and Hertz–Mindlin; parallel-bond and soft-bond facets).
 #include <gtest/gtest.h>
 
-#include <algorithm>
-
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -48,7 +46,6 @@ struct Scene {
 };
 
 struct Result : test::BallState {
-  std::vector<double> norms;  // the last pass's kept force norms (World::keep_force_norms)
   std::vector<BondState> state;
   std::size_t pairs = 0;
   int count[5] = {0, 0, 0, 0, 0};  // by BondState
@@ -69,7 +66,7 @@ void bonded_setup(Scene& sc) {
 // Jittered cubic lattice of polydisperse balls (spacing below 2 R̄: neighbours overlap),
 // random velocities and spins; the packing is pulled apart (cell strain rate, or a radial
 // velocity field without the cell) so that bonds soften and break within the run.
-Result run(const Scene& sc, PairKernel kernel, bool norms = true) {
+Result run(const Scene& sc, PairKernel kernel) {
   const double R = 1e-4, s = sc.spacing * R;
   const int ns = sc.nside;
   WorldParams p;
@@ -86,7 +83,6 @@ Result run(const Scene& sc, PairKernel kernel, bool norms = true) {
   p.ball_ball.softbond.soft = 20.0;  // ζ: bonds break after a short softening branch
   World w(p);
   w.set_pair_kernel(kernel);
-  w.keep_force_norms(norms);  // as the DEM node: the pass forms every contact's ||F||
   std::mt19937_64 rng(2024);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const Vec3 c{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
@@ -106,7 +102,6 @@ Result run(const Scene& sc, PairKernel kernel, bool norms = true) {
   Result r;
   static_cast<test::BallState&>(r) = test::ball_state(w);
   r.pairs = w.pair_contacts().size();
-  if (norms) w.force_norm_values(r.norms);
   for (const BondHist& b : w.pair_contacts().bond) {
     r.state.push_back(b.state);
     ++r.count[static_cast<int>(b.state)];
@@ -152,7 +147,6 @@ const char* kernel_name(PairKernel k) {
 void check_scene(const Scene& sc) {
   const Result ref = run(sc, PairKernel::kScalar);
   ASSERT_GT(ref.pairs, 3u * ref.x.size() / 2);  // a connected packing, not a gas
-  ASSERT_GT(std::count_if(ref.norms.begin(), ref.norms.end(), [](double f) { return f > 0.0; }), 0);
   // the contacts carried load and slipped during the run
   ASSERT_GT(ref.e.friction, 0.0);
   std::printf("%s: %zu balls, %zu pairs; bonds intact %d softening %d broken tension %d shear %d; "
@@ -171,13 +165,7 @@ void check_scene(const Scene& sc) {
     EXPECT_TRUE(same_bits(r.e.friction, ref.e.friction));
     EXPECT_TRUE(same_bits(r.e.softening, ref.e.softening));
     EXPECT_TRUE(same_bits(r.e.strain, ref.e.strain));
-    EXPECT_TRUE(r.norms.size() == ref.norms.size() &&
-                std::memcmp(r.norms.data(), ref.norms.data(), r.norms.size() * sizeof(double)) == 0)
-        << "the pass's force norms differ";
   }
-  // The kernels without the norms (bench_dem's pass) give the same balls.
-  const Result r = run(sc, PairKernel::kAuto, false);
-  EXPECT_TRUE(same_bits(r.x, ref.x) && same_bits(r.f, ref.f) && same_bits(r.t, ref.t)) << sc.name << ", no norms";
 }
 
 }  // namespace

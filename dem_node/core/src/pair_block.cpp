@@ -28,23 +28,17 @@ namespace avx512 {
 
 using simd::pick;
 
-Fn linear_kernel(Isa isa, bool norms) {
-  return norms ? pick<Fn>(isa, &baseline::linear_block<true>, &avx2::linear_block<true>, &avx512::linear_block<true>)
-               : pick<Fn>(isa, &baseline::linear_block<false>, &avx2::linear_block<false>, &avx512::linear_block<false>);
+Fn linear_kernel(Isa isa) {
+  return pick<Fn>(isa, &baseline::linear_block, &avx2::linear_block, &avx512::linear_block);
 }
-Fn softbond_kernel(Isa isa, bool norms) {
-  return norms ? pick<Fn>(isa, &baseline::softbond_block<true>, &avx2::softbond_block<true>,
-                          &avx512::softbond_block<true>)
-               : pick<Fn>(isa, &baseline::softbond_block<false>, &avx2::softbond_block<false>,
-                          &avx512::softbond_block<false>);
+Fn softbond_kernel(Isa isa) {
+  return pick<Fn>(isa, &baseline::softbond_block, &avx2::softbond_block, &avx512::softbond_block);
 }
-Fn hertz_kernel(Isa isa, bool norms) {
-  return norms ? pick<Fn>(isa, &baseline::hertz_block<true>, &avx2::hertz_block<true>, &avx512::hertz_block<true>)
-               : pick<Fn>(isa, &baseline::hertz_block<false>, &avx2::hertz_block<false>, &avx512::hertz_block<false>);
+Fn hertz_kernel(Isa isa) {
+  return pick<Fn>(isa, &baseline::hertz_block, &avx2::hertz_block, &avx512::hertz_block);
 }
-Fn pbond_kernel(Isa isa, bool norms) {
-  return norms ? pick<Fn>(isa, &baseline::pbond_block<true>, &avx2::pbond_block<true>, &avx512::pbond_block<true>)
-               : pick<Fn>(isa, &baseline::pbond_block<false>, &avx2::pbond_block<false>, &avx512::pbond_block<false>);
+Fn pbond_kernel(Isa isa) {
+  return pick<Fn>(isa, &baseline::pbond_block, &avx2::pbond_block, &avx512::pbond_block);
 }
 WallFn linear_wall_kernel(Isa isa) {
   return pick<WallFn>(isa, &baseline::linear_wall_block, &avx2::linear_wall_block, &avx512::linear_wall_block);

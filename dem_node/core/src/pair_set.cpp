@@ -188,15 +188,6 @@ template <class L>
 [[gnu::always_inline]] inline double force_norm(const ContactHist& h, const BondHist* b) {
   return norm(L::force(h, b));
 }
-// Whether a lane the kernel finished (not redone by the scalar law) leaves its contact's key()
-// unchanged: true where the law's store_lane keeps kActive and the bond state (Law::kLaneKeepsKey).
-template <class L>
-constexpr bool lane_keeps_key() {
-  if constexpr (requires { L::kLaneKeepsKey; })
-    return L::kLaneKeepsKey;
-  else
-    return false;
-}
 }  // namespace
 
 void PairSet::pass(SetContext& cx, double dt) {
@@ -277,7 +268,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   pairblock::Fn kern = nullptr;
   {
     pairblock::Isa isa;
-    if (detail::block_isa(cx.kernel, isa)) kern = Law::lane_kernel(isa, lc, SN != nullptr);
+    if (detail::block_isa(cx.kernel, isa)) kern = Law::lane_kernel(isa, lc);
   }
   const pairblock::Ctx ctx{V, W, R, H, BD, lc, dt, ed, Periodic && strained};
   // Threaded: the B contacts of split balls after their first chunk save into their records; a
@@ -511,10 +502,8 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
-        // A lane the kernel finished leaves a soft-bond contact's key as it was (its store keeps
-        // the flags' kActive and the bond state), and brings its force norm (kernel with norms).
-        if (!lane_keeps_key<Law>() || out.scalar[l]) CH_[cl] |= key_(cl) != k0[l];
-        if (SN_) SN_[cl] = out.scalar[l] ? force_norm<Law>(H_[cl], bond_at_(cl)) : out.sn[l];
+        CH_[cl] |= key_(cl) != k0[l];
+        if (SN_) SN_[cl] = force_norm<Law>(H_[cl], bond_at_(cl));
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
           if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};

@@ -52,7 +52,6 @@ struct Out {
   double kn[kLanes], ks[kLanes];     // Hertz–Mindlin: tangent stiffnesses
   std::int64_t active[kLanes], slip[kLanes];  // new kActive / kSlip flags (linear)
   std::int64_t scalar[kLanes];  // lane must be redone by the scalar law
-  double sn[kLanes];  // ‖Law::force‖ of the stored history (the kernels "with norms" only)
 };
 
 /// Read-only inputs of stage 2.
@@ -123,14 +122,12 @@ using simd::Isa;
 using simd::isa_available;
 using simd::best_isa;
 /// Stage 2 kernels. Linear: every lane. Soft bond: requires SoftUnload::kElastic and
-/// rescale (PairSet::pass_law falls back to the scalar pass otherwise). `norms`: the kernel also
-/// writes Out::sn, each lane's ‖Law::force‖ of the history it stores (the pass's kept force
-/// norms, World::keep_force_norms), in the lanes instead of the scalar stage 3.
-Fn linear_kernel(Isa isa, bool norms);
-Fn softbond_kernel(Isa isa, bool norms);
-Fn hertz_kernel(Isa isa, bool norms);
+/// rescale (PairSet::pass_law falls back to the scalar pass otherwise).
+Fn linear_kernel(Isa isa);
+Fn softbond_kernel(Isa isa);
+Fn hertz_kernel(Isa isa);
 /// Parallel bond: every lane (requires rescale).
-Fn pbond_kernel(Isa isa, bool norms);
+Fn pbond_kernel(Isa isa);
 MotionFn motion_kernel(Isa isa);
 /// Stage 2 of the wall contacts (WallIn): every law (requires rescale; the soft bond also
 /// SoftUnload::kElastic; the bonded laws a BondHist per contact).

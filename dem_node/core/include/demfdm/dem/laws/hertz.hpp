@@ -119,8 +119,8 @@ struct HertzLaw : LawDefaults {
   static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale ? pairblock::hertz_wall_kernel(isa) : nullptr;
   }
-  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c, bool norms) {
-    return c.rescale ? pairblock::hertz_kernel(isa, norms) : nullptr;
+  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::hertz_kernel(isa) : nullptr;
   }
   static bool lane_needs_scalar(const BondHist*) { return false; }
   static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {

@@ -177,8 +177,8 @@ struct LinearLaw : LawDefaults {
   static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale ? pairblock::linear_wall_kernel(isa) : nullptr;
   }
-  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c, bool norms) {
-    return c.rescale ? pairblock::linear_kernel(isa, norms) : nullptr;
+  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::linear_kernel(isa) : nullptr;
   }
   static bool lane_needs_scalar(const BondHist* /*b*/) { return false; }
   static void store_lane(ContactHist& h, BondHist* /*b*/, const pairblock::Out& out, int l) {

@@ -183,8 +183,8 @@ struct PBondLaw : LawDefaults {
   static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale ? pairblock::pbond_wall_kernel(isa) : nullptr;
   }
-  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c, bool norms) {
-    return c.rescale ? pairblock::pbond_kernel(isa, norms) : nullptr;
+  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale ? pairblock::pbond_kernel(isa) : nullptr;
   }
   static bool lane_needs_scalar(const BondHist* /*b*/) { return false; }
   static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {

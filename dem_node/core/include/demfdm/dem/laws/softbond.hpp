@@ -303,14 +303,11 @@ struct SoftBondLaw : LawDefaults {
   static pairblock::WallFn wall_lane_kernel(pairblock::Isa isa, const LawConst& c) {
     return c.rescale && c.unload == SoftUnload::kElastic ? pairblock::softbond_wall_kernel(isa) : nullptr;
   }
-  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c, bool norms) {
-    return c.rescale && c.unload == SoftUnload::kElastic ? pairblock::softbond_kernel(isa, norms) : nullptr;
+  static pairblock::Fn lane_kernel(pairblock::Isa isa, const LawConst& c) {
+    return c.rescale && c.unload == SoftUnload::kElastic ? pairblock::softbond_kernel(isa) : nullptr;
   }
   /// Unbonded soft-bond contacts take the scalar law (§3.5 moment limits).
   static bool lane_needs_scalar(const BondHist* b) { return !bonded(b->state); }
-  /// store_lane keeps kActive and the bond state (a lane that would change them is redone by the
-  /// scalar law): the pass skips the key check of the lanes it stores.
-  static constexpr bool kLaneKeepsKey = true;
   static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {
     h.fs = {out.fs[0][l], out.fs[1][l], out.fs[2][l]};
     h.fn = out.fn[l];
