@@ -50,13 +50,11 @@ TEST(Procedures, SkeletonRatioLeavesOutRattlers) {
   EXPECT_DOUBLE_EQ(b.f[2].z, -b.m[2] * 9.81);
 }
 
-// The skeleton ratio's one-thread loop (sums fused into the pass over the balls) and its
-// threaded path (work arrays, then the sums in row order) give the bits of a plain loop over
-// is_rattler and skeleton_term, on 5,832 balls with random forces, some with fixed axes and
-// some rattlers.
-TEST(Procedures, SkeletonRatioSameBitsOnOneAndTwoThreads) {
-  World w(plain());
-  std::mt19937_64 rng(7);
+namespace {
+// 5,832 balls under gravity with random forces (every 7th a rattler: its force is its weight),
+// some with fixed axes.
+void random_forces(World& w, unsigned seed) {
+  std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const double R = 1e-3;
   for (int k = 0; k < 18; ++k)
@@ -67,10 +65,21 @@ TEST(Procedures, SkeletonRatioSameBitsOnOneAndTwoThreads) {
   auto& b = w.balls();
   const Vec3 g = w.gravity();
   for (std::size_t i = 0; i < b.size(); ++i) {
-    b.f[i] = (i % 7 == 3) ? b.m[i] * g : Vec3{u(rng), u(rng), u(rng)};  // every 7th a rattler
+    b.f[i] = (i % 7 == 3) ? b.m[i] * g : Vec3{u(rng), u(rng), u(rng)};
     b.fa[i] = (i % 7 == 3) ? Vec3{} : Vec3{u(rng), u(rng), u(rng)} * 1e-3;
     b.fix[i] = (i % 11 == 5) ? static_cast<std::uint8_t>(kFixVz) : static_cast<std::uint8_t>(i % 13 == 2 ? kFixVel : 0);
   }
+}
+}  // namespace
+
+// The skeleton ratio's one-thread loop (sums fused into the pass over the balls) and its
+// threaded path (work arrays, then the sums in row order) give the bits of a plain loop over
+// is_rattler and skeleton_term, on 5,832 balls with random forces, some with fixed axes and
+// some rattlers.
+TEST(Procedures, SkeletonRatioSameBitsOnOneAndTwoThreads) {
+  World w(plain());
+  random_forces(w, 7);
+  auto& b = w.balls();
   const double fc = 0.37;
   double sum = 0.0;
   std::size_t rattlers = 0;
@@ -96,21 +105,7 @@ TEST(Procedures, SkeletonRatioSameBitsOnOneAndTwoThreads) {
 // threads, with and without order-free sums, on the state of the test above (rattlers, fixed axes).
 TEST(Procedures, BallRatiosGiveTheBitsOfTheTwoRatios) {
   World w(plain());
-  std::mt19937_64 rng(11);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  const double R = 1e-3;
-  for (int k = 0; k < 18; ++k)
-    for (int j = 0; j < 18; ++j)
-      for (int i = 0; i < 18; ++i) w.add_ball({3 * R * i, 3 * R * j, 3 * R * k}, R);
-  w.set_gravity(true, 1.0);
-  w.prepare();
-  auto& b = w.balls();
-  const Vec3 g = w.gravity();
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    b.f[i] = (i % 7 == 3) ? b.m[i] * g : Vec3{u(rng), u(rng), u(rng)};
-    b.fa[i] = (i % 7 == 3) ? Vec3{} : Vec3{u(rng), u(rng), u(rng)} * 1e-3;
-    b.fix[i] = (i % 11 == 5) ? static_cast<std::uint8_t>(kFixVz) : static_cast<std::uint8_t>(i % 13 == 2 ? kFixVel : 0);
-  }
+  random_forces(w, 11);
   auto bits = [](double v) {
     std::uint64_t a;
     std::memcpy(&a, &v, 8);
