@@ -236,6 +236,67 @@ TEST(Dist, LinearFreeRcbBalancedSameBits) {
   check(sc);
 }
 
+// Bonds stretched beyond the halo (2 R_max + skin): pairs of balls bonded by unbreakable,
+// soft parallel bonds fly apart across the cuts, their gaps growing to several skins, so that a
+// bonded partner is farther from its pair's rank than any ghost. Newton off: the partner rule
+// (each owner sends its ball to the owners of its partners) keeps both rows on both ranks, the
+// bits of one World. At 3 ranks the outer bricks start without pairs and receive bonded ones.
+void check_stretched() {
+  auto build2 = [] {
+    WorldParams p;
+    p.threads = 1;
+    p.thread_independent = true;
+    p.ball_ball.model = ContactModel::kLinearPBond;
+    p.ball_ball.pbond.ten = 1e30;
+    p.ball_ball.pbond.coh = 1e30;
+    p.ball_ball.pbond.emod = 1e3;
+    p.dt_fixed = 5e-8;
+    auto w = std::make_unique<World>(p);
+    // four pairs in a row along x, each pair touching, its balls moving apart along x
+    for (int k = 0; k < 4; ++k) {
+      const double y = 3.0 * kR * k;
+      w->add_ball({-kR, y, 0.0}, kR);
+      w->add_ball({kR, y, 0.0}, kR);
+    }
+    w->prepare();
+    w->bond_ball_ball(-1.0, 0.01 * kR);
+    for (std::size_t i = 0; i < w->num_balls(); ++i) w->balls().v[i] = {(i % 2 ? 1.0 : -1.0) * (2.0 + 0.2 * double(i)), 0, 0};
+    w->prepare();
+    return w;
+  };
+  std::unique_ptr<World> full = build2();
+  BrickGrid g;
+  g.lo = {-12 * kR, -5 * kR, -5 * kR};  // (the end bricks of a free axis reach to infinity)
+  g.len = {24 * kR, 20 * kR, 10 * kR};
+  g.n[0] = g_size;
+  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  d.load(*full);
+  const int steps = 3000;
+  double widest = 0.0;  // largest gap of a pair over the run, in skins (the reference's)
+  d.step(steps);
+  const DistDem::Balls got = d.gather();
+  long long mine = static_cast<long long>(d.world().pair_contacts().size()), listed = 0;
+  MPI_Reduce(&mine, &listed, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  if (g_rank == 0) {
+    std::unique_ptr<World> ref = build2();
+    for (int s = 0; s < steps; ++s) {
+      ref->step(1);
+      const Particles& b = ref->balls();
+      for (std::size_t i = 0; i + 1 < b.size(); i += 2)
+        widest = std::max(widest, (norm(b.x[i + 1] - b.x[i]) - 2 * kR) / ref->skin());
+    }
+    std::printf("stretched bonds, %d ranks: widest gap %.2f skins (halo %.2f skins), %lld pairs listed over "
+                "the ranks (one World: %zu), %lld bonds intact\n",
+                g_size, widest, (2 * kR + ref->skin()) / ref->skin(), listed,
+                ref->pair_contacts().size(), static_cast<long long>(bond_counts(*ref).intact));
+    EXPECT_GT(widest, (2 * kR + ref->skin()) / ref->skin() + 1.0) << "the bonds must stretch beyond the halo";
+    EXPECT_EQ(bond_counts(*ref).intact, 4u);
+    test::expect_same_balls(got, *ref, ref->num_balls());
+  }
+  test::share_verdict();
+}
+TEST(Dist, StretchedBondsPartnerRuleSameBits) { check_stretched(); }
+
 // BrickGrid::near against its definition, brick by brick: every brick that, grown by the halo
 // (the end bricks of a free axis reaching to infinity), holds the point or a periodic image of
 // it; ascending, once each; the owner among them. Grids with one brick along an axis (periodic

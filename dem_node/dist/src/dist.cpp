@@ -915,7 +915,10 @@ void DistDem::exchange() {
   // Destinations of each own row (counting sort by row): its owner, the ranks within the halo,
   // the owners of its contacts' partners.
   const PairContacts& pc = w_->pair_contacts();
-  const bool has_bond = !pc.bond.empty();
+  // from the law, not from this rank's list: a rank without pairs still receives bonded ones
+  // (with `!pc.bond.empty()` it dropped their bond histories, and its next rebuild read past
+  // the empty array: tests/dist, Dist.StretchedBonds* at 3 ranks)
+  const bool has_bond = law_has_bond(p_.ball_ball.model);
   std::vector<std::uint32_t>& off = bf.off;
   std::vector<std::uint32_t>& near_off = bf.near_off;
   off.assign(n + 1, 0);
