@@ -14,6 +14,8 @@
 //            BENCH_DIST_REPLICATE=K: K x K x K copies of the periodic packing first (a wider block).
 //   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts);
 //            BENCH_DIST_WEIGHT=time weighs balls by their rank's measured time, not contacts.
+// BENCH_DIST_NEWTON=1: `newton on` (DistDem::set_newton): each pair across a face computed once,
+// the ghosts' forces sent back to their owners.
 // BENCH_DIST_DECOMP=rcb: recursive coordinate bisection (BrickGrid::set_rcb) instead of the cut
 // along one axis; `balance` then moves every cut of the tree.
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
@@ -349,6 +351,7 @@ int main(int argc, char** argv) {
   else
     g.n[footing ? 2 : 0] = P;
   DistDem d(MPI_COMM_WORLD, p, g);
+  if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
   d.load(full);
   DistDem::Balance bal;
   bal.every = balance;

@@ -127,17 +127,20 @@ void PairSet::rebuild(SetContext& cx) {
       detail::init_contact(pt, a, b, q.h.back(), has_bond ? &q.bond.back() : nullptr, cx.p.ball_ball, false);
     }
   };
-  // A rank's world (cx.ghost): a pair of two ghosts acts on ghosts only and is not kept.
+  // A rank's world (cx.ghost): a pair of two ghosts acts on ghosts only and is not kept; with
+  // `newton`, neither is a pair whose ball A (the lower row) is a ghost: its owner computes it.
   const std::uint8_t* G = cx.ghost;
+  const bool newton = cx.newton;
+  auto elsewhere = [&](std::uint32_t a, std::uint32_t b) { return G && (newton ? G[a] != 0 : (G[a] & G[b]) != 0); };
   for (const auto& e : np)
-    if (!G || !(G[e.a] & G[e.b])) push(e.a, e.b, e.s);
+    if (!elsewhere(e.a, e.b)) push(e.a, e.b, e.s);
   // bonded contacts beyond the cut-off are kept (a bond never disappears in a rebuild)
   bool appended = false;
   carry.rest(
       pc.h, pc.bond, has_bond,
       [&](std::size_t k) {
         std::uint32_t a = pc.a[k], b = pc.b[k];
-        if (G && (G[a] & G[b])) return;
+        if (elsewhere(a, b)) return;
         Vec3 d = pt.x[b] - pt.x[a];
         std::array<std::int8_t, 4> s{0, 0, 0, 0};
         if (per)

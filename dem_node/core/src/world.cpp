@@ -48,7 +48,7 @@ World::~World() = default;
 SetContext World::context() {
   return SetContext{pt_,           p_,           skin_,          edot_,
                     thread_count(), kernel_,      e_slip_dead_,   e_soft_dead_,
-                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data()};
+                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), newton_};
 }
 
 PairContacts& World::pair_contacts() {
@@ -268,6 +268,7 @@ void World::force_pass(double dt) {
       continue;
     }
     set->pass(cx, dt);
+    if (set == pairs_.get() && newton_reverse_) newton_reverse_(pt_.f.data(), pt_.t.data());
     lap(times_.*(set->phase()));
   }
   if (p_.order_free_sums && !wall_sums_by_caller_) order_free_wall_sums();
@@ -460,6 +461,7 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
     if (want_dt) stiffness_sums();
   }
   if (!want_dt) return out;
+  if (newton_stiffness_) newton_stiffness_(kt.data(), kr.data());  // (outside the sections: MPI)
   // The smallest step over the balls (a minimum: exact in any order). The square root is
   // monotonic and correctly rounded, so the root of the smallest ratio is the smallest root: one
   // root instead of two per ball, and a branch-free loop that vectorises.
@@ -600,6 +602,13 @@ void World::set_counters(const Counters& k) {
 }
 
 void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }
+
+void World::set_newton(bool on, std::function<void(Vec3*, Vec3*)> reverse,
+                       std::function<void(double*, double*)> stiffness) {
+  newton_ = on;
+  newton_reverse_ = on ? std::move(reverse) : nullptr;
+  newton_stiffness_ = on ? std::move(stiffness) : nullptr;
+}
 
 double World::reduced_step(double dt) const { return step_reduction_ ? step_reduction_(dt) : dt; }
 

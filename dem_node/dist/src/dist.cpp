@@ -523,7 +523,7 @@ void DistDem::load(const World& full) {
   const PairContacts& fc = full.pair_contacts();
   for (std::size_t c = 0; c < fc.size(); ++c) {
     if (own[fc.a[c]] == rank_) local[fc.b[c]] = 1;
-    if (own[fc.b[c]] == rank_) local[fc.a[c]] = 1;
+    if (!newton_ && own[fc.b[c]] == rank_) local[fc.a[c]] = 1;
   }
   Particles pt;
   std::vector<std::uint8_t> ghost;
@@ -538,7 +538,7 @@ void DistDem::load(const World& full) {
   const bool has_bond = !fc.bond.empty();
   for (std::size_t c = 0; c < fc.size(); ++c) {
     const std::uint32_t a = fc.a[c], b = fc.b[c];
-    if (!(own[a] == rank_ || own[b] == rank_)) continue;
+    if (newton_ ? own[a] != rank_ : !(own[a] == rank_ || own[b] == rank_)) continue;
     pc.a.push_back(static_cast<std::uint32_t>(row[a]));
     pc.b.push_back(static_cast<std::uint32_t>(row[b]));
     pc.shift.push_back(fc.shift[c]);
@@ -601,6 +601,14 @@ void DistDem::load(const World& full) {
   // again would run another force pass, which is not the identity on every law's history.
   // Otherwise: prepared here, as `full.prepare()` would.
   run_disp2_ = 0.0;
+  if (newton_) {
+    // the ghosts' forces and stiffness sums back to their owners (the forward lists, reversed:
+    // built before a prepare's force pass needs them)
+    build_forward();
+    w_->set_newton(
+        true, [this](Vec3* f, Vec3* t) { reverse(&f->x, &t->x, 3); },
+        [this](double* kt, double* kr) { reverse(kt, kr, 1); });
+  }
   if (k.prepared) {
     run_disp2_ = k.max_disp2;
   } else {
@@ -608,7 +616,54 @@ void DistDem::load(const World& full) {
   }
   reduce_walls();
   exchanges_ = 0;
-  build_forward();
+  if (!newton_) build_forward();
+}
+
+void DistDem::set_newton(bool on) {
+  if (w_) throw std::logic_error("DistDem::set_newton: call it before load.");
+  newton_ = on;
+}
+
+// The forward exchange reversed: each ghost row's values to the rank that forwards it (its
+// owner), which adds them to its own row in ascending source rank, each rank's rows in id
+// order (a fixed order: the same bits for the same cuts).
+void DistDem::reverse(double* a, double* b, int w) {
+  const std::size_t W = static_cast<std::size_t>(w);
+  std::vector<std::size_t> at(static_cast<std::size_t>(size_) + 1, 0);
+  for (int r = 0; r < size_; ++r)
+    at[static_cast<std::size_t>(r) + 1] = at[static_cast<std::size_t>(r)] + 2 * W * send_rows_[static_cast<std::size_t>(r)].size();
+  rev_in_.resize(at.back());
+  rev_out_.resize(static_cast<std::size_t>(size_));
+  std::vector<MPI_Request>& req = fwd_req_;
+  req.clear();
+  constexpr int kTag = 7302;
+  for (int r = 0; r < size_; ++r) {
+    const std::size_t ur = static_cast<std::size_t>(r);
+    if (send_rows_[ur].empty()) continue;
+    req.emplace_back();
+    MPI_Irecv(rev_in_.data() + at[ur], static_cast<int>(at[ur + 1] - at[ur]), MPI_DOUBLE, r, kTag, comm_, &req.back());
+  }
+  for (int r = 0; r < size_; ++r) {
+    const std::size_t ur = static_cast<std::size_t>(r);
+    if (recv_rows_[ur].empty()) continue;
+    std::vector<double>& o = rev_out_[ur];
+    o.clear();
+    for (std::uint32_t i : recv_rows_[ur]) {
+      o.insert(o.end(), a + i * W, a + (i + 1) * W);
+      o.insert(o.end(), b + i * W, b + (i + 1) * W);
+    }
+    req.emplace_back();
+    MPI_Isend(o.data(), static_cast<int>(o.size()), MPI_DOUBLE, r, kTag, comm_, &req.back());
+  }
+  MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
+  for (int r = 0; r < size_; ++r) {
+    const std::size_t ur = static_cast<std::size_t>(r);
+    const double* q = rev_in_.data() + at[ur];
+    for (std::uint32_t i : send_rows_[ur]) {
+      for (std::size_t k = 0; k < W; ++k) a[i * W + k] += *q++;
+      for (std::size_t k = 0; k < W; ++k) b[i * W + k] += *q++;
+    }
+  }
 }
 
 // Every rank's wall-contact shares go to rank 0, which merges them in (kind, ball id, wall)
@@ -933,8 +988,41 @@ void DistDem::exchange() {
     }
     near_off[i + 1] = static_cast<std::uint32_t>(near_all.size());
   }
+  // `newton`: a pair lives on the owner of its ball A, which must hold B. B's owner sends B to
+  // the bricks within the halo of B; where A's new owner is not one of them (a bond stretched
+  // beyond the halo), this rank asks B's owner for it (a need record: B's id, the rank), in a
+  // round of its own, made only when some rank has one.
+  std::vector<std::uint64_t> needs;  // (id, rank) pairs received: rank needs my ball id
+  if (newton_) {
+    std::vector<std::vector<std::uint64_t>> ask(P);
+    bool any = false;
+    for (std::size_t c = 0; c < pc.size(); ++c) {
+      const std::uint32_t a = pc.a[c], b = pc.b[c];
+      if (mine(b)) continue;  // the partner rule below
+      const int ra = own[a];
+      if (ra == own[b]) continue;
+      grid_.near(pt.x[b], halo_, nb);
+      if (std::binary_search(nb.begin(), nb.end(), ra)) continue;
+      ask[static_cast<std::size_t>(old_owner[b])].insert(ask[static_cast<std::size_t>(old_owner[b])].end(),
+                                                         {pt.id[b], static_cast<std::uint64_t>(ra)});
+      any = true;
+    }
+    int mine_any = any, all_any = 0;
+    MPI_Allreduce(&mine_any, &all_any, 1, MPI_INT, MPI_MAX, comm_);
+    if (all_any) all_to_all(comm_, ask, needs, sbuf_, rbuf_);
+  }
+  std::vector<std::pair<std::uint32_t, int>> need_rows;  // (own row, rank that needs it)
+  for (std::size_t k = 0; k + 1 < needs.size(); k += 2) {
+    const auto it = std::lower_bound(pt.id.begin(), pt.id.end(), needs[k]);
+    const std::size_t i = static_cast<std::size_t>(it - pt.id.begin());
+    if (it == pt.id.end() || *it != needs[k] || !mine(i))
+      throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " was asked for ball " +
+                             std::to_string(needs[k]) + ", which it does not own.");
+    need_rows.emplace_back(static_cast<std::uint32_t>(i), static_cast<int>(needs[k + 1]));
+    ++off[i + 1];
+  }
   for (std::size_t c = 0; c < pc.size(); ++c) {
-    if (mine(pc.a[c])) ++off[pc.a[c] + 1];
+    if (!newton_ && mine(pc.a[c])) ++off[pc.a[c] + 1];
     if (mine(pc.b[c])) ++off[pc.b[c] + 1];
   }
   for (std::size_t i = 0; i < n; ++i) off[i + 1] += off[i];
@@ -948,14 +1036,21 @@ void DistDem::exchange() {
     dest[fill[i]++] = own[i];
     for (std::uint32_t k = near_off[i]; k < near_off[i + 1]; ++k) dest[fill[i]++] = near_all[k];
   }
+  for (const auto& [i, r] : need_rows) dest[fill[i]++] = r;
   // contacts: the partner rule, and the records for a new owner that did not own either ball
   std::vector<std::vector<PairRec>>& pout = buf_->pout;
   pout.resize(P);
   for (auto& o : pout) o.clear();
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const std::uint32_t a = pc.a[c], b = pc.b[c];
-    if (mine(a)) dest[fill[a]++] = own[b];
+    if (!newton_ && mine(a)) dest[fill[a]++] = own[b];
     if (mine(b)) dest[fill[b]++] = own[a];
+    if (newton_) {  // the pair goes with its ball A (always this rank's: the list's rule)
+      if (own[a] != rank_)
+        pout[static_cast<std::size_t>(own[a])].push_back(
+            PairRec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}});
+      continue;
+    }
     if (!(mine(a) || mine(b))) continue;
     const int oa = old_owner[a], ob = old_owner[b];
     auto send = [&](int d) {
@@ -1105,7 +1200,7 @@ void DistDem::exchange() {
   std::vector<std::int64_t>& psrc = bf.psrc;
   psrc.clear();
   auto push_pair = [&](std::int64_t a, std::int64_t b, std::int64_t from) {
-    if (ghost[static_cast<std::size_t>(a)] && ghost[static_cast<std::size_t>(b)]) return;
+    if (ghost[static_cast<std::size_t>(a)] && (newton_ || ghost[static_cast<std::size_t>(b)])) return;
     nc.a.push_back(static_cast<std::uint32_t>(a));
     nc.b.push_back(static_cast<std::uint32_t>(b));
     psrc.push_back(from);

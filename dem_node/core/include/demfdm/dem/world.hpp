@@ -335,6 +335,16 @@ class World {
   /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
   /// owner's). Collective for such a caller: every rank computes the step at the same steps.
   void set_step_reduction(std::function<double(double)> reduce);
+  /// A rank's World with `newton` on (DistDem::set_newton, docs/scaling.md): a ball-ball pair
+  /// is listed only where its ball A (the lower row, so the lower id) is not a ghost, and its
+  /// force on a ghost B stays in the ghost's row; `reverse` is called right after the pair pass
+  /// to add the ghosts' forces and torques into their owners' rows (LAMMPS's reverse
+  /// communication). `stiffness` does the same for the critical step's per-ball stiffness sums
+  /// (contact_scan). Both are collective for such a caller. Off: every pair with an own ball is
+  /// listed and computed on both sides (the rank-count independent bits).
+  void set_newton(bool on, std::function<void(Vec3* f, Vec3* t)> reverse,
+                  std::function<void(double* kt, double* kr)> stiffness);
+  bool newton() const { return newton_; }
   double time() const { return time_; }
   std::int64_t step_count() const { return step_; }
   double dt() const { return dt_; }
@@ -519,6 +529,9 @@ class World {
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
   std::function<double(double)> step_reduction_;  // set_step_reduction
+  bool newton_ = false;                           // set_newton
+  std::function<void(Vec3*, Vec3*)> newton_reverse_;
+  std::function<void(double*, double*)> newton_stiffness_;
   double reduced_step(double dt) const;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms

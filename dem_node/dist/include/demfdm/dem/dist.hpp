@@ -3,7 +3,9 @@
 // brick (owned) and copies of the balls within reach of it (ghosts), every row in ball-id order,
 // and the ball-ball pairs that have an owned ball. A pair of an owned ball and a ghost is
 // computed on both ranks, from the same inputs, so both keep the same history (LAMMPS's
-// `newton off` for pairs).
+// `newton off` for pairs). With set_newton(true) it is computed once, on the owner of its ball
+// A, and its force on the ghost goes back to the ghost's owner (`newton on`; not one World's
+// bits, see set_newton).
 //
 // Every step: the World's first half (integration), then the ghosts' x, v, ω from their owners
 // (point to point with the ranks that share ghosts with this one), then the rebuild test over
@@ -199,6 +201,15 @@ class DistDem {
     Weight weight = Weight::kContacts;
   };
   void set_balance(const Balance& b) { bal_ = b; }
+  /// `newton on` (LAMMPS's name; before load): a pair across a brick face is computed once, on
+  /// the rank that owns its ball A (the lower id), and the forces and torques it puts on a ghost
+  /// go back to the ghost's owner after the pair pass (reverse communication), as do the
+  /// ghost's stiffness sums for the critical step. A pair's history lives on A's owner and
+  /// migrates with A. It saves the ghost pairs' second computation, but a ball's sum then adds
+  /// its remote pairs after its local ones: the results depend on the rank count (within
+  /// round-off at first), unlike `newton off` (the default), whose bits are one World's.
+  void set_newton(bool on);
+  bool newton() const { return newton_; }
   const BrickGrid& grid() const { return grid_; }
   std::int64_t rebalances() const { return rebalances_; }
   /// This rank's load as the balancing weighs it: Σ over its own balls of 1 + listed contacts.
@@ -268,6 +279,11 @@ class DistDem {
   void exchange();  // migration, new ghosts, histories, forward lists; replaces the World's balls
   const std::vector<int>& peer_ranks();  // the bricks within the halo and the skin of this one
   void forward();   // the ghosts' x, v, ω from their owners
+  /// `newton`: the forward exchange reversed. Two per-row arrays of `w` doubles per row (the
+  /// forces and torques: w = 3; the stiffness sums: w = 1): each ghost row's values are added
+  /// into its owner's row, in source-rank and then row order (point to point with the ranks
+  /// that share ghosts with this one).
+  void reverse(double* a, double* b, int w);
   void build_forward();  // the forward lists of the current rows
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
@@ -293,6 +309,7 @@ class DistDem {
   std::unique_ptr<World> w_;
   double halo_ = 0.0;
   bool walls_every_step_ = false;  // a platen servo: the walls' sums reduced after every step (load)
+  bool newton_ = false;            // set_newton
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0, sparse_exchanges_ = 0;
   std::vector<int> peers_;                   // peer_ranks()
@@ -316,6 +333,8 @@ class DistDem {
   std::vector<std::vector<Vec3>> fwd_out_;
   std::vector<Vec3> fwd_in_;
   std::vector<MPI_Request> fwd_req_;
+  std::vector<std::vector<double>> rev_out_;  // reverse(): the ghost rows' values per owner
+  std::vector<double> rev_in_;
 };
 
 }  // namespace demfdm::dem
