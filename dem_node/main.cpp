@@ -631,9 +631,11 @@ class DemParticipant : public node::Participant {
         if (g.len[k] > g.len[axis]) axis = k;
       g.n[axis] = g_ranks.size;
     }
-    spdlog::info("dem: the block cut into {} bricks ({}){}", g_ranks.size,
-                 g.parts > 0 ? "recursive coordinate bisection" : "slabs", describe_cuts(g));
+    spdlog::info("dem: the block cut into {} bricks ({}){}{}", g_ranks.size,
+                 g.parts > 0 ? "recursive coordinate bisection" : "slabs", describe_cuts(g),
+                 s_.boolean("dem.newton") ? "; newton on: each pair across two bricks computed once" : "");
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
+    dist_->set_newton(s_.boolean("dem.newton"));
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
                         s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime
                                                                    : dem::DistDem::Weight::kContacts});

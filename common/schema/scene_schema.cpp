@@ -318,6 +318,13 @@ void declare_dem(config::Section& root) {
   d.choice("balance_weight", {"contacts", "time"}, std::string("contacts"),
            "What dem.balance_every weighs: a ball's listed contacts plus one (contacts), or its rank's "
            "measured compute time shared by the rank's balls (time, LAMMPS's weight time).");
+  d.boolean("newton", false,
+            "With dem.ranks > 1 (LAMMPS's newton on; docs/scaling.md): a ball-ball pair across two ranks' "
+            "bricks is computed once, on the rank of its lower-id ball, and its force on the other ball is "
+            "sent back to that ball's rank after the pass. Saves the second computation of every such "
+            "pair; the results then depend on the rank count (within round-off at first, which the "
+            "dynamics amplify). false: each such pair computed on both ranks, one process's bits at any "
+            "rank count.");
   d.reals("kick", "m/s", std::vector<double>{},
           "Stability studies: velocity [vx, vy, vz] given to the highest ball at the first stage that is not "
           "a specimen-generation stage; empty: none.");

@@ -545,7 +545,7 @@ std::vector<std::string> branch_conflicts(const config::Scene& saved, const conf
       return idx >= ran;
     }
     for (const char* p : {"dem.dt_safety", "dem.damping", "dem.dt_fixed", "dem.dt_above_critical", "dem.footing.",
-                          "dem.output.", "dem.escape_margin", "dem.ranks", "dem.decomposition", "dem.balance_", "coupling.",
+                          "dem.output.", "dem.escape_margin", "dem.ranks", "dem.decomposition", "dem.balance_", "dem.newton", "coupling.",
                           "output.", "bus.", "run.threads", "run.thread_independent", "run.order_free_sums", "run.name",
                           "run.description", "run.guard_", "run.checkpoint_", "continuum.output."})
       if (starts(k, p)) return true;
