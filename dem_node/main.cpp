@@ -671,6 +671,7 @@ class DemParticipant : public node::Participant {
     effect_s_["ranks.reduce"] += t.reduce;
     effect_s_["ranks.exchange"] += t.exchange;
     effect_s_["ranks.walls"] += t.walls;
+    if (dist_->newton()) effect_s_["ranks.reverse"] += t.reverse;
     ranked_phases_ = dist_->world().phase_times();
     has_ranked_phases_ = true;
     dist_live_ = false;

@@ -33,7 +33,9 @@
 // ranks); imbalance (largest compute time over the mean); ghosts per owned ball; ghost states
 // received per step and rank; rebuilds; balls that changed rank; rebalances; owned balls per
 // rank (min/max); weight_imbalance (the balancing's weight, 1 + listed contacts per own ball, at
-// the end: largest over mean; free of timing noise); the footing force [N] (footing mode).
+// the end: largest over mean; free of timing noise); the footing force [N] (footing mode); the
+// World's rebuild and ball-ball pass [ms]; the `newton` reverse [ms] (its communication, counted in
+// comm_share); the pairs listed over the ranks at the end (one World's count with newton on).
 #include <mpi.h>
 #include <omp.h>
 
@@ -385,10 +387,11 @@ int main(int argc, char** argv) {
   const DistDem::Times& t = d.times();
   // the forces phase split: the neighbour rebuild and the ball-ball pass of the rank's World
   const PhaseTimes& pt = d.world().phase_times();
-  double mine[10] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
-                     double(t.forwarded), pt.rebuild, pt.pair};
-  double sum[10], cmax = 0.0;
-  MPI_Reduce(mine, sum, 10, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+  double mine[12] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
+                     double(t.forwarded), pt.rebuild, pt.pair, t.reverse,
+                     double(d.world().pair_contacts().size())};
+  double sum[12], cmax = 0.0;
+  MPI_Reduce(mine, sum, 12, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
   const double comp = t.compute();
   MPI_Reduce(&comp, &cmax, 1, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
   long long mig = d.migrated() - mig0, mig_sum = 0, own = static_cast<long long>(d.owned()), own_min = 0, own_max = 0;
@@ -400,18 +403,19 @@ int main(int argc, char** argv) {
   MPI_Reduce(&wgt, &wgt_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
   if (rank == 0) {
     const double ms = 1e3 / double(steps) / P;
-    const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5];
+    const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5] + sum[10];
     std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
                 "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
-                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N,rebuild_ms,pair_ms\n");
+                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N,rebuild_ms,pair_ms,reverse_ms,"
+                "pairs_listed\n");
     std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g,"
-                "%.4f,%.4f\n",
+                "%.4f,%.4f,%.4f,%.0f\n",
                 P, mode.c_str(), model.c_str(), full.num_balls(), steps, wall,
                 double(full.num_balls()) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
-                sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5]) / total, cmax / ((sum[0] + sum[1]) / P),
+                sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5] + sum[10]) / total, cmax / ((sum[0] + sum[1]) / P),
                 sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - ex0), mig_sum,
                 static_cast<long long>(d.rebalances()), own_min, own_max, double(wgt_max) / (double(wgt_sum) / P),
-                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms);
+                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms, sum[10] * ms, sum[11]);
   }
   if (const char* mg = std::getenv("BENCH_DIST_MODEL_GRID")) model_grid(d, g, mg);
   MPI_Finalize();

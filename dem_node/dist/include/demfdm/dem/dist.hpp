@@ -237,9 +237,10 @@ class DistDem {
   /// (communication).
   struct Times {
     double motion = 0.0, forces = 0.0, forward = 0.0, reduce = 0.0, exchange = 0.0, walls = 0.0;
+    double reverse = 0.0;        // `newton`: the ghosts' forces and stiffness sums sent back (not in forces)
     std::int64_t forwarded = 0;  // ghost states received
     double compute() const { return motion + forces; }
-    double comm() const { return forward + reduce + exchange + walls; }
+    double comm() const { return forward + reduce + exchange + walls + reverse; }
   };
   const Times& times() const { return times_; }
   void reset_times() {
