@@ -16,6 +16,9 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
   order-free: today with run.order_free_sums (session 20): the walls' sums folded on every
          rank, a maximum-allreduce of one double and a sum-allreduce of four per wall value
          (the node's measurements likewise, not modelled: they are not the engine's).
+  newton: order-free with dem.newton (session 23): each pair across a face computed once, on the
+         owner of its ball A; the ghosts' forces and torques sent back to their owners after the
+         pass (a reverse message of 48 bytes per ghost to each neighbour brick, every step).
   next:  the same exchange and RCB, ghosts not integrated, the walls' sums as exact
          (order-free) accumulators in one allreduce.
 
@@ -99,6 +102,17 @@ MEASURED_AVX512 = dict(
     # per rank (12,918 owned, 0.236 ghosts each) -> 0.27 us per local ball and rebuild
     exchange_us_per_ball=0.187e3 * (600 / 26) / 15971,
 )
+# `newton on` (session 23, AVX2 AMD EPYC, bench_dist strong, linear, 2 ranks, 600 steps, 5
+# alternated pairs against newton off): the pairs listed over the ranks 119,136 against 122,674
+# (one World's count), the forces phase 0.978 (s.e. 0.006) of newton off's at 0.2364 ghosts per
+# owned ball. With forces = F1/P (1 + c g): c_newton = (0.978 (1 + c g) - 1) / g, the same share
+# of the ghosts' work saved on either machine. The reverse record per ghost: force and torque.
+NEWTON_FORCES_RATIO = 0.978
+NEWTON_G = 0.2364
+REVERSE_BYTES = 48
+for _m in (MEASURED_AVX2, MEASURED_AVX512):
+    _c = _m["ghost_pair_coeff"]
+    _m["ghost_pair_coeff_newton"] = (NEWTON_FORCES_RATIO * (1.0 + _c * NEWTON_G) - 1.0) / NEWTON_G
 MACHINES = {"avx2": MEASURED_AVX2, "avx512": MEASURED_AVX512}
 
 NETWORKS = {
@@ -136,8 +150,9 @@ def step_time(P, n, m, net, design):
     one = P == 1
     g = 0.0 if one else ghosts_per_ball(n, m)
     parts = {}
-    comp = n * m["compute_us"] * (1.0 + m["ghost_pair_coeff"] * g)
-    if design in ("today", "order-free"):
+    coeff = m["ghost_pair_coeff_newton"] if design == "newton" else m["ghost_pair_coeff"]
+    comp = n * m["compute_us"] * (1.0 + coeff * g)
+    if design in ("today", "order-free", "newton"):
         comp += n * g * m["motion_us"]  # ghosts integrated too
     imb = 1.0 if one else m["imbalance_rcb_code"]
     parts["compute"] = comp * imb
@@ -153,12 +168,14 @@ def step_time(P, n, m, net, design):
         parts["exchange"] = per_rebuild / m["steps_per_rebuild"]
         # forward: point to point with the ranks that share ghosts (26 for cubic bricks)
         parts["forward"] = min(26, P - 1) * a_us + n * g * m["ghost_bytes"] / beta
+        if design == "newton":  # the reverse: the same messages, 48 bytes per ghost
+            parts["forward"] += min(26, P - 1) * a_us + n * g * REVERSE_BYTES / beta
         parts["reduce"] = 2 * math.log2(P) * a_us  # rebuild test, recursive doubling
         if design == "today":
             recs = m["wall_records_one"] * P ** (2.0 / 3.0)
             parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta +
                               recs * wall_root_us(P, m))
-        elif design == "order-free":  # two allreduces (recursive doubling): 1 and 4 doubles per value
+        elif design in ("order-free", "newton"):  # two allreduces (recursive doubling): 1 and 4 doubles per value
             parts["walls"] = 2 * math.log2(P) * (2 * a_us + m["wall_values"] * 5 * 8 / beta)
         else:
             parts["walls"] = 2 * math.log2(P) * (a_us + m["wall_values"] * 24 / beta)
@@ -181,7 +198,7 @@ def main():
     print(hdr if args.csv else "| " + " | ".join(hdr.split(",")) + " |")
     if not args.csv:
         print("|" + "---|" * len(hdr.split(",")))
-    for design in ("today", "order-free", "next"):
+    for design in ("today", "order-free", "newton", "next"):
         t1 = step_time(1, args.balls, m, net, design)["total"]
         for P in (1, 2, 8, 64, 256, 1024):
             p = step_time(P, args.balls, m, net, design)
