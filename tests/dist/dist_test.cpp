@@ -327,6 +327,10 @@ TEST(Dist, NewtonHertzPeriodicAutomaticStep) {
   sc.steps = 200;
   check_newton(sc, 1e-8, 1e-6);
 }
+// two threads per rank: the threaded pass's chunks, then the reverse
+TEST(Dist, NewtonParallelBondPeriodicTwoThreads) {
+  check_newton({"pbond periodic, cut along x, 2 threads", ContactModel::kLinearPBond, true, true, 0, 200, 2}, 1e-8, 1e-6);
+}
 TEST(Dist, NewtonLinearFreeRcbBalanced) {
   Scene sc{"linear free, RCB balanced", ContactModel::kLinear, false, false, 2, 200};
   sc.rcb = true;
