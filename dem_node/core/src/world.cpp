@@ -48,7 +48,7 @@ World::~World() = default;
 SetContext World::context() {
   return SetContext{pt_,           p_,           skin_,          edot_,
                     thread_count(), kernel_,      e_slip_dead_,   e_soft_dead_,
-                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), newton_};
+                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), bool(newton_reverse_)};
 }
 
 PairContacts& World::pair_contacts() {
@@ -607,11 +607,9 @@ void World::set_counters(const Counters& k) {
 
 void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }
 
-void World::set_newton(bool on, std::function<void(Vec3*, Vec3*)> reverse,
-                       std::function<void(double*, double*)> stiffness) {
-  newton_ = on;
-  newton_reverse_ = on ? std::move(reverse) : nullptr;
-  newton_stiffness_ = on ? std::move(stiffness) : nullptr;
+void World::set_newton(std::function<void(Vec3*, Vec3*)> reverse, std::function<void(double*, double*)> stiffness) {
+  newton_reverse_ = std::move(reverse);
+  newton_stiffness_ = std::move(stiffness);
 }
 
 double World::reduced_step(double dt) const { return step_reduction_ ? step_reduction_(dt) : dt; }

@@ -601,14 +601,12 @@ void DistDem::load(const World& full) {
   // again would run another force pass, which is not the identity on every law's history.
   // Otherwise: prepared here, as `full.prepare()` would.
   run_disp2_ = 0.0;
-  if (newton_) {
-    // the ghosts' forces and stiffness sums back to their owners (the forward lists, reversed:
-    // built before a prepare's force pass needs them)
-    build_forward();
-    w_->set_newton(
-        true, [this](Vec3* f, Vec3* t) { reverse(&f->x, &t->x, 3); },
-        [this](double* kt, double* kr) { reverse(kt, kr, 1); });
-  }
+  // The forward lists (with newton, reversed, they send the ghosts' forces and stiffness sums
+  // back to their owners, from a prepare's force pass on).
+  build_forward();
+  if (newton_)
+    w_->set_newton([this](Vec3* f, Vec3* t) { reverse(&f->x, &t->x, 3); },
+                   [this](double* kt, double* kr) { reverse(kt, kr, 1); });
   if (k.prepared) {
     run_disp2_ = k.max_disp2;
   } else {
@@ -616,12 +614,48 @@ void DistDem::load(const World& full) {
   }
   reduce_walls();
   exchanges_ = 0;
-  if (!newton_) build_forward();
 }
 
 void DistDem::set_newton(bool on) {
   if (w_) throw std::logic_error("DistDem::set_newton: call it before load.");
   newton_ = on;
+}
+
+// Point to point with the ranks that share ghosts (the counts are known from the forward lists,
+// so no count exchange): to each rank r, `per_row` doubles of every row of out_rows[r] (pack(i,
+// dst)); from each rank r, those of every row of in_rows[r], applied (unpack(i, src)) in ascending
+// r and row order. No message to the other ranks, whatever their number.
+template <class Pack, class Unpack>
+void DistDem::rows_message(const std::vector<std::vector<std::uint32_t>>& out_rows,
+                           const std::vector<std::vector<std::uint32_t>>& in_rows, std::size_t per_row, int tag,
+                           Pack pack, Unpack unpack) {
+  const std::size_t P = static_cast<std::size_t>(size_);
+  std::vector<std::size_t> at(P + 1, 0);
+  for (std::size_t r = 0; r < P; ++r) at[r + 1] = at[r] + per_row * in_rows[r].size();
+  msg_in_.resize(at.back());
+  msg_out_.resize(P);
+  std::vector<MPI_Request>& req = msg_req_;
+  req.clear();
+  for (std::size_t r = 0; r < P; ++r) {
+    if (in_rows[r].empty()) continue;
+    req.emplace_back();
+    MPI_Irecv(msg_in_.data() + at[r], static_cast<int>(at[r + 1] - at[r]), MPI_DOUBLE, static_cast<int>(r), tag, comm_,
+              &req.back());
+  }
+  for (std::size_t r = 0; r < P; ++r) {
+    if (out_rows[r].empty()) continue;
+    std::vector<double>& o = msg_out_[r];
+    o.resize(per_row * out_rows[r].size());
+    double* d = o.data();
+    for (std::uint32_t i : out_rows[r]) d = pack(i, d);
+    req.emplace_back();
+    MPI_Isend(o.data(), static_cast<int>(o.size()), MPI_DOUBLE, static_cast<int>(r), tag, comm_, &req.back());
+  }
+  MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
+  for (std::size_t r = 0; r < P; ++r) {
+    const double* q = msg_in_.data() + at[r];
+    for (std::uint32_t i : in_rows[r]) q = unpack(i, q);
+  }
 }
 
 // The forward exchange reversed: each ghost row's values to the rank that forwards it (its
@@ -630,41 +664,17 @@ void DistDem::set_newton(bool on) {
 void DistDem::reverse(double* a, double* b, int w) {
   const double t0 = MPI_Wtime();
   const std::size_t W = static_cast<std::size_t>(w);
-  std::vector<std::size_t> at(static_cast<std::size_t>(size_) + 1, 0);
-  for (int r = 0; r < size_; ++r)
-    at[static_cast<std::size_t>(r) + 1] = at[static_cast<std::size_t>(r)] + 2 * W * send_rows_[static_cast<std::size_t>(r)].size();
-  rev_in_.resize(at.back());
-  rev_out_.resize(static_cast<std::size_t>(size_));
-  std::vector<MPI_Request>& req = fwd_req_;
-  req.clear();
-  constexpr int kTag = 7302;
-  for (int r = 0; r < size_; ++r) {
-    const std::size_t ur = static_cast<std::size_t>(r);
-    if (send_rows_[ur].empty()) continue;
-    req.emplace_back();
-    MPI_Irecv(rev_in_.data() + at[ur], static_cast<int>(at[ur + 1] - at[ur]), MPI_DOUBLE, r, kTag, comm_, &req.back());
-  }
-  for (int r = 0; r < size_; ++r) {
-    const std::size_t ur = static_cast<std::size_t>(r);
-    if (recv_rows_[ur].empty()) continue;
-    std::vector<double>& o = rev_out_[ur];
-    o.clear();
-    for (std::uint32_t i : recv_rows_[ur]) {
-      o.insert(o.end(), a + i * W, a + (i + 1) * W);
-      o.insert(o.end(), b + i * W, b + (i + 1) * W);
-    }
-    req.emplace_back();
-    MPI_Isend(o.data(), static_cast<int>(o.size()), MPI_DOUBLE, r, kTag, comm_, &req.back());
-  }
-  MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
-  for (int r = 0; r < size_; ++r) {
-    const std::size_t ur = static_cast<std::size_t>(r);
-    const double* q = rev_in_.data() + at[ur];
-    for (std::uint32_t i : send_rows_[ur]) {
-      for (std::size_t k = 0; k < W; ++k) a[i * W + k] += *q++;
-      for (std::size_t k = 0; k < W; ++k) b[i * W + k] += *q++;
-    }
-  }
+  rows_message(
+      recv_rows_, send_rows_, 2 * W, 7302,
+      [&](std::uint32_t i, double* d) {
+        d = std::copy(a + i * W, a + (i + 1) * W, d);
+        return std::copy(b + i * W, b + (i + 1) * W, d);
+      },
+      [&](std::uint32_t i, const double* q) {
+        for (std::size_t k = 0; k < W; ++k) a[i * W + k] += *q++;
+        for (std::size_t k = 0; k < W; ++k) b[i * W + k] += *q++;
+        return q;
+      });
   times_.reverse += MPI_Wtime() - t0;
 }
 
@@ -814,53 +824,20 @@ void DistDem::step(std::int64_t n) {
   times_.walls += MPI_Wtime() - t0;
 }
 
-// Point to point with the ranks this one shares ghosts with (the counts are known from the
-// forward lists, so no count exchange): no message to the other ranks, whatever their number.
+// The ghosts' x, v and ω from their owners (rows_message).
 void DistDem::forward() {
-  std::vector<std::vector<Vec3>>& out = fwd_out_;
-  out.resize(static_cast<std::size_t>(size_));
-  const Particles& pt = w_->balls();
-  std::size_t nin = 0;
-  std::vector<std::size_t> at(static_cast<std::size_t>(size_) + 1, 0);
-  for (int r = 0; r < size_; ++r) {
-    nin += 3 * recv_rows_[static_cast<std::size_t>(r)].size();
-    at[static_cast<std::size_t>(r) + 1] = nin;
-  }
-  std::vector<Vec3>& in = fwd_in_;
-  in.resize(nin);
-  std::vector<MPI_Request>& req = fwd_req_;
-  req.clear();
-  constexpr int kTag = 7301;
-  for (int r = 0; r < size_; ++r) {
-    const auto& rows = recv_rows_[static_cast<std::size_t>(r)];
-    if (rows.empty()) continue;
-    req.emplace_back();
-    MPI_Irecv(in.data() + at[static_cast<std::size_t>(r)], static_cast<int>(3 * rows.size() * sizeof(Vec3)), MPI_BYTE,
-              r, kTag, comm_, &req.back());
-  }
-  for (int r = 0; r < size_; ++r) {
-    const auto& rows = send_rows_[static_cast<std::size_t>(r)];
-    if (rows.empty()) continue;
-    auto& o = out[static_cast<std::size_t>(r)];
-    o.clear();
-    for (std::uint32_t i : rows) {
-      o.push_back(pt.x[i]);
-      o.push_back(pt.v[i]);
-      o.push_back(pt.w[i]);
-    }
-    req.emplace_back();
-    MPI_Isend(o.data(), static_cast<int>(o.size() * sizeof(Vec3)), MPI_BYTE, r, kTag, comm_, &req.back());
-  }
-  MPI_Waitall(static_cast<int>(req.size()), req.data(), MPI_STATUSES_IGNORE);
-  times_.forwarded += static_cast<std::int64_t>(nin / 3);
   Particles& q = w_->balls();
-  std::size_t k = 0;
-  for (int r = 0; r < size_; ++r)
-    for (std::uint32_t i : recv_rows_[static_cast<std::size_t>(r)]) {
-      q.x[i] = in[k++];
-      q.v[i] = in[k++];
-      q.w[i] = in[k++];
-    }
+  rows_message(
+      send_rows_, recv_rows_, 9, 7301,
+      [&](std::uint32_t i, double* d) {
+        for (const Vec3* v : {&q.x[i], &q.v[i], &q.w[i]}) *d++ = v->x, *d++ = v->y, *d++ = v->z;
+        return d;
+      },
+      [&](std::uint32_t i, const double* p) {
+        for (Vec3* v : {&q.x[i], &q.v[i], &q.w[i]}) v->x = *p++, v->y = *p++, v->z = *p++;
+        return p;
+      });
+  for (const auto& rows : recv_rows_) times_.forwarded += static_cast<std::int64_t>(rows.size());
 }
 
 // Migration and ghosts, incremental (as LAMMPS's exchange + borders, in id order). The rows a
@@ -1048,18 +1025,19 @@ void DistDem::exchange() {
     const std::uint32_t a = pc.a[c], b = pc.b[c];
     if (!newton_ && mine(a)) dest[fill[a]++] = own[b];
     if (mine(b)) dest[fill[b]++] = own[a];
+    auto put = [&](int d) {
+      pout[static_cast<std::size_t>(d)].push_back(
+          PairRec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}});
+    };
     if (newton_) {  // the pair goes with its ball A (always this rank's: the list's rule)
-      if (own[a] != rank_)
-        pout[static_cast<std::size_t>(own[a])].push_back(
-            PairRec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}});
+      if (own[a] != rank_) put(own[a]);
       continue;
     }
     if (!(mine(a) || mine(b))) continue;
     const int oa = old_owner[a], ob = old_owner[b];
     auto send = [&](int d) {
       if (d == rank_ || d == oa || d == ob) return;  // an old owner of a or b: it has the pair
-      pout[static_cast<std::size_t>(d)].push_back(
-          PairRec{pt.id[a], pt.id[b], pc.shift[c], pc.h[c], has_bond ? pc.bond[c] : BondHist{}});
+      put(d);
     };
     send(own[a]);
     if (own[b] != own[a]) send(own[b]);

@@ -342,9 +342,8 @@ class World {
   /// communication). `stiffness` does the same for the critical step's per-ball stiffness sums
   /// (contact_scan). Both are collective for such a caller. Off: every pair with an own ball is
   /// listed and computed on both sides (the rank-count independent bits).
-  void set_newton(bool on, std::function<void(Vec3* f, Vec3* t)> reverse,
-                  std::function<void(double* kt, double* kr)> stiffness);
-  bool newton() const { return newton_; }
+  /// Empty functions: off.
+  void set_newton(std::function<void(Vec3* f, Vec3* t)> reverse, std::function<void(double* kt, double* kr)> stiffness);
   double time() const { return time_; }
   std::int64_t step_count() const { return step_; }
   double dt() const { return dt_; }
@@ -529,8 +528,7 @@ class World {
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
   std::function<double(double)> step_reduction_;  // set_step_reduction
-  bool newton_ = false;                           // set_newton
-  std::function<void(Vec3*, Vec3*)> newton_reverse_;
+  std::function<void(Vec3*, Vec3*)> newton_reverse_;  // set_newton (set: newton on)
   std::function<void(double*, double*)> newton_stiffness_;
   double reduced_step(double dt) const;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).

@@ -285,6 +285,12 @@ class DistDem {
   /// into its owner's row, in source-rank and then row order (point to point with the ranks
   /// that share ghosts with this one).
   void reverse(double* a, double* b, int w);
+  /// forward's and reverse's messages: per_row doubles of each row of out_rows[r] to rank r
+  /// (pack), those of each row of in_rows[r] from rank r (unpack), point to point (dist.cpp).
+  template <class Pack, class Unpack>
+  void rows_message(const std::vector<std::vector<std::uint32_t>>& out_rows,
+                    const std::vector<std::vector<std::uint32_t>>& in_rows, std::size_t per_row, int tag, Pack pack,
+                    Unpack unpack);
   void build_forward();  // the forward lists of the current rows
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
@@ -331,11 +337,9 @@ class DistDem {
   PairContacts nc_;
   std::vector<std::uint8_t> ghost_buf_;
   std::vector<char> sbuf_, rbuf_;
-  std::vector<std::vector<Vec3>> fwd_out_;
-  std::vector<Vec3> fwd_in_;
-  std::vector<MPI_Request> fwd_req_;
-  std::vector<std::vector<double>> rev_out_;  // reverse(): the ghost rows' values per owner
-  std::vector<double> rev_in_;
+  std::vector<std::vector<double>> msg_out_;  // rows_message: the records per destination rank
+  std::vector<double> msg_in_;
+  std::vector<MPI_Request> msg_req_;
 };
 
 }  // namespace demfdm::dem
