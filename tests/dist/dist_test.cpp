@@ -42,6 +42,7 @@ struct Scene {
   int balance_every = 0;  // DistDem's balancing (contact weights) every this many exchanges
   double tall = 1.0;      // the free cluster's grid: this many times as high as wide
   bool order_free = false;  // WorldParams::order_free_sums: the measurements without a gather
+  bool from_root = false;   // DistDem::load_from_root: the other ranks never hold the whole World
 };
 
 constexpr int kSide = 12;  // kSide³ balls
@@ -115,7 +116,12 @@ double weight_imbalance(const World& w, const BrickGrid& g) {
 void check(const Scene& sc) {
   std::unique_ptr<World> full = build(sc, true);
   DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
-  d.load(*full);
+  if (sc.from_root) {
+    if (g_rank != 0) full = std::make_unique<World>(full->params());  // no ball
+    d.load_from_root(*full);
+  } else {
+    d.load(*full);
+  }
   d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
@@ -211,6 +217,22 @@ TEST(Dist, HertzPeriodicAutomaticStepSameBits) {
 TEST(Dist, ParallelBondPeriodicTwoThreadsSameBits) {
   check({"pbond periodic, cut along x, 2 threads", ContactModel::kLinearPBond, true, true, 0, 600, 2});
 }
+// The whole World on rank 0 only (DistDem::load_from_root): the strained periodic cell with soft
+// bonds across the cuts, cut by RCB; the free cluster, RCB balanced every 2nd exchange.
+TEST(Dist, SoftBondPeriodicFromRootRcbSameBits) {
+  Scene sc{"softbond periodic, from rank 0, RCB", ContactModel::kSoftBond, true, true, 1};
+  sc.rcb = true;
+  sc.from_root = true;
+  check(sc);
+}
+TEST(Dist, LinearFreeFromRootRcbBalancedSameBits) {
+  Scene sc{"linear free, from rank 0, RCB balanced", ContactModel::kLinear, false, false, 2, 200};
+  sc.rcb = true;
+  sc.balance_every = 2;
+  sc.tall = 3.0;
+  sc.from_root = true;
+  check(sc);
+}
 
 // The measurements as order-free sums (order_free_sum.hpp): each rank folds its own terms, two
 // allreduces, no terms gathered; the same bits as one World summing the same way.
@@ -249,11 +271,17 @@ TEST(Dist, LinearFreeRcbBalancedSameBits) {
 // moves pairs with their ball A to its new owner (about 900-1,650 migrations at 2-4 ranks).
 void check_newton(const Scene& sc, double pos_tol, double force_tol) {
   long long migrated = 0;
-  auto run = [&](DistDem::Balls& got, long long& listed, double& dt_end) {
+  // (the second run loads from rank 0 alone, DistDem::load_from_root: the same bits again)
+  auto run = [&](DistDem::Balls& got, long long& listed, double& dt_end, bool from_root) {
     std::unique_ptr<World> full = build(sc, true);
     DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
     d.set_newton(true);
-    d.load(*full);
+    if (from_root) {
+      if (g_rank != 0) full = std::make_unique<World>(full->params());
+      d.load_from_root(*full);
+    } else {
+      d.load(*full);
+    }
     d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
     d.step(sc.steps);
     got = d.gather();
@@ -269,8 +297,8 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
   DistDem::Balls got, again;
   long long listed = 0, listed2 = 0;
   double dt_end = 0.0, dt2 = 0.0;
-  const std::size_t ghosts = run(got, listed, dt_end);
-  run(again, listed2, dt2);
+  const std::size_t ghosts = run(got, listed, dt_end, false);
+  run(again, listed2, dt2, true);
   unsigned long long gh = ghosts, all_gh = 0;
   MPI_Reduce(&gh, &all_gh, 1, MPI_UNSIGNED_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
   if (g_rank == 0) {
@@ -293,7 +321,7 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
                 static_cast<long long>(ref->rebuild_count()), dx / kR, df / fmax, dtq / tmax);
     EXPECT_EQ(listed, static_cast<long long>(ref->pair_contacts().size())) << "every pair computed once";
     EXPECT_TRUE(test::same_bits(got.x, again.x) && test::same_bits(got.f, again.f) && test::same_bits(got.t, again.t))
-        << "two runs on the same ranks must give the same bits";
+        << "two runs on the same ranks (the second loaded from rank 0) must give the same bits";
     EXPECT_EQ(std::memcmp(&dt_end, &dt2, sizeof dt2), 0);
     if (g_size == 1) {
       test::expect_same_balls(got, *ref, r.size());

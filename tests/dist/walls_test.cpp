@@ -45,6 +45,7 @@ struct WallScene {
   bool servo = false;   // a platen servo pushes the side plane x = 0 (its stress target above the block's)
   int per_call = 1;     // DEM steps per call of step(n) (the floor's vertices are set once per call)
   bool order_free = false;  // WorldParams::order_free_sums: the walls' sums and the measurements
+  bool from_root = false;   // DistDem::load_from_root and unload to rank 0 only: the other ranks never hold the whole World
 };
 
 // The floor: a 3 x 3 grid of vertices over the box's base (margin kS), 8 triangles facing +z.
@@ -165,7 +166,12 @@ void check(const WallScene& sc) {
   g.len = {kL, kL, kL};
   g.n[sc.axis] = g_size;
   DistDem d(MPI_COMM_WORLD, full->params(), g);
-  d.load(*full);
+  if (sc.from_root) {
+    if (g_rank != 0) full = std::make_unique<World>(full->params());  // no ball, no wall, no effect
+    d.load_from_root(*full);
+  } else {
+    d.load(*full);
+  }
   d.set_balance({sc.balance_every, 2048, sc.weight});
   d.set_neighbour_reach(sc.reach);
   std::vector<Vec3> hist;
@@ -174,8 +180,12 @@ void check(const WallScene& sc) {
   const Sums got_sums = sums(d.world(), hist);
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
-  // One World again from the ranks' parts (DistDem::unload), on every rank.
-  d.unload(*full);
+  // One World again from the ranks' parts (DistDem::unload), on every rank (from_root: on rank 0).
+  d.unload(*full, sc.from_root);
+  if (sc.from_root && g_rank != 0) {
+    EXPECT_EQ(full->num_balls(), 0u) << "a rank other than 0 assembled the whole World";
+    EXPECT_EQ(full->num_planes(), 0);
+  }
   long long mine[2] = {static_cast<long long>(d.owned()), static_cast<long long>(d.migrated())};
   long long sum[2] = {0, 0};
   MPI_Reduce(mine, sum, 2, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
@@ -310,6 +320,25 @@ TEST(DistWalls, PeriodicServoIsRefusedByName) {
   }
 }
 
+// The same refusal when the whole World is on rank 0 only: every rank throws rank 0's words.
+TEST(DistWalls, PeriodicServoIsRefusedByNameFromRoot) {
+  const Floor floor;
+  std::unique_ptr<World> full = build({"refusal"}, floor, true);
+  full->add_effect(std::make_unique<PeriodicServo>(ServoParams{}, kR));
+  if (g_rank != 0) full = std::make_unique<World>(full->params());
+  BrickGrid g;
+  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
+  g.len = {kL, kL, kL};
+  g.n[0] = g_size;
+  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  try {
+    d.load_from_root(*full);
+    ADD_FAILURE() << "load_from_root took a world with a periodic servo";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'periodic_servo'"), std::string::npos) << e.what();
+  }
+}
+
 TEST(DistWalls, PlatenServoCutAlongYSameBits) {
   WallScene sc{"walls, a platen servo on a side, cut along y, 4 steps per call"};
   sc.servo = true;
@@ -329,6 +358,16 @@ TEST(DistWalls, OrderFreeSumsWithAServoCutAlongYSameBits) {
 }
 TEST(DistWalls, BondedFloorCutAlongZSameBits) {
   check({"walls, bonded floor, cut along z", ContactModel::kLinearPBond, 2});
+}
+// The whole World on rank 0 only (DistDem::load_from_root, unload to rank 0): each rank gets its
+// part as a World's state file in memory; the walls, the footing, the bonded floor's histories,
+// the platen servo and the counters come with it.
+TEST(DistWalls, FromRootBondedFloorAndServoSameBits) {
+  WallScene sc{"walls, from rank 0, bonded floor, a platen servo, cut along y", ContactModel::kLinearPBond, 1};
+  sc.servo = true;
+  sc.per_call = 4;
+  sc.from_root = true;
+  check(sc);
 }
 // Dynamic balancing: the cuts move every 3rd exchange (balls change rank), the bits do not.
 TEST(DistWalls, BalancedCutsAlongZSameBits) {

@@ -1,5 +1,6 @@
 // The DEM on MPI ranks (dist.hpp, docs/scaling.md).
 #include "demfdm/dem/dist.hpp"
+#include "demfdm/dem/checkpoint.hpp"
 
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/procedures.hpp"
@@ -485,14 +486,16 @@ std::size_t DistDem::owned() const {
 
 std::size_t DistDem::ghosts() const { return w_->num_balls() - owned(); }
 
-void DistDem::load(const World& full) {
+namespace {
+
+// The effects the ranks run (load): gravity comes with the parameters; a platen servo runs on
+// every rank, reading its wall's reaction and stiffness sum, which the ranks then reduce after
+// every step (step), so every rank sets the same wall velocity as one World. No other effect runs
+// on the ranks yet. Also refuses rows out of id order.
+std::vector<PlatenServoParams> loadable(const World& full) {
   const Particles& fp = full.balls();
-  const std::size_t n = fp.size();
-  for (std::size_t i = 1; i < n; ++i)
+  for (std::size_t i = 1; i < fp.size(); ++i)
     if (!(fp.id[i - 1] < fp.id[i])) throw std::invalid_argument("DistDem::load: the rows must be in id order.");
-  // Gravity comes with the parameters. A platen servo runs on every rank: it reads its wall's
-  // reaction and stiffness sum, which the ranks then reduce after every step (step), so every
-  // rank sets the same wall velocity as one World. No other effect runs on the ranks yet.
   std::vector<PlatenServoParams> platens;
   for (const Effect* e : full.effects()) {
     if (std::string(e->name()) == "gravity") continue;
@@ -503,27 +506,38 @@ void DistDem::load(const World& full) {
     throw std::invalid_argument("DistDem::load: the world has the effect '" + std::string(e->name()) +
                                 "', which the DEM on MPI ranks cannot run yet (docs/scaling.md); run it on one rank.");
   }
-  p_ = full.params();
-  p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
-  // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
-  // thread count.
-  p_.thread_independent = true;
+  return platens;
+}
+
+// The halo of `full`: twice its largest radius plus its skin.
+double full_halo(const World& full) {
   double rmax = 0.0;
-  for (double r : fp.r) rmax = std::max(rmax, r);
-  halo_ = 2.0 * rmax + p_.skin;
-  // Which rows are local: the brick's balls, the balls within the halo, and the partners of a
-  // contact with one of this rank's balls (a bonded pair may be stretched beyond the halo).
+  for (double r : full.balls().r) rmax = std::max(rmax, r);
+  return 2.0 * rmax + full.skin();
+}
+
+}  // namespace
+
+// Rank r's part of `full` (halo_, grid_ and newton_ set): the rows that are local to r (its
+// brick's balls, the balls within the halo, and the partners of a contact with one of r's balls:
+// a bonded pair may be stretched beyond the halo), in id order, the ball-ball pairs r computes,
+// and the wall contacts of r's balls, in a World with full's walls, cell, effects and counters
+// (`mark_ghosts`: its rows of other ranks' balls marked as ghosts; unmarked, it can be saved).
+std::unique_ptr<World> DistDem::part_of(const World& full, int r, const std::vector<PlatenServoParams>& platens,
+                                        bool mark_ghosts) const {
+  const Particles& fp = full.balls();
+  const std::size_t n = fp.size();
   std::vector<int> own(n), nb;
   std::vector<std::uint8_t> local(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
     own[i] = grid_.owner(fp.x[i]);
     grid_.near(fp.x[i], halo_, nb);
-    local[i] = own[i] == rank_ || std::binary_search(nb.begin(), nb.end(), rank_);
+    local[i] = own[i] == r || std::binary_search(nb.begin(), nb.end(), r);
   }
   const PairContacts& fc = full.pair_contacts();
   for (std::size_t c = 0; c < fc.size(); ++c) {
-    if (own[fc.a[c]] == rank_) local[fc.b[c]] = 1;
-    if (!newton_ && own[fc.b[c]] == rank_) local[fc.a[c]] = 1;
+    if (own[fc.a[c]] == r) local[fc.b[c]] = 1;
+    if (!newton_ && own[fc.b[c]] == r) local[fc.a[c]] = 1;
   }
   Particles pt;
   std::vector<std::uint8_t> ghost;
@@ -532,27 +546,27 @@ void DistDem::load(const World& full) {
     if (local[i]) {
       row[i] = static_cast<std::int64_t>(pt.size());
       push_ball(pt, ball_rec(fp, i));
-      ghost.push_back(own[i] != rank_);
+      ghost.push_back(own[i] != r);
     }
   PairContacts pc;
   const bool has_bond = !fc.bond.empty();
   for (std::size_t c = 0; c < fc.size(); ++c) {
     const std::uint32_t a = fc.a[c], b = fc.b[c];
-    if (newton_ ? own[a] != rank_ : !(own[a] == rank_ || own[b] == rank_)) continue;
+    if (newton_ ? own[a] != r : !(own[a] == r || own[b] == r)) continue;
     pc.a.push_back(static_cast<std::uint32_t>(row[a]));
     pc.b.push_back(static_cast<std::uint32_t>(row[b]));
     pc.shift.push_back(fc.shift[c]);
     pc.h.push_back(fc.h[c]);
     if (has_bond) pc.bond.push_back(fc.bond[c]);
   }
-  // The walls, the same on every rank (each moves them itself), and the wall contacts of this
-  // rank's balls.
+  // The walls, the same on every rank (each moves them itself), and the wall contacts of r's
+  // balls.
   std::array<WallContacts, 3> wc;
   const auto fw = wall_lists(full);
   for (int k = 0; k < 3; ++k) {
     const WallContacts& f = *fw[static_cast<std::size_t>(k)];
     for (std::size_t c = 0; c < f.size(); ++c)
-      if (own[f.ball[c]] == rank_) {  // every field, its candidate facets and last forces too
+      if (own[f.ball[c]] == r) {  // every field, its candidate facets and last forces too
         WallContacts& d = wc[static_cast<std::size_t>(k)];
         push_wall(d, static_cast<std::uint32_t>(row[f.ball[c]]), f.wall[c], f.facet[c], f.h[c],
                   f.bond.empty() ? nullptr : &f.bond[c]);
@@ -566,30 +580,115 @@ void DistDem::load(const World& full) {
   }
   for (WallContacts& d : wc)  // a list without contacts has its one offset, as a World's has
     if (d.cand_off.empty()) d.cand_off.push_back(0);
-  w_ = std::make_unique<World>(p_);
-  w_->set_wall_sums_by_caller(size_ > 1);  // reduce_walls forms them from every rank's shares
-  w_->set_pair_kernel(full.pair_kernel());
-  w_->set_cell(full.cell_origin(), full.cell_length());
-  w_->set_strain_rate(full.strain_rate());
-  for (int i = 0; i < full.num_planes(); ++i) w_->plane(w_->add_plane(full.plane(i).p)) = full.plane(i);
+  auto w = std::make_unique<World>(p_);
+  w->set_wall_sums_by_caller(size_ > 1);  // reduce_walls forms them from every rank's shares
+  w->set_pair_kernel(full.pair_kernel());
+  w->set_cell(full.cell_origin(), full.cell_length());
+  w->set_strain_rate(full.strain_rate());
+  for (int i = 0; i < full.num_planes(); ++i) w->plane(w->add_plane(full.plane(i).p)) = full.plane(i);
   for (int i = 0; i < full.num_facet_walls(); ++i) {
     const FacetWall& f = full.facet_wall(i);
     std::vector<double> v;
     std::vector<std::int32_t> t;
     for (const Vec3& x : f.pos) v.insert(v.end(), {x.x, x.y, x.z});
     for (const auto& tr : f.tri) t.insert(t.end(), tr.begin(), tr.end());
-    w_->facet_wall(w_->add_facet_wall(v, t)) = f;
+    w->facet_wall(w->add_facet_wall(v, t)) = f;
   }
-  if (full.has_footing()) w_->set_footing(full.footing().p);
-  w_->copy_walls(full);  // every field, the walls' ids too (histories are carried by them)
-  for (const PlatenServoParams& ps : platens) w_->add_effect(std::make_unique<PlatenServo>(ps));
-  walls_every_step_ = !platens.empty();
-  w_->swap_balls(pt, pc, wc, ghost);
+  if (full.has_footing()) w->set_footing(full.footing().p);
+  w->copy_walls(full);  // every field, the walls' ids too (histories are carried by them)
+  for (const PlatenServoParams& ps : platens) w->add_effect(std::make_unique<PlatenServo>(ps));
+  if (!mark_ghosts) ghost.clear();
+  w->swap_balls(pt, pc, wc, ghost);
   // One World's counters (time, step, the step's schedule, ...). The counts and energies that
   // are sums over the ranks' contacts start from the full world's on rank 0 and from 0 elsewhere.
   World::Counters k = full.counters();
-  if (rank_ != 0) k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
-  w_->set_counters(k);
+  if (r != 0) k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
+  w->set_counters(k);
+  return w;
+}
+
+void DistDem::load(const World& full) {
+  const std::vector<PlatenServoParams> platens = loadable(full);
+  p_ = full.params();
+  p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
+  // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
+  // thread count.
+  p_.thread_independent = true;
+  halo_ = full_halo(full);
+  take(part_of(full, rank_, platens), !platens.empty());
+}
+
+namespace {
+constexpr int kTagPart = 7303;  // load_from_root's parts
+}  // namespace
+
+// Rank 0 cuts `full` and sends each rank its part as a World's state file in memory (the
+// checkpoint format, dem/checkpoint.hpp: every field, bit for bit). The receiving rank loads it
+// as its `full` with rank 0's halo: its rows are exactly the ones part_of selects again, so it
+// keeps them all and steps as load(full) would have it.
+void DistDem::load_from_root(const World& full) {
+  // Rank 0's verdict on `full` first (a refusal is every rank's), then the halo.
+  std::string refused;
+  std::vector<PlatenServoParams> platens;
+  double hk[2] = {0.0, 0.0};
+  if (rank_ == 0) {
+    try {
+      platens = loadable(full);
+      hk[0] = full_halo(full);
+      hk[1] = static_cast<double>(static_cast<int>(full.pair_kernel()));
+    } catch (const std::invalid_argument& e) {
+      refused = e.what();
+    }
+  }
+  int len = static_cast<int>(refused.size());
+  MPI_Bcast(&len, 1, MPI_INT, 0, comm_);
+  if (len > 0) {
+    refused.resize(static_cast<std::size_t>(len));
+    MPI_Bcast(refused.data(), len, MPI_CHAR, 0, comm_);
+    throw std::invalid_argument(refused);
+  }
+  MPI_Bcast(hk, 2, MPI_DOUBLE, 0, comm_);
+  halo_ = hk[0];
+  if (rank_ == 0) {
+    p_ = full.params();
+    p_.skin = full.skin();
+    p_.thread_independent = true;
+    for (int r = 1; r < size_; ++r) {
+      // (a failure here reaches the waiting ranks as a size of -1)
+      std::string bytes;
+      long long nb = -1;
+      try {
+        bytes = state_bytes(*part_of(full, r, platens, false), CheckpointMeta{});
+        nb = static_cast<long long>(bytes.size());
+      } catch (...) {
+        for (int q = r; q < size_; ++q) MPI_Send(&nb, 1, MPI_LONG_LONG, q, kTagPart, comm_);
+        throw;
+      }
+      MPI_Send(&nb, 1, MPI_LONG_LONG, r, kTagPart, comm_);
+      MPI_Send(bytes.data(), static_cast<int>(nb), MPI_CHAR, r, kTagPart, comm_);
+    }
+    take(part_of(full, 0, platens), !platens.empty());
+    return;
+  }
+  long long nb = 0;
+  MPI_Recv(&nb, 1, MPI_LONG_LONG, 0, kTagPart, comm_, MPI_STATUS_IGNORE);
+  if (nb < 0) throw std::runtime_error("DistDem::load_from_root: rank 0 could not cut its World (see rank 0's error).");
+  std::string bytes(static_cast<std::size_t>(nb), '\0');
+  MPI_Recv(bytes.data(), static_cast<int>(nb), MPI_CHAR, 0, kTagPart, comm_, MPI_STATUS_IGNORE);
+  World part(p_);
+  load_state_bytes(part, std::move(bytes), 0, "rank 0's part for rank " + std::to_string(rank_));
+  part.set_pair_kernel(static_cast<PairKernel>(static_cast<int>(hk[1])));
+  platens = loadable(part);
+  p_ = part.params();  // (its skin and thread_independent are rank 0's)
+  take(part_of(part, rank_, platens), !platens.empty());
+}
+
+// The rank's World from its part: the step's reduction over the ranks, the forward lists, the
+// newton hooks, and the walls' sums of every rank.
+void DistDem::take(std::unique_ptr<World> w, bool platens) {
+  w_ = std::move(w);
+  walls_every_step_ = platens;
+  const World::Counters k = w_->counters();
   // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
   w_->set_step_reduction([this](double dt) {
     double g = dt;
@@ -1617,7 +1716,7 @@ struct WallFullRec {
 
 }  // namespace
 
-void DistDem::unload(World& full) const {
+void DistDem::unload(World& full, bool root_only) const {
   const Particles& pt = w_->balls();
   const auto& g = w_->ghost_rows();
   auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
@@ -1652,16 +1751,25 @@ void DistDem::unload(World& full) const {
   put_recs(out, cands);
   put_recs(out, sums);
   put_recs(out, std::vector<std::int64_t>{mine.bond_failures});
-  // every rank gets every part
+  // every rank gets every part (root_only: rank 0 alone)
   const int bytes = static_cast<int>(out.size());
   std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_) + 1, 0);
-  MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
+  if (root_only)
+    MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
+  else
+    MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
   for (int r = 0; r < size_; ++r)
     displ[static_cast<std::size_t>(r) + 1] = displ[static_cast<std::size_t>(r)] + counts[static_cast<std::size_t>(r)];
-  std::vector<char> in(static_cast<std::size_t>(displ.back()));
-  MPI_Allgatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), displ.data(), MPI_BYTE, comm_);
+  std::vector<char> in(root_only && rank_ != 0 ? 0 : static_cast<std::size_t>(displ.back()));
   double run = run_disp2_, max_disp2 = 0.0;
-  MPI_Allreduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, comm_);
+  if (root_only) {
+    MPI_Gatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+    MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
+    if (rank_ != 0) return;
+  } else {
+    MPI_Allgatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), displ.data(), MPI_BYTE, comm_);
+    MPI_Allreduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, comm_);
+  }
 
   std::vector<BallRec> ab;
   std::vector<PairRec> ap;

@@ -169,6 +169,13 @@ class DistDem {
   /// and last forces included, so the ranks step on as `full` would; an unprepared one is
   /// prepared on the ranks, as `full.prepare()` would.
   void load(const World& full);
+  /// As load(full), with the whole World on rank 0 only (collective): the other ranks' `full` is
+  /// not read (an empty World will do), so a rank other than 0 never holds more than its part.
+  /// Rank 0 cuts `full` into each rank's part (its rows, pairs, wall contacts, the walls, the
+  /// cell, the effects and the counters) and sends it as a World's state file in memory (the
+  /// checkpoint format, bit for bit), one rank at a time. The same bits as load(full) on every
+  /// rank. A `full` that load refuses is refused on every rank, with rank 0's message.
+  void load_from_root(const World& full);
   /// One World holding every ball, on every rank (collective): `full` gets the state one World
   /// stepped as this one was would have (balls, contact lists in that World's orders with their
   /// histories and last forces, wall contacts with their candidates, the walls, the counters), so
@@ -177,7 +184,9 @@ class DistDem {
   /// parameters and ids of walls and balls are kept where the ranks do not change them). Not the
   /// same bits as one World: the energies of local damping and of dropped contacts, summed rank by
   /// rank (docs/scaling.md).
-  void unload(World& full) const;
+  /// With `root_only`, `full` is assembled on rank 0 only (a gather, not an all-gather); the
+  /// other ranks' `full` is left as it was.
+  void unload(World& full, bool root_only = false) const;
   /// n steps; the walls' sums are those of the last (reduced after every step where a platen
   /// servo reads them at the next one, else once at the end: within the call nothing reads them).
   void step(std::int64_t n = 1);
@@ -277,6 +286,12 @@ class DistDem {
   Balls gather() const;
 
  private:
+  /// Rank r's part of `full` as a World (halo_, grid_, newton_ and p_ set; load).
+  std::unique_ptr<World> part_of(const World& full, int r, const std::vector<PlatenServoParams>& platens,
+                                 bool mark_ghosts = true) const;
+  /// This rank's part as its World: the step's reduction, the forward lists, the newton hooks,
+  /// the walls' sums (load).
+  void take(std::unique_ptr<World> w, bool platens);
   void exchange();  // migration, new ghosts, histories, forward lists; replaces the World's balls
   const std::vector<int>& peer_ranks();  // the bricks within the halo and the skin of this one
   void forward();   // the ghosts' x, v, ω from their owners
