@@ -56,11 +56,13 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 
 // The DEM on MPI ranks (dem.ranks > 1, started by launch/run under mpirun; docs/scaling.md).
 // Rank 0 speaks on the bus and tells the other ranks every call it gets (RankedParticipant);
-// each rank runs the same adapter. Every rank holds the whole World for the stages' set-up
-// (specimen procedures, walls, the footing, the interface bonds: the same calls on the same
-// state, so the same bits) and steps the stages that are not specimen preparation on a
-// dem::DistDem, its brick of the block; at a stage's end, a checkpoint or a frame the ranks'
-// parts are assembled into the whole World again (DistDem::unload). Only rank 0 writes files.
+// each rank runs the same adapter. Rank 0 alone holds the whole World: it sets the stages up
+// (specimen procedures, walls, the footing, the interface bonds) and steps the specimen
+// preparation stages; the steps of every other stage run on a dem::DistDem, each rank its brick
+// of the block, which rank 0 cuts and sends (DistDem::load_from_root). At a stage's end, a
+// checkpoint or a frame the ranks' parts are assembled into the whole World on rank 0
+// (DistDem::unload to rank 0). The other ranks never hold more than their part. Only rank 0
+// writes files.
 struct Ranks {
   MPI_Comm comm = MPI_COMM_NULL;
   int rank = 0, size = 1;
@@ -198,9 +200,9 @@ class DemParticipant : public node::Participant {
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
     history_due_ = -1;
-    // A ranked run loads the whole World on every rank; its next step cuts it into bricks again.
+    // A ranked run loads the whole World on rank 0; its next step cuts it into bricks again.
     dist_live_ = false;
-    dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
+    if (!part_only()) dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = dem_threads(s_);
     world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
@@ -255,7 +257,7 @@ class DemParticipant : public node::Participant {
   // A user dt_fixed (checked against the critical step at every stage begin) is the node's
   // step; else dt_safety x critical. The coordinator grants the smallest dt_stable of the nodes.
   double dt_stable() const override {
-    if (world_.num_balls() == 0) return 0.0;  // the whole World's count: the same on the ranks
+    if (!dist_live_ && world_.num_balls() == 0) return 0.0;  // (on the ranks rank 0 answers)
     if (user_dt_ > 0 && !preparing_) return interval_ * user_dt_;
     return interval_ * safe_dt();
   }
@@ -278,11 +280,25 @@ class DemParticipant : public node::Participant {
                                       0.5 * sc * s_.real("dem.specimen.d_max"));
   }
   // Critical step of 1.8 without the safety factor [s].
-  double critical_dt() const { return safe_dt() / world_.params().dt_safety; }
+  double critical_dt() const { return safe_dt() / live().params().dt_safety; }
   double time() const override { return live().time(); }
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     leave_dist();  // the set-up acts on the whole World
+    if (part_only()) {
+      // Rank 0 sets the stage up on the whole World and sends this rank its part at the first
+      // step of a stage on the ranks (enter_dist); the stage's flags are the scene's.
+      stage_ratio_ = st.view.real("ratio");
+      coupled_stage_ = st.coupled;
+      ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
+      effect_s_.clear();
+      has_ranked_phases_ = false;
+      preparing_ = is_generation(st);
+      penetrating_ = st.kind == schema::Action::kPenetrate;
+      if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
+      energy_pending_ = true;
+      return {};
+    }
     open_outputs();
     begin_model_time(st);
     stage_ratio_ = st.view.real("ratio");
@@ -357,7 +373,7 @@ class DemParticipant : public node::Participant {
       // Each rank tests its rows; a finding is reported from the whole World (its neighbourhood
       // and the same words as one process), assembled only then.
       int bad = dem::check_finite(live()).has_value() ? 1 : 0;
-      if (!bad && escape_margin_ > 0 && !world_.periodic()) {
+      if (!bad && escape_margin_ > 0 && !live().periodic()) {
         auto [lo, hi] = domain();
         bad = dem::check_escape(live(), lo, hi, escape_margin_).has_value() ? 1 : 0;
       }
@@ -382,7 +398,16 @@ class DemParticipant : public node::Participant {
         if (auto f = dem::check_escape(world_, lo, hi, escape_margin_)) return node::HealthReport{f->cause, f->detail};
     }
     const double ke = kinetic_energy();
-    if (auto jump = energy_jump_.check(ke)) {
+    // On the ranks rank 0's test decides (the other ranks' has not seen the specimen stages,
+    // which rank 0 runs alone), and the World for its report is assembled there.
+    std::optional<std::string> jump;
+    if (!part_only()) jump = energy_jump_.check(ke);
+    if (dist_live_) {
+      int found = jump ? 1 : 0;
+      MPI_Bcast(&found, 1, MPI_INT, 0, g_ranks.comm);
+      if (found) sync_full();
+    }
+    if (jump) {
       sync_full();
       const auto f = dem::energy_jump_finding(world_, *jump);
       return node::HealthReport{f.cause, f.detail};
@@ -412,6 +437,7 @@ class DemParticipant : public node::Participant {
       return;
     }
     early_step_ = -1;
+    if (part_only() && is_generation(st)) return;  // rank 0 steps the whole World
     begin_step(st, values, dt);
     dem::World& w = live();
     const double node_before = w.time();
@@ -425,9 +451,12 @@ class DemParticipant : public node::Participant {
 
   // What a coupling step does before its DEM steps.
   void begin_step(const schema::Stage& st, const std::vector<double>& values, double dt) {
-    if (world_.num_balls() == 0) throw std::runtime_error("no particles: the scene's stages generate none before cycling");
+    if (!part_only() && world_.num_balls() == 0)
+      throw std::runtime_error("no particles: the scene's stages generate none before cycling");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
-    if (energy_pending_) {
+    if (energy_pending_ && part_only()) {
+      energy_pending_ = false;  // rank 0 keeps the stage's energy balance
+    } else if (energy_pending_) {
       // Energy balance of the stage (docs/stability.md) from the state before its first step,
       // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN).
       energy_pending_ = false;
@@ -499,7 +528,7 @@ class DemParticipant : public node::Participant {
       fc_valid_ = true;
     }
     proto::Values v{{"ratio", ratio()}, {"dt_s", live().dt()}, {"dt_critical_s", critical_dt()}};
-    if (world_.gravity_on()) {
+    if (live().gravity_on()) {
       auto sk = skeleton();
       v.push_back({"ratio_skeleton", sk.ratio});
       v.push_back({"rattlers", static_cast<double>(sk.rattlers)});
@@ -517,11 +546,12 @@ class DemParticipant : public node::Participant {
   bool criterion_met(const schema::Stage& st) override {
     if (penetrating_) return footing_disp() >= target_disp_ * (1 - 1e-12);
     if (st.kind == schema::Action::kCycle) return false;
-    return (world_.gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
+    return (live().gravity_on() ? skeleton().ratio : ratio()) < stage_ratio_;
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     write_history_row();
-    leave_dist();  // the whole World again, on every rank
+    leave_dist();  // the whole World again, on rank 0
+    if (part_only()) return {};
     if (out_) write_frame(last);
     if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
     const double crit = world_.num_balls() > 0 ? critical_dt() : 0.0;
@@ -563,6 +593,14 @@ class DemParticipant : public node::Participant {
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
     leave_dist();
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
+    if (g_ranks.size > 1) {  // rank 0 sets the interface up; every rank learns the wall's index
+      if (!part_only()) interface_setup(m);
+      MPI_Bcast(&wall_, 1, MPI_INT, 0, g_ranks.comm);
+      return;
+    }
+    interface_setup(m);
+  }
+  void interface_setup(const proto::InterfaceMesh& m) {
     wall_ = world_.add_facet_wall(m.positions, m.triangles);
     n_iface_ = m.n_points();
     spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
@@ -581,6 +619,7 @@ class DemParticipant : public node::Participant {
   void set_interface_kinematics(const proto::Kinematics& k) override {
     node::Timed t(effect_s_["coupling"]);
     if (wall_ < 0) throw std::runtime_error("interface kinematics before the interface mesh");
+    if (part_only() && !dist_live_) return;  // rank 0's whole World takes them into the parts
     live().set_vertex_kinematics(wall_, k.positions, k.velocities);
   }
   proto::Forces interface_forces() override {
@@ -597,6 +636,9 @@ class DemParticipant : public node::Participant {
   }
 
  private:
+  // A rank other than 0 of the DEM on ranks: it holds only its part of the World, while the ranks
+  // step; rank 0 holds the whole World, sets the stages up, measures them and writes.
+  static bool part_only() { return g_ranks.size > 1 && g_ranks.rank != 0; }
   // The World that steps: a rank's brick while the ranks step, else the whole World.
   dem::World& live() { return dist_live_ ? dist_->world() : world_; }
   const dem::World& live() const { return dist_live_ ? dist_->world() : world_; }
@@ -614,10 +656,15 @@ class DemParticipant : public node::Participant {
   // longest axis).
   void enter_dist() {
     if (g_ranks.size <= 1 || dist_live_ || preparing_) return;
+    // Rank 0's cell and step (the other ranks did not set the stages up).
+    double c[8] = {world_.periodic() ? 1.0 : 0.0, world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
+                   world_.cell_length().x, world_.cell_length().y, world_.cell_length().z, user_dt_};
+    MPI_Bcast(c, 8, MPI_DOUBLE, 0, g_ranks.comm);
+    user_dt_ = c[7];
     dem::BrickGrid g;
-    if (world_.periodic()) {
-      g.lo = world_.cell_origin();
-      g.len = world_.cell_length();
+    if (c[0] != 0.0) {
+      g.lo = {c[1], c[2], c[3]};
+      g.len = {c[4], c[5], c[6]};
       g.periodic[0] = g.periodic[1] = g.periodic[2] = true;
     } else {
       g.lo = block_.origin;
@@ -639,7 +686,7 @@ class DemParticipant : public node::Participant {
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
                         s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime
                                                                    : dem::DistDem::Weight::kContacts});
-    dist_->load(world_);
+    dist_->load_from_root(world_);  // the other ranks hold only their part
     dist_live_ = true;
     synced_ = false;
     safe_dt_key_ = {-1, -1, -1};
@@ -648,7 +695,7 @@ class DemParticipant : public node::Participant {
   void sync_full() {
     if (!dist_live_ || synced_) return;
     node::Timed t(effect_s_["ranks.unload"]);
-    dist_->unload(world_);
+    dist_->unload(world_, true);  // on rank 0, which writes and sets the next stage up
     synced_ = true;
   }
   // The cuts of an RCB tree, each as its axis and its place along the block (a fraction), for a
@@ -700,7 +747,7 @@ class DemParticipant : public node::Participant {
       live().mutable_params().dt_fixed = user_dt_;
       return;
     }
-    const double safe = world_.params().dt_safety * crit;
+    const double safe = live().params().dt_safety * crit;
     std::ostringstream os;
     os.precision(6);
     os << "dem.dt_fixed = " << user_dt_ << " s exceeds the critical timestep " << crit << " s (docs/theory.md 1.8) at the "

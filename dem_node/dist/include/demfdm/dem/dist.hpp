@@ -27,7 +27,7 @@
 // parts (unload: output, checkpoints, the next stage's set-up), platen servos (every rank runs
 // them on the walls' sums, reduced after every step then). Not yet: the other effects (the
 // periodic servo; load refuses them); specimen procedures (dem_node runs them on the whole
-// World on every rank).
+// World on rank 0, which sends each rank its part: load_from_root).
 #pragma once
 
 #include <mpi.h>
