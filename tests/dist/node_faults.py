@@ -4,7 +4,8 @@ scenes/footing_small.toml with dem.ranks = 2,
 
 1. the blow-up guard: the top ball kicked out of the block at the gravity stage (dem.kick) stops
    the run with exit code 3 and the same report (blowup_dem.txt, byte for byte) as on one
-   process: the ranks find it and the whole World reports it;
+   process: the ranks find it and the whole World reports it; the same with the escape test off
+   and the kinetic-energy jump test finding it (rank 0's test, its verdict broadcast);
 2. a dead rank: rank 1 of the DEM killed with SIGKILL in the penetration ends the run with exit
    code 3 within 5 s, launch/run naming the DEM and the coordinator naming node 'dem';
 3. never losing a ranked run: checkpoints inside the penetration, rank 1 killed, `launch/run
@@ -34,28 +35,31 @@ def launch(name, sets):
     return subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
-# 1. The guard.
-reports = {}
-for ranks in (1, 2):
-    name = "kick_ranks%d" % ranks
-    p = launch(name, ["dem.ranks=%d" % ranks, "dem.kick=[0.0, 0.0, 200.0]"])
-    out, _ = p.communicate(timeout=300)
-    path = os.path.join(work, name, "blowup_dem.txt")
-    print("%s: exit code %d, report %s" % (name, p.returncode, "written" if os.path.exists(path) else "missing"))
-    if p.returncode != 3:
-        failures.append("%s: exit code %d, expected 3\n%s" % (name, p.returncode, out[-3000:]))
-    if not os.path.exists(path):
-        failures.append("%s: no blowup_dem.txt" % name)
-        continue
-    reports[ranks] = open(path, "rb").read()
-    if b"left the DEM domain" not in reports[ranks]:
-        failures.append("%s: the report does not name a ball leaving the domain" % name)
-if len(reports) == 2:
-    if reports[1] != reports[2]:
-        failures.append("the blow-up report on 2 ranks differs from one process's")
-    else:
-        print("blow-up report on 2 ranks: the same %d bytes as on one process (%s)" %
-              (len(reports[2]), reports[2].split(b"\n")[0].decode()[:120]))
+# 1. The guard: the kicked ball leaves the block (escape test), and, with no escape test and the
+# energy-jump factor at 5, the kinetic energy jumps (rank 0's test decides on the ranks).
+for case, sets, words in (("kick", [], b"left the DEM domain"),
+                          ("jump", ["dem.escape_margin=0", "run.guard_energy_jump=5"], b"kinetic energy jumped")):
+    reports = {}
+    for ranks in (1, 2):
+        name = "%s_ranks%d" % (case, ranks)
+        p = launch(name, ["dem.ranks=%d" % ranks, "dem.kick=[0.0, 0.0, 200.0]"] + sets)
+        out, _ = p.communicate(timeout=300)
+        path = os.path.join(work, name, "blowup_dem.txt")
+        print("%s: exit code %d, report %s" % (name, p.returncode, "written" if os.path.exists(path) else "missing"))
+        if p.returncode != 3:
+            failures.append("%s: exit code %d, expected 3\n%s" % (name, p.returncode, out[-3000:]))
+        if not os.path.exists(path):
+            failures.append("%s: no blowup_dem.txt" % name)
+            continue
+        reports[ranks] = open(path, "rb").read()
+        if words not in reports[ranks]:
+            failures.append("%s: the report does not say '%s'" % (name, words.decode()))
+    if len(reports) == 2:
+        if reports[1] != reports[2]:
+            failures.append("%s: the blow-up report on 2 ranks differs from one process's" % case)
+        else:
+            print("%s: blow-up report on 2 ranks: the same %d bytes as on one process (%s)" %
+                  (case, len(reports[2]), reports[2].split(b"\n")[1].decode()[:120]))
 
 
 # 2. A dead rank.
