@@ -16,6 +16,9 @@
 //            BENCH_DIST_WEIGHT=time weighs balls by their rank's measured time, not contacts.
 // BENCH_DIST_NEWTON=1: `newton on` (DistDem::set_newton): each pair across a face computed once,
 // the ghosts' forces sent back to their owners.
+// BENCH_DIST_FROM_ROOT=1: rank 0 alone holds the packing and sends each rank its part
+// (DistDem::load_from_root, as the DEM node does) instead of every rank cutting its own (load);
+// the last column, load_ms, is the wall time of either.
 // BENCH_DIST_DECOMP=rcb: recursive coordinate bisection (BrickGrid::set_rcb) instead of the cut
 // along one axis; `balance` then moves every cut of the tree.
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
@@ -35,7 +38,8 @@
 // rank (min/max); weight_imbalance (the balancing's weight, 1 + listed contacts per own ball, at
 // the end: largest over mean; free of timing noise); the footing force [N] (footing mode); the
 // World's rebuild and ball-ball pass [ms]; the `newton` reverse [ms] (its communication, counted in
-// comm_share); the pairs listed over the ranks at the end (one World's count with newton on).
+// comm_share); the pairs listed over the ranks at the end (one World's count with newton on); the
+// wall time of the load [ms] (every rank cutting its part, or rank 0 sending them: BENCH_DIST_FROM_ROOT).
 #include <mpi.h>
 #include <omp.h>
 
@@ -354,7 +358,17 @@ int main(int argc, char** argv) {
     g.n[footing ? 2 : 0] = P;
   DistDem d(MPI_COMM_WORLD, p, g);
   if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
-  d.load(full);
+  const char* from_root = std::getenv("BENCH_DIST_FROM_ROOT");
+  MPI_Barrier(MPI_COMM_WORLD);
+  const double tl0 = MPI_Wtime();
+  if (from_root && std::string(from_root) == "1") {
+    World none(p);  // the other ranks hold no ball: rank 0 cuts and sends
+    d.load_from_root(rank == 0 ? full : none);
+  } else {
+    d.load(full);
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  const double load_s = MPI_Wtime() - tl0;
   DistDem::Balance bal;
   bal.every = balance;
   if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
@@ -407,15 +421,15 @@ int main(int argc, char** argv) {
     std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
                 "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
                 "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N,rebuild_ms,pair_ms,reverse_ms,"
-                "pairs_listed\n");
+                "pairs_listed,load_ms\n");
     std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g,"
-                "%.4f,%.4f,%.4f,%.0f\n",
+                "%.4f,%.4f,%.4f,%.0f,%.1f\n",
                 P, mode.c_str(), model.c_str(), full.num_balls(), steps, wall,
                 double(full.num_balls()) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
                 sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5] + sum[10]) / total, cmax / ((sum[0] + sum[1]) / P),
                 sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - ex0), mig_sum,
                 static_cast<long long>(d.rebalances()), own_min, own_max, double(wgt_max) / (double(wgt_sum) / P),
-                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms, sum[10] * ms, sum[11]);
+                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms, sum[10] * ms, sum[11], load_s * 1e3);
   }
   if (const char* mg = std::getenv("BENCH_DIST_MODEL_GRID")) model_grid(d, g, mg);
   MPI_Finalize();

@@ -518,43 +518,94 @@ double full_halo(const World& full) {
 
 }  // namespace
 
-// Rank r's part of `full` (halo_, grid_ and newton_ set): the rows that are local to r (its
-// brick's balls, the balls within the halo, and the partners of a contact with one of r's balls:
-// a bonded pair may be stretched beyond the halo), in id order, the ball-ball pairs r computes,
-// and the wall contacts of r's balls, in a World with full's walls, cell, effects and counters
-// (`mark_ghosts`: its rows of other ranks' balls marked as ghosts; unmarked, it can be saved).
-std::unique_ptr<World> DistDem::part_of(const World& full, int r, const std::vector<PlatenServoParams>& platens,
-                                        bool mark_ghosts) const {
+// Which rows, pairs and wall contacts of `full` go to each rank of `ranks` (all ranks, or this
+// one), in one pass over the balls, the pairs and the wall contacts (halo_, grid_ and newton_
+// set): a rank's rows are its brick's balls, the balls within the halo, and the partners of a
+// contact with one of its balls (a bonded pair may be stretched beyond the halo), in id order.
+DistDem::Cut DistDem::cut(const World& full, bool all_ranks) const {
   const Particles& fp = full.balls();
-  const std::size_t n = fp.size();
-  std::vector<int> own(n), nb;
-  std::vector<std::uint8_t> local(n, 0);
+  const std::size_t n = fp.size(), P = static_cast<std::size_t>(size_);
+  Cut k;
+  k.own.resize(n);
+  k.rows.resize(P);
+  k.pairs.resize(P);
+  for (auto& w : k.walls) w.resize(P);
+  auto wanted = [&](int r) { return all_ranks || r == rank_; };
+  // One rank: its rows as a mask (in row order without a sort); every rank: lists, sorted after
+  // the partners are added.
+  std::vector<std::uint8_t> mask(all_ranks ? 0 : n, 0);
+  auto add = [&](int r, std::uint32_t i) {
+    if (all_ranks)
+      k.rows[static_cast<std::size_t>(r)].push_back(i);
+    else if (r == rank_)
+      mask[i] = 1;
+  };
+  std::vector<int> nb;
   for (std::size_t i = 0; i < n; ++i) {
-    own[i] = grid_.owner(fp.x[i]);
+    const int o = grid_.owner(fp.x[i]);
+    k.own[i] = o;
     grid_.near(fp.x[i], halo_, nb);
-    local[i] = own[i] == r || std::binary_search(nb.begin(), nb.end(), r);
+    bool has_o = false;
+    for (int r : nb) {
+      has_o = has_o || r == o;
+      add(r, static_cast<std::uint32_t>(i));
+    }
+    if (!has_o) add(o, static_cast<std::uint32_t>(i));
   }
   const PairContacts& fc = full.pair_contacts();
-  for (std::size_t c = 0; c < fc.size(); ++c) {
-    if (own[fc.a[c]] == r) local[fc.b[c]] = 1;
-    if (!newton_ && own[fc.b[c]] == r) local[fc.a[c]] = 1;
+  for (std::size_t c = 0; c < fc.size(); ++c) {  // (each rank's pairs in full's order)
+    const std::uint32_t a = fc.a[c], b = fc.b[c];
+    const int oa = k.own[a], ob = k.own[b];
+    if (wanted(oa)) {  // A's owner computes the pair (and B is its partner)
+      k.pairs[static_cast<std::size_t>(oa)].push_back(static_cast<std::uint32_t>(c));
+      add(oa, b);
+    }
+    if (!newton_ && ob != oa && wanted(ob)) {  // newton off: B's owner computes it too
+      k.pairs[static_cast<std::size_t>(ob)].push_back(static_cast<std::uint32_t>(c));
+      add(ob, a);
+    }
   }
+  if (all_ranks) {
+    for (auto& rows : k.rows) {
+      std::sort(rows.begin(), rows.end());
+      rows.erase(std::unique(rows.begin(), rows.end()), rows.end());
+    }
+  } else {
+    for (std::size_t i = 0; i < n; ++i)
+      if (mask[i]) k.rows[static_cast<std::size_t>(rank_)].push_back(static_cast<std::uint32_t>(i));
+  }
+  const auto fw = wall_lists(full);
+  for (std::size_t q = 0; q < 3; ++q) {
+    const WallContacts& f = *fw[q];
+    for (std::size_t c = 0; c < f.size(); ++c)
+      if (wanted(k.own[f.ball[c]])) k.walls[q][static_cast<std::size_t>(k.own[f.ball[c]])].push_back(static_cast<std::uint32_t>(c));
+  }
+  return k;
+}
+
+// Rank r's part of `full` as cut by `k`: its rows, the ball-ball pairs r computes and the wall
+// contacts of r's balls, in a World with full's walls, cell, effects and counters
+// (`mark_ghosts`: its rows of other ranks' balls marked as ghosts; unmarked, it can be saved).
+std::unique_ptr<World> DistDem::part_of(const World& full, const Cut& k, int r,
+                                        const std::vector<PlatenServoParams>& platens, bool mark_ghosts) const {
+  const Particles& fp = full.balls();
+  const std::size_t n = fp.size();
+  const std::vector<int>& own = k.own;
+  const std::vector<std::uint32_t>& rows = k.rows[static_cast<std::size_t>(r)];
   Particles pt;
   std::vector<std::uint8_t> ghost;
   std::vector<std::int64_t> row(n, -1);
-  for (std::size_t i = 0; i < n; ++i)
-    if (local[i]) {
-      row[i] = static_cast<std::int64_t>(pt.size());
-      push_ball(pt, ball_rec(fp, i));
-      ghost.push_back(own[i] != r);
-    }
+  for (std::uint32_t i : rows) {
+    row[i] = static_cast<std::int64_t>(pt.size());
+    push_ball(pt, ball_rec(fp, i));
+    ghost.push_back(own[i] != r);
+  }
   PairContacts pc;
+  const PairContacts& fc = full.pair_contacts();
   const bool has_bond = !fc.bond.empty();
-  for (std::size_t c = 0; c < fc.size(); ++c) {
-    const std::uint32_t a = fc.a[c], b = fc.b[c];
-    if (newton_ ? own[a] != r : !(own[a] == r || own[b] == r)) continue;
-    pc.a.push_back(static_cast<std::uint32_t>(row[a]));
-    pc.b.push_back(static_cast<std::uint32_t>(row[b]));
+  for (std::uint32_t c : k.pairs[static_cast<std::size_t>(r)]) {  // in full's order
+    pc.a.push_back(static_cast<std::uint32_t>(row[fc.a[c]]));
+    pc.b.push_back(static_cast<std::uint32_t>(row[fc.b[c]]));
     pc.shift.push_back(fc.shift[c]);
     pc.h.push_back(fc.h[c]);
     if (has_bond) pc.bond.push_back(fc.bond[c]);
@@ -563,11 +614,10 @@ std::unique_ptr<World> DistDem::part_of(const World& full, int r, const std::vec
   // balls.
   std::array<WallContacts, 3> wc;
   const auto fw = wall_lists(full);
-  for (int k = 0; k < 3; ++k) {
-    const WallContacts& f = *fw[static_cast<std::size_t>(k)];
-    for (std::size_t c = 0; c < f.size(); ++c)
-      if (own[f.ball[c]] == r) {  // every field, its candidate facets and last forces too
-        WallContacts& d = wc[static_cast<std::size_t>(k)];
+  for (std::size_t q = 0; q < 3; ++q) {
+    const WallContacts& f = *fw[q];
+    for (std::uint32_t c : k.walls[q][static_cast<std::size_t>(r)]) {  // every field, its candidate facets and last forces too
+        WallContacts& d = wc[q];
         push_wall(d, static_cast<std::uint32_t>(row[f.ball[c]]), f.wall[c], f.facet[c], f.h[c],
                   f.bond.empty() ? nullptr : &f.bond[c]);
         if (!f.cand_off.empty()) {
@@ -601,9 +651,9 @@ std::unique_ptr<World> DistDem::part_of(const World& full, int r, const std::vec
   w->swap_balls(pt, pc, wc, ghost);
   // One World's counters (time, step, the step's schedule, ...). The counts and energies that
   // are sums over the ranks' contacts start from the full world's on rank 0 and from 0 elsewhere.
-  World::Counters k = full.counters();
-  if (r != 0) k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
-  w->set_counters(k);
+  World::Counters kc = full.counters();
+  if (r != 0) kc.bond_failures = 0, kc.e_damp = kc.e_slip_dead = kc.e_soft_dead = 0.0;
+  w->set_counters(kc);
   return w;
 }
 
@@ -615,17 +665,17 @@ void DistDem::load(const World& full) {
   // thread count.
   p_.thread_independent = true;
   halo_ = full_halo(full);
-  take(part_of(full, rank_, platens), !platens.empty());
+  take(part_of(full, cut(full, false), rank_, platens), !platens.empty());
 }
 
 namespace {
 constexpr int kTagPart = 7303;  // load_from_root's parts
 }  // namespace
 
-// Rank 0 cuts `full` and sends each rank its part as a World's state file in memory (the
-// checkpoint format, dem/checkpoint.hpp: every field, bit for bit). The receiving rank loads it
-// as its `full` with rank 0's halo: its rows are exactly the ones part_of selects again, so it
-// keeps them all and steps as load(full) would have it.
+// Rank 0 cuts `full` (one pass, cut) and sends each rank its part as a World's state file in
+// memory (the checkpoint format, dem/checkpoint.hpp: every field, bit for bit). The receiving
+// rank takes it as its World, the rows of other ranks' balls marked as ghosts, and steps as
+// load(full) would have it.
 void DistDem::load_from_root(const World& full) {
   // Rank 0's verdict on `full` first (a refusal is every rank's), then the halo.
   std::string refused;
@@ -653,12 +703,14 @@ void DistDem::load_from_root(const World& full) {
     p_ = full.params();
     p_.skin = full.skin();
     p_.thread_independent = true;
+    Cut k;
     for (int r = 1; r < size_; ++r) {
       // (a failure here reaches the waiting ranks as a size of -1)
       std::string bytes;
       long long nb = -1;
       try {
-        bytes = state_bytes(*part_of(full, r, platens, false), CheckpointMeta{});
+        if (r == 1) k = cut(full, true);
+        bytes = state_bytes(*part_of(full, k, r, platens, false), CheckpointMeta{});
         nb = static_cast<long long>(bytes.size());
       } catch (...) {
         for (int q = r; q < size_; ++q) MPI_Send(&nb, 1, MPI_LONG_LONG, q, kTagPart, comm_);
@@ -667,7 +719,8 @@ void DistDem::load_from_root(const World& full) {
       MPI_Send(&nb, 1, MPI_LONG_LONG, r, kTagPart, comm_);
       MPI_Send(bytes.data(), static_cast<int>(nb), MPI_CHAR, r, kTagPart, comm_);
     }
-    take(part_of(full, 0, platens), !platens.empty());
+    if (size_ == 1) k = cut(full, true);
+    take(part_of(full, k, 0, platens), !platens.empty());
     return;
   }
   long long nb = 0;
@@ -675,12 +728,24 @@ void DistDem::load_from_root(const World& full) {
   if (nb < 0) throw std::runtime_error("DistDem::load_from_root: rank 0 could not cut its World (see rank 0's error).");
   std::string bytes(static_cast<std::size_t>(nb), '\0');
   MPI_Recv(bytes.data(), static_cast<int>(nb), MPI_CHAR, 0, kTagPart, comm_, MPI_STATUS_IGNORE);
-  World part(p_);
-  load_state_bytes(part, std::move(bytes), 0, "rank 0's part for rank " + std::to_string(rank_));
-  part.set_pair_kernel(static_cast<PairKernel>(static_cast<int>(hk[1])));
-  platens = loadable(part);
-  p_ = part.params();  // (its skin and thread_independent are rank 0's)
-  take(part_of(part, rank_, platens), !platens.empty());
+  // The part as rank 0 cut it, with the rows of other ranks' balls marked as ghosts.
+  auto part = std::make_unique<World>(p_);
+  load_state_bytes(*part, std::move(bytes), 0, "rank 0's part for rank " + std::to_string(rank_));
+  platens = loadable(*part);
+  p_ = part->params();  // (its skin and thread_independent are rank 0's)
+  const World::Counters kc = part->counters();
+  Particles pt;
+  PairContacts pc;
+  std::array<WallContacts, 3> wc;
+  std::vector<std::uint8_t> ghost;
+  part->swap_balls(pt, pc, wc, ghost);
+  ghost.resize(pt.size());
+  for (std::size_t i = 0; i < pt.size(); ++i) ghost[i] = grid_.owner(pt.x[i]) != rank_;
+  part->swap_balls(pt, pc, wc, ghost);
+  part->set_counters(kc);
+  part->set_wall_sums_by_caller(size_ > 1);
+  part->set_pair_kernel(static_cast<PairKernel>(static_cast<int>(hk[1])));
+  take(std::move(part), !platens.empty());
 }
 
 // The rank's World from its part: the step's reduction over the ranks, the forward lists, the

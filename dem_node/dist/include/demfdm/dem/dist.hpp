@@ -33,6 +33,7 @@
 #include <mpi.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -286,8 +287,18 @@ class DistDem {
   Balls gather() const;
 
  private:
-  /// Rank r's part of `full` as a World (halo_, grid_, newton_ and p_ set; load).
-  std::unique_ptr<World> part_of(const World& full, int r, const std::vector<PlatenServoParams>& platens,
+  /// Where the rows, pairs and wall contacts of a whole World go (load, load_from_root): per
+  /// row its owner; per rank its rows (ascending), the pairs it computes and its balls' wall
+  /// contacts of each kind, as indices into the whole World's arrays.
+  struct Cut {
+    std::vector<int> own;
+    std::vector<std::vector<std::uint32_t>> rows, pairs;
+    std::array<std::vector<std::vector<std::uint32_t>>, 3> walls;
+  };
+  /// One pass over `full` for every rank (all_ranks) or this one (halo_, grid_, newton_ set).
+  Cut cut(const World& full, bool all_ranks) const;
+  /// Rank r's part of `full` as a World (p_ set; load).
+  std::unique_ptr<World> part_of(const World& full, const Cut& k, int r, const std::vector<PlatenServoParams>& platens,
                                  bool mark_ghosts = true) const;
   /// This rank's part as its World: the step's reduction, the forward lists, the newton hooks,
   /// the walls' sums (load).
