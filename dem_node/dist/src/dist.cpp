@@ -594,12 +594,22 @@ std::unique_ptr<World> DistDem::part_of(const World& full, const Cut& k, int r,
   const std::vector<std::uint32_t>& rows = k.rows[static_cast<std::size_t>(r)];
   Particles pt;
   std::vector<std::uint8_t> ghost;
-  std::vector<std::int64_t> row(n, -1);
+  // full's row -> this part's row: `k.row`, all -1 between calls (only this part's entries are
+  // set and reset, so that cutting for every rank stays O(N) in all)
+  std::vector<std::int64_t>& row = k.row;
+  if (row.size() != n) row.assign(n, -1);
   for (std::uint32_t i : rows) {
     row[i] = static_cast<std::int64_t>(pt.size());
     push_ball(pt, ball_rec(fp, i));
     ghost.push_back(own[i] != r);
   }
+  struct Reset {
+    std::vector<std::int64_t>& row;
+    const std::vector<std::uint32_t>& rows;
+    ~Reset() {
+      for (std::uint32_t i : rows) row[i] = -1;
+    }
+  } reset{row, rows};
   PairContacts pc;
   const PairContacts& fc = full.pair_contacts();
   const bool has_bond = !fc.bond.empty();
@@ -669,7 +679,8 @@ void DistDem::load(const World& full) {
 }
 
 namespace {
-constexpr int kTagPart = 7303;  // load_from_root's parts
+constexpr int kTagPart = 7303;                 // load_from_root's parts
+constexpr long long kPartChunk = 1LL << 30;    // bytes per message of a part
 }  // namespace
 
 // Rank 0 cuts `full` (one pass, cut) and sends each rank its part as a World's state file in
@@ -717,7 +728,8 @@ void DistDem::load_from_root(const World& full) {
         throw;
       }
       MPI_Send(&nb, 1, MPI_LONG_LONG, r, kTagPart, comm_);
-      MPI_Send(bytes.data(), static_cast<int>(nb), MPI_CHAR, r, kTagPart, comm_);
+      for (long long at = 0; at < nb; at += kPartChunk)  // (an int counts at most 2 GiB)
+        MPI_Send(bytes.data() + at, static_cast<int>(std::min(kPartChunk, nb - at)), MPI_CHAR, r, kTagPart, comm_);
     }
     if (size_ == 1) k = cut(full, true);
     take(part_of(full, k, 0, platens), !platens.empty());
@@ -727,7 +739,9 @@ void DistDem::load_from_root(const World& full) {
   MPI_Recv(&nb, 1, MPI_LONG_LONG, 0, kTagPart, comm_, MPI_STATUS_IGNORE);
   if (nb < 0) throw std::runtime_error("DistDem::load_from_root: rank 0 could not cut its World (see rank 0's error).");
   std::string bytes(static_cast<std::size_t>(nb), '\0');
-  MPI_Recv(bytes.data(), static_cast<int>(nb), MPI_CHAR, 0, kTagPart, comm_, MPI_STATUS_IGNORE);
+  for (long long at = 0; at < nb; at += kPartChunk)
+    MPI_Recv(bytes.data() + at, static_cast<int>(std::min(kPartChunk, nb - at)), MPI_CHAR, 0, kTagPart, comm_,
+             MPI_STATUS_IGNORE);
   // The part as rank 0 cut it, with the rows of other ranks' balls marked as ghosts.
   auto part = std::make_unique<World>(p_);
   load_state_bytes(*part, std::move(bytes), 0, "rank 0's part for rank " + std::to_string(rank_));

@@ -294,6 +294,7 @@ class DistDem {
     std::vector<int> own;
     std::vector<std::vector<std::uint32_t>> rows, pairs;
     std::array<std::vector<std::vector<std::uint32_t>>, 3> walls;
+    mutable std::vector<std::int64_t> row;  // part_of's scratch: a whole-World row's row in the part
   };
   /// One pass over `full` for every rank (all_ranks) or this one (halo_, grid_, newton_ set).
   Cut cut(const World& full, bool all_ranks) const;
