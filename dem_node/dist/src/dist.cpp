@@ -1830,23 +1830,41 @@ void DistDem::unload(World& full, bool root_only) const {
   put_recs(out, cands);
   put_recs(out, sums);
   put_recs(out, std::vector<std::int64_t>{mine.bond_failures});
-  // every rank gets every part (root_only: rank 0 alone)
-  const int bytes = static_cast<int>(out.size());
-  std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_) + 1, 0);
-  if (root_only)
-    MPI_Gather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, comm_);
-  else
-    MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
-  for (int r = 0; r < size_; ++r)
-    displ[static_cast<std::size_t>(r) + 1] = displ[static_cast<std::size_t>(r)] + counts[static_cast<std::size_t>(r)];
-  std::vector<char> in(root_only && rank_ != 0 ? 0 : static_cast<std::size_t>(displ.back()));
+  // every rank gets every part (root_only: rank 0 alone, each part in messages of at most 1 GiB,
+  // so that a whole World beyond 2 GiB, which an int cannot count, is assembled)
+  std::vector<long long> displ(static_cast<std::size_t>(size_) + 1, 0);
+  std::vector<char> in;
   double run = run_disp2_, max_disp2 = 0.0;
   if (root_only) {
-    MPI_Gatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
+    long long bytes = static_cast<long long>(out.size());
+    std::vector<long long> counts(static_cast<std::size_t>(size_));
+    MPI_Gather(&bytes, 1, MPI_LONG_LONG, counts.data(), 1, MPI_LONG_LONG, 0, comm_);
+    if (rank_ != 0) {
+      for (long long at = 0; at < bytes; at += kPartChunk)
+        MPI_Send(out.data() + at, static_cast<int>(std::min(kPartChunk, bytes - at)), MPI_BYTE, 0, kTagPart, comm_);
+      MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
+      return;
+    }
+    for (int r = 0; r < size_; ++r)
+      displ[static_cast<std::size_t>(r) + 1] = displ[static_cast<std::size_t>(r)] + counts[static_cast<std::size_t>(r)];
+    in.resize(static_cast<std::size_t>(displ.back()));
+    std::copy(out.begin(), out.end(), in.begin());
+    for (int r = 1; r < size_; ++r)
+      for (long long at = 0; at < counts[static_cast<std::size_t>(r)]; at += kPartChunk)
+        MPI_Recv(in.data() + displ[static_cast<std::size_t>(r)] + at,
+                 static_cast<int>(std::min(kPartChunk, counts[static_cast<std::size_t>(r)] - at)), MPI_BYTE, r, kTagPart,
+                 comm_, MPI_STATUS_IGNORE);
     MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
-    if (rank_ != 0) return;
   } else {
-    MPI_Allgatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), displ.data(), MPI_BYTE, comm_);
+    const int bytes = static_cast<int>(out.size());
+    std::vector<int> counts(static_cast<std::size_t>(size_)), di(static_cast<std::size_t>(size_) + 1, 0);
+    MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, comm_);
+    for (int r = 0; r < size_; ++r) {
+      di[static_cast<std::size_t>(r) + 1] = di[static_cast<std::size_t>(r)] + counts[static_cast<std::size_t>(r)];
+      displ[static_cast<std::size_t>(r) + 1] = di[static_cast<std::size_t>(r) + 1];
+    }
+    in.resize(static_cast<std::size_t>(displ.back()));
+    MPI_Allgatherv(out.data(), bytes, MPI_BYTE, in.data(), counts.data(), di.data(), MPI_BYTE, comm_);
     MPI_Allreduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, comm_);
   }
 
