@@ -168,6 +168,7 @@ void check(const WallScene& sc) {
   DistDem d(MPI_COMM_WORLD, full->params(), g);
   if (sc.from_root) {
     if (g_rank != 0) full = std::make_unique<World>(full->params());  // no ball, no wall, no effect
+    d.set_part_chunk(4096);  // each part and each assembled share in many messages
     d.load_from_root(*full);
   } else {
     d.load(*full);
@@ -360,8 +361,8 @@ TEST(DistWalls, BondedFloorCutAlongZSameBits) {
   check({"walls, bonded floor, cut along z", ContactModel::kLinearPBond, 2});
 }
 // The whole World on rank 0 only (DistDem::load_from_root, unload to rank 0): each rank gets its
-// part as a World's state file in memory; the walls, the footing, the bonded floor's histories,
-// the platen servo and the counters come with it.
+// part as a World's state file in memory, in messages of 4 KiB; the walls, the footing, the
+// bonded floor's histories, the platen servo and the counters come with it.
 TEST(DistWalls, FromRootBondedFloorAndServoSameBits) {
   WallScene sc{"walls, from rank 0, bonded floor, a platen servo, cut along y", ContactModel::kLinearPBond, 1};
   sc.servo = true;

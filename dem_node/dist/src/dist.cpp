@@ -680,7 +680,6 @@ void DistDem::load(const World& full) {
 
 namespace {
 constexpr int kTagPart = 7303;                 // load_from_root's parts
-constexpr long long kPartChunk = 1LL << 30;    // bytes per message of a part
 }  // namespace
 
 // Rank 0 cuts `full` (one pass, cut) and sends each rank its part as a World's state file in
@@ -728,8 +727,8 @@ void DistDem::load_from_root(const World& full) {
         throw;
       }
       MPI_Send(&nb, 1, MPI_LONG_LONG, r, kTagPart, comm_);
-      for (long long at = 0; at < nb; at += kPartChunk)  // (an int counts at most 2 GiB)
-        MPI_Send(bytes.data() + at, static_cast<int>(std::min(kPartChunk, nb - at)), MPI_CHAR, r, kTagPart, comm_);
+      for (long long at = 0; at < nb; at += chunk_)  // (an int counts at most 2 GiB)
+        MPI_Send(bytes.data() + at, static_cast<int>(std::min(chunk_, nb - at)), MPI_CHAR, r, kTagPart, comm_);
     }
     if (size_ == 1) k = cut(full, true);
     take(part_of(full, k, 0, platens), !platens.empty());
@@ -739,8 +738,8 @@ void DistDem::load_from_root(const World& full) {
   MPI_Recv(&nb, 1, MPI_LONG_LONG, 0, kTagPart, comm_, MPI_STATUS_IGNORE);
   if (nb < 0) throw std::runtime_error("DistDem::load_from_root: rank 0 could not cut its World (see rank 0's error).");
   std::string bytes(static_cast<std::size_t>(nb), '\0');
-  for (long long at = 0; at < nb; at += kPartChunk)
-    MPI_Recv(bytes.data() + at, static_cast<int>(std::min(kPartChunk, nb - at)), MPI_CHAR, 0, kTagPart, comm_,
+  for (long long at = 0; at < nb; at += chunk_)
+    MPI_Recv(bytes.data() + at, static_cast<int>(std::min(chunk_, nb - at)), MPI_CHAR, 0, kTagPart, comm_,
              MPI_STATUS_IGNORE);
   // The part as rank 0 cut it, with the rows of other ranks' balls marked as ghosts.
   auto part = std::make_unique<World>(p_);
@@ -1840,8 +1839,8 @@ void DistDem::unload(World& full, bool root_only) const {
     std::vector<long long> counts(static_cast<std::size_t>(size_));
     MPI_Gather(&bytes, 1, MPI_LONG_LONG, counts.data(), 1, MPI_LONG_LONG, 0, comm_);
     if (rank_ != 0) {
-      for (long long at = 0; at < bytes; at += kPartChunk)
-        MPI_Send(out.data() + at, static_cast<int>(std::min(kPartChunk, bytes - at)), MPI_BYTE, 0, kTagPart, comm_);
+      for (long long at = 0; at < bytes; at += chunk_)
+        MPI_Send(out.data() + at, static_cast<int>(std::min(chunk_, bytes - at)), MPI_BYTE, 0, kTagPart, comm_);
       MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
       return;
     }
@@ -1850,9 +1849,9 @@ void DistDem::unload(World& full, bool root_only) const {
     in.resize(static_cast<std::size_t>(displ.back()));
     std::copy(out.begin(), out.end(), in.begin());
     for (int r = 1; r < size_; ++r)
-      for (long long at = 0; at < counts[static_cast<std::size_t>(r)]; at += kPartChunk)
+      for (long long at = 0; at < counts[static_cast<std::size_t>(r)]; at += chunk_)
         MPI_Recv(in.data() + displ[static_cast<std::size_t>(r)] + at,
-                 static_cast<int>(std::min(kPartChunk, counts[static_cast<std::size_t>(r)] - at)), MPI_BYTE, r, kTagPart,
+                 static_cast<int>(std::min(chunk_, counts[static_cast<std::size_t>(r)] - at)), MPI_BYTE, r, kTagPart,
                  comm_, MPI_STATUS_IGNORE);
     MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
   } else {

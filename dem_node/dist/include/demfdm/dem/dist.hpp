@@ -219,6 +219,9 @@ class DistDem {
   /// its remote pairs after its local ones: the results depend on the rank count (within
   /// round-off at first), unlike `newton off` (the default), whose bits are one World's.
   void set_newton(bool on);
+  /// The largest message [bytes] of load_from_root's parts and of unload to rank 0 (default
+  /// 1 GiB: an MPI count is an int); tests set a small one to send a part in many messages.
+  void set_part_chunk(long long bytes) { chunk_ = std::max(1LL, bytes); }
   bool newton() const { return newton_; }
   const BrickGrid& grid() const { return grid_; }
   std::int64_t rebalances() const { return rebalances_; }
@@ -344,6 +347,7 @@ class DistDem {
   double halo_ = 0.0;
   bool walls_every_step_ = false;  // a platen servo: the walls' sums reduced after every step (load)
   bool newton_ = false;            // set_newton
+  long long chunk_ = 1LL << 30;    // set_part_chunk
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0, sparse_exchanges_ = 0;
   std::vector<int> peers_;                   // peer_ranks()
