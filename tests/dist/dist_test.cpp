@@ -225,11 +225,9 @@ TEST(Dist, SoftBondPeriodicFromRootRcbSameBits) {
   sc.from_root = true;
   check(sc);
 }
+static Scene free_rcb_balanced(const char* name);  // (below)
 TEST(Dist, LinearFreeFromRootRcbBalancedSameBits) {
-  Scene sc{"linear free, from rank 0, RCB balanced", ContactModel::kLinear, false, false, 2, 200};
-  sc.rcb = true;
-  sc.balance_every = 2;
-  sc.tall = 3.0;
+  Scene sc = free_rcb_balanced("linear free, from rank 0, RCB balanced");
   sc.from_root = true;
   check(sc);
 }
@@ -250,13 +248,14 @@ TEST(Dist, LinearPeriodicRcbSameBits) {
   sc.rcb = true;
   check(sc);
 }
-TEST(Dist, LinearFreeRcbBalancedSameBits) {
-  Scene sc{"linear free, RCB balanced", ContactModel::kLinear, false, false, 2, 200};
+static Scene free_rcb_balanced(const char* name) {
+  Scene sc{name, ContactModel::kLinear, false, false, 2, 200};
   sc.rcb = true;
   sc.balance_every = 2;
   sc.tall = 3.0;
-  check(sc);
+  return sc;
 }
+TEST(Dist, LinearFreeRcbBalancedSameBits) { check(free_rcb_balanced("linear free, RCB balanced")); }
 
 // `newton on` (DistDem::set_newton): each pair across a brick face computed once, on the rank
 // that owns its ball A, its force on the ghost B sent back to B's owner. Checked against one

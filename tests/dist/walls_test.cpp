@@ -303,42 +303,30 @@ void check(const WallScene& sc) {
 
 TEST(DistWalls, LinearFloorCutAlongXSameBits) { check({"walls, linear floor, cut along x"}); }
 // An effect the ranks cannot run yet (the periodic servo reads the whole cell's stress every
-// step) is refused by name, on every rank.
-TEST(DistWalls, PeriodicServoIsRefusedByName) {
+// step) is refused by name, on every rank; from_root: the whole World on rank 0 only, every rank
+// throws rank 0's words.
+static void check_refusal(bool from_root) {
   const Floor floor;
   std::unique_ptr<World> full = build({"refusal"}, floor, true);
   full->add_effect(std::make_unique<PeriodicServo>(ServoParams{}, kR));
+  if (from_root && g_rank != 0) full = std::make_unique<World>(full->params());
   BrickGrid g;
   g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
   g.len = {kL, kL, kL};
   g.n[0] = g_size;
   DistDem d(MPI_COMM_WORLD, full->params(), g);
   try {
-    d.load(*full);
-    ADD_FAILURE() << "load took a world with a periodic servo";
+    if (from_root)
+      d.load_from_root(*full);
+    else
+      d.load(*full);
+    ADD_FAILURE() << "the ranks took a world with a periodic servo";
   } catch (const std::invalid_argument& e) {
     EXPECT_NE(std::string(e.what()).find("'periodic_servo'"), std::string::npos) << e.what();
   }
 }
-
-// The same refusal when the whole World is on rank 0 only: every rank throws rank 0's words.
-TEST(DistWalls, PeriodicServoIsRefusedByNameFromRoot) {
-  const Floor floor;
-  std::unique_ptr<World> full = build({"refusal"}, floor, true);
-  full->add_effect(std::make_unique<PeriodicServo>(ServoParams{}, kR));
-  if (g_rank != 0) full = std::make_unique<World>(full->params());
-  BrickGrid g;
-  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
-  g.len = {kL, kL, kL};
-  g.n[0] = g_size;
-  DistDem d(MPI_COMM_WORLD, full->params(), g);
-  try {
-    d.load_from_root(*full);
-    ADD_FAILURE() << "load_from_root took a world with a periodic servo";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("'periodic_servo'"), std::string::npos) << e.what();
-  }
-}
+TEST(DistWalls, PeriodicServoIsRefusedByName) { check_refusal(false); }
+TEST(DistWalls, PeriodicServoIsRefusedByNameFromRoot) { check_refusal(true); }
 
 TEST(DistWalls, PlatenServoCutAlongYSameBits) {
   WallScene sc{"walls, a platen servo on a side, cut along y, 4 steps per call"};
