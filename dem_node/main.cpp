@@ -686,7 +686,10 @@ class DemParticipant : public node::Participant {
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
                         s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime
                                                                    : dem::DistDem::Weight::kContacts});
-    dist_->load_from_root(world_);  // the other ranks hold only their part
+    {
+      node::Timed t(effect_s_["ranks.load"]);
+      dist_->load_from_root(world_);  // the other ranks hold only their part
+    }
     dist_live_ = true;
     synced_ = false;
     safe_dt_key_ = {-1, -1, -1};

@@ -85,6 +85,8 @@ for name, ranks, threads, more in runs[1:]:
     m = re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.exchange=([0-9.e+-]+)", log)
     if not m:
         failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
+    if not re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.load=([0-9.e+-]+)", log):
+        failures.append("%s: the node's log names no load of the parts from rank 0 in the penetration" % name)
     if more and not re.search(r"dem: [1-9][0-9]* rebalances of the ranks' cuts", log):
         failures.append("%s: the ranks did not rebalance their cuts" % name)
     print("%s: %d CSV files and %d + %d datasets compared with one process's" %
