@@ -115,10 +115,17 @@ double weight_imbalance(const World& w, const BrickGrid& g) {
 // every rank passes or fails together.
 void check(const Scene& sc) {
   std::unique_ptr<World> full = build(sc, true);
-  DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
+  // from_root: the other ranks run 2 threads, rank 0 sc.threads (each rank keeps its own count;
+  // the bits do not depend on it)
+  WorldParams own = full->params();
+  if (sc.from_root && g_rank != 0) own.threads = 2;
+  DistDem d(MPI_COMM_WORLD, own, grid(sc));
   if (sc.from_root) {
-    if (g_rank != 0) full = std::make_unique<World>(full->params());  // no ball
+    if (g_rank != 0) full = std::make_unique<World>(own);  // no ball
     d.load_from_root(*full);
+    int kept = d.world().params().threads == own.threads, all_kept = 0;
+    MPI_Allreduce(&kept, &all_kept, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
+    EXPECT_TRUE(all_kept) << "a rank took another rank's thread count";
   } else {
     d.load(*full);
   }

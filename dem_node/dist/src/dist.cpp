@@ -742,9 +742,13 @@ void DistDem::load_from_root(const World& full) {
     MPI_Recv(bytes.data() + at, static_cast<int>(std::min(chunk_, nb - at)), MPI_CHAR, 0, kTagPart, comm_,
              MPI_STATUS_IGNORE);
   // The part as rank 0 cut it, with the rows of other ranks' balls marked as ghosts.
+  // (this rank's thread count, from the parameters it constructed the DistDem with: its host's
+  // cores may differ from rank 0's; the bits do not depend on it)
+  const int threads = p_.threads;
   auto part = std::make_unique<World>(p_);
   load_state_bytes(*part, std::move(bytes), 0, "rank 0's part for rank " + std::to_string(rank_));
   platens = loadable(*part);
+  part->mutable_params().threads = threads;
   p_ = part->params();  // (its skin and thread_independent are rank 0's)
   const World::Counters kc = part->counters();
   Particles pt;

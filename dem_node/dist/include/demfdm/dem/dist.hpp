@@ -175,7 +175,8 @@ class DistDem {
   /// Rank 0 cuts `full` into each rank's part (its rows, pairs, wall contacts, the walls, the
   /// cell, the effects and the counters) and sends it as a World's state file in memory (the
   /// checkpoint format, bit for bit), one rank at a time. The same bits as load(full) on every
-  /// rank. A `full` that load refuses is refused on every rank, with rank 0's message.
+  /// rank. A `full` that load refuses is refused on every rank, with rank 0's message. A rank's
+  /// thread count is the one of the parameters it constructed this DistDem with.
   void load_from_root(const World& full);
   /// One World holding every ball, on every rank (collective): `full` gets the state one World
   /// stepped as this one was would have (balls, contact lists in that World's orders with their
