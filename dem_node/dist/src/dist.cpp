@@ -518,8 +518,8 @@ double full_halo(const World& full) {
 
 }  // namespace
 
-// Which rows, pairs and wall contacts of `full` go to each rank of `ranks` (all ranks, or this
-// one), in one pass over the balls, the pairs and the wall contacts (halo_, grid_ and newton_
+// Which rows, pairs and wall contacts of `full` go to every rank (all_ranks) or to this one, in
+// one pass over the balls, the pairs and the wall contacts (halo_, grid_ and newton_
 // set): a rank's rows are its brick's balls, the balls within the halo, and the partners of a
 // contact with one of its balls (a bonded pair may be stretched beyond the halo), in id order.
 DistDem::Cut DistDem::cut(const World& full, bool all_ranks) const {
