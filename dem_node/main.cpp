@@ -551,6 +551,13 @@ class DemParticipant : public node::Participant {
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     write_history_row();
     leave_dist();  // the whole World again, on rank 0
+    // On the ranks: the largest peak memory of the ranks other than 0 (rank 0's is the node's,
+    // "peak_rss_mb"), for the summary.
+    double others = 0.0;
+    if (g_ranks.size > 1) {
+      const double mine = part_only() ? node::process_peak_rss_mb() : 0.0;
+      MPI_Reduce(&mine, &others, 1, MPI_DOUBLE, MPI_MAX, 0, g_ranks.comm);
+    }
     if (part_only()) return {};
     if (out_) write_frame(last);
     if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
@@ -576,6 +583,7 @@ class DemParticipant : public node::Participant {
     }
     add_phase_times();
     for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
+    if (g_ranks.size > 1) v.push_back({"peak_rss_mb_other_ranks", others});
     spdlog::info("dem: stage '{}' ends: {} balls, ratio {:.3e}, Z {:.3f}, bonds intact {} softening {} broken T {} S {}",
                  st.name, world_.num_balls(), m.ratio, m.coord.z, m.bonds.intact, m.bonds.softening,
                  m.bonds.broken_tension, m.bonds.broken_shear);

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <iostream>
 #include <sstream>
+#include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -113,6 +114,12 @@ double process_cpu_s() {
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 }  // namespace
+
+double process_peak_rss_mb() {
+  rusage ru{};
+  if (getrusage(RUSAGE_SELF, &ru) != 0) return 0.0;
+  return static_cast<double>(ru.ru_maxrss) / 1024.0;  // (Linux: kilobytes)
+}
 
 Options parse_options(int argc, char** argv, std::vector<std::string>* positional,
                       const std::vector<std::string>& flags) {
@@ -415,6 +422,7 @@ int run_node(int argc, char** argv, const std::string& role, const std::string& 
         in_stage = false;
         auto values = part->stage_end(st, c.header.step);
         values.push_back({"cpu_s", process_cpu_s() - stage_cpu0});
+        values.push_back({"peak_rss_mb", process_peak_rss_mb()});
         std::ostringstream vs;
         vs.precision(10);
         for (auto& [k, v] : values) vs << " " << k << "=" << v;

@@ -177,6 +177,10 @@ using Factory = std::function<std::unique_ptr<Participant>(const Context&)>;
 // scene, 3 protocol or engine failure (reported to the coordinator and logged), 130 interrupted.
 int run_node(int argc, char** argv, const std::string& role, const std::string& solver, const Factory& make);
 
+// The largest resident set of this process so far [MB] (getrusage ru_maxrss): the STAGE_END
+// report's "peak_rss_mb", from which the summary gives each node's peak memory.
+double process_peak_rss_mb();
+
 // Command-line parsing shared by the node executables and the coordinator.
 // Recognises --lcm-url=URL, --run-id=N, --run-dir=DIR, -v; throws std::invalid_argument on
 // anything else (the message names the argument).

@@ -83,11 +83,15 @@ RunTotals run_totals(const RunSummary& sum) {
   for (auto& s : sum.stages) {
     for (auto& [r, c] : s.compute_s) t.compute_s[r] += c;
     for (auto& [r, w] : s.wait_s) t.wait_s[r] += w;
-    for (auto& [r, rep] : s.end)
+    for (auto& [r, rep] : s.end) {
       if (const double cpu = cpu_of(rep); cpu >= 0) {
         t.cpu_s[r] += cpu;
         t.cpu_wall_s[r] += s.wall_s;
       }
+      if (auto it = rep.values.find(kPeakKey); it != rep.values.end()) t.peak_mb[r] = std::max(t.peak_mb[r], it->second);
+      if (auto it = rep.values.find(kPeakRanksKey); it != rep.values.end())
+        t.peak_ranks_mb[r] = std::max(t.peak_ranks_mb[r], it->second);
+    }
     for (auto& [r, eff] : stage_effects(s))
       for (auto& [name, sec] : eff) t.effects[r][name] += sec;
   }
@@ -184,6 +188,19 @@ std::string summary_text(const RunInfo& info, const RunSummary& sum) {
          << share(together, info.host_cores) << " %)" << std::setprecision(3);
     os << "\n";
   }
+  if (!tot.peak_mb.empty()) {
+    // The largest resident set of each node's process (and of the DEM's other ranks).
+    os << "Peak memory (resident set):";
+    bool first = true;
+    for (auto& [r, mb] : tot.peak_mb) {
+      os << (first ? " " : ", ") << r << " " << std::setprecision(0) << mb << " MB" << std::setprecision(3);
+      if (auto o = tot.peak_ranks_mb.find(r); o != tot.peak_ranks_mb.end())
+        os << " (rank 0; its other ranks at most " << std::setprecision(0) << o->second << " MB each)"
+           << std::setprecision(3);
+      first = false;
+    }
+    os << "\n";
+  }
   if (!info.bus.empty()) os << "coordinator bus: " << info.bus << "\n";
   if (!info.checkpoints.empty()) os << "checkpoints: " << info.checkpoints << "\n";
   if (!info.resumed.empty()) os << info.resumed << "\n";
@@ -243,6 +260,9 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum) {
       const double wall = value_or_zero(tot.cpu_wall_s, r);
       os << ", \"cpu_s\": " << json_number(cp->second) << ", \"cpu_cores\": " << json_number(wall > 0 ? cp->second / wall : 0.0);
     }
+    if (auto pk = tot.peak_mb.find(r); pk != tot.peak_mb.end()) os << ", \"peak_rss_mb\": " << json_number(pk->second);
+    if (auto pk = tot.peak_ranks_mb.find(r); pk != tot.peak_ranks_mb.end())
+      os << ", \"peak_rss_mb_other_ranks\": " << json_number(pk->second);
     os << ", \"effects\": " << json_effects(it == tot.effects.end() ? std::map<std::string, double>{} : it->second, c)
        << "}";
     first = false;

@@ -21,6 +21,11 @@ inline constexpr const char* kEffectPrefix = "effect_s.";
 // process (all threads, user + system) over the stage. The summary divides it by the stage's
 // wall time (cores the node kept busy) and adds the nodes up against the machine's cores.
 inline constexpr const char* kCpuKey = "cpu_s";
+// Peak memory: a node reports, in its STAGE_END values, `peak_rss_mb`, the largest resident set of
+// its process so far; the DEM on MPI ranks also `peak_rss_mb_other_ranks`, the largest of its
+// other ranks' (rank 0's is the node's). The summary gives the largest over the stages.
+inline constexpr const char* kPeakKey = "peak_rss_mb";
+inline constexpr const char* kPeakRanksKey = "peak_rss_mb_other_ranks";
 
 struct NodeInfo {
   std::string role, solver, host, build_id;
@@ -56,6 +61,7 @@ double cpu_of(const NodeReport& end);
 struct RunTotals {
   std::map<std::string, std::map<std::string, double>> effects;
   std::map<std::string, double> compute_s, wait_s, cpu_s, cpu_wall_s;
+  std::map<std::string, double> peak_mb, peak_ranks_mb;  // role -> the largest reported [MB]
 };
 RunTotals run_totals(const RunSummary& sum);
 

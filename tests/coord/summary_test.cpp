@@ -136,6 +136,39 @@ TEST(Summary, JsonStringEscapes) {
   EXPECT_EQ(coord::json_string("a\"b\\c\n\x01"), "\"a\\\"b\\\\c\\n\\u0001\"");
 }
 
+// Peak memory: the largest STAGE_END peak_rss_mb of each node over the stages, and for the DEM on
+// ranks the largest of its other ranks' (peak_rss_mb_other_ranks), in the text and in the JSON.
+TEST(Summary, PeakMemoryPerNodeAndOtherRanks) {
+  coord::StageSummary a;
+  a.name = "gravity";
+  a.action = "couple";
+  a.last_step = 9;
+  a.wall_s = 10.0;
+  a.ended_by = "steps";
+  a.compute_s = {{"continuum", 1.0}, {"dem", 9.0}};
+  a.end["dem"].values = {{"peak_rss_mb", 380.0}, {"peak_rss_mb_other_ranks", 120.0}};
+  a.end["continuum"].values = {{"peak_rss_mb", 90.0}};
+  coord::StageSummary b = a;
+  b.name = "penetrate";
+  b.end["dem"].values = {{"peak_rss_mb", 400.0}, {"peak_rss_mb_other_ranks", 110.0}};
+  b.end["continuum"].values = {{"ratio", 1.0}};
+  coord::RunSummary sum;
+  sum.stages = {a, b};
+  sum.wall_s = 20.0;
+  sum.steps = 20;
+  const std::string t = coord::summary_text(info(), sum);
+  EXPECT_NE(t.find("Peak memory (resident set): continuum 90 MB, dem 400 MB (rank 0; its other ranks at most 120 MB "
+                   "each)\n"),
+            std::string::npos)
+      << t;
+  const std::string j = coord::summary_json(info(), sum);
+  EXPECT_TRUE(python_json_check(j, "j['totals']['nodes']['dem']['peak_rss_mb'] == 400 and "
+                                   "j['totals']['nodes']['dem']['peak_rss_mb_other_ranks'] == 120 and "
+                                   "j['totals']['nodes']['continuum']['peak_rss_mb'] == 90 and "
+                                   "'peak_rss_mb_other_ranks' not in j['totals']['nodes']['continuum']"))
+      << j;
+}
+
 // CPU utilisation (issue 16 item 2): each node's STAGE_END cpu_s over the stage's wall time, per
 // stage and over the run (only the stages a node reported CPU time for), and all nodes together
 // against the host's cores.

@@ -87,6 +87,11 @@ for name, ranks, threads, more in runs[1:]:
         failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
     if not re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.load=([0-9.e+-]+)", log):
         failures.append("%s: the node's log names no load of the parts from rank 0 in the penetration" % name)
+    summary = open(os.path.join(d, "summary.txt")).read()
+    pm = re.search(r"Peak memory \(resident set\):.* dem ([0-9]+) MB \(rank 0; its other ranks at most ([0-9]+) MB each\)",
+                   summary)
+    if not pm or float(pm.group(1)) <= 0 or float(pm.group(2)) <= 0:
+        failures.append("%s: the summary gives no peak memory of the DEM's ranks" % name)
     if more and not re.search(r"dem: [1-9][0-9]* rebalances of the ranks' cuts", log):
         failures.append("%s: the ranks did not rebalance their cuts" % name)
     print("%s: %d CSV files and %d + %d datasets compared with one process's" %
