@@ -136,16 +136,25 @@ TEST(Summary, JsonStringEscapes) {
   EXPECT_EQ(coord::json_string("a\"b\\c\n\x01"), "\"a\\\"b\\\\c\\n\\u0001\"");
 }
 
-// Peak memory: the largest STAGE_END peak_rss_mb of each node over the stages, and for the DEM on
-// ranks the largest of its other ranks' (peak_rss_mb_other_ranks), in the text and in the JSON.
-TEST(Summary, PeakMemoryPerNodeAndOtherRanks) {
+// A coupled stage "gravity" of steps 0-9 in 10 s: the continuum computed 1 s and waited 9 s, the
+// DEM computed 9 s and waited 1 s.
+static coord::StageSummary gravity_stage() {
   coord::StageSummary a;
   a.name = "gravity";
   a.action = "couple";
+  a.first_step = 0;
   a.last_step = 9;
   a.wall_s = 10.0;
   a.ended_by = "steps";
   a.compute_s = {{"continuum", 1.0}, {"dem", 9.0}};
+  a.wait_s = {{"continuum", 9.0}, {"dem", 1.0}};
+  return a;
+}
+
+// Peak memory: the largest STAGE_END peak_rss_mb of each node over the stages, and for the DEM on
+// ranks the largest of its other ranks' (peak_rss_mb_other_ranks), in the text and in the JSON.
+TEST(Summary, PeakMemoryPerNodeAndOtherRanks) {
+  coord::StageSummary a = gravity_stage();
   a.end["dem"].values = {{"peak_rss_mb", 380.0}, {"peak_rss_mb_other_ranks", 120.0}};
   a.end["continuum"].values = {{"peak_rss_mb", 90.0}};
   coord::StageSummary b = a;
@@ -173,15 +182,7 @@ TEST(Summary, PeakMemoryPerNodeAndOtherRanks) {
 // stage and over the run (only the stages a node reported CPU time for), and all nodes together
 // against the host's cores.
 TEST(Summary, CpuUtilisationPerStageAndNodeAndOverTheRun) {
-  coord::StageSummary a;
-  a.name = "gravity";
-  a.action = "couple";
-  a.first_step = 0;
-  a.last_step = 9;
-  a.wall_s = 10.0;
-  a.ended_by = "steps";
-  a.compute_s = {{"continuum", 1.0}, {"dem", 9.0}};
-  a.wait_s = {{"continuum", 9.0}, {"dem", 1.0}};
+  coord::StageSummary a = gravity_stage();
   a.end["dem"].values = {{"cpu_s", 18.0}};
   a.end["continuum"].values = {{"cpu_s", 1.0}};
   coord::StageSummary b = a;
