@@ -260,11 +260,12 @@ std::string summary_json(const RunInfo& info, const RunSummary& sum) {
       const double wall = value_or_zero(tot.cpu_wall_s, r);
       os << ", \"cpu_s\": " << json_number(cp->second) << ", \"cpu_cores\": " << json_number(wall > 0 ? cp->second / wall : 0.0);
     }
+    os << ", \"effects\": " << json_effects(it == tot.effects.end() ? std::map<std::string, double>{} : it->second, c);
+    // (after the effects: readers that match the members before them keep working)
     if (auto pk = tot.peak_mb.find(r); pk != tot.peak_mb.end()) os << ", \"peak_rss_mb\": " << json_number(pk->second);
     if (auto pk = tot.peak_ranks_mb.find(r); pk != tot.peak_ranks_mb.end())
       os << ", \"peak_rss_mb_other_ranks\": " << json_number(pk->second);
-    os << ", \"effects\": " << json_effects(it == tot.effects.end() ? std::map<std::string, double>{} : it->second, c)
-       << "}";
+    os << "}";
     first = false;
   }
   os << (tot.compute_s.empty() ? "}" : "\n  }");
