@@ -285,29 +285,25 @@ class DemParticipant : public node::Participant {
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
     leave_dist();  // the set-up acts on the whole World
+    // The stage's flags: the scene's, on every rank.
+    stage_ratio_ = st.view.real("ratio");
+    coupled_stage_ = st.coupled;
+    ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
+    has_ranked_phases_ = false;
+    preparing_ = is_generation(st);
+    penetrating_ = st.kind == schema::Action::kPenetrate;
+    if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
+    energy_pending_ = true;  // the stage's energy balance starts at its first step
     if (part_only()) {
       // Rank 0 sets the stage up on the whole World and sends this rank its part at the first
-      // step of a stage on the ranks (enter_dist); the stage's flags are the scene's.
-      stage_ratio_ = st.view.real("ratio");
-      coupled_stage_ = st.coupled;
-      ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
+      // step of a stage on the ranks (enter_dist).
       effect_s_.clear();
-      has_ranked_phases_ = false;
-      preparing_ = is_generation(st);
-      penetrating_ = st.kind == schema::Action::kPenetrate;
-      if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
-      energy_pending_ = true;
       return {};
     }
     open_outputs();
     begin_model_time(st);
-    stage_ratio_ = st.view.real("ratio");
-    coupled_stage_ = st.coupled;
-    ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     effect_s_.clear();
     world_.reset_phase_times();
-    has_ranked_phases_ = false;
-    preparing_ = is_generation(st);
     // The node measures the mean contact force after every step (step_values): the pass keeps
     // the contacts' force norms for it (the same bits as reading the histories again); not in
     // specimen preparation, whose procedures measure seldom.
@@ -355,13 +351,10 @@ class DemParticipant : public node::Participant {
       case schema::Action::kGeostatic:  // the table says the DEM does not act in it (refused at --check)
         throw std::invalid_argument("dem_node does not act in stage action '" + st.action + "'");
     }
-    penetrating_ = st.kind == schema::Action::kPenetrate;
-    if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
     if (!preparing_ && !kick_.empty() && !kicked_) kick();
     world_.prepare();
     if (user_dt_ > 0 && !preparing_ && world_.num_balls() > 0)
       check_dt_fixed("end of the set-up of stage '" + st.name + "'");
-    energy_pending_ = true;  // the stage's energy balance starts at its first step
     return v;
   }
 
