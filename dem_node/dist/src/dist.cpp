@@ -509,13 +509,6 @@ std::vector<PlatenServoParams> loadable(const World& full) {
   return platens;
 }
 
-// The halo of `full`: twice its largest radius plus its skin.
-double full_halo(const World& full) {
-  double rmax = 0.0;
-  for (double r : full.balls().r) rmax = std::max(rmax, r);
-  return 2.0 * rmax + full.skin();
-}
-
 }  // namespace
 
 // Which rows, pairs and wall contacts of `full` go to every rank (all_ranks) or to this one, in
@@ -667,14 +660,21 @@ std::unique_ptr<World> DistDem::part_of(const World& full, const Cut& k, int r,
   return w;
 }
 
-void DistDem::load(const World& full) {
-  const std::vector<PlatenServoParams> platens = loadable(full);
+// The parameters and the halo of the ranks' Worlds, from the whole World.
+void DistDem::params_from(const World& full) {
   p_ = full.params();
   p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
   // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
   // thread count.
   p_.thread_independent = true;
-  halo_ = full_halo(full);
+  double rmax = 0.0;
+  for (double r : full.balls().r) rmax = std::max(rmax, r);
+  halo_ = 2.0 * rmax + p_.skin;
+}
+
+void DistDem::load(const World& full) {
+  const std::vector<PlatenServoParams> platens = loadable(full);
+  params_from(full);
   take(part_of(full, cut(full, false), rank_, platens), !platens.empty());
 }
 
@@ -694,7 +694,8 @@ void DistDem::load_from_root(const World& full) {
   if (rank_ == 0) {
     try {
       platens = loadable(full);
-      hk[0] = full_halo(full);
+      params_from(full);
+      hk[0] = halo_;
       hk[1] = static_cast<double>(static_cast<int>(full.pair_kernel()));
     } catch (const std::invalid_argument& e) {
       refused = e.what();
@@ -710,27 +711,31 @@ void DistDem::load_from_root(const World& full) {
   MPI_Bcast(hk, 2, MPI_DOUBLE, 0, comm_);
   halo_ = hk[0];
   if (rank_ == 0) {
-    p_ = full.params();
-    p_.skin = full.skin();
-    p_.thread_independent = true;
+    // (a failure while cutting reaches the ranks still waiting as a size of -1)
+    auto fail_from = [&](int r) {
+      const long long bad = -1;
+      for (int q = r; q < size_; ++q) MPI_Send(&bad, 1, MPI_LONG_LONG, q, kTagPart, comm_);
+    };
     Cut k;
+    try {
+      k = cut(full, true);
+    } catch (...) {
+      fail_from(1);
+      throw;
+    }
     for (int r = 1; r < size_; ++r) {
-      // (a failure here reaches the waiting ranks as a size of -1)
       std::string bytes;
-      long long nb = -1;
       try {
-        if (r == 1) k = cut(full, true);
         bytes = state_bytes(*part_of(full, k, r, platens, false), CheckpointMeta{});
-        nb = static_cast<long long>(bytes.size());
       } catch (...) {
-        for (int q = r; q < size_; ++q) MPI_Send(&nb, 1, MPI_LONG_LONG, q, kTagPart, comm_);
+        fail_from(r);
         throw;
       }
+      const long long nb = static_cast<long long>(bytes.size());
       MPI_Send(&nb, 1, MPI_LONG_LONG, r, kTagPart, comm_);
       for (long long at = 0; at < nb; at += chunk_)  // (an int counts at most 2 GiB)
         MPI_Send(bytes.data() + at, static_cast<int>(std::min(chunk_, nb - at)), MPI_CHAR, r, kTagPart, comm_);
     }
-    if (size_ == 1) k = cut(full, true);
     take(part_of(full, k, 0, platens), !platens.empty());
     return;
   }

@@ -300,6 +300,8 @@ class DistDem {
     std::array<std::vector<std::vector<std::uint32_t>>, 3> walls;
     mutable std::vector<std::int64_t> row;  // part_of's scratch: a whole-World row's row in the part
   };
+  /// p_ and halo_ from the whole World (load).
+  void params_from(const World& full);
   /// One pass over `full` for every rank (all_ranks) or this one (halo_, grid_, newton_ set).
   Cut cut(const World& full, bool all_ranks) const;
   /// Rank r's part of `full` as a World (p_ set; load).
