@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <random>
 #include <set>
 
@@ -204,4 +205,59 @@ TEST(Interface, KeptBondedContactIsSortedIn) {
   ASSERT_EQ(fc.size(), 3u);
   EXPECT_EQ(fc.ball, (std::vector<std::uint32_t>{0, 1, 2}));
   EXPECT_TRUE(bonded(fc.bond[0].state));
+}
+
+// The facets' shares of their walls' vertex sums as the force pass formed them (what a rank of the
+// DEM on MPI ranks sends rank 0, World::facet_sum_shares), added again in their order
+// (World::set_facet_sums): the pass's own sums, bit for bit. Bonded and unbonded balls on a floor
+// of facets, sheared and spun, so that the shares carry forces, moments (equivalent vertex
+// forces from both) and stiffness on every vertex of the floor's two facets.
+TEST(Interface, FacetSharesAddUpToThePassesSums) {
+  WorldParams p;
+  p.gravity = true;
+  p.g_level = 100.0;
+  p.ball_facet.model = ContactModel::kLinearPBond;
+  p.ball_facet.pbond.zero_linear = true;
+  p.ball_facet.pbond.ten = 1e7;
+  p.ball_facet.pbond.coh = 1e7;
+  const double R = 1e-4;
+  World w(p);
+  add_square(w, 2e-3);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (int i = 0; i < 6; ++i)
+    for (int j = 0; j < 6; ++j) w.add_ball({(i - 2.5) * 2.6 * R, (j - 2.5) * 2.6 * R, R}, R);  // touching the floor
+  w.prepare();
+  ASSERT_EQ(w.bond_ball_facet(1e-9), 36u);
+  for (std::size_t b = 0; b < w.num_balls(); ++b) {
+    w.balls().v[b] = {0.005 * u(rng), 0.005 * u(rng), -0.002};
+    w.balls().w[b] = {20.0 * u(rng), 20.0 * u(rng), 20.0 * u(rng)};
+  }
+  for (int s = 0; s < 200; ++s) w.step();
+  std::vector<FacetSumShare> shares;
+  w.facet_sum_shares(shares);
+  std::size_t loaded = 0;
+  for (std::size_t k = 0; k < shares.size(); ++k) {
+    loaded += shares[k].loaded;
+    if (k > 0) {
+      EXPECT_TRUE(shares[k - 1].ball < shares[k].ball ||
+                  (shares[k - 1].ball == shares[k].ball && shares[k - 1].wall < shares[k].wall))
+          << "the shares are in one World's contact order";
+    }
+  }
+  std::printf("%zu facet contacts, %zu shares, %zu loaded\n", w.facet_contacts().size(), shares.size(), loaded);
+  ASSERT_GT(loaded, 10u) << "the floor must carry load";
+  std::vector<double> pass, again;
+  w.pack_wall_sums(pass);
+  w.set_facet_sums(shares);
+  w.pack_wall_sums(again);
+  ASSERT_EQ(pass.size(), again.size());
+  EXPECT_EQ(std::memcmp(pass.data(), again.data(), pass.size() * sizeof(double)), 0)
+      << "the shares added again must give the pass's sums";
+  double any = 0.0;
+  for (double v : pass) any = std::max(any, std::abs(v));
+  EXPECT_GT(any, 0.0);
+  // a share of a facet the World does not have is refused by name
+  shares.back().facet = 1000;
+  EXPECT_THROW(w.set_facet_sums(shares), std::invalid_argument);
 }

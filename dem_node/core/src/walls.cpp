@@ -767,7 +767,7 @@ void World::copy_walls(const World& o) {
   footing_->kind.ft = o.footing_->kind.ft;
 }
 
-void World::wall_sum_records(std::vector<WallSumRec>& out) const {
+void World::wall_sum_records(std::vector<WallSumRec>& out, bool facets) const {
   const SetContext cx = const_cast<World*>(this)->context();
   auto ids = [&](const WallContacts& wc, std::size_t c, WallSumRec r, std::uint8_t kind) {
     r.ball = pt_.id[wc.ball[c]];
@@ -778,7 +778,7 @@ void World::wall_sum_records(std::vector<WallSumRec>& out) const {
   const WallContacts& pc = planes_->contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) ids(pc, c, PlaneKind::rec(pc, static_cast<std::int64_t>(c)), 0);
   const WallContacts& fc = facets_->contacts;
-  for (std::size_t c = 0; c < fc.size(); ++c) {  // a facet contact that does not act adds nothing
+  for (std::size_t c = 0; facets && c < fc.size(); ++c) {  // a facet contact that does not act adds nothing
     const WallSumRec r = facet_rec(cx, fc, static_cast<std::int64_t>(c));
     if (r.active) ids(fc, c, r, 1);
   }
@@ -833,15 +833,8 @@ void World::wall_sum_terms(std::vector<WallTerm>& out) const {
     at += static_cast<std::uint32_t>(4 * fw.vforce.size() + 3);
   }
   if (facets_->present()) {
-    // (No pass yet, e.g. a World just loaded onto a rank: the terms from the contacts' records,
-    // facet_term of facet_rec, as after_law forms them.)
-    const std::vector<FacetTerm>& ft = facets_->kind.terms;
-    const WallContacts& wc = facets_->contacts;
-    const bool passed = ft.size() == wc.size();
-    const SetContext cx = const_cast<World*>(this)->context();
-    for (std::size_t c = 0; c < wc.size(); ++c) {
-      const FacetTerm t = passed ? ft[c] : facet_term(fws, facet_rec(cx, wc, static_cast<std::int64_t>(c)));
-      if (!t.active) continue;
+    for_each_facet_term([&](std::size_t, const FacetTerm& t) {
+      if (!t.active) return;
       const FacetWall& fw = fws[t.wall];
       const auto& tr = fw.tri[static_cast<std::size_t>(t.facet)];
       const std::uint32_t b = base[t.wall], nv = static_cast<std::uint32_t>(fw.vforce.size());
@@ -850,10 +843,59 @@ void World::wall_sum_terms(std::vector<WallTerm>& out) const {
         put3(b + 4 * nv, t.F);
       }
       for (int v = 0; v < 3; ++v) out.push_back({b + 3 * nv + static_cast<std::uint32_t>(tr[v]), t.k[v]});
-    }
+    });
   }
   const WallContacts& gc = footing_->contacts;
   for (std::size_t c = 0; c < gc.size(); ++c) put3(at, FootingKind::rec(gc, static_cast<std::int64_t>(c)).F);
+}
+
+// Each facet contact's share of the vertex sums as the last force pass formed it
+// (FacetKind::after_law), in contact order. (No pass yet, e.g. a World just loaded onto a rank:
+// the terms from the contacts' records, facet_term of facet_rec, as after_law forms them.)
+template <class Fn>
+void World::for_each_facet_term(Fn fn) const {
+  const std::vector<FacetTerm>& ft = facets_->kind.terms;
+  const WallContacts& wc = facets_->contacts;
+  const bool passed = ft.size() == wc.size();
+  const SetContext cx = const_cast<World*>(this)->context();
+  for (std::size_t c = 0; c < wc.size(); ++c)
+    fn(c, passed ? ft[c] : facet_term(facets_->kind.walls, facet_rec(cx, wc, static_cast<std::int64_t>(c))));
+}
+
+void World::facet_sum_shares(std::vector<FacetSumShare>& out) const {
+  if (!facets_->present()) return;
+  const WallContacts& wc = facets_->contacts;
+  for_each_facet_term([&](std::size_t c, const FacetTerm& t) {
+    if (!t.active) return;  // (adds nothing)
+    FacetSumShare s;
+    s.ball = pt_.id[wc.ball[c]];
+    s.wall = t.wall;
+    s.facet = t.facet;
+    s.loaded = t.loaded ? 1 : 0;
+    s.f = t.f;
+    s.F = t.F;
+    for (int v = 0; v < 3; ++v) s.k[v] = t.k[v];
+    out.push_back(s);
+  });
+}
+
+void World::set_facet_sums(std::span<const FacetSumShare> shares) {
+  auto& walls = facets_->kind.walls;
+  facet_zero(walls);
+  for (const FacetSumShare& s : shares) {
+    if (s.wall >= walls.size() || s.facet < 0 || static_cast<std::size_t>(s.facet) >= walls[s.wall].tri.size())
+      throw std::invalid_argument("set_facet_sums: a share names facet " + std::to_string(s.facet) + " of wall " +
+                                  std::to_string(s.wall) + ", which this World does not have.");
+    FacetTerm t;
+    t.active = true;
+    t.wall = s.wall;
+    t.facet = s.facet;
+    t.loaded = s.loaded != 0;
+    t.f = s.f;
+    t.F = s.F;
+    for (int v = 0; v < 3; ++v) t.k[v] = s.k[v];
+    facet_add(walls, t);
+  }
 }
 
 std::size_t World::wall_sum_slots() const {

@@ -72,6 +72,20 @@ struct WallSumRec {
   double k = 0.0;  // planes: K_n (servo gain); facets: the vertex stiffness K (docs/theory.md 6.5)
 };
 
+/// One acting facet contact's share of its wall's vertex sums as the force pass formed it: its
+/// equivalent vertex forces, force and vertex stiffness shares (docs/theory.md 6.4, 6.5;
+/// World::facet_sum_shares, World::set_facet_sums). What a rank of the DEM on MPI ranks sends
+/// rank 0, which then only adds the shares in one World's contact order.
+struct FacetSumShare {
+  std::uint64_t ball = 0;   // ball id
+  std::uint32_t wall = 0;   // facet wall index
+  std::int32_t facet = 0;   // the contact's facet
+  std::uint8_t loaded = 0;  // carries a force or moment: vertex forces and the wall's total
+  std::array<Vec3, 3> f{};  // equivalent vertex forces
+  Vec3 F{};                 // the force on the wall
+  double k[3] = {0.0, 0.0, 0.0};  // vertex stiffness shares
+};
+
 /// Planar wall: infinite plane, or a bounded rectangle (half1, half2 finite).
 struct PlaneWallParams {
   Vec3 point{};          // [m] a point on the plane (rectangle centre)
@@ -307,7 +321,18 @@ class World {
                   std::vector<std::uint8_t>& ghost);
   /// Every wall contact's share of its wall's sums (reactions, servo gains, facet vertex forces
   /// and stiffness), appended to `out` kind by kind (planes, facets, footing) in contact order.
-  void wall_sum_records(std::vector<WallSumRec>& out) const;
+  /// (`facets` false: the planes' and the footing's only, for a caller that takes the facets'
+  /// shares from facet_sum_shares.)
+  void wall_sum_records(std::vector<WallSumRec>& out, bool facets = true) const;
+  /// The acting facet contacts' shares of their walls' vertex sums as this World's last force
+  /// pass formed them (in contact order; formed from the contacts' records if no pass ran on this
+  /// list yet, e.g. a World just loaded), appended to `out`.
+  void facet_sum_shares(std::vector<FacetSumShare>& out) const;
+  /// The facet walls' sums (vertex forces and stiffness, total force) from `shares`, sorted by
+  /// (ball id, wall): every rank's shares merged, which are one World's facet contacts in its
+  /// order; the additions of the pass's own sums (FacetKind::end). After set_wall_sums, which
+  /// leaves the facet sums to this when given no facet records.
+  void set_facet_sums(std::span<const FacetSumShare> shares);
   /// Recompute the walls' sums from `recs`, sorted by (kind, ball id, wall): the records of every
   /// rank merged, which are the contacts of one World (rows in id order) in its order. The same
   /// arithmetic as the force pass's own sums.
@@ -538,6 +563,9 @@ class World {
   // and the sums, kept from step to step
   std::vector<WallTerm> of_terms_;
   mutable std::vector<std::uint32_t> scratch_slots_;
+  // fn(c, term): each facet contact's share of the vertex sums as the last pass formed it (walls.cpp)
+  template <class Fn>
+  void for_each_facet_term(Fn fn) const;
   std::vector<double> of_values_;
   std::vector<OrderFreeSum> of_sums_;
   bool wall_sums_by_caller_ = false;
