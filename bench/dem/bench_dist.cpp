@@ -12,7 +12,8 @@
 //            released overlaps shoot off the free top). One DistDem::step call per step, as the
 //            DEM node makes at coupling.interval = 1, so the walls' sums are formed every step.
 //            BENCH_DIST_REPLICATE=K: K x K x K copies of the periodic packing first (a wider block).
-//   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts);
+//   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts),
+//            the first cut balanced too (BENCH_DIST_BALANCE_AFTER_LOAD=1: not, as before session 25);
 //            BENCH_DIST_WEIGHT=time weighs balls by their rank's measured time, not contacts.
 // BENCH_DIST_NEWTON=1: `newton on` (DistDem::set_newton): each pair across a face computed once,
 // the ghosts' forces sent back to their owners.
@@ -24,6 +25,8 @@
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
+// mpirun -np P bench_dist --run DIR [steps] [balance]: a run's checkpoint (its DEM World) stepped
+// on the ranks as the DEM node steps it (run_state below).
 // bench_dist --merge P N: rank 0's merge of the walls' shares, P runs of N (merge_bench below).
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
 // cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
@@ -46,6 +49,8 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <numeric>
 #include <random>
 #include <string>
@@ -164,6 +169,56 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
               imbalance(code));
 }
 
+// One CSV line on rank 0 (the columns of the header comment) from the ranks' times since
+// reset_times and the counters since ex0 / mig0.
+struct Run {
+  int P = 1, rank = 0;
+  std::string mode, model;
+  std::size_t balls = 0;
+  long steps = 0;
+  double wall = 0.0, load_s = 0.0;
+  std::int64_t ex0 = 0, mig0 = 0;
+};
+
+void report(const DistDem& d, const Run& r) {
+  const int P = r.P;
+  const long steps = r.steps;
+  const double wall = r.wall;
+  const DistDem::Times& t = d.times();
+  // the forces phase split: the neighbour rebuild and the ball-ball pass of the rank's World
+  const PhaseTimes& pt = d.world().phase_times();
+  double mine[12] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
+                     double(t.forwarded), pt.rebuild, pt.pair, t.reverse,
+                     double(d.world().pair_contacts().size())};
+  double sum[12], cmax = 0.0;
+  MPI_Reduce(mine, sum, 12, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
+  const double comp = t.compute();
+  MPI_Reduce(&comp, &cmax, 1, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+  long long mig = d.migrated() - r.mig0, mig_sum = 0, own = static_cast<long long>(d.owned()), own_min = 0, own_max = 0;
+  MPI_Reduce(&mig, &mig_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  MPI_Reduce(&own, &own_min, 1, MPI_LONG_LONG, MPI_MIN, 0, MPI_COMM_WORLD);
+  MPI_Reduce(&own, &own_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
+  long long wgt = static_cast<long long>(d.weight()), wgt_max = 0, wgt_sum = 0;
+  MPI_Reduce(&wgt, &wgt_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
+  MPI_Reduce(&wgt, &wgt_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  if (r.rank == 0) {
+    const double ms = 1e3 / double(steps) / P;
+    const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5] + sum[10];
+    std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
+                "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
+                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N,rebuild_ms,pair_ms,reverse_ms,"
+                "pairs_listed,load_ms\n");
+    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g,"
+                "%.4f,%.4f,%.4f,%.0f,%.1f\n",
+                P, r.mode.c_str(), r.model.c_str(), r.balls, steps, wall,
+                double(r.balls) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
+                sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5] + sum[10]) / total, cmax / ((sum[0] + sum[1]) / P),
+                sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - r.ex0), mig_sum,
+                static_cast<long long>(d.rebalances()), own_min, own_max, double(wgt_max) / (double(wgt_sum) / P),
+                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms, sum[10] * ms, sum[11], r.load_s * 1e3);
+  }
+}
+
 // `bench_dist --state FILE SCENE_HASH nx,ny,nz`: the model grid over a World saved in a
 // checkpoint (dem.world.state of a run folder's checkpoint), over its balls' bounding box.
 int model_state(const char* file, const char* hash, const char* spec) {
@@ -180,6 +235,104 @@ int model_state(const char* file, const char* hash, const char* spec) {
   std::printf("state,%s,step,%lld,footing_z,%.6g\n", file, static_cast<long long>(w.step_count()),
               w.has_footing() ? w.footing().p.bottom_centre.z : 0.0);
   model_imbalance(all, lo, hi - lo, spec);
+  return 0;
+}
+
+// `mpirun -np P bench_dist --run DIR [steps] [balance]`: a run's own state on the ranks, as the DEM
+// node steps it: the World of a checkpoint folder (DIR/dem.world.state, its scene hash from
+// DIR/manifest.txt) held by rank 0 alone and sent to the ranks (DistDem::load_from_root), cut by
+// RCB over its balls' bounding box (slabs across the longest side with BENCH_DIST_DECOMP=slabs,
+// across BENCH_DIST_AXIS=x|y|z if given),
+// free axes unless the World is periodic; one DistDem::step(1) per step, the walls (facets,
+// footing) and effects of the state moving as they were saved (a footing keeps its last
+// velocity; facet vertices stand still: no continuum). The same CSV line as the other modes,
+// mode "run", model the ball-ball law. BENCH_DIST_ORDER_FREE=1 (0): run.order_free_sums on (off)
+// whatever the state says; BENCH_DIST_PER_RANK=1: a line per rank first (its own times and counts).
+int run_state(int argc, char** argv) {
+  int rank = 0, P = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &P);
+  const std::filesystem::path dir = argv[2];
+  const long steps = argc > 3 ? std::stol(argv[3]) : 1000;
+  const int balance = argc > 4 ? std::stoi(argv[4]) : 0;
+  std::uint64_t hash = 0;
+  {
+    std::ifstream in(dir / "manifest.txt");
+    std::string key, value;
+    while (in >> key) {
+      if (key == "scene_hash" && in >> value) hash = std::stoull(value, nullptr, 16);
+      std::getline(in, value);
+    }
+  }
+  World full{WorldParams{}};
+  if (rank == 0) load_state_file(full, dir / "dem.world.state", hash);
+  if (const char* of = std::getenv("BENCH_DIST_ORDER_FREE"))  // run.order_free_sums on or off
+    full.mutable_params().order_free_sums = std::string(of) == "1";
+  // rank 0's parameters and box for every rank's DistDem (the others hold no ball)
+  double box[7] = {0, 0, 0, 0, 0, 0, 0};
+  if (rank == 0) {
+    Vec3 lo = full.balls().x[0], hi = lo;
+    for (std::size_t i = 0; i < full.num_balls(); ++i)
+      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], full.balls().x[i][k]), hi[k] = std::max(hi[k], full.balls().x[i][k]);
+    if (full.periodic()) lo = full.cell_origin(), hi = full.cell_origin() + full.cell_length();
+    box[0] = full.periodic() ? 1.0 : 0.0;
+    for (int k = 0; k < 3; ++k) box[1 + k] = lo[k], box[4 + k] = hi[k] - lo[k];
+  }
+  MPI_Bcast(box, 7, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  BrickGrid g;
+  g.lo = {box[1], box[2], box[3]};
+  g.len = {box[4], box[5], box[6]};
+  for (bool& per : g.periodic) per = box[0] != 0.0;
+  const char* decomp = std::getenv("BENCH_DIST_DECOMP");
+  if (decomp && std::string(decomp) == "slabs") {
+    int axis = 0;
+    for (int k = 1; k < 3; ++k)
+      if (g.len[k] > g.len[axis]) axis = k;
+    if (const char* ax = std::getenv("BENCH_DIST_AXIS"))  // x, y or z instead of the longest side
+      axis = std::clamp(ax[0] - 'x', 0, 2);
+    g.n[axis] = P;
+  } else {
+    g.set_rcb(P);
+  }
+  WorldParams p = full.params();
+  p.threads = omp_get_max_threads();
+  DistDem d(MPI_COMM_WORLD, p, g);
+  if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
+  DistDem::Balance bal;
+  bal.every = balance;
+  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
+    bal.weight = DistDem::Weight::kTime;
+  d.set_balance(bal);  // (before the load: its first cut balanced too)
+  MPI_Barrier(MPI_COMM_WORLD);
+  const double tl0 = MPI_Wtime();
+  d.load_from_root(full);
+  MPI_Barrier(MPI_COMM_WORLD);
+  const double load_s = MPI_Wtime() - tl0;
+  d.step(1);  // warm-up
+  d.reset_times();
+  d.world().reset_phase_times();
+  const std::int64_t ex0 = d.exchanges(), mig0 = d.migrated();
+  MPI_Barrier(MPI_COMM_WORLD);
+  const double t0 = MPI_Wtime();
+  for (long k = 0; k < steps; ++k) d.step(1);
+  MPI_Barrier(MPI_COMM_WORLD);
+  const double wall = MPI_Wtime() - t0;
+  const std::size_t balls = d.num_balls();
+  if (std::getenv("BENCH_DIST_PER_RANK")) {  // each rank's own compute and counts, in rank order
+    for (int r = 0; r < P; ++r) {
+      if (r == rank) {
+        const PhaseTimes& pt = d.world().phase_times();
+        std::printf("rank,%d,owned,%zu,ghosts,%zu,pairs,%zu,facet_contacts,%zu,motion_ms,%.4f,forces_ms,%.4f,pair_ms,%.4f,"
+                    "facet_ms,%.4f,rebuild_ms,%.4f,walls_ms,%.4f\n",
+                    rank, d.owned(), d.ghosts(), d.world().pair_contacts().size(), d.world().facet_contacts().size(),
+                    d.times().motion * 1e3 / double(steps), d.times().forces * 1e3 / double(steps), pt.pair * 1e3 / double(steps),
+                    pt.facet * 1e3 / double(steps), pt.rebuild * 1e3 / double(steps), d.times().walls * 1e3 / double(steps));
+        std::fflush(stdout);
+      }
+      MPI_Barrier(MPI_COMM_WORLD);
+    }
+  }
+  report(d, {P, rank, "run", to_string(p.ball_ball.model), balls, steps, wall, load_s, ex0, mig0});
   return 0;
 }
 
@@ -257,6 +410,11 @@ int main(int argc, char** argv) {
   if (argc == 5 && std::string(argv[1]) == "--state") return model_state(argv[2], argv[3], argv[4]);
   if (argc == 4 && std::string(argv[1]) == "--merge") return merge_bench(std::atoi(argv[2]), std::atol(argv[3]));
   MPI_Init(&argc, &argv);
+  if (argc >= 3 && std::string(argv[1]) == "--run") {
+    const int rc = run_state(argc, argv);
+    MPI_Finalize();
+    return rc;
+  }
   int rank = 0, P = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   MPI_Comm_size(MPI_COMM_WORLD, &P);
@@ -358,6 +516,11 @@ int main(int argc, char** argv) {
     g.n[footing ? 2 : 0] = P;
   DistDem d(MPI_COMM_WORLD, p, g);
   if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
+  DistDem::Balance bal;
+  bal.every = balance;
+  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
+    bal.weight = DistDem::Weight::kTime;
+  if (!std::getenv("BENCH_DIST_BALANCE_AFTER_LOAD")) d.set_balance(bal);  // (before the load: its first cut balanced too)
   const char* from_root = std::getenv("BENCH_DIST_FROM_ROOT");
   MPI_Barrier(MPI_COMM_WORLD);
   const double tl0 = MPI_Wtime();
@@ -369,10 +532,6 @@ int main(int argc, char** argv) {
   }
   MPI_Barrier(MPI_COMM_WORLD);
   const double load_s = MPI_Wtime() - tl0;
-  DistDem::Balance bal;
-  bal.every = balance;
-  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
-    bal.weight = DistDem::Weight::kTime;
   d.set_balance(bal);
   if (footing) {  // the packing settles in its box (the footing at rest), then the footing moves
     const char* relax = std::getenv("BENCH_DIST_RELAX");
@@ -398,39 +557,7 @@ int main(int argc, char** argv) {
   }
   MPI_Barrier(MPI_COMM_WORLD);
   const double wall = MPI_Wtime() - t0;
-  const DistDem::Times& t = d.times();
-  // the forces phase split: the neighbour rebuild and the ball-ball pass of the rank's World
-  const PhaseTimes& pt = d.world().phase_times();
-  double mine[12] = {t.motion,   t.forces, t.forward, t.reduce, t.exchange, t.walls, double(d.ghosts()) / double(d.owned()),
-                     double(t.forwarded), pt.rebuild, pt.pair, t.reverse,
-                     double(d.world().pair_contacts().size())};
-  double sum[12], cmax = 0.0;
-  MPI_Reduce(mine, sum, 12, MPI_DOUBLE, MPI_SUM, 0, MPI_COMM_WORLD);
-  const double comp = t.compute();
-  MPI_Reduce(&comp, &cmax, 1, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
-  long long mig = d.migrated() - mig0, mig_sum = 0, own = static_cast<long long>(d.owned()), own_min = 0, own_max = 0;
-  MPI_Reduce(&mig, &mig_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
-  MPI_Reduce(&own, &own_min, 1, MPI_LONG_LONG, MPI_MIN, 0, MPI_COMM_WORLD);
-  MPI_Reduce(&own, &own_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
-  long long wgt = static_cast<long long>(d.weight()), wgt_max = 0, wgt_sum = 0;
-  MPI_Reduce(&wgt, &wgt_max, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
-  MPI_Reduce(&wgt, &wgt_sum, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
-  if (rank == 0) {
-    const double ms = 1e3 / double(steps) / P;
-    const double total = sum[0] + sum[1] + sum[2] + sum[3] + sum[4] + sum[5] + sum[10];
-    std::printf("ranks,mode,model,balls,steps,wall_s,particle_steps_per_s,motion_ms,forces_ms,forward_ms,reduce_ms,"
-                "exchange_ms,walls_ms,comm_share,imbalance,ghosts_per_owned,ghosts_recv_per_step,rebuilds,migrations,"
-                "rebalances,owned_min,owned_max,weight_imbalance,footing_fz_N,rebuild_ms,pair_ms,reverse_ms,"
-                "pairs_listed,load_ms\n");
-    std::printf("%d,%s,%s,%zu,%ld,%.4f,%.4e,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.1f,%lld,%lld,%lld,%lld,%lld,%.4f,%.4g,"
-                "%.4f,%.4f,%.4f,%.0f,%.1f\n",
-                P, mode.c_str(), model.c_str(), full.num_balls(), steps, wall,
-                double(full.num_balls()) * double(steps) / wall, sum[0] * ms, sum[1] * ms, sum[2] * ms, sum[3] * ms,
-                sum[4] * ms, sum[5] * ms, (sum[2] + sum[3] + sum[4] + sum[5] + sum[10]) / total, cmax / ((sum[0] + sum[1]) / P),
-                sum[6] / P, sum[7] / double(steps) / P, static_cast<long long>(d.exchanges() - ex0), mig_sum,
-                static_cast<long long>(d.rebalances()), own_min, own_max, double(wgt_max) / (double(wgt_sum) / P),
-                d.world().footing_reaction().z, sum[8] * ms, sum[9] * ms, sum[10] * ms, sum[11], load_s * 1e3);
-  }
+  report(d, {P, rank, mode, model, full.num_balls(), steps, wall, load_s, ex0, mig0});
   if (const char* mg = std::getenv("BENCH_DIST_MODEL_GRID")) model_grid(d, g, mg);
   MPI_Finalize();
   return 0;

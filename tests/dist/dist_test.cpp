@@ -43,6 +43,7 @@ struct Scene {
   double tall = 1.0;      // the free cluster's grid: this many times as high as wide
   bool order_free = false;  // WorldParams::order_free_sums: the measurements without a gather
   bool from_root = false;   // DistDem::load_from_root: the other ranks never hold the whole World
+  bool balance_at_load = false;  // set_balance before the load (as the DEM node): the first cut balanced
 };
 
 constexpr int kSide = 12;  // kSide³ balls
@@ -120,6 +121,7 @@ void check(const Scene& sc) {
   WorldParams own = full->params();
   if (sc.from_root && g_rank != 0) own.threads = 2;
   DistDem d(MPI_COMM_WORLD, own, grid(sc));
+  if (sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
   if (sc.from_root) {
     if (g_rank != 0) full = std::make_unique<World>(own);  // no ball
     d.load_from_root(*full);
@@ -129,7 +131,17 @@ void check(const Scene& sc) {
   } else {
     d.load(*full);
   }
-  d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
+  if (sc.balance_at_load && g_rank == 0 && g_size > 1) {  // the loaded state cut by the first cuts
+    const std::unique_ptr<World> start = build(sc, true);
+    const double first = weight_imbalance(*start, d.grid()), geometric = weight_imbalance(*start, grid(sc));
+    std::printf("  balanced at the load: weight imbalance %.4f (geometric cuts %.4f)\n", first, geometric);
+    // (the cluster is still a lattice of 12 layers of 144 balls at the load and a cut falls
+    // between layers: 1.0000 at 2 ranks, 1.197 at 3, 1.026 at 4, 1.320 at 9 (geometric cuts 2.0,
+    // 3.0, 4.0, 6.8); at 3 ranks 1.0040 once it has flown apart)
+    EXPECT_LT(first, g_size == 2 ? 1.02 : g_size <= 4 ? 1.25 : 1.4) << "the first cut must carry equal weight";
+    EXPECT_GT(geometric, 1.5) << "the scene must need balancing";
+  }
+  if (!sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
   const double dt_end = d.world().dt();
@@ -236,6 +248,19 @@ static Scene free_rcb_balanced(const char* name);  // (below)
 TEST(Dist, LinearFreeFromRootRcbBalancedSameBits) {
   Scene sc = free_rcb_balanced("linear free, from rank 0, RCB balanced");
   sc.from_root = true;
+  check(sc);
+}
+// The balancing set before the load, as the DEM node does: the first cut is already balanced
+// (rank 0's whole World weighed, DistDem::balance_at_load), for load_from_root and for load.
+TEST(Dist, LinearFreeFromRootRcbBalancedAtLoadSameBits) {
+  Scene sc = free_rcb_balanced("linear free, from rank 0, RCB balanced from the load");
+  sc.from_root = true;
+  sc.balance_at_load = true;
+  check(sc);
+}
+TEST(Dist, LinearFreeRcbBalancedAtLoadSameBits) {
+  Scene sc = free_rcb_balanced("linear free, RCB balanced from the load");
+  sc.balance_at_load = true;
   check(sc);
 }
 

@@ -250,6 +250,9 @@ bool by_kind_ball_wall(const WallSumRec& x, const WallSumRec& y) {
   if (x.kind != y.kind) return x.kind < y.kind;
   return x.ball != y.ball ? x.ball < y.ball : x.wall < y.wall;
 }
+bool by_kind_ball_wall(const FacetSumShare& x, const FacetSumShare& y) {  // (one kind)
+  return x.ball != y.ball ? x.ball < y.ball : x.wall < y.wall;
+}
 
 }  // namespace
 
@@ -283,10 +286,12 @@ void radix_order(const std::vector<std::uint64_t>& keys, std::vector<std::uint32
 // more than a radix order of one key per share and one copy per share (bench_dist --merge: 16.1
 // against 11.2 ns per share at 8 runs, 4.8 against 10.5 at 2). Both are stable: equal keys keep
 // rank order. Keys that do not fit 63 bits are merged.
-void order_wall_shares(std::vector<WallSumRec>& v, const std::vector<std::size_t>& starts) {
+template <class T>
+void order_wall_shares(std::vector<T>& v, const std::vector<std::size_t>& starts) {
+  const auto less = [](const T& x, const T& y) { return by_kind_ball_wall(x, y); };
   if (starts.size() < 3) return;  // one run: already in order
   if (starts.size() - 1 < 8) {
-    merge_runs(v, starts, by_kind_ball_wall);
+    merge_runs(v, starts, less);
     return;
   }
   const std::size_t first = starts.front(), m = starts.back() - first;
@@ -296,12 +301,12 @@ void order_wall_shares(std::vector<WallSumRec>& v, const std::vector<std::size_t
   int wb = 1;
   while (wb < 32 && (std::uint64_t{wall_max} >> wb) != 0) ++wb;
   if ((ball_max >> (63 - wb)) != 0) {
-    merge_runs(v, starts, by_kind_ball_wall);
+    merge_runs(v, starts, less);
     return;
   }
   thread_local std::vector<std::uint64_t> keys;
   thread_local std::vector<std::uint32_t> ord;
-  thread_local std::vector<WallSumRec> tmp;
+  thread_local std::vector<T> tmp;
   keys.resize(m);
   for (std::size_t j = 0; j < m; ++j) keys[j] = v[first + j].ball << wb | v[first + j].wall;
   radix_order(keys, ord);
@@ -309,6 +314,8 @@ void order_wall_shares(std::vector<WallSumRec>& v, const std::vector<std::size_t
   for (std::size_t j = 0; j < m; ++j) tmp[j] = v[first + ord[j]];
   std::copy(tmp.begin(), tmp.end(), v.begin() + static_cast<std::ptrdiff_t>(first));
 }
+template void order_wall_shares(std::vector<WallSumRec>&, const std::vector<std::size_t>&);
+template void order_wall_shares(std::vector<FacetSumShare>&, const std::vector<std::size_t>&);
 
 namespace {
 
@@ -426,7 +433,7 @@ void all_to_all(MPI_Comm comm, const std::vector<std::vector<T>>& out, std::vect
 // DistDem
 
 // A wall contact's share as sent to rank 0 (DistDem::reduce_walls): planes and the footing send
-// only what they sum; a facet sends its whole WallSumRec.
+// only what they sum; a facet sends its FacetSumShare (the terms its rank's pass formed).
 struct PlaneShare {
   std::uint64_t ball;
   std::uint32_t wall;
@@ -450,7 +457,7 @@ struct DistDem::Buffers {
   std::vector<std::uint64_t> kin;
   std::vector<std::uint32_t> order, order2;
   std::vector<PlaneShare> plane_shares;
-  std::vector<WallSumRec> facet_shares;
+  std::vector<FacetSumShare> facet_shares, all_facet_shares;
   std::vector<std::size_t> run_starts;  // reduce_walls: where each rank's records of a kind begin
   // reduce_walls with order-free sums: the terms, bounds, sums and folds
   std::vector<World::WallTerm> of_terms;
@@ -675,6 +682,7 @@ void DistDem::params_from(const World& full) {
 void DistDem::load(const World& full) {
   const std::vector<PlatenServoParams> platens = loadable(full);
   params_from(full);
+  balance_at_load(rank_ == 0 ? &full : nullptr);  // (every rank holds `full`: rank 0's weights count)
   take(part_of(full, cut(full, false), rank_, platens), !platens.empty());
 }
 
@@ -710,6 +718,7 @@ void DistDem::load_from_root(const World& full) {
   }
   MPI_Bcast(hk, 2, MPI_DOUBLE, 0, comm_);
   halo_ = hk[0];
+  balance_at_load(rank_ == 0 ? &full : nullptr);
   if (rank_ == 0) {
     // (a failure while cutting reaches the ranks still waiting as a size of -1)
     auto fail_from = [&](int r) {
@@ -889,7 +898,7 @@ void DistDem::reduce_walls() {
   }
   std::vector<WallSumRec>& mine = buf_->sums;
   mine.clear();
-  w_->wall_sum_records(mine);
+  w_->wall_sum_records(mine, false);  // (the facets' shares below: the terms the pass formed)
   // compact shares by kind
   auto& ps = buf_->plane_shares;
   auto& fs = buf_->facet_shares;
@@ -897,9 +906,9 @@ void DistDem::reduce_walls() {
   ps.clear(), fs.clear(), gs.clear();
   for (const WallSumRec& r : mine) {
     if (r.kind == 0) ps.push_back({r.ball, r.wall, r.active, r.F, r.k});
-    else if (r.kind == 1) fs.push_back(r);
     else gs.push_back({r.ball, r.F});
   }
+  w_->facet_sum_shares(fs);
   // one message per rank: three counts, then the shares of each kind
   std::vector<char>& out = sbuf_;
   out.clear();
@@ -909,7 +918,7 @@ void DistDem::reduce_walls() {
   const std::uint64_t cnt[3] = {ps.size(), fs.size(), gs.size()};
   put(cnt, sizeof cnt);
   put(ps.data(), ps.size() * sizeof(PlaneShare));
-  put(fs.data(), fs.size() * sizeof(WallSumRec));
+  put(fs.data(), fs.size() * sizeof(FacetSumShare));
   put(gs.data(), gs.size() * sizeof(FootingShare));
   const int bytes = static_cast<int>(out.size());
   std::vector<int> counts(static_cast<std::size_t>(size_)), displ(static_cast<std::size_t>(size_) + 1, 0);
@@ -919,28 +928,35 @@ void DistDem::reduce_walls() {
   if (rank_ == 0) rbuf_.resize(static_cast<std::size_t>(displ.back()));
   MPI_Gatherv(out.data(), bytes, MPI_BYTE, rbuf_.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm_);
   std::vector<WallSumRec>& all = buf_->all_sums;
+  std::vector<FacetSumShare>& fall = buf_->all_facet_shares;
   if (rank_ == 0) {
-    // per kind, the ranks' runs one after the other, then merged pairwise (merge_runs)
+    // per kind, the ranks' runs one after the other, then put in one World's order
+    // (order_wall_shares); the facets' shares apart
     all.clear();
+    fall.clear();
     std::vector<std::size_t>& starts = buf_->run_starts;
     for (int kind = 0; kind < 3; ++kind) {
       starts.clear();
       for (int r = 0; r < size_; ++r) {
-        starts.push_back(all.size());
+        starts.push_back(kind == 1 ? fall.size() : all.size());
         const char* q = rbuf_.data() + displ[static_cast<std::size_t>(r)];
         std::uint64_t c[3];
         std::memcpy(c, q, sizeof c);
         q += sizeof c;
         if (kind > 0) q += c[0] * sizeof(PlaneShare);
-        if (kind > 1) q += c[1] * sizeof(WallSumRec);
+        if (kind > 1) q += c[1] * sizeof(FacetSumShare);
+        if (kind == 1) {
+          const std::size_t at = fall.size();
+          fall.resize(at + c[1]);
+          if (c[1] > 0) std::memcpy(&fall[at], q, c[1] * sizeof(FacetSumShare));
+          continue;
+        }
         for (std::uint64_t j = 0; j < c[kind]; ++j) {
           WallSumRec rec;
           if (kind == 0) {
             PlaneShare x;
             std::memcpy(&x, q + j * sizeof x, sizeof x);
             rec.ball = x.ball, rec.wall = x.wall, rec.active = x.active, rec.F = x.F, rec.k = x.k;
-          } else if (kind == 1) {
-            std::memcpy(&rec, q + j * sizeof rec, sizeof rec);
           } else {
             FootingShare x;
             std::memcpy(&x, q + j * sizeof x, sizeof x);
@@ -950,13 +966,21 @@ void DistDem::reduce_walls() {
           all.push_back(rec);
         }
       }
-      starts.push_back(all.size());
-      order_wall_shares(all, starts);
+      if (kind == 1) {
+        starts.push_back(fall.size());
+        order_wall_shares(fall, starts);
+      } else {
+        starts.push_back(all.size());
+        order_wall_shares(all, starts);
+      }
     }
   }
   // the sums back: every rank has the same walls, so the same array length
   std::vector<double>& packed = buf_->packed;
-  if (rank_ == 0) w_->set_wall_sums(all);
+  if (rank_ == 0) {
+    w_->set_wall_sums(all);  // (the planes and the footing)
+    if (w_->num_facet_walls() > 0) w_->set_facet_sums(fall);
+  }
   w_->pack_wall_sums(packed);
   MPI_Bcast(packed.data(), static_cast<int>(packed.size()), MPI_DOUBLE, 0, comm_);
   if (rank_ != 0) w_->unpack_wall_sums(packed);
@@ -1490,7 +1514,6 @@ std::int64_t DistDem::weight() const {
 void DistDem::rebalance() {
   const Particles& pt = w_->balls();
   const std::size_t n = pt.size();
-  const auto& gh = w_->ghost_rows();
   std::vector<std::int64_t> wt;
   if (bal_.weight == Weight::kTime) {  // this rank's time since the last balancing, per own ball
     const double t = times_.compute() - compute_at_balance_;
@@ -1501,12 +1524,20 @@ void DistDem::rebalance() {
   } else {
     contact_weights(*w_, wt);
   }
+  balance_cuts(pt.x, wt, w_->ghost_rows());
+  ++rebalances_;
+}
+
+// The cuts that give every brick (RCB) or slab (a grid) its share of the weights `wt` of the
+// points `x` (those marked in `skip` left out), summed over the ranks (collective).
+void DistDem::balance_cuts(const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt,
+                           const std::vector<std::uint8_t>& skip) {
+  const std::size_t n = x.size();
   const int B = std::max(bal_.bins, 2);
   if (grid_.parts > 0) {  // the owned balls' weights, summed over the ranks level by level
-    rcb_cuts(grid_, pt.x, wt, gh, B, [this](std::vector<std::int64_t>& h) {
+    rcb_cuts(grid_, x, wt, skip, B, [this](std::vector<std::int64_t>& h) {
       MPI_Allreduce(MPI_IN_PLACE, h.data(), static_cast<int>(h.size()), MPI_INT64_T, MPI_SUM, comm_);
     });
-    ++rebalances_;
     return;
   }
   std::vector<std::int64_t> h(static_cast<std::size_t>(B)), g(static_cast<std::size_t>(B));
@@ -1516,15 +1547,28 @@ void DistDem::rebalance() {
     std::fill(h.begin(), h.end(), 0);
     const double L = grid_.len[k];
     for (std::size_t i = 0; i < n; ++i) {
-      if (!gh.empty() && gh[i]) continue;
-      const double u = along(grid_, pt.x[i], k);
+      if (!skip.empty() && skip[i]) continue;
+      const double u = along(grid_, x[i], k);
       const int b = std::clamp(static_cast<int>(std::floor(u / L * B)), 0, B - 1);
       h[static_cast<std::size_t>(b)] += wt[i];
     }
     MPI_Allreduce(h.data(), g.data(), B, MPI_INT64_T, MPI_SUM, comm_);
     grid_.cuts[k] = equal_weight_cuts(g, nk, L);
   }
-  ++rebalances_;
+}
+
+// With balancing on, the first cut already balanced: rank 0's whole World weighed by its contacts
+// (a measured time does not exist yet), the other ranks adding nothing (collective). Not counted
+// in rebalances().
+void DistDem::balance_at_load(const World* full) {
+  if (bal_.every <= 0 || size_ < 2) return;
+  std::vector<std::int64_t> wt;
+  if (full) {
+    contact_weights(*full, wt);
+    balance_cuts(full->balls().x, wt, {});
+  } else {
+    balance_cuts({}, {}, {});
+  }
 }
 
 // RCB's cuts, one tree level at a time from the root: every inner node of the level cuts across

@@ -130,8 +130,9 @@ void radix_order(const std::vector<std::uint64_t>& keys, std::vector<std::uint32
 
 /// The walls' shares v[starts.front(), starts.back()) of one kind, sorted runs that begin at
 /// `starts` (one per rank), put in one World's order, (ball id, wall), stably (radix_order; the
-/// walls' sums of reduce_walls).
-void order_wall_shares(std::vector<WallSumRec>& v, const std::vector<std::size_t>& starts);
+/// walls' sums of reduce_walls). T: WallSumRec or FacetSumShare.
+template <class T>
+void order_wall_shares(std::vector<T>& v, const std::vector<std::size_t>& starts);
 
 /// Every rank's records on rank 0, in rank order (the other ranks get an empty array); `starts`
 /// (rank 0): where each rank's records begin, and their end. Collective.
@@ -205,6 +206,8 @@ class DistDem {
   /// The cuts fall on the edges of `bins` even slabs per axis; the weights are integers, summed
   /// exactly, so every rank finds the same cuts. Balancing moves balls between ranks, never a
   /// bit of the results (rows stay in id order), even when the cuts follow measured times.
+  /// With `every` > 0 the first cut (load, load_from_root) is balanced too, by contacts (no time
+  /// is measured yet), from rank 0's whole World; rebalances() does not count it.
   enum class Weight : std::uint8_t { kContacts, kTime };
   struct Balance {
     int every = 0;
@@ -327,6 +330,8 @@ class DistDem {
   void build_forward();  // the forward lists of the current rows
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
+  void balance_cuts(const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt, const std::vector<std::uint8_t>& skip);
+  void balance_at_load(const World* full);  // load, load_from_root: a balanced first cut
   double owned_max_disp2() const;
   /// The order-free sum (order_free_sum.hpp) of every rank's terms `v`, on every rank: one
   /// maximum-allreduce for the bound, one sum-allreduce of the folds; `count`, if given, is
