@@ -25,7 +25,12 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
 Two sets of measured figures (--machine): "avx2", session 14 (AMD EPYC, 2 vCPUs, AVX2, the
 exchange of that session), and "avx512", session 19 (AMD EPYC, 2 vCPUs, AVX-512, the exchange of
 ad830ea and the rebuild of eec388e). The efficiency falls where the compute per ball is faster and the network is not.
-Usage: project_scaling.py [--machine avx2|avx512] [--network ib|ethernet] [--balls N] [--csv]
+Two workloads (--workload): "bench", the above (the strained periodic bench packing, linear law,
+one rebuild per 23 steps, a fixed set of wall contacts); "footing", the default scene's
+penetration measured in session 25 on the AVX2 machine (soft bond, one rebuild per 699 steps, the
+interface's facet contacts and vertices growing with the block's surface, P^(2/3)).
+Usage: project_scaling.py [--machine avx2|avx512] [--workload bench|footing] [--network ib|ethernet]
+                          [--balls N] [--csv]
 """
 import argparse
 import math
@@ -113,7 +118,51 @@ REVERSE_BYTES = 48
 for _m in (MEASURED_AVX2, MEASURED_AVX512):
     _c = _m["ghost_pair_coeff"]
     _m["ghost_pair_coeff_newton"] = (NEWTON_FORCES_RATIO * (1.0 + _c * NEWTON_G) - 1.0) / NEWTON_G
+# The footing workload (session 25): the default scene's penetration, the soft-bond law, measured
+# on the AVX2 AMD EPYC (2 vCPUs) with `bench_dist --run` on the default scene's penetration-end
+# checkpoint (38,075 balls, 148,172 pairs, 4,828 facet contacts, 62 footing contacts; a run of
+# session 21), 3,000 steps, three rounds (docs/scaling.md). The figures that are properties of
+# the geometry and not of the law (the ghost pairs' coefficient, newton's saving, the records'
+# bytes, the imbalance of RCB) are the bench's above: at 2 ranks the per-rank working set halves
+# and the forces phase came out below half of one rank's (4.07-4.61 ms against 4.68-5.75), so a
+# coefficient cannot be measured on this state.
+MEASURED_FOOTING_AVX2 = dict(
+    MEASURED_AVX2,
+    # one rank: motion + forces 10.06 / 12.24 / 11.67 ms per step (median 11.67), motion 0.697
+    compute_us=11.674e3 / 38075,
+    motion_us=0.697e3 / 38075,
+    # two ranks, RCB balanced by time, order-free sums: exchange 0.0247 / 0.0280 / 0.0267 ms per
+    # step, 5 rebuilds in 3,000 steps, 20,279 local balls per rank (19,037 owned, 0.0652 ghosts
+    # each) -> 0.79 us per local ball and rebuild (the soft bond's histories: 0.27-0.72 us for the
+    # linear law)
+    exchange_us_per_ball=0.0267e3 * (3000 / 5) / 20279,
+    # the default scene's penetration: 67 rebuilds in 46,845 steps (the World's rebuild counter,
+    # 77 at the gravity stage's end, 144 at the penetration's end)
+    steps_per_rebuild=46845 / 67,
+    # the block: 38,075 balls in 4 x 4 x 10 mm; halo 2 R_max + skin = 2 x 0.1368 + 0.0472 mm
+    density=38075 / (4.0 * 4.0 * 10.0),
+    halo=2 * 0.13677 + 0.04716,
+    # walls: the interface facets and the footing of the block, 4,828 + 62 contacts for 38,075
+    # balls; a block of n balls of the same shape has (n / 38,075)^(2/3) of them, a weakly scaled
+    # one P^(2/3) more. FacetSumShare: 144 bytes. Rank 0 per share, everything included (its
+    # shares packed, the others received, put in order, added; session 25's code at 2 ranks:
+    # 0.36 ms for 4,828 shares): 75 ns, plus the ordering's growth with the rank count
+    # (wall_root_us_at above, less its 2-rank 5 ns)
+    wall_records_one=4828 + 62,
+    wall_ref_balls=38075,
+    wall_record_bytes=144,
+    wall_share_root_us=0.36e3 / 4828,
+    # order-free sums: each rank folds its own contacts' terms, 0.28 ms for about 2,400 facet
+    # contacts on the rank that did not wait (2 ranks, bench_dist --run, BENCH_DIST_PER_RANK):
+    # 0.12 us per contact; the largest rank is a corner brick of the block, with three of its faces
+    # on the interface (the sides and the floor; the top is free); slots: 4 per interface vertex
+    # (185 vertices) plus the totals, 746, growing as the interface, P^(2/3)
+    fold_us_per_contact=0.28e3 / 2400,
+    wall_area_ref=4.0 * 4.0 + 4 * 4.0 * 10.0,  # [mm^2] the interface: four sides and the floor
+    wall_values=746,
+)
 MACHINES = {"avx2": MEASURED_AVX2, "avx512": MEASURED_AVX512}
+WORKLOADS = {"bench": None, "footing": MEASURED_FOOTING_AVX2}
 
 NETWORKS = {
     # InfiniBand HDR class: 2 us latency, 10 GB/s
@@ -171,14 +220,26 @@ def step_time(P, n, m, net, design):
         if design == "newton":  # the reverse: the same messages, 48 bytes per ghost
             parts["forward"] += min(26, P - 1) * a_us + n * g * REVERSE_BYTES / beta
         parts["reduce"] = 2 * math.log2(P) * a_us  # rebuild test, recursive doubling
+        # the walls' contacts and values of the one-rank block: fixed (bench), or growing with the
+        # block's surface (footing: a block of n balls of the reference block's shape)
+        surf = (n / m["wall_ref_balls"]) ** (2.0 / 3.0) if "wall_ref_balls" in m else 1.0
+        recs = m["wall_records_one"] * surf * P ** (2.0 / 3.0)
+        values = m["wall_values"] * surf * (P ** (2.0 / 3.0) if "wall_ref_balls" in m else 1.0)
+        fold = 0.0
+        if "fold_us_per_contact" in m:  # the largest rank's own folding: a corner brick, three faces
+            a = (n / m["density"]) ** (1.0 / 3.0)
+            per_mm2 = m["wall_records_one"] / m["wall_area_ref"]
+            fold = 3 * a * a * per_mm2 * m["fold_us_per_contact"]
         if design == "today":
-            recs = m["wall_records_one"] * P ** (2.0 / 3.0)
-            parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta +
-                              recs * wall_root_us(P, m))
+            if "wall_share_root_us" in m:  # rank 0's measured cost per share, and the ordering's growth
+                root = m["wall_share_root_us"] + max(0.0, wall_root_us(P, m) - wall_root_us(2, m))
+            else:
+                root = wall_root_us(P, m)
+            parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta + recs * root)
         elif design in ("order-free", "newton"):  # two allreduces (recursive doubling): 1 and 4 doubles per value
-            parts["walls"] = 2 * math.log2(P) * (2 * a_us + m["wall_values"] * 5 * 8 / beta)
+            parts["walls"] = fold + 2 * math.log2(P) * (2 * a_us + values * 5 * 8 / beta)
         else:
-            parts["walls"] = 2 * math.log2(P) * (a_us + m["wall_values"] * 24 / beta)
+            parts["walls"] = fold + 2 * math.log2(P) * (a_us + values * 24 / beta)
     parts["total"] = sum(v for k, v in parts.items())
     return parts
 
@@ -186,12 +247,16 @@ def step_time(P, n, m, net, design):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--machine", choices=sorted(MACHINES), default="avx512")
+    ap.add_argument("--workload", choices=sorted(WORKLOADS), default="bench",
+                    help="bench: the strained periodic bench packing, linear law (--machine's figures); "
+                         "footing: the default scene's penetration, soft bond, AVX2 (session 25; --machine ignored)")
     ap.add_argument("--network", choices=sorted(NETWORKS), default="ib")
     ap.add_argument("--balls", type=int, default=25835, help="balls per rank (weak scaling)")
     ap.add_argument("--csv", action="store_true")
     args = ap.parse_args()
-    m, net = MACHINES[args.machine], NETWORKS[args.network]
-    print(f"# machine {args.machine}; network {args.network}: alpha {net['alpha_us']} us, beta {net['beta_gbs']} GB/s; "
+    m, net = WORKLOADS[args.workload] or MACHINES[args.machine], NETWORKS[args.network]
+    what = f"machine {args.machine}" if args.workload == "bench" else "workload footing (AVX2)"
+    print(f"# {what}; network {args.network}: alpha {net['alpha_us']} us, beta {net['beta_gbs']} GB/s; "
           f"{args.balls} balls per rank; ghosts per owned ball in a cubic brick: "
           f"{ghosts_per_ball(args.balls, m):.3f}")
     hdr = "design,ranks,compute_ms,exchange_ms,forward_ms,reduce_ms,walls_ms,total_ms,efficiency"
