@@ -684,9 +684,11 @@ class DemParticipant : public node::Participant {
                  s_.boolean("dem.newton") ? "; newton on: each pair across two bricks computed once" : "");
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
     dist_->set_newton(s_.boolean("dem.newton"));
+    // (auto: measured time, but contacts with newton on, whose results follow the cuts)
+    const std::string weight = s_.string("dem.balance_weight");
+    const bool by_time = weight == "time" || (weight == "auto" && !s_.boolean("dem.newton"));
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
-                        s_.string("dem.balance_weight") == "time" ? dem::DistDem::Weight::kTime
-                                                                   : dem::DistDem::Weight::kContacts});
+                        by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts});
     {
       node::Timed t(effect_s_["ranks.load"]);
       dist_->load_from_root(world_);  // the other ranks hold only their part

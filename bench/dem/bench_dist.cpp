@@ -15,7 +15,8 @@
 //   balance: DistDem's dynamic balancing every that many exchanges (0, the default: even cuts),
 //            the first cut balanced too (BENCH_DIST_BALANCE_AFTER_LOAD=1: not, as before session 25);
 //            BENCH_DIST_WEIGHT=time weighs balls by their rank's measured time, not contacts.
-// BENCH_DIST_NEWTON=1: `newton on` (DistDem::set_newton): each pair across a face computed once,
+// BENCH_DIST_NEWTON=1: `newton on` (DistDem::set_newton; refused with BENCH_DIST_WEIGHT=time and
+// balancing on: its results follow the cuts): each pair across a face computed once,
 // the ghosts' forces sent back to their owners.
 // BENCH_DIST_FROM_ROOT=1: rank 0 alone holds the packing and sends each rank its part
 // (DistDem::load_from_root, as the DEM node does) instead of every rank cutting its own (load);

@@ -717,3 +717,23 @@ int main(int argc, char** argv) {
   MPI_Finalize();
   return rc;
 }
+
+// newton on with cuts balanced by measured time is refused, in either order of the calls:
+// newton's results follow the cuts, and time-weighted cuts differ from run to run.
+TEST(Dist, NewtonWithTimeWeightedCutsIsRefused) {
+  Scene sc{"refusal", ContactModel::kLinear, true};
+  const DistDem::Balance by_time{1, 2048, DistDem::Weight::kTime}, by_contacts{1, 2048, DistDem::Weight::kContacts};
+  {
+    DistDem d(MPI_COMM_WORLD, WorldParams{}, grid(sc));
+    d.set_newton(true);
+    EXPECT_THROW(d.set_balance(by_time), std::invalid_argument);
+    EXPECT_NO_THROW(d.set_balance(by_contacts));
+    EXPECT_NO_THROW(d.set_balance({0, 2048, DistDem::Weight::kTime}));  // no balancing: no cuts to follow
+  }
+  {
+    DistDem d(MPI_COMM_WORLD, WorldParams{}, grid(sc));
+    d.set_balance(by_time);
+    EXPECT_THROW(d.set_newton(true), std::invalid_argument);
+  }
+  test::share_verdict();
+}

@@ -811,9 +811,24 @@ void DistDem::take(std::unique_ptr<World> w, bool platens) {
   exchanges_ = 0;
 }
 
+namespace {
+void refuse_newton_time(bool newton, const DistDem::Balance& b) {
+  if (newton && b.every > 0 && b.weight == DistDem::Weight::kTime)
+    throw std::invalid_argument(
+        "DistDem: newton on with cuts balanced by measured time: newton's results follow the cuts, and "
+        "time-weighted cuts differ from run to run (balance by contacts instead).");
+}
+}  // namespace
+
 void DistDem::set_newton(bool on) {
   if (w_) throw std::logic_error("DistDem::set_newton: call it before load.");
+  refuse_newton_time(on, bal_);
   newton_ = on;
+}
+
+void DistDem::set_balance(const Balance& b) {
+  refuse_newton_time(newton_, b);
+  bal_ = b;
 }
 
 // Point to point with the ranks that share ghosts (the counts are known from the forward lists,

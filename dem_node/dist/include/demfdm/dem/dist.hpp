@@ -214,7 +214,9 @@ class DistDem {
     int bins = 2048;
     Weight weight = Weight::kContacts;
   };
-  void set_balance(const Balance& b) { bal_ = b; }
+  /// Refused with `newton` on and time weights: newton's results follow the cuts, and cuts that
+  /// follow measured times differ from run to run.
+  void set_balance(const Balance& b);
   /// `newton on` (LAMMPS's name; before load): a pair across a brick face is computed once, on
   /// the rank that owns its ball A (the lower id), and the forces and torques it puts on a ghost
   /// go back to the ghost's owner after the pair pass (reverse communication), as do the
