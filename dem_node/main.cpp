@@ -679,9 +679,6 @@ class DemParticipant : public node::Participant {
         if (g.len[k] > g.len[axis]) axis = k;
       g.n[axis] = g_ranks.size;
     }
-    spdlog::info("dem: the block cut into {} bricks ({}){}{}", g_ranks.size,
-                 g.parts > 0 ? "recursive coordinate bisection" : "slabs", describe_cuts(g),
-                 s_.boolean("dem.newton") ? "; newton on: each pair across two bricks computed once" : "");
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
     dist_->set_newton(s_.boolean("dem.newton"));
     // (auto: measured time, but contacts with newton on, whose results follow the cuts)
@@ -693,6 +690,13 @@ class DemParticipant : public node::Participant {
       node::Timed t(effect_s_["ranks.load"]);
       dist_->load_from_root(world_);  // the other ranks hold only their part
     }
+    // The pass keeps its force norms for the measurements' mean contact force, as world_ does
+    // (the same bits as the scan's, tests/dem/contact_scan_test.cpp).
+    dist_->world().keep_force_norms(true);
+    // (the cuts as the load left them: balanced by contacts when dem.balance_every > 0)
+    spdlog::info("dem: the block cut into {} bricks ({}){}{}", g_ranks.size,
+                 g.parts > 0 ? "recursive coordinate bisection" : "slabs", describe_cuts(dist_->grid()),
+                 s_.boolean("dem.newton") ? "; newton on: each pair across two bricks computed once" : "");
     dist_live_ = true;
     synced_ = false;
     safe_dt_key_ = {-1, -1, -1};

@@ -170,6 +170,17 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
               imbalance(code));
 }
 
+// BENCH_DIST_NEWTON onto `d`, and the balancing of every `every` exchanges with BENCH_DIST_WEIGHT's
+// weights (set by the caller, before or after the load).
+DistDem::Balance newton_and_balance(DistDem& d, int every) {
+  if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
+  DistDem::Balance bal;
+  bal.every = every;
+  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
+    bal.weight = DistDem::Weight::kTime;
+  return bal;
+}
+
 // One CSV line on rank 0 (the columns of the header comment) from the ranks' times since
 // reset_times and the counters since ex0 / mig0.
 struct Run {
@@ -298,11 +309,7 @@ int run_state(int argc, char** argv) {
   WorldParams p = full.params();
   p.threads = omp_get_max_threads();
   DistDem d(MPI_COMM_WORLD, p, g);
-  if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
-  DistDem::Balance bal;
-  bal.every = balance;
-  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
-    bal.weight = DistDem::Weight::kTime;
+  const DistDem::Balance bal = newton_and_balance(d, balance);
   d.set_balance(bal);  // (before the load: its first cut balanced too)
   MPI_Barrier(MPI_COMM_WORLD);
   const double tl0 = MPI_Wtime();
@@ -516,11 +523,7 @@ int main(int argc, char** argv) {
   else
     g.n[footing ? 2 : 0] = P;
   DistDem d(MPI_COMM_WORLD, p, g);
-  if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
-  DistDem::Balance bal;
-  bal.every = balance;
-  if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
-    bal.weight = DistDem::Weight::kTime;
+  const DistDem::Balance bal = newton_and_balance(d, balance);
   if (!std::getenv("BENCH_DIST_BALANCE_AFTER_LOAD")) d.set_balance(bal);  // (before the load: its first cut balanced too)
   const char* from_root = std::getenv("BENCH_DIST_FROM_ROOT");
   MPI_Barrier(MPI_COMM_WORLD);

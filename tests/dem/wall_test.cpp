@@ -21,6 +21,17 @@ int add_square(World& w, double h, double z = 0.0) {
   const std::vector<std::int32_t> t = {0, 1, 2, 0, 2, 3};
   return w.add_facet_wall(v, t);
 }
+
+// The paper's interface (docs/theory.md 2.6): ball-facet parallel bonds without a linear part
+// while bonded, of tensile and cohesive strength `strength` [Pa].
+WorldParams bonded_interface(double strength) {
+  WorldParams p;
+  p.ball_facet.model = ContactModel::kLinearPBond;
+  p.ball_facet.pbond.zero_linear = true;
+  p.ball_facet.pbond.ten = strength;
+  p.ball_facet.pbond.coh = strength;
+  return p;
+}
 }  // namespace
 
 // §6.4: the equivalent vertex forces have the exact resultant and moment (1e-12 relative).
@@ -155,12 +166,8 @@ TEST(Footing, ReactionBottomAndSide) {
 // bond breaks in shear, and the ball is then stopped by the floor (without the restored linear
 // part it fell through the wall).
 TEST(Interface, BrokenInterfaceBondStopsTheBallAtTheWall) {
-  WorldParams p;
+  WorldParams p = bonded_interface(1e5);
   p.local_damping = 0.0;
-  p.ball_facet.model = ContactModel::kLinearPBond;
-  p.ball_facet.pbond.zero_linear = true;
-  p.ball_facet.pbond.ten = 1e5;
-  p.ball_facet.pbond.coh = 1e5;
   const double R = 1e-4;
   World w(p);
   add_square(w, 2e-3);
@@ -213,13 +220,9 @@ TEST(Interface, KeptBondedContactIsSortedIn) {
 // of facets, sheared and spun, so that the shares carry forces, moments (equivalent vertex
 // forces from both) and stiffness on every vertex of the floor's two facets.
 TEST(Interface, FacetSharesAddUpToThePassesSums) {
-  WorldParams p;
+  WorldParams p = bonded_interface(1e7);
   p.gravity = true;
   p.g_level = 100.0;
-  p.ball_facet.model = ContactModel::kLinearPBond;
-  p.ball_facet.pbond.zero_linear = true;
-  p.ball_facet.pbond.ten = 1e7;
-  p.ball_facet.pbond.coh = 1e7;
   const double R = 1e-4;
   World w(p);
   add_square(w, 2e-3);

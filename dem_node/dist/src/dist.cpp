@@ -447,6 +447,10 @@ struct FootingShare {
 };
 
 struct DistDem::Buffers {
+  // the node's measurements, every step: each rank's terms, rank 0's gathered terms, the values
+  // of order-free sums
+  std::vector<World::ContactTerm> m_terms, m_all;
+  std::vector<double> m_vals;
   // the exchange's per-row and per-destination arrays, kept from one exchange to the next (a
   // fresh allocation of each cost page faults at every rebuild)
   std::vector<int> own, old_owner, holders, dest, near_all;
@@ -1710,7 +1714,8 @@ double DistDem::order_free_sum(const std::vector<double>& v, double* count) cons
 double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count) const {
   using T = World::ContactTerm;
   if (p_.order_free_sums) {  // the terms (with `count`: those > 0, as the mean counts them)
-    std::vector<double> v;
+    std::vector<double>& v = buf_->m_vals;
+    v.clear();
     double c = 0.0;
     for (const T& t : terms) {
       c += t.v > 0.0;
@@ -1725,7 +1730,8 @@ double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t
   // rank 0 merges the ranks' runs pairwise: O(n log ranks), not a sort of every term per call.
   if (!std::is_sorted(terms.begin(), terms.end(), key_less)) std::sort(terms.begin(), terms.end(), key_less);
   std::vector<std::size_t> at;
-  std::vector<T> all = gather_on_root(comm_, terms, &at);
+  std::vector<T>& all = buf_->m_all;
+  gather_on_root(comm_, terms, all, &at);
   double res[2] = {0.0, 0.0};
   if (rank_ == 0) {
     merge_runs(all, at, key_less);
@@ -1751,12 +1757,14 @@ double DistDem::ball_sum(Term term) const {
   const auto& g = w_->ghost_rows();
   const Particles& pt = w_->balls();
   if (p_.order_free_sums) {  // every rank's folds, no terms gathered (order_free_sum.hpp)
-    std::vector<double> v;
+    std::vector<double>& v = buf_->m_vals;
+    v.clear();
     for (std::size_t i = 0; i < pt.size(); ++i)
       if (g.empty() || !g[i]) v.push_back(term(i));
     return order_free_sum(v);
   }
-  std::vector<World::ContactTerm> t;
+  std::vector<World::ContactTerm>& t = buf_->m_terms;
+  t.clear();
   for (std::size_t i = 0; i < pt.size(); ++i)
     if (g.empty() || !g[i]) t.push_back({0, pt.id[i], 0, term(i)});
   return ordered_sum(t);
@@ -1803,7 +1811,8 @@ std::int64_t DistDem::bond_failures() const {
 
 // World::contact_scan's rule: Σ ‖F‖ over the contacts that carry a force, over their count.
 double DistDem::mean_contact_force() const {
-  std::vector<World::ContactTerm> t;
+  std::vector<World::ContactTerm>& t = buf_->m_terms;
+  t.clear();
   w_->contact_force_norms(t);
   std::int64_t n = 0;
   const double s = ordered_sum(t, &n);

@@ -137,7 +137,17 @@ void order_wall_shares(std::vector<T>& v, const std::vector<std::size_t>& starts
 /// Every rank's records on rank 0, in rank order (the other ranks get an empty array); `starts`
 /// (rank 0): where each rank's records begin, and their end. Collective.
 template <class T>
+void gather_on_root(MPI_Comm comm, const std::vector<T>& mine, std::vector<T>& all, std::vector<std::size_t>* starts = nullptr);
+template <class T>
 std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine, std::vector<std::size_t>* starts = nullptr) {
+  std::vector<T> all;
+  gather_on_root(comm, mine, all, starts);
+  return all;
+}
+/// The same into `all` (rank 0; the others get it empty), whose memory a caller can keep from
+/// call to call.
+template <class T>
+void gather_on_root(MPI_Comm comm, const std::vector<T>& mine, std::vector<T>& all, std::vector<std::size_t>* starts) {
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
@@ -154,9 +164,8 @@ std::vector<T> gather_on_root(MPI_Comm comm, const std::vector<T>& mine, std::ve
     for (int r = 0; r < size; ++r) starts->push_back(static_cast<std::size_t>(displ[static_cast<std::size_t>(r)]) / sizeof(T));
     starts->push_back(static_cast<std::size_t>(total) / sizeof(T));
   }
-  std::vector<T> all(rank == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
+  all.resize(rank == 0 ? static_cast<std::size_t>(total) / sizeof(T) : 0);
   MPI_Gatherv(mine.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, 0, comm);
-  return all;
 }
 
 class DistDem {
