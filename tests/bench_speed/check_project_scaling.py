@@ -1,0 +1,86 @@
+#!/usr/bin/python3
+"""ctest bench_project_scaling: bench/dem/project_scaling.py (docs/scaling.md), both workloads,
+both networks, against invariants of its cost model:
+- one rank: efficiency 1.00, no communication (exchange, forward, reduce, walls all 0);
+- every part >= 0 and the total their sum (to the printed rounding);
+- more ranks never cost less in any part than 2 ranks, and the efficiency never rises with the
+  rank count within a design;
+- the footing workload (one rebuild per 699 steps) pays less exchange per step than the bench
+  (one per 23) at every rank count above 1, and its walls' sums gathered on rank 0 ("today") grow
+  faster with the rank count than its order-free ones;
+- Ethernet is never faster than InfiniBand;
+- the ghosts per owned ball of a cubic brick of 25,835 balls at the bench's density and halo:
+  ((a + 2 h)^3 - a^3) / a^3 from the script's own figures, 0.469.
+Usage: check_project_scaling.py REPO_ROOT
+"""
+import csv
+import io
+import re
+import subprocess
+import sys
+
+root = sys.argv[1]
+script = root + "/bench/dem/project_scaling.py"
+fails = []
+
+
+def check(cond, what):
+    if not cond:
+        fails.append(what)
+
+
+def run(*args):
+    out = subprocess.run([sys.executable, script, "--csv", *args], capture_output=True, text=True, timeout=60)
+    check(out.returncode == 0, "project_scaling.py %s: exit %d: %s" % (" ".join(args), out.returncode, out.stderr))
+    head, body = out.stdout.split("\n", 1)
+    rows = list(csv.DictReader(io.StringIO(body)))
+    return head, rows
+
+
+parts = ("compute_ms", "exchange_ms", "forward_ms", "reduce_ms", "walls_ms")
+tables = {}
+for wl in ("bench", "footing"):
+    for net in ("ib", "ethernet"):
+        head, rows = run("--workload", wl, "--network", net)
+        tables[(wl, net)] = rows
+        check(len(rows) == 4 * 6, "%s %s: %d rows" % (wl, net, len(rows)))
+        if wl == "bench":
+            g = float(re.search(r"ghosts per owned ball in a cubic brick: ([0-9.]+)", head).group(1))
+            check(abs(g - 0.469) < 0.0005, "bench: ghosts per owned ball %.3f, expected 0.469" % g)
+        for design in sorted({r["design"] for r in rows}):
+            rs = sorted((r for r in rows if r["design"] == design), key=lambda r: int(r["ranks"]))
+            one = rs[0]
+            check(one["ranks"] == "1" and one["efficiency"] == "1.00", "%s %s %s: one rank %s" % (wl, net, design, one))
+            check(all(float(one[k]) == 0.0 for k in parts[1:]), "%s %s %s: one rank communicates" % (wl, net, design))
+            for r in rs:
+                vals = [float(r[k]) for k in parts]
+                check(min(vals) >= 0.0, "%s %s %s %s: a negative part" % (wl, net, design, r["ranks"]))
+                check(abs(sum(vals) - float(r["total_ms"])) <= 0.003, "%s %s %s %s: parts %.3f, total %s" %
+                      (wl, net, design, r["ranks"], sum(vals), r["total_ms"]))
+            for a, b in zip(rs[1:], rs[2:]):
+                for k in parts:
+                    check(float(b[k]) >= float(a[k]) - 1e-9, "%s %s %s: %s falls from %s to %s ranks" %
+                          (wl, net, design, k, a["ranks"], b["ranks"]))
+                check(float(b["efficiency"]) <= float(a["efficiency"]), "%s %s %s: efficiency rises from %s to %s ranks" %
+                      (wl, net, design, a["ranks"], b["ranks"]))
+
+
+def cell(wl, net, design, ranks, key):
+    return float(next(r for r in tables[(wl, net)] if r["design"] == design and r["ranks"] == str(ranks))[key])
+
+
+for P in (2, 8, 64, 256, 1024):
+    check(cell("footing", "ib", "today", P, "exchange_ms") < cell("bench", "ib", "today", P, "exchange_ms"),
+          "footing: exchange not below the bench's at %d ranks" % P)
+    for wl in ("bench", "footing"):
+        for design in ("today", "order-free", "newton", "next"):
+            check(cell(wl, "ethernet", design, P, "total_ms") >= cell(wl, "ib", design, P, "total_ms"),
+                  "%s %s: Ethernet faster than InfiniBand at %d ranks" % (wl, design, P))
+grow = lambda d: cell("footing", "ib", d, 1024, "walls_ms") / cell("footing", "ib", d, 64, "walls_ms")
+check(grow("today") > grow("order-free"), "footing: the gathered walls' sums grow no faster than the order-free ones")
+print("project_scaling.py: %d tables checked; footing at 64 ranks, InfiniBand: today %.2f, order-free %.2f, newton %.2f" %
+      (len(tables), cell("footing", "ib", "today", 64, "efficiency"), cell("footing", "ib", "order-free", 64, "efficiency"),
+       cell("footing", "ib", "newton", 64, "efficiency")))
+for f in fails:
+    print("FAIL:", f)
+sys.exit(1 if fails else 0)
