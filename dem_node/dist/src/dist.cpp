@@ -448,9 +448,10 @@ struct FootingShare {
 
 struct DistDem::Buffers {
   // the node's measurements, every step: each rank's terms, rank 0's gathered terms, the values
-  // of order-free sums
+  // of order-free sums; the kept merge orders of ordered_sum (ball terms, contact terms)
   std::vector<World::ContactTerm> m_terms, m_all;
   std::vector<double> m_vals;
+  OrderCache order_cache[2];
   // the exchange's per-row and per-destination arrays, kept from one exchange to the next (a
   // fresh allocation of each cost page faults at every rebuild)
   std::vector<int> own, old_owner, holders, dest, near_all;
@@ -787,6 +788,7 @@ void DistDem::load_from_root(const World& full) {
 // newton hooks, and the walls' sums of every rank.
 void DistDem::take(std::unique_ptr<World> w, bool platens) {
   w_ = std::move(w);
+  ++layout_gen_;  // (ordered_sum's kept merge orders)
   walls_every_step_ = platens;
   const World::Counters k = w_->counters();
   // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
@@ -1145,6 +1147,7 @@ void neighbour_exchange(MPI_Comm comm, const std::vector<int>& peers, const std:
 void DistDem::exchange() {
   if (size_ == 1) {  // no ghosts and no other rank: the rows stay, the World's rebuild does the rest
     ++exchanges_;
+    ++layout_gen_;
     return;
   }
   const Particles& pt = w_->balls();
@@ -1492,6 +1495,7 @@ void DistDem::exchange() {
   }
   w_->swap_balls(q, nc, wc, ghost);  // q_, nc_, the wall lists, ghost_buf_ now hold the old arrays
   ++exchanges_;
+  ++layout_gen_;
   build_forward();
 }
 
@@ -1711,7 +1715,7 @@ double DistDem::order_free_sum(const std::vector<double>& v, double* count) cons
   return sum.result();
 }
 
-double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count) const {
+double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count, int which) const {
   using T = World::ContactTerm;
   if (p_.order_free_sums) {  // the terms (with `count`: those > 0, as the mean counts them)
     std::vector<double>& v = buf_->m_vals;
@@ -1729,21 +1733,53 @@ double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t
   // Each rank's terms in key order (they nearly always are: rows and lists in id order), then
   // rank 0 merges the ranks' runs pairwise: O(n log ranks), not a sort of every term per call.
   if (!std::is_sorted(terms.begin(), terms.end(), key_less)) std::sort(terms.begin(), terms.end(), key_less);
-  std::vector<std::size_t> at;
-  std::vector<T>& all = buf_->m_all;
-  gather_on_root(comm_, terms, all, &at);
+  // The merge order is kept while the terms' keys cannot have changed: the owned balls change
+  // only at an exchange or a load (layout_gen_), the contacts also at a rebuild. Then only the
+  // values travel (8 bytes a term, not 32) and rank 0 adds them in the kept order: the same
+  // additions. Every rank takes part in the decision (a rank whose count changed makes all
+  // gather the keys again).
+  OrderCache& oc = buf_->order_cache[which];
+  const std::int64_t key[2] = {layout_gen_, which == kContactTerms ? w_->rebuild_count() : 0};
+  int stale = key[0] != oc.key[0] || key[1] != oc.key[1] || terms.size() != oc.local ? 1 : 0;
+  MPI_Allreduce(MPI_IN_PLACE, &stale, 1, MPI_INT, MPI_MAX, comm_);
   double res[2] = {0.0, 0.0};
-  if (rank_ == 0) {
-    merge_runs(all, at, key_less);
-    double s = 0.0;
-    std::int64_t c = 0;
-    for (const T& t : all) {
-      if (count) {  // the mean's rule: only the terms that carry a force
-        if (t.v > 0.0) s += t.v, ++c;
-      } else {
-        s += t.v;
-      }
+  double s = 0.0;
+  std::int64_t c = 0;
+  auto add = [&](double v) {
+    if (count) {  // the mean's rule: only the terms that carry a force
+      if (v > 0.0) s += v, ++c;
+    } else {
+      s += v;
     }
+  };
+  if (stale) {
+    std::vector<std::size_t> at;
+    std::vector<T>& all = buf_->m_all;
+    gather_on_root(comm_, terms, all, &at);
+    oc.key[0] = key[0], oc.key[1] = key[1];
+    oc.local = terms.size();
+    int mine = static_cast<int>(terms.size());
+    oc.counts.assign(static_cast<std::size_t>(size_), 0);
+    MPI_Gather(&mine, 1, MPI_INT, oc.counts.data(), 1, MPI_INT, 0, comm_);
+    if (rank_ == 0) {
+      oc.displ.assign(static_cast<std::size_t>(size_), 0);
+      for (int r = 1; r < size_; ++r)
+        oc.displ[static_cast<std::size_t>(r)] = oc.displ[static_cast<std::size_t>(r) - 1] + oc.counts[static_cast<std::size_t>(r) - 1];
+      oc.perm.resize(all.size());
+      for (std::size_t j = 0; j < all.size(); ++j) oc.perm[j] = static_cast<std::uint32_t>(j);
+      merge_runs(oc.perm, at, [&](std::uint32_t x, std::uint32_t y) { return key_less(all[x], all[y]); });
+      for (std::uint32_t j : oc.perm) add(all[j].v);
+    }
+  } else {
+    oc.mine.resize(terms.size());
+    for (std::size_t j = 0; j < terms.size(); ++j) oc.mine[j] = terms[j].v;
+    if (rank_ == 0) oc.all.resize(oc.perm.size());
+    MPI_Gatherv(oc.mine.data(), static_cast<int>(oc.mine.size()), MPI_DOUBLE, oc.all.data(), oc.counts.data(),
+                oc.displ.data(), MPI_DOUBLE, 0, comm_);
+    if (rank_ == 0)
+      for (std::uint32_t j : oc.perm) add(oc.all[j]);
+  }
+  if (rank_ == 0) {
     res[0] = s;
     res[1] = static_cast<double>(c);
   }
@@ -1767,7 +1803,7 @@ double DistDem::ball_sum(Term term) const {
   t.clear();
   for (std::size_t i = 0; i < pt.size(); ++i)
     if (g.empty() || !g[i]) t.push_back({0, pt.id[i], 0, term(i)});
-  return ordered_sum(t);
+  return ordered_sum(t, nullptr, kBallTerms);
 }
 
 SkeletonRatio DistDem::skeleton_ratio(double fc) const {
@@ -1815,7 +1851,7 @@ double DistDem::mean_contact_force() const {
   t.clear();
   w_->contact_force_norms(t);
   std::int64_t n = 0;
-  const double s = ordered_sum(t, &n);
+  const double s = ordered_sum(t, &n, kContactTerms);
   return n ? s / double(n) : 0.0;
 }
 

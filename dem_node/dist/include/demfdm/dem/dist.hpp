@@ -352,8 +352,20 @@ class DistDem {
   /// and `extra`, if given, with them: one sum-allreduce (collective).
   void sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const;
   /// Σ of the terms of every rank in key order, on every rank; `count`: how many are > 0. With
-  /// WorldParams::order_free_sums, the order-free sum of the terms instead (no gather).
-  double ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count = nullptr) const;
+  /// WorldParams::order_free_sums, the order-free sum of the terms instead (no gather). `which`:
+  /// the kind of terms, whose merge order is kept until their keys can change (ball terms: an
+  /// exchange or a load; contact terms: also a rebuild).
+  enum { kBallTerms = 0, kContactTerms = 1 };
+  double ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count, int which) const;
+  /// ordered_sum's kept merge order of one kind of terms: the layout key it holds for, this rank's
+  /// term count, rank 0's permutation of the gathered terms and the ranks' counts and offsets.
+  struct OrderCache {
+    std::int64_t key[2] = {-1, -1};
+    std::size_t local = static_cast<std::size_t>(-1);
+    std::vector<std::uint32_t> perm;
+    std::vector<int> counts, displ;
+    std::vector<double> mine, all;
+  };
   /// The owned balls' terms keyed by id (set 0), in id order.
   template <class Term>
   double ball_sum(Term term) const;
@@ -369,6 +381,7 @@ class DistDem {
   long long chunk_ = 1LL << 30;    // set_part_chunk
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0, sparse_exchanges_ = 0;
+  std::int64_t layout_gen_ = 0;  // +1 at every load and exchange: the rows may have changed
   std::vector<int> peers_;                   // peer_ranks()
   double reach_ = -1.0;                      // set_neighbour_reach
   std::vector<std::vector<char>> nbr_out_;   // neighbour_exchange's messages
