@@ -212,10 +212,13 @@ void check(const WallScene& sc) {
     EXPECT_TRUE(test::same_bits(got_sums.history, want.history)) << "the per-step histories differ";
     if (sc.order_free) {  // the default sums of the same contacts: the last bits apart
       std::vector<WallSumRec> recs;
+      std::vector<FacetSumShare> shares;
       ref->wall_sum_records(recs);
+      ref->facet_sum_shares(shares);
       std::vector<double> of, plain;
       ref->pack_wall_sums(of);
       ref->set_wall_sums(recs);  // one World's records in its order: the default sums
+      ref->set_facet_sums(shares);
       ref->pack_wall_sums(plain);
       ref->unpack_wall_sums(of);  // (the reference steps on below)
       double worst = 0.0, rel = 0.0;

@@ -130,8 +130,8 @@ void FacetKind::after_law(const SetContext& cx, WallContacts& wc, std::int64_t c
 namespace {
 
 // §6.4 equivalent vertex forces and §6.5 stiffness of one contact, from its WallSumRec (its
-// wall, facet, F, M, x_c, weights and K, whether it acts): the force pass and
-// World::set_wall_sums share this arithmetic.
+// wall, facet, F, M, x_c, weights and K, whether it acts), as the force pass forms them
+// (FacetKind::after_law; World::facet_sum_shares passes them on).
 FacetTerm facet_term(const std::vector<FacetWall>& walls, const WallSumRec& r) {
   FacetTerm t;
   if (!r.active) return t;
@@ -168,13 +168,6 @@ void facet_add(std::vector<FacetWall>& walls, const FacetTerm& t) {
     fw.total_force += t.F;
   }
   for (int v = 0; v < 3; ++v) fw.vstiff[tr[v]] += t.k[v];
-}
-
-// The sums over the records one(0) … one(m − 1), serial in that order.
-template <class One>
-void facet_sums(std::vector<FacetWall>& walls, std::int64_t m, One one) {
-  facet_zero(walls);
-  for (std::int64_t c = 0; c < m; ++c) facet_add(walls, facet_term(walls, one(c)));
 }
 
 // A facet contact's share: it acts while it carries a force or is bonded; K = K_n + K_s, plus
@@ -767,8 +760,7 @@ void World::copy_walls(const World& o) {
   footing_->kind.ft = o.footing_->kind.ft;
 }
 
-void World::wall_sum_records(std::vector<WallSumRec>& out, bool facets) const {
-  const SetContext cx = const_cast<World*>(this)->context();
+void World::wall_sum_records(std::vector<WallSumRec>& out) const {
   auto ids = [&](const WallContacts& wc, std::size_t c, WallSumRec r, std::uint8_t kind) {
     r.ball = pt_.id[wc.ball[c]];
     r.wall = wc.wall[c];
@@ -777,34 +769,24 @@ void World::wall_sum_records(std::vector<WallSumRec>& out, bool facets) const {
   };
   const WallContacts& pc = planes_->contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) ids(pc, c, PlaneKind::rec(pc, static_cast<std::int64_t>(c)), 0);
-  const WallContacts& fc = facets_->contacts;
-  for (std::size_t c = 0; facets && c < fc.size(); ++c) {  // a facet contact that does not act adds nothing
-    const WallSumRec r = facet_rec(cx, fc, static_cast<std::int64_t>(c));
-    if (r.active) ids(fc, c, r, 1);
-  }
   const WallContacts& gc = footing_->contacts;
   for (std::size_t c = 0; c < gc.size(); ++c) ids(gc, c, FootingKind::rec(gc, static_cast<std::int64_t>(c)), 2);
 }
 
 void World::set_wall_sums(std::span<const WallSumRec> recs) {
-  std::size_t k0 = 0, k1 = 0, k2 = 0;
+  std::size_t k1 = 0;
   while (k1 < recs.size() && recs[k1].kind == 0) ++k1;
-  k2 = k1;
-  while (k2 < recs.size() && recs[k2].kind == 1) ++k2;
-  for (std::size_t k = 0; k < recs.size(); ++k)
-    if (recs[k].kind != (k < k1 ? 0 : k < k2 ? 1 : 2))
-      throw std::invalid_argument("set_wall_sums: the records must be sorted by kind.");
+  for (std::size_t k = k1; k < recs.size(); ++k)
+    if (recs[k].kind != 2)
+      throw std::invalid_argument("set_wall_sums: the records must be the planes' (kind 0), then the footing's (kind 2).");
   const SetContext cx = context();
   if (planes_->present()) {
     planes_->kind.begin(cx, planes_->contacts);
-    for (std::size_t k = k0; k < k1; ++k) planes_->kind.add(recs[k]);
+    for (std::size_t k = 0; k < k1; ++k) planes_->kind.add(recs[k]);
   }
-  if (facets_->present())
-    facet_sums(facets_->kind.walls, static_cast<std::int64_t>(k2 - k1),
-               [&](std::int64_t c) { return recs[k1 + static_cast<std::size_t>(c)]; });
   if (footing_->present()) {
     footing_->kind.begin(cx, footing_->contacts);
-    for (std::size_t k = k2; k < recs.size(); ++k) footing_->kind.add(recs[k]);
+    for (std::size_t k = k1; k < recs.size(); ++k) footing_->kind.add(recs[k]);
   }
 }
 

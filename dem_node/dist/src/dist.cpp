@@ -919,7 +919,7 @@ void DistDem::reduce_walls() {
   }
   std::vector<WallSumRec>& mine = buf_->sums;
   mine.clear();
-  w_->wall_sum_records(mine, false);  // (the facets' shares below: the terms the pass formed)
+  w_->wall_sum_records(mine);  // the planes and the footing; the facets' shares below
   // compact shares by kind
   auto& ps = buf_->plane_shares;
   auto& fs = buf_->facet_shares;
@@ -1758,13 +1758,13 @@ double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t
     gather_on_root(comm_, terms, all, &at);
     oc.key[0] = key[0], oc.key[1] = key[1];
     oc.local = terms.size();
-    int mine = static_cast<int>(terms.size());
-    oc.counts.assign(static_cast<std::size_t>(size_), 0);
-    MPI_Gather(&mine, 1, MPI_INT, oc.counts.data(), 1, MPI_INT, 0, comm_);
     if (rank_ == 0) {
-      oc.displ.assign(static_cast<std::size_t>(size_), 0);
-      for (int r = 1; r < size_; ++r)
-        oc.displ[static_cast<std::size_t>(r)] = oc.displ[static_cast<std::size_t>(r) - 1] + oc.counts[static_cast<std::size_t>(r) - 1];
+      oc.counts.resize(static_cast<std::size_t>(size_));
+      oc.displ.resize(static_cast<std::size_t>(size_));
+      for (std::size_t r = 0; r < static_cast<std::size_t>(size_); ++r) {  // (where each rank's terms begin)
+        oc.displ[r] = static_cast<int>(at[r]);
+        oc.counts[r] = static_cast<int>(at[r + 1] - at[r]);
+      }
       oc.perm.resize(all.size());
       for (std::size_t j = 0; j < all.size(); ++j) oc.perm[j] = static_cast<std::uint32_t>(j);
       merge_runs(oc.perm, at, [&](std::uint32_t x, std::uint32_t y) { return key_less(all[x], all[y]); });

@@ -59,7 +59,8 @@ struct WallContacts {
   std::size_t size() const { return ball.size(); }
 };
 
-/// One wall contact's share of its wall's sums (World::wall_sum_records, World::set_wall_sums):
+/// One wall contact's share of its wall's sums (World::wall_sum_records, World::set_wall_sums;
+/// a facet contact's record is what its terms are formed from, FacetSumShare):
 /// what a rank of the DEM on MPI ranks (dem_node/dist) passes to every rank, so that each sums
 /// the contacts of every rank in the order of one World.
 struct WallSumRec {
@@ -319,23 +320,21 @@ class World {
   /// carries these histories across by ball and wall id. A ghost row has no wall contacts.
   void swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts, 3>& wall,
                   std::vector<std::uint8_t>& ghost);
-  /// Every wall contact's share of its wall's sums (reactions, servo gains, facet vertex forces
-  /// and stiffness), appended to `out` kind by kind (planes, facets, footing) in contact order.
-  /// (`facets` false: the planes' and the footing's only, for a caller that takes the facets'
-  /// shares from facet_sum_shares.)
-  void wall_sum_records(std::vector<WallSumRec>& out, bool facets = true) const;
+  /// Every plane and footing contact's share of its wall's sums (reactions, servo gains),
+  /// appended to `out` kind by kind (planes, footing) in contact order. (The facets' shares:
+  /// facet_sum_shares.)
+  void wall_sum_records(std::vector<WallSumRec>& out) const;
   /// The acting facet contacts' shares of their walls' vertex sums as this World's last force
   /// pass formed them (in contact order; formed from the contacts' records if no pass ran on this
   /// list yet, e.g. a World just loaded), appended to `out`.
   void facet_sum_shares(std::vector<FacetSumShare>& out) const;
   /// The facet walls' sums (vertex forces and stiffness, total force) from `shares`, sorted by
   /// (ball id, wall): every rank's shares merged, which are one World's facet contacts in its
-  /// order; the additions of the pass's own sums (FacetKind::end). After set_wall_sums, which
-  /// leaves the facet sums to this when given no facet records.
+  /// order; the additions of the pass's own sums (FacetKind::end).
   void set_facet_sums(std::span<const FacetSumShare> shares);
-  /// Recompute the walls' sums from `recs`, sorted by (kind, ball id, wall): the records of every
-  /// rank merged, which are the contacts of one World (rows in id order) in its order. The same
-  /// arithmetic as the force pass's own sums.
+  /// Recompute the planes' and the footing's sums from `recs`, sorted by (kind, ball id, wall):
+  /// the records of every rank merged, which are the contacts of one World (rows in id order) in
+  /// its order. The same arithmetic as the force pass's own sums.
   void set_wall_sums(std::span<const WallSumRec> recs);
   /// The walls' sums as one array (planes: reaction, servo gain; facet walls: vertex forces,
   /// vertex stiffness, total force; the footing's reaction), and back: what one rank sends the
