@@ -51,11 +51,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <numeric>
 #include <random>
 #include <string>
 
+#include "coordinator/core/checkpoint.hpp"
 #include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/dist.hpp"
 #include "packing.hpp"
@@ -251,11 +251,11 @@ int model_state(const char* file, const char* hash, const char* spec) {
 }
 
 // `mpirun -np P bench_dist --run DIR [steps] [balance]`: a run's own state on the ranks, as the DEM
-// node steps it: the World of a checkpoint folder (DIR/dem.world.state, its scene hash from
-// DIR/manifest.txt) held by rank 0 alone and sent to the ranks (DistDem::load_from_root), cut by
-// RCB over its balls' bounding box (slabs across the longest side with BENCH_DIST_DECOMP=slabs,
-// across BENCH_DIST_AXIS=x|y|z if given),
-// free axes unless the World is periodic; one DistDem::step(1) per step, the walls (facets,
+// node steps it: the World of a checkpoint folder (DIR/dem.world.state; the folder verified and
+// its scene hash read by coord::verify_checkpoint) held by rank 0 alone and sent to the ranks
+// (DistDem::load_from_root), cut by RCB over its balls' bounding box (slabs across the longest
+// side with BENCH_DIST_DECOMP=slabs, across BENCH_DIST_AXIS=x|y|z if given), free axes unless
+// the World is periodic; one DistDem::step(1) per step, the walls (facets,
 // footing) and effects of the state moving as they were saved (a footing keeps its last
 // velocity; facet vertices stand still: no continuum). The same CSV line as the other modes,
 // mode "run", model the ball-ball law. BENCH_DIST_ORDER_FREE=1 (0): run.order_free_sums on (off)
@@ -267,17 +267,9 @@ int run_state(int argc, char** argv) {
   const std::filesystem::path dir = argv[2];
   const long steps = argc > 3 ? std::stol(argv[3]) : 1000;
   const int balance = argc > 4 ? std::stoi(argv[4]) : 0;
-  std::uint64_t hash = 0;
-  {
-    std::ifstream in(dir / "manifest.txt");
-    std::string key, value;
-    while (in >> key) {
-      if (key == "scene_hash" && in >> value) hash = std::stoull(value, nullptr, 16);
-      std::getline(in, value);
-    }
-  }
   World full{WorldParams{}};
-  if (rank == 0) load_state_file(full, dir / "dem.world.state", hash);
+  if (rank == 0)  // (the folder checked whole: its manifest, every file's checksum)
+    load_state_file(full, dir / "dem.world.state", demfdm::coord::verify_checkpoint(dir).scene_hash);
   if (const char* of = std::getenv("BENCH_DIST_ORDER_FREE"))  // run.order_free_sums on or off
     full.mutable_params().order_free_sums = std::string(of) == "1";
   // rank 0's parameters and box for every rank's DistDem (the others hold no ball)

@@ -20,10 +20,10 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <sstream>
 #include <string>
 
+#include "coordinator/core/checkpoint.hpp"
 #include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/guard.hpp"
 #include "demfdm/dem/procedures.hpp"
@@ -34,16 +34,6 @@ using namespace demfdm::dem;
 using Clock = std::chrono::steady_clock;
 
 namespace {
-
-std::uint64_t manifest_scene_hash(const std::filesystem::path& dir) {
-  std::ifstream in(dir / "manifest.txt");
-  std::string key, value;
-  while (in >> key) {
-    if (key == "scene_hash" && in >> value) return std::stoull(value, nullptr, 16);
-    std::getline(in, value);
-  }
-  throw std::runtime_error((dir / "manifest.txt").string() + ": no scene_hash line");
-}
 
 double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
 
@@ -59,7 +49,7 @@ int main(int argc, char** argv) try {
   const int rounds = argc > 3 ? std::stoi(argv[3]) : 1;
   const int measure_threads = argc > 4 ? std::stoi(argv[4]) : 0;  // 0: the World's own
   const int step_threads_arg = argc > 5 ? std::stoi(argv[5]) : 0;  // 0: the World's own
-  const std::uint64_t hash = manifest_scene_hash(dir);
+  const std::uint64_t hash = demfdm::coord::verify_checkpoint(dir).scene_hash;
   for (int r = 0; r < rounds; ++r) {
     World w{WorldParams{}};
     load_state_file(w, dir / "dem.world.state", hash);
