@@ -58,6 +58,8 @@
 #include "coordinator/core/checkpoint.hpp"
 #include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/dist.hpp"
+#include "demfdm/dem/guard.hpp"
+#include "demfdm/dem/procedures.hpp"
 #include "packing.hpp"
 
 using namespace demfdm::dem;
@@ -250,6 +252,29 @@ int model_state(const char* file, const char* hash, const char* spec) {
   return 0;
 }
 
+// The DEM node's per-step work on the ranks after a step (dem_node/main.cpp, check_health and the
+// history row of a stage under gravity): the guard's finite and escape tests on each rank's rows
+// and a maximum over the ranks, the kinetic energy, the mean contact force and both ratios.
+// Returns the values (their bits: the same whatever the code path).
+struct NodeMeasures {
+  double kinetic, fc, unbalanced, skeleton;
+  std::size_t rattlers;
+  int bad;
+};
+NodeMeasures node_measures(const DistDem& d, const Vec3& lo, const Vec3& hi, double margin) {
+  NodeMeasures m{};
+  int bad = check_finite(d.world()).has_value() ? 1 : 0;
+  if (!bad) bad = check_escape(d.world(), lo, hi, margin).has_value() ? 1 : 0;
+  MPI_Allreduce(&bad, &m.bad, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+  m.kinetic = d.kinetic_energy();
+  m.fc = d.mean_contact_force();
+  m.unbalanced = d.unbalanced_ratio(m.fc);
+  const SkeletonRatio s = d.skeleton_ratio(m.fc);
+  m.skeleton = s.ratio;
+  m.rattlers = s.rattlers;
+  return m;
+}
+
 // `mpirun -np P bench_dist --run DIR [steps] [balance]`: a run's own state on the ranks, as the DEM
 // node steps it: the World of a checkpoint folder (DIR/dem.world.state; the folder verified and
 // its scene hash read by coord::verify_checkpoint) held by rank 0 alone and sent to the ranks
@@ -259,7 +284,9 @@ int model_state(const char* file, const char* hash, const char* spec) {
 // footing) and effects of the state moving as they were saved (a footing keeps its last
 // velocity; facet vertices stand still: no continuum). The same CSV line as the other modes,
 // mode "run", model the ball-ball law. BENCH_DIST_ORDER_FREE=1 (0): run.order_free_sums on (off)
-// whatever the state says; BENCH_DIST_PER_RANK=1: a line per rank first (its own times and counts).
+// whatever the state says; BENCH_DIST_PER_RANK=1: a line per rank first (its own times and counts);
+// BENCH_DIST_MEASURE=1: after every step the node's measurements (node_measures), timed apart,
+// and a line with their time per step and the last step's values in hexadecimal (their bits).
 int run_state(int argc, char** argv) {
   int rank = 0, P = 1;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
@@ -313,10 +340,26 @@ int run_state(int argc, char** argv) {
   d.world().reset_phase_times();
   const std::int64_t ex0 = d.exchanges(), mig0 = d.migrated();
   MPI_Barrier(MPI_COMM_WORLD);
+  const bool measure = std::getenv("BENCH_DIST_MEASURE") && std::string(std::getenv("BENCH_DIST_MEASURE")) == "1";
+  // the guard's box: the balls' bounding box at the load, widened by its own size (margin: 0)
+  const Vec3 blo{box[1] - box[4], box[2] - box[5], box[3] - box[6]};
+  const Vec3 bhi{box[1] + 2 * box[4], box[2] + 2 * box[5], box[3] + 2 * box[6]};
+  NodeMeasures last{};
+  double measure_s = 0.0;
   const double t0 = MPI_Wtime();
-  for (long k = 0; k < steps; ++k) d.step(1);
+  for (long k = 0; k < steps; ++k) {
+    d.step(1);
+    if (measure) {
+      const double tm = MPI_Wtime();
+      last = node_measures(d, blo, bhi, 0.0);
+      measure_s += MPI_Wtime() - tm;
+    }
+  }
   MPI_Barrier(MPI_COMM_WORLD);
   const double wall = MPI_Wtime() - t0;
+  if (measure && rank == 0)
+    std::printf("measure,ms_per_step,%.4f,kinetic,%a,fc,%a,unbalanced,%a,skeleton,%a,rattlers,%zu,bad,%d\n",
+                measure_s * 1e3 / double(steps), last.kinetic, last.fc, last.unbalanced, last.skeleton, last.rattlers, last.bad);
   const std::size_t balls = d.num_balls();
   if (std::getenv("BENCH_DIST_PER_RANK")) {  // each rank's own compute and counts, in rank order
     for (int r = 0; r < P; ++r) {
