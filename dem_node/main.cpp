@@ -363,16 +363,16 @@ class DemParticipant : public node::Participant {
   std::optional<node::HealthReport> check_health(std::int64_t) override {
     node::Timed t(effect_s_["guard"]);
     if (dist_live_) {
-      // Each rank tests its rows; a finding is reported from the whole World (its neighbourhood
-      // and the same words as one process), assembled only then.
-      int bad = dem::check_finite(live()).has_value() ? 1 : 0;
-      if (!bad && escape_margin_ > 0 && !live().periodic()) {
-        auto [lo, hi] = domain();
-        bad = dem::check_escape(live(), lo, hi, escape_margin_).has_value() ? 1 : 0;
-      }
-      int any = 0;
-      MPI_Allreduce(&bad, &any, 1, MPI_INT, MPI_MAX, g_ranks.comm);
-      if (any) sync_full();
+      // Each rank screens its rows in one pass, with the kinetic energy (DistDem::screen: the
+      // verdicts travel in its collectives); a finding is reported from the whole World (its
+      // neighbourhood and the same words as one process), assembled only then.
+      const bool box = escape_margin_ > 0 && !live().periodic();
+      dem::Vec3 lo{}, hi{};
+      if (box) std::tie(lo, hi) = domain();
+      const dem::DistDem::Screen sc = dist_->screen(lo, hi, box);
+      ke_ = sc.kinetic;
+      ke_valid_ = true;
+      if (!sc.finite || (box && sc.outside > escape_margin_)) sync_full();
     }
     if (!dist_live_ || synced_) {
       // One pass over the balls for the finite test, the escape distance and the kinetic energy
@@ -916,7 +916,7 @@ class DemParticipant : public node::Participant {
   // contact force).
   double ratio() {
     if (!ratio_valid_) {
-      if (!dist_live_ && world_.gravity_on() && !skeleton_valid_) {
+      if (live().gravity_on() && !skeleton_valid_) {
         ball_ratios();  // the step's report reads both
       } else {
         ratio_ = dist_live_ ? dist_->unbalanced_ratio(mean_contact_force()) : world_.unbalanced_ratio(mean_contact_force());
@@ -927,7 +927,7 @@ class DemParticipant : public node::Participant {
   }
   // Both ratios of the current state in one pass over the balls (dem::ball_ratios: their bits).
   void ball_ratios() {
-    const dem::BallRatios r = dem::ball_ratios(world_, mean_contact_force());
+    const dem::BallRatios r = dist_live_ ? dist_->ball_ratios(mean_contact_force()) : dem::ball_ratios(world_, mean_contact_force());
     ratio_ = r.unbalanced;
     skeleton_ = r.skeleton;
     ratio_valid_ = skeleton_valid_ = true;
@@ -942,7 +942,7 @@ class DemParticipant : public node::Participant {
   }
   const dem::SkeletonRatio& skeleton() {
     if (!skeleton_valid_) {
-      if (!dist_live_ && !ratio_valid_) {
+      if (!ratio_valid_) {
         ball_ratios();
       } else {
         skeleton_ = dist_live_ ? dist_->skeleton_ratio(mean_contact_force()) : dem::skeleton_ratio(world_, mean_contact_force());

@@ -263,15 +263,14 @@ struct NodeMeasures {
 };
 NodeMeasures node_measures(const DistDem& d, const Vec3& lo, const Vec3& hi, double margin) {
   NodeMeasures m{};
-  int bad = check_finite(d.world()).has_value() ? 1 : 0;
-  if (!bad) bad = check_escape(d.world(), lo, hi, margin).has_value() ? 1 : 0;
-  MPI_Allreduce(&bad, &m.bad, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
-  m.kinetic = d.kinetic_energy();
+  const DistDem::Screen sc = d.screen(lo, hi, true);
+  m.bad = !sc.finite || sc.outside > margin;
+  m.kinetic = sc.kinetic;
   m.fc = d.mean_contact_force();
-  m.unbalanced = d.unbalanced_ratio(m.fc);
-  const SkeletonRatio s = d.skeleton_ratio(m.fc);
-  m.skeleton = s.ratio;
-  m.rattlers = s.rattlers;
+  const BallRatios r = d.ball_ratios(m.fc);
+  m.unbalanced = r.unbalanced;
+  m.skeleton = r.skeleton.ratio;
+  m.rattlers = r.skeleton.rattlers;
   return m;
 }
 
@@ -344,6 +343,7 @@ int run_state(int argc, char** argv) {
   // the guard's box: the balls' bounding box at the load, widened by its own size (margin: 0)
   const Vec3 blo{box[1] - box[4], box[2] - box[5], box[3] - box[6]};
   const Vec3 bhi{box[1] + 2 * box[4], box[2] + 2 * box[5], box[3] + 2 * box[6]};
+  if (measure) d.world().keep_force_norms(true);  // (as the node's ranks do)
   NodeMeasures last{};
   double measure_s = 0.0;
   const double t0 = MPI_Wtime();

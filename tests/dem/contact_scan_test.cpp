@@ -278,13 +278,18 @@ TEST(ContactScan, PassForceNormsSameBitsAsTheHistories) {
       const World& cw = *w;
       const std::string at = name(c) + " step " + std::to_string(k + 1);
       ASSERT_TRUE(cw.force_norms_kept()) << at;
-      std::vector<World::ContactTerm> terms;
+      std::vector<double> terms;
       cw.contact_force_norms(terms);
+      std::vector<World::ContactTerm> keys;  // (the keys of the terms, in their order)
+      cw.contact_force_keys(keys);
       const PairContacts& pc = cw.pair_contacts();
       ASSERT_GE(terms.size(), pc.size()) << at;
+      ASSERT_EQ(keys.size(), terms.size()) << at;
       for (std::size_t j = 0; j < pc.size(); ++j) {
         const double ref = norm(cw.pair_force(j));
-        ASSERT_TRUE(same_bits(terms[j].v, ref)) << at << ": contact " << j << " norm " << terms[j].v << " vs " << ref;
+        ASSERT_TRUE(same_bits(terms[j], ref)) << at << ": contact " << j << " norm " << terms[j] << " vs " << ref;
+        ASSERT_EQ(keys[j].a, cw.balls().id[pc.a[j]]) << at << ": contact " << j;
+        ASSERT_EQ(keys[j].b, cw.balls().id[pc.b[j]]) << at << ": contact " << j;
         idle_seen += ref == 0.0;
       }
       const World::ContactScan s = cw.contact_scan(true, true);

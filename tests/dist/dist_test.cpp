@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <numeric>
 #include <random>
 #include <string>
@@ -148,6 +149,21 @@ void check(const Scene& sc) {
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
   const double skel = d.skeleton_ratio(fc).ratio;
+  // the node's step measurements on ranks: both ratios in one gather, the guard's screen with the
+  // kinetic energy (a box of no volume: its distance outside is every centre's largest |x_k|)
+  const BallRatios both = d.ball_ratios(fc);
+  const Vec3 origin{0.0, 0.0, 0.0};
+  const DistDem::Screen scr = d.screen(origin, origin, true);
+  // gravity switched on and every 7th ball made a rattler (its contact part of the force exactly
+  // 0), the same in one World below: the skeleton sum leaves them out and counts them
+  const auto make_rattlers = [](World& w) {
+    if (!w.gravity_on()) w.set_gravity(true, 1.0);
+    Particles& b = w.balls();
+    for (std::size_t i = 0; i < b.size(); ++i)
+      if (b.id[i] % 7 == 0) b.fa[i] = Vec3{0.0, 0.0, 0.0}, b.f[i] = b.m[i] * w.gravity();
+  };
+  make_rattlers(d.world());
+  const BallRatios rattled = d.ball_ratios(fc);
   const BondCounts bonds = d.bond_counts();
   const std::int64_t failures = d.bond_failures();
   long long mine[3] = {static_cast<long long>(d.owned()), static_cast<long long>(d.ghosts()),
@@ -167,6 +183,30 @@ void check(const Scene& sc) {
     test::expect_same_measures(*ref, ke, fc, ratio);
     const double skel_ref = skeleton_ratio(*ref, fc).ratio;
     EXPECT_EQ(std::memcmp(&skel_ref, &skel, sizeof skel), 0) << "skeleton ratio " << skel << " vs " << skel_ref;
+    const BallRatios both_ref = ball_ratios(*ref, fc);
+    EXPECT_EQ(std::memcmp(&both_ref.unbalanced, &both.unbalanced, sizeof(double)), 0)
+        << "ball_ratios: unbalanced " << both.unbalanced << " vs " << both_ref.unbalanced;
+    EXPECT_EQ(std::memcmp(&both_ref.skeleton.ratio, &both.skeleton.ratio, sizeof(double)), 0)
+        << "ball_ratios: skeleton " << both.skeleton.ratio << " vs " << both_ref.skeleton.ratio;
+    EXPECT_EQ(both.skeleton.rattlers, both_ref.skeleton.rattlers);
+    EXPECT_EQ(std::memcmp(&both.unbalanced, &ratio, sizeof ratio), 0) << "ball_ratios against unbalanced_ratio";
+    std::vector<double> scratch;
+    const BallScreen scr_ref = screen_balls(*ref, origin, origin, true, scratch);
+    EXPECT_TRUE(scr.finite);
+    EXPECT_EQ(std::memcmp(&scr.kinetic, &scr_ref.kinetic, sizeof(double)), 0)
+        << "screen: kinetic energy " << scr.kinetic << " vs " << scr_ref.kinetic;
+    EXPECT_EQ(std::memcmp(&scr.kinetic, &ke, sizeof ke), 0) << "screen against kinetic_energy";
+    EXPECT_EQ(scr.outside, scr_ref.outside);
+    EXPECT_GT(scr.outside, 0.0);
+    make_rattlers(*ref);
+    const BallRatios rattled_ref = ball_ratios(*ref, fc);
+    const SkeletonRatio skel_rattled = skeleton_ratio(*ref, fc);
+    EXPECT_EQ(std::memcmp(&rattled.skeleton.ratio, &skel_rattled.ratio, sizeof(double)), 0)
+        << "with rattlers: skeleton " << rattled.skeleton.ratio << " vs " << skel_rattled.ratio;
+    EXPECT_EQ(std::memcmp(&rattled.unbalanced, &rattled_ref.unbalanced, sizeof(double)), 0)
+        << "with rattlers: unbalanced " << rattled.unbalanced << " vs " << rattled_ref.unbalanced;
+    EXPECT_EQ(rattled.skeleton.rattlers, skel_rattled.rattlers);
+    EXPECT_GE(rattled.skeleton.rattlers, ref->num_balls() / 7);
     if (sc.order_free) {  // the plain sums of the same state: the last bits apart
       World& plain = *ref;
       plain.mutable_params().order_free_sums = false;
@@ -214,6 +254,16 @@ void check(const Scene& sc) {
     }
   }
   test::share_verdict();
+  // A non-finite velocity in the last rank's first row only: every rank's screen finds it.
+  const int last = g_size - 1;
+  int planted = 0;
+  if (g_rank == last && d.world().num_balls() > 0) {
+    d.world().balls().v[0].y = std::numeric_limits<double>::quiet_NaN();
+    planted = 1;
+  }
+  MPI_Bcast(&planted, 1, MPI_INT, last, MPI_COMM_WORLD);
+  ASSERT_EQ(planted, 1) << "the last rank holds no row";
+  EXPECT_FALSE(d.screen(origin, origin, false).finite) << "rank " << g_rank << " missed the last rank's NaN";
 }
 
 }  // namespace

@@ -151,18 +151,26 @@ std::optional<GuardFinding> check_finite(const World& w, std::size_t neighbours)
   return std::nullopt;
 }
 
-BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box, std::vector<double>& scratch) {
+namespace {
+// One row of the screen: its finite test or-ed into `bad`, its distance outside the box into
+// `worst`; returns its kinetic energy term (World::kinetic_energy_of).
+[[gnu::always_inline]] inline double screen_row(const World& w, std::size_t i, const Vec3& lo, const Vec3& hi, bool box,
+                                                unsigned& bad, double& worst) {
   const auto& b = w.balls();
-  const std::int64_t n = static_cast<std::int64_t>(b.size());
+  bad |= not_finite(b.x[i]) | not_finite(b.v[i]) | not_finite(b.w[i]) | not_finite(b.f[i]) | not_finite(b.t[i]);
+  if (box) worst = std::max(worst, outside_box(b.x[i], lo, hi));
+  return w.kinetic_energy_of(i);
+}
+}  // namespace
+
+BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box, std::vector<double>& scratch) {
+  const std::int64_t n = static_cast<std::int64_t>(w.balls().size());
   const int nt = w.thread_count();
   unsigned bad = 0;
   double worst = 0.0;
   BallScreen out;
-  auto row = [&](std::size_t i, unsigned& bd, double& wo) __attribute__((always_inline)) {
-    bd |= not_finite(b.x[i]) | not_finite(b.v[i]) | not_finite(b.w[i]) | not_finite(b.f[i]) | not_finite(b.t[i]);
-    if (box) wo = std::max(wo, outside_box(b.x[i], lo, hi));
-    return w.kinetic_energy_of(i);
-  };
+  auto row = [&](std::size_t i, unsigned& bd, double& wo)
+                 __attribute__((always_inline)) { return screen_row(w, i, lo, hi, box, bd, wo); };
   // World::ordered_ball_sum's paths (the same additions in the same order; order-free: the terms
   // kept, then their order-free sum).
   const bool par = nt > 1 && n > 4096, order_free = w.params().order_free_sums;
@@ -179,6 +187,28 @@ BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box
       for (std::int64_t i = 0; i < n; ++i) out.kinetic += t[i];
   }
   if (w.has_footing()) bad |= not_finite(w.footing_reaction());
+  out.finite = bad == 0;
+  out.outside = worst;
+  return out;
+}
+
+BallScreen screen_rows(const World& w, const Vec3& lo, const Vec3& hi, bool box, const std::vector<std::uint8_t>& ghost,
+                       std::vector<double>& terms) {
+  const std::size_t n = w.balls().size();
+  unsigned bad = 0;
+  double worst = 0.0;
+  terms.clear();
+  if (ghost.empty()) {
+    terms.resize(n);
+    for (std::size_t i = 0; i < n; ++i) terms[i] = screen_row(w, i, lo, hi, box, bad, worst);
+  } else {
+    for (std::size_t i = 0; i < n; ++i) {
+      const double t = screen_row(w, i, lo, hi, box, bad, worst);
+      if (!ghost[i]) terms.push_back(t);
+    }
+  }
+  if (w.has_footing()) bad |= not_finite(w.footing_reaction());
+  BallScreen out;
   out.finite = bad == 0;
   out.outside = worst;
   return out;

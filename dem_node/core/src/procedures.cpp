@@ -12,22 +12,8 @@ namespace demfdm::dem {
 
 SkeletonRatio skeleton_ratio(const World& w) { return skeleton_ratio(w, w.mean_contact_force()); }
 
-namespace {
-// The two formulas of the skeleton ratio, written once: whether ball i is a rattler (its contact
-// part of the force, F + F_a - m g, is zero; F + F_a left in f) and its term |F + F_a| over the
-// free axes.
-[[gnu::always_inline]] inline bool rattler_of(const Particles& b, std::size_t i, const Vec3& g, Vec3& f) {
-  f = b.f[i] + b.fa[i];
-  const Vec3 c = f - b.m[i] * g;  // contact part of the force
-  return c.x == 0 && c.y == 0 && c.z == 0;
-}
-[[gnu::always_inline]] inline double term_of(const Particles& b, std::size_t i, const Vec3& f) {
-  double s2 = 0;
-  for (int k = 0; k < 3; ++k)
-    if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
-  return std::sqrt(s2);
-}
-}  // namespace
+using detail::rattler_of;
+using detail::term_of;
 
 bool is_rattler(const World& w, std::size_t i, const Vec3& g) {
   Vec3 f;

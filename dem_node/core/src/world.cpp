@@ -640,17 +640,19 @@ double World::kinetic_energy() const {
   return ordered_ball_sum([this](std::size_t i) { return kinetic_energy_of(i); });
 }
 
-void World::contact_force_norms(std::vector<ContactTerm>& out) const {
+void World::contact_force_norms(std::vector<double>& out) const {
   const SetContext cx = const_cast<World*>(this)->context();
   pairs_->scan(cx, false, true);
+  force_norm_values(out, true);
+}
+
+void World::contact_force_keys(std::vector<ContactTerm>& out) const {
   const PairContacts& pc = pairs_->contacts;
-  const std::vector<double>& f = pairs_->force_norms();
   for (std::size_t c = 0; c < pc.size(); ++c)
-    if (ghost_.empty() || !ghost_[pc.a[c]]) out.push_back({0, pt_.id[pc.a[c]], pt_.id[pc.b[c]], f[c]});
+    if (ghost_.empty() || !ghost_[pc.a[c]]) out.push_back({0, pt_.id[pc.a[c]], pt_.id[pc.b[c]], 0.0});
   const WallContacts* wl[3] = {&planes_->contacts, &facets_->contacts, &footing_->contacts};
   for (std::uint64_t k = 0; k < 3; ++k)
-    for (std::size_t c = 0; c < wl[k]->size(); ++c)
-      out.push_back({k + 1, pt_.id[wl[k]->ball[c]], wl[k]->wall[c], norm(wl[k]->F[c])});
+    for (std::size_t c = 0; c < wl[k]->size(); ++c) out.push_back({k + 1, pt_.id[wl[k]->ball[c]], wl[k]->wall[c], 0.0});
 }
 
 void World::force_norm_values(std::vector<double>& out, bool pairs) const {

@@ -1,6 +1,7 @@
 // The DEM on MPI ranks (dist.hpp, docs/scaling.md).
 #include "demfdm/dem/dist.hpp"
 #include "demfdm/dem/checkpoint.hpp"
+#include "demfdm/dem/guard.hpp"
 
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/procedures.hpp"
@@ -448,9 +449,11 @@ struct FootingShare {
 
 struct DistDem::Buffers {
   // the node's measurements, every step: each rank's terms, rank 0's gathered terms, the values
-  // of order-free sums; the kept merge orders of ordered_sum (ball terms, contact terms)
+  // of order-free sums; the kept merge orders of ordered_sums (ball terms, contact terms)
   std::vector<World::ContactTerm> m_terms, m_all;
-  std::vector<double> m_vals;
+  std::vector<double> m_vals, m_rows, m_bound, m_res, m_scratch;
+  std::vector<OrderFreeSum> m_folds;
+  std::vector<int> m_counts, m_displ;
   OrderCache order_cache[2];
   // the exchange's per-row and per-destination arrays, kept from one exchange to the next (a
   // fresh allocation of each cost page faults at every rebuild)
@@ -788,7 +791,7 @@ void DistDem::load_from_root(const World& full) {
 // newton hooks, and the walls' sums of every rank.
 void DistDem::take(std::unique_ptr<World> w, bool platens) {
   w_ = std::move(w);
-  ++layout_gen_;  // (ordered_sum's kept merge orders)
+  ++layout_gen_;  // (ordered_sums' kept merge orders)
   walls_every_step_ = platens;
   const World::Counters k = w_->counters();
   // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
@@ -1707,57 +1710,72 @@ void DistDem::sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const 
   if (extra) *extra = f[S * F];
 }
 
-double DistDem::order_free_sum(const std::vector<double>& v, double* count) const {
-  double bound = count ? max_positive_of(v.data(), v.size()) : max_abs_of(v.data(), v.size());
-  MPI_Allreduce(MPI_IN_PLACE, &bound, 1, MPI_DOUBLE, MPI_MAX, comm_);  // a NaN anywhere: NaN here
-  OrderFreeSum sum = fold_terms(v.data(), v.size(), bound, count != nullptr);
-  sum_folds(&sum, 1, count);  // (an integer count below 2^53 adds exactly)
-  return sum.result();
-}
-
-double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count, int which) const {
-  using T = World::ContactTerm;
-  if (p_.order_free_sums) {  // the terms (with `count`: those > 0, as the mean counts them)
-    std::vector<double>& v = buf_->m_vals;
-    v.clear();
-    double c = 0.0;
-    for (const T& t : terms) {
-      c += t.v > 0.0;
-      v.push_back(t.v);  // (with `count`, order_free_sum takes a term that is not > 0 as +0)
+void DistDem::ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
+                           double* sums, std::int64_t* count, double* also_max, int n_max) const {
+  const std::size_t k = static_cast<std::size_t>(K);
+  if (p_.order_free_sums) {  // each column's order-free sum (order_free_sum.hpp): no keys, no gather
+    // the columns' bounds and the maxima asked for in one maximum-allreduce (a NaN anywhere: NaN)
+    std::vector<double>& col = buf_->m_vals;
+    std::vector<double>& b = buf_->m_bound;
+    b.assign(k + static_cast<std::size_t>(n_max), 0.0);
+    col.resize(n);
+    for (std::size_t c = 0; c < k; ++c) {
+      for (std::size_t j = 0; j < n; ++j) col[j] = vals[j * k + c];
+      b[c] = positive ? max_positive_of(col.data(), n) : max_abs_of(col.data(), n);
     }
-    const double s = order_free_sum(v, count ? &c : nullptr);
-    if (count) *count = static_cast<std::int64_t>(c);
-    return s;
+    for (int m = 0; m < n_max; ++m) b[k + static_cast<std::size_t>(m)] = also_max[m];
+    MPI_Allreduce(MPI_IN_PLACE, b.data(), static_cast<int>(b.size()), MPI_DOUBLE, MPI_MAX, comm_);
+    for (int m = 0; m < n_max; ++m) also_max[m] = b[k + static_cast<std::size_t>(m)];
+    std::vector<OrderFreeSum>& f = buf_->m_folds;
+    f.clear();
+    double c_pos = 0.0;
+    for (std::size_t c = 0; c < k; ++c) {
+      for (std::size_t j = 0; j < n; ++j) col[j] = vals[j * k + c];
+      f.push_back(fold_terms(col.data(), n, b[c], positive));
+      if (positive) c_pos += static_cast<double>(count_positive(col.data(), n));
+    }
+    sum_folds(f.data(), k, positive ? &c_pos : nullptr);  // (an integer count below 2^53 adds exactly)
+    for (std::size_t c = 0; c < k; ++c) sums[c] = f[c].result();
+    if (count) *count = static_cast<std::int64_t>(c_pos);
+    return;
   }
-  const auto key_less = [](const T& x, const T& y) { return std::tie(x.set, x.a, x.b) < std::tie(y.set, y.a, y.b); };
-  // Each rank's terms in key order (they nearly always are: rows and lists in id order), then
-  // rank 0 merges the ranks' runs pairwise: O(n log ranks), not a sort of every term per call.
-  if (!std::is_sorted(terms.begin(), terms.end(), key_less)) std::sort(terms.begin(), terms.end(), key_less);
-  // The merge order is kept while the terms' keys cannot have changed: the owned balls change
-  // only at an exchange or a load (layout_gen_), the contacts also at a rebuild. Then only the
-  // values travel (8 bytes a term, not 32) and rank 0 adds them in the kept order: the same
-  // additions. Every rank takes part in the decision (a rank whose count changed makes all
-  // gather the keys again).
+  // The merge order is formed again only when the terms' keys may have changed: the owned balls
+  // change only at an exchange or a load (layout_gen_), the contacts also at a rebuild, and a
+  // rank whose count changed makes every rank form it again (one maximum-allreduce decides, with
+  // the maxima asked for). Else only the values travel (8 bytes a term and column, not the
+  // 32-byte keyed terms) and rank 0 adds them in the kept order: the same additions.
   OrderCache& oc = buf_->order_cache[which];
   const std::int64_t key[2] = {layout_gen_, which == kContactTerms ? w_->rebuild_count() : 0};
-  int stale = key[0] != oc.key[0] || key[1] != oc.key[1] || terms.size() != oc.local ? 1 : 0;
-  MPI_Allreduce(MPI_IN_PLACE, &stale, 1, MPI_INT, MPI_MAX, comm_);
-  double res[2] = {0.0, 0.0};
-  double s = 0.0;
-  std::int64_t c = 0;
-  auto add = [&](double v) {
-    if (count) {  // the mean's rule: only the terms that carry a force
-      if (v > 0.0) s += v, ++c;
-    } else {
-      s += v;
+  std::vector<double>& mx = buf_->m_bound;
+  mx.assign(1 + static_cast<std::size_t>(n_max), 0.0);
+  mx[0] = key[0] != oc.key[0] || key[1] != oc.key[1] || n != oc.local ? 1.0 : 0.0;
+  for (int m = 0; m < n_max; ++m) mx[1 + static_cast<std::size_t>(m)] = also_max[m];
+  MPI_Allreduce(MPI_IN_PLACE, mx.data(), static_cast<int>(mx.size()), MPI_DOUBLE, MPI_MAX, comm_);
+  for (int m = 0; m < n_max; ++m) also_max[m] = mx[1 + static_cast<std::size_t>(m)];
+  if (mx[0] != 0.0) {
+    using T = World::ContactTerm;
+    const auto key_less = [](const T& x, const T& y) { return std::tie(x.set, x.a, x.b) < std::tie(y.set, y.a, y.b); };
+    std::vector<T>& t = buf_->m_terms;
+    t.clear();
+    keys(t);  // this rank's keys, in the values' order
+    // In key order (they nearly always are: rows and lists in id order); else the permutation
+    // that sorts them, kept with the merge order.
+    oc.lperm.clear();
+    if (!std::is_sorted(t.begin(), t.end(), key_less)) {
+      oc.lperm.resize(n);
+      for (std::size_t j = 0; j < n; ++j) oc.lperm[j] = static_cast<std::uint32_t>(j);
+      std::sort(oc.lperm.begin(), oc.lperm.end(), [&](std::uint32_t x, std::uint32_t y) { return key_less(t[x], t[y]); });
+      std::vector<T>& sorted = buf_->m_all;
+      sorted.resize(n);
+      for (std::size_t j = 0; j < n; ++j) sorted[j] = t[oc.lperm[j]];
+      t.swap(sorted);
     }
-  };
-  if (stale) {
+    // rank 0 merges the ranks' runs pairwise: O(n log ranks), not a sort of every term
     std::vector<std::size_t> at;
     std::vector<T>& all = buf_->m_all;
-    gather_on_root(comm_, terms, all, &at);
+    gather_on_root(comm_, t, all, &at);
     oc.key[0] = key[0], oc.key[1] = key[1];
-    oc.local = terms.size();
+    oc.local = n;
     if (rank_ == 0) {
       oc.counts.resize(static_cast<std::size_t>(size_));
       oc.displ.resize(static_cast<std::size_t>(size_));
@@ -1768,52 +1786,116 @@ double DistDem::ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t
       oc.perm.resize(all.size());
       for (std::size_t j = 0; j < all.size(); ++j) oc.perm[j] = static_cast<std::uint32_t>(j);
       merge_runs(oc.perm, at, [&](std::uint32_t x, std::uint32_t y) { return key_less(all[x], all[y]); });
-      for (std::uint32_t j : oc.perm) add(all[j].v);
     }
-  } else {
-    oc.mine.resize(terms.size());
-    for (std::size_t j = 0; j < terms.size(); ++j) oc.mine[j] = terms[j].v;
-    if (rank_ == 0) oc.all.resize(oc.perm.size());
-    MPI_Gatherv(oc.mine.data(), static_cast<int>(oc.mine.size()), MPI_DOUBLE, oc.all.data(), oc.counts.data(),
-                oc.displ.data(), MPI_DOUBLE, 0, comm_);
-    if (rank_ == 0)
-      for (std::uint32_t j : oc.perm) add(oc.all[j]);
   }
+  // this rank's values in key order, gathered on rank 0 (K per term)
+  const double* mine = vals;
+  if (!oc.lperm.empty()) {
+    oc.mine.resize(n * k);
+    for (std::size_t j = 0; j < n; ++j)
+      for (std::size_t c = 0; c < k; ++c) oc.mine[j * k + c] = vals[oc.lperm[j] * k + c];
+    mine = oc.mine.data();
+  }
+  std::vector<int>& cnt = buf_->m_counts;
+  std::vector<int>& dsp = buf_->m_displ;
   if (rank_ == 0) {
-    res[0] = s;
-    res[1] = static_cast<double>(c);
+    oc.all.resize(oc.perm.size() * k);
+    cnt.resize(static_cast<std::size_t>(size_));
+    dsp.resize(static_cast<std::size_t>(size_));
+    for (std::size_t r = 0; r < static_cast<std::size_t>(size_); ++r) cnt[r] = oc.counts[r] * K, dsp[r] = oc.displ[r] * K;
   }
-  MPI_Bcast(res, 2, MPI_DOUBLE, 0, comm_);
-  if (count) *count = static_cast<std::int64_t>(res[1]);
-  return res[0];
+  MPI_Gatherv(mine, static_cast<int>(n * k), MPI_DOUBLE, oc.all.data(), cnt.data(), dsp.data(), MPI_DOUBLE, 0, comm_);
+  std::vector<double>& res = buf_->m_res;
+  res.assign(k + 1, 0.0);
+  if (rank_ == 0) {
+    const double* v = oc.all.data();
+    if (positive) {  // the mean's rule (K = 1): only the terms that carry a force
+      // (adding +0 for the others leaves the sum's bits: it starts at +0 and never is -0)
+      double s = 0.0;
+      std::int64_t c = 0;
+      for (std::uint32_t j : oc.perm) {
+        const bool on = v[j] > 0.0;
+        s += on ? v[j] : 0.0;
+        c += on;
+      }
+      res[0] = s;
+      res[1] = static_cast<double>(c);
+    } else if (K == 1) {
+      double s = 0.0;
+      for (std::uint32_t j : oc.perm) s += v[j];
+      res[0] = s;
+    } else {  // K chains of additions side by side, each in key order from +0
+      double s[kMaxColumns] = {};
+      for (std::uint32_t j : oc.perm)
+        for (std::size_t c = 0; c < k; ++c) s[c] += v[j * k + c];
+      for (std::size_t c = 0; c < k; ++c) res[c] = s[c];
+    }
+  }
+  MPI_Bcast(res.data(), static_cast<int>(res.size()), MPI_DOUBLE, 0, comm_);
+  for (std::size_t c = 0; c < k; ++c) sums[c] = res[c];
+  if (count) *count = static_cast<std::int64_t>(res[k]);
 }
 
-template <class Term>
-double DistDem::ball_sum(Term term) const {
+void DistDem::owned_sums(const std::vector<double>& v, int K, double* sums, double* also_max, int n_max) const {
   const auto& g = w_->ghost_rows();
   const Particles& pt = w_->balls();
-  if (p_.order_free_sums) {  // every rank's folds, no terms gathered (order_free_sum.hpp)
-    std::vector<double>& v = buf_->m_vals;
-    v.clear();
+  const KeyFill keys = [&](std::vector<World::ContactTerm>& out) {
     for (std::size_t i = 0; i < pt.size(); ++i)
-      if (g.empty() || !g[i]) v.push_back(term(i));
-    return order_free_sum(v);
-  }
-  std::vector<World::ContactTerm>& t = buf_->m_terms;
-  t.clear();
-  for (std::size_t i = 0; i < pt.size(); ++i)
-    if (g.empty() || !g[i]) t.push_back({0, pt.id[i], 0, term(i)});
-  return ordered_sum(t, nullptr, kBallTerms);
+      if (g.empty() || !g[i]) out.push_back({0, pt.id[i], 0, 0.0});
+  };
+  ordered_sums(v.size() / static_cast<std::size_t>(K), v.data(), K, keys, kBallTerms, false, sums, nullptr, also_max, n_max);
 }
 
-SkeletonRatio DistDem::skeleton_ratio(double fc) const {
-  const double sum = ball_sum([this](std::size_t i) { return dem::skeleton_term(*w_, i); });
-  long long mine = 0, all = 0;  // an integer count: exact
+template <int K, class Terms>
+void DistDem::ball_sums(Terms terms, double* sums) const {
+  static_assert(K >= 1 && K <= kMaxColumns);
   const auto& g = w_->ghost_rows();
-  for (std::size_t i = 0; i < w_->num_balls(); ++i)
-    if ((g.empty() || !g[i]) && is_rattler(*w_, i)) ++mine;
-  MPI_Allreduce(&mine, &all, 1, MPI_LONG_LONG, MPI_SUM, comm_);
-  return skeleton_ratio_of(sum, static_cast<std::size_t>(all), num_balls(), fc);
+  const std::size_t n = w_->num_balls();
+  std::vector<double>& v = buf_->m_rows;
+  v.resize(n * K);
+  double* out = v.data();
+  for (std::size_t i = 0; i < n; ++i)
+    if (g.empty() || !g[i]) {
+      terms(i, out);
+      out += K;
+    }
+  v.resize(static_cast<std::size_t>(out - v.data()));
+  owned_sums(v, K, sums);
+}
+
+SkeletonRatio DistDem::skeleton_ratio(double fc) const { return ball_ratios(fc).skeleton; }
+
+BallRatios DistDem::ball_ratios(double fc) const {
+  // dem::ball_ratios's terms (procedures.hpp: unbalanced_term), three sums in id order at once:
+  // the unbalanced forces, the skeleton terms (+0 for a rattler) and the rattlers (a sum of ones:
+  // exact, like the integer count)
+  const Vec3 g = w_->gravity();
+  double s[3];
+  ball_sums<3>(
+      [&](std::size_t i, double* t) {
+        bool r = false;
+        t[0] = dem::unbalanced_term(*w_, i, g, r);
+        t[1] = r ? 0.0 : t[0];
+        t[2] = r ? 1.0 : 0.0;
+      },
+      s);
+  const std::size_t n = num_balls();
+  if (n == 0) return {0.0, skeleton_ratio_of(s[1], static_cast<std::size_t>(s[2]), 0, fc)};
+  return {World::unbalanced_ratio_of(s[0], n, fc), skeleton_ratio_of(s[1], static_cast<std::size_t>(s[2]), n, fc)};
+}
+
+DistDem::Screen DistDem::screen(const Vec3& lo, const Vec3& hi, bool box) const {
+  // dem::screen_balls's tests on every row of this rank (ghosts: bit copies of their owners'
+  // rows), the owned rows' kinetic terms summed as kinetic_energy() sums them, the verdicts'
+  // maxima carried by its collective
+  std::vector<double>& v = buf_->m_rows;
+  const BallScreen sc = screen_rows(*w_, lo, hi, box, w_->ghost_rows(), v);
+  double mx[2] = {sc.finite ? 0.0 : 1.0, sc.outside};
+  Screen out;
+  owned_sums(v, 1, &out.kinetic, mx, 2);
+  out.finite = mx[0] == 0.0;
+  out.outside = mx[1];
+  return out;
 }
 
 double DistDem::safe_step() const {
@@ -1823,7 +1905,9 @@ double DistDem::safe_step() const {
 }
 
 double DistDem::kinetic_energy() const {
-  return ball_sum([this](std::size_t i) { return w_->kinetic_energy_of(i); });
+  double s = 0.0;
+  ball_sums<1>([this](std::size_t i, double* t) { t[0] = w_->kinetic_energy_of(i); }, &s);
+  return s;
 }
 
 std::size_t DistDem::num_balls() const {
@@ -1845,13 +1929,17 @@ std::int64_t DistDem::bond_failures() const {
   return all;
 }
 
-// World::contact_scan's rule: Σ ‖F‖ over the contacts that carry a force, over their count.
+// World::contact_scan's rule: Σ ‖F‖ over the contacts that carry a force, over their count. The
+// norms without their keys every step (World::contact_force_norms), the keys only when the merge
+// order is formed again.
 double DistDem::mean_contact_force() const {
-  std::vector<World::ContactTerm>& t = buf_->m_terms;
-  t.clear();
-  w_->contact_force_norms(t);
+  std::vector<double>& v = buf_->m_rows;
+  v.clear();
+  w_->contact_force_norms(v);
+  const KeyFill keys = [this](std::vector<World::ContactTerm>& out) { w_->contact_force_keys(out); };
   std::int64_t n = 0;
-  const double s = ordered_sum(t, &n, kContactTerms);
+  double s = 0.0;
+  ordered_sums(v.size(), v.data(), 1, keys, kContactTerms, true, &s, &n);
   return n ? s / double(n) : 0.0;
 }
 
@@ -1859,7 +1947,9 @@ double DistDem::mean_contact_force() const {
 double DistDem::unbalanced_ratio(double fc) const {
   const std::size_t n = num_balls();
   if (n == 0) return 0.0;
-  return World::unbalanced_ratio_of(ball_sum([this](std::size_t i) { return w_->unbalanced_force_of(i); }), n, fc);
+  double s = 0.0;
+  ball_sums<1>([this](std::size_t i, double* t) { t[0] = w_->unbalanced_force_of(i); }, &s);
+  return World::unbalanced_ratio_of(s, n, fc);
 }
 
 DistDem::Balls DistDem::gather() const {

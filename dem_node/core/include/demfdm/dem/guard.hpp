@@ -43,6 +43,11 @@ struct BallScreen {
   double kinetic = 0.0;  // [J]
 };
 BallScreen screen_balls(const World& w, const Vec3& lo, const Vec3& hi, bool box, std::vector<double>& scratch);
+/// The same tests over every row of a rank's World (dem_node/dist), one thread; the kinetic
+/// energy terms of the rows not marked in `ghost` (every row if it is empty) are written to
+/// `terms` in row order instead of summed (`kinetic` stays 0).
+BallScreen screen_rows(const World& w, const Vec3& lo, const Vec3& hi, bool box, const std::vector<std::uint8_t>& ghost,
+                       std::vector<double>& terms);
 
 /// The `k` balls nearest to ball `row` (minimum image in a periodic cell), one line each:
 /// id, distance, position, radius, velocity, force.

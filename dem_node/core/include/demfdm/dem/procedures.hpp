@@ -3,6 +3,7 @@
 // tests/dem/procedures_test.cpp.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <string>
 #include <vector>
@@ -47,6 +48,30 @@ struct BallRatios {
   SkeletonRatio skeleton;
 };
 BallRatios ball_ratios(const World& w, double mean_contact_force);
+namespace detail {
+// The two formulas of the skeleton ratio, written once: whether ball i is a rattler (its contact
+// part of the force, F + F_a - m g, is zero; F + F_a left in f) and its term |F + F_a| over the
+// free axes.
+[[gnu::always_inline]] inline bool rattler_of(const Particles& b, std::size_t i, const Vec3& g, Vec3& f) {
+  f = b.f[i] + b.fa[i];
+  const Vec3 c = f - b.m[i] * g;  // contact part of the force
+  return c.x == 0 && c.y == 0 && c.z == 0;
+}
+[[gnu::always_inline]] inline double term_of(const Particles& b, std::size_t i, const Vec3& f) {
+  double s2 = 0;
+  for (int k = 0; k < 3; ++k)
+    if (!(b.fix[i] & (1u << k))) s2 += f[k] * f[k];
+  return std::sqrt(s2);
+}
+}  // namespace detail
+/// Ball i's terms of both ratios, as ball_ratios forms them: returns its unbalanced force
+/// (World::unbalanced_force_of, bit for bit) and sets `rattler` (is_rattler with gravity g); its
+/// skeleton term is +0 for a rattler, else the same value.
+[[gnu::always_inline]] inline double unbalanced_term(const World& w, std::size_t i, const Vec3& g, bool& rattler) {
+  Vec3 f;
+  rattler = detail::rattler_of(w.balls(), i, g, f);  // f = F + F_a, as World::unbalanced_force_of forms it
+  return detail::term_of(w.balls(), i, f);
+}
 
 /// One horizontal slab of a vertical stress profile: particle-based stress (region_stress) of the
 /// balls whose centres lie in the slab, depth measured down from the block top.

@@ -501,9 +501,12 @@ class World {
     std::uint64_t set, a, b;
     double v;
   };
-  /// ‖F‖ of every contact, the terms of mean_contact_force(), appended in set and contact order.
-  /// With ghost rows, a pair whose ball A is a ghost is left out (its owner has it).
-  void contact_force_norms(std::vector<ContactTerm>& out) const;
+  /// ‖F‖ of every contact, the terms of mean_contact_force(), appended in set and contact order
+  /// (the pass's norms, formed first if it did not keep them). With ghost rows, a pair whose ball
+  /// A is a ghost is left out (its owner has it).
+  void contact_force_norms(std::vector<double>& out) const;
+  /// The keys of those terms, in the same order (their `v` is 0).
+  void contact_force_keys(std::vector<ContactTerm>& out) const;
   /// The same norms without their keys, after a scan of the force norms (contact_scan with
   /// want_fc): the terms of an order-free mean contact force; `pairs` false: the wall contacts'
   /// only.

@@ -286,6 +286,18 @@ class DistDem {
   double unbalanced_ratio(double mean_contact_force) const;
   /// The skeleton ratio (procedures.hpp) of one World, the same bits (collective).
   SkeletonRatio skeleton_ratio(double mean_contact_force) const;
+  /// unbalanced_ratio and skeleton_ratio together: their bits, one pass over the balls and one
+  /// gather of three values per ball (dem::ball_ratios of one World; collective).
+  BallRatios ball_ratios(double mean_contact_force) const;
+  /// The guard's per-step screen (guard.hpp: screen_balls) of one World: whether every rank's
+  /// rows are finite, the largest distance of a centre outside [lo, hi] (with `box`) and the
+  /// kinetic energy (kinetic_energy()'s bits), in the kinetic energy's collectives.
+  struct Screen {
+    bool finite = true;
+    double outside = 0.0;  // [m]
+    double kinetic = 0.0;  // [J]
+  };
+  Screen screen(const Vec3& lo, const Vec3& hi, bool box) const;
   /// World::contact_scan's step (dt_safety x the critical step) of one World: the smallest over
   /// the ranks; a ball's stiffness sums are complete on the rank that owns it and a ghost's
   /// partial ones only give a longer step (collective).
@@ -344,31 +356,37 @@ class DistDem {
   void balance_cuts(const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt, const std::vector<std::uint8_t>& skip);
   void balance_at_load(const World* full);  // load, load_from_root: a balanced first cut
   double owned_max_disp2() const;
-  /// The order-free sum (order_free_sum.hpp) of every rank's terms `v`, on every rank: one
-  /// maximum-allreduce for the bound, one sum-allreduce of the folds; `count`, if given, is
-  /// summed over the ranks with them (collective).
-  double order_free_sum(const std::vector<double>& v, double* count = nullptr) const;
   /// The folds of the S sums (the same boundaries on every rank) added over the ranks, in place,
   /// and `extra`, if given, with them: one sum-allreduce (collective).
   void sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const;
-  /// Σ of the terms of every rank in key order, on every rank; `count`: how many are > 0. With
-  /// WorldParams::order_free_sums, the order-free sum of the terms instead (no gather). `which`:
-  /// the kind of terms, whose merge order is kept until their keys can change (ball terms: an
-  /// exchange or a load; contact terms: also a rebuild).
+  /// Σ of every rank's terms in one World's key order, on every rank, for K value columns at once
+  /// (`sums[0..K)`). `vals`: this rank's n terms, K values each, in the order in which `keys`
+  /// appends their keys; `keys` is called only when the merge order is formed again (which:
+  /// the kind of terms, whose merge order is kept until their keys can change; ball terms: an
+  /// exchange or a load; contact terms: also a rebuild). `positive` (K = 1): only terms > 0 are
+  /// added, and `count` gets how many. With WorldParams::order_free_sums, each column's
+  /// order-free sum instead (no keys, no gather). `also_max[0..n_max)`: replaced by their maxima
+  /// over the ranks, in the same collective (a NaN anywhere: NaN).
   enum { kBallTerms = 0, kContactTerms = 1 };
-  double ordered_sum(std::vector<World::ContactTerm>& terms, std::int64_t* count, int which) const;
-  /// ordered_sum's kept merge order of one kind of terms: the layout key it holds for, this rank's
-  /// term count, rank 0's permutation of the gathered terms and the ranks' counts and offsets.
+  static constexpr int kMaxColumns = 3;
+  using KeyFill = std::function<void(std::vector<World::ContactTerm>&)>;
+  void ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
+                    double* sums, std::int64_t* count = nullptr, double* also_max = nullptr, int n_max = 0) const;
+  /// ordered_sums' kept merge order of one kind of terms: the layout key it holds for, this rank's
+  /// term count and the permutation that puts its terms in key order (empty: they are), rank 0's
+  /// permutation of the gathered terms and the ranks' counts and offsets.
   struct OrderCache {
     std::int64_t key[2] = {-1, -1};
     std::size_t local = static_cast<std::size_t>(-1);
-    std::vector<std::uint32_t> perm;
+    std::vector<std::uint32_t> lperm, perm;
     std::vector<int> counts, displ;
     std::vector<double> mine, all;
   };
-  /// The owned balls' terms keyed by id (set 0), in id order.
-  template <class Term>
-  double ball_sum(Term term) const;
+  /// The owned balls' K terms (`terms(row, out)`) keyed by id (set 0), summed in id order.
+  template <int K, class Terms>
+  void ball_sums(Terms terms, double* sums) const;
+  /// The same from the owned rows' terms `v` (K per row, in row order).
+  void owned_sums(const std::vector<double>& v, int K, double* sums, double* also_max = nullptr, int n_max = 0) const;
 
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
