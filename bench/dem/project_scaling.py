@@ -194,6 +194,48 @@ def wall_root_us(P, m):
             return tab[lo] + f * (tab[hi] - tab[lo])
 
 
+def allreduce_us(P, nbytes, net):
+    """One MPI_Allreduce of nbytes over P ranks (a commutative operation: MPI_SUM, MPI_MAX) with
+    the algorithm Open MPI 4.1.4 (Debian 12's) picks by default (coll/tuned's fixed decision,
+    ompi_coll_tuned_allreduce_intra_dec_fixed, commutative branch), costed with Hockney's model:
+      recursive doubling: log2 P (alpha + m / beta);
+      ring and segmented ring: 2 (P - 1) (alpha + m / (P beta));
+      Rabenseifner (reduce-scatter, then allgather): 2 log2 P alpha + 2 (P - 1) / P m / beta;
+      nonoverlapping (a binomial reduce, then a binomial broadcast): 2 log2 P (alpha + m / beta).
+    The local additions are left out (a few ns per double)."""
+    a, beta = net["alpha_us"], net["beta_gbs"] * 1e3  # bytes per us
+    if P <= 1:
+        return 0.0
+    lg = math.log2(P)
+    rd = lg * (a + nbytes / beta)
+    ring = 2 * (P - 1) * (a + nbytes / (P * beta))
+    rab = 2 * lg * a + 2 * (P - 1) / P * nbytes / beta
+    nonover = 2 * lg * (a + nbytes / beta)
+    # (P, size) -> algorithm, as the decision function's table (sizes in bytes)
+    if P < 4:
+        table = [(8, ring), (4096, rd), (8192, ring), (16384, rd), (65536, ring), (262144, ring)]
+    elif P < 8:
+        table = [(16, ring), (8192, rd)]
+    elif P < 16:
+        table = [(8192, rd)]
+    elif P < 32:
+        table = [(64, ring), (4096, rd)]
+    elif P < 64:
+        table = [(128, ring)]
+    elif P < 128:
+        table = [(262144, rd)]
+    elif P < 256:
+        table = [(131072, nonover), (262144, rd)]
+    elif P < 512:
+        table = [(4096, nonover)]
+    else:  # 512 to 2,047 ranks
+        table = [(2048, nonover), (16384, rd)]
+    for limit, cost in table:
+        if nbytes < limit:
+            return cost
+    return rab
+
+
 def step_time(P, n, m, net, design):
     a_us, beta = net["alpha_us"], net["beta_gbs"] * 1e3  # bytes per us
     one = P == 1
@@ -236,10 +278,11 @@ def step_time(P, n, m, net, design):
             else:
                 root = wall_root_us(P, m)
             parts["walls"] = (math.log2(P) * 2 * a_us + recs * m["wall_record_bytes"] / beta + recs * root)
-        elif design in ("order-free", "newton"):  # two allreduces (recursive doubling): 1 and 4 doubles per value
-            parts["walls"] = fold + 2 * math.log2(P) * (2 * a_us + values * 5 * 8 / beta)
-        else:
-            parts["walls"] = fold + 2 * math.log2(P) * (a_us + values * 24 / beta)
+        elif design in ("order-free", "newton"):  # two allreduces: the bounds (maximum, 1 double per
+            # value), then the folds (sum, 4 doubles per value)
+            parts["walls"] = fold + allreduce_us(P, values * 8, net) + allreduce_us(P, values * 4 * 8, net)
+        else:  # one allreduce of exact accumulators, 3 words per value
+            parts["walls"] = fold + allreduce_us(P, values * 24, net)
     parts["total"] = sum(v for k, v in parts.items())
     return parts
 
