@@ -254,10 +254,11 @@ int model_state(const char* file, const char* hash, const char* spec) {
 
 // The DEM node's per-step work on the ranks after a step (dem_node/main.cpp, check_health and the
 // history row of a stage under gravity): the guard's finite and escape tests on each rank's rows
-// and a maximum over the ranks, the kinetic energy, the mean contact force and both ratios.
+// and a maximum over the ranks, the kinetic energy, the mean contact force, the critical step
+// (the node's dt_stable) and both ratios.
 // Returns the values (their bits: the same whatever the code path).
 struct NodeMeasures {
-  double kinetic, fc, unbalanced, skeleton;
+  double kinetic, fc, dt, unbalanced, skeleton;
   std::size_t rattlers;
   int bad;
 };
@@ -266,8 +267,10 @@ NodeMeasures node_measures(const DistDem& d, const Vec3& lo, const Vec3& hi, dou
   const DistDem::Screen sc = d.screen(lo, hi, true);
   m.bad = !sc.finite || sc.outside > margin;
   m.kinetic = sc.kinetic;
-  m.fc = d.mean_contact_force();
-  const BallRatios r = d.ball_ratios(m.fc);
+  const DistDem::RatioSums rs = d.ratio_sums();
+  m.fc = rs.fc;
+  m.dt = d.safe_step();
+  const BallRatios r = rs.ratios();
   m.unbalanced = r.unbalanced;
   m.skeleton = r.skeleton.ratio;
   m.rattlers = r.skeleton.rattlers;
@@ -358,8 +361,9 @@ int run_state(int argc, char** argv) {
   MPI_Barrier(MPI_COMM_WORLD);
   const double wall = MPI_Wtime() - t0;
   if (measure && rank == 0)
-    std::printf("measure,ms_per_step,%.4f,kinetic,%a,fc,%a,unbalanced,%a,skeleton,%a,rattlers,%zu,bad,%d\n",
-                measure_s * 1e3 / double(steps), last.kinetic, last.fc, last.unbalanced, last.skeleton, last.rattlers, last.bad);
+    std::printf("measure,ms_per_step,%.4f,kinetic,%a,fc,%a,dt,%a,unbalanced,%a,skeleton,%a,rattlers,%zu,bad,%d\n",
+                measure_s * 1e3 / double(steps), last.kinetic, last.fc, last.dt, last.unbalanced, last.skeleton,
+                last.rattlers, last.bad);
   const std::size_t balls = d.num_balls();
   if (std::getenv("BENCH_DIST_PER_RANK")) {  // each rank's own compute and counts, in rank order
     for (int r = 0; r < P; ++r) {
