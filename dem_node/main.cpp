@@ -916,8 +916,8 @@ class DemParticipant : public node::Participant {
   // contact force).
   double ratio() {
     if (!ratio_valid_) {
-      if ((live().gravity_on() && !skeleton_valid_) || dist_live_) {
-        ball_ratios();  // the step's report reads both (on the ranks: one set of collectives)
+      if (live().gravity_on() && !skeleton_valid_) {
+        ball_ratios();  // the step's report reads both
       } else {
         ratio_ = dist_live_ ? dist_->unbalanced_ratio(mean_contact_force()) : world_.unbalanced_ratio(mean_contact_force());
         ratio_valid_ = true;
@@ -927,16 +927,7 @@ class DemParticipant : public node::Participant {
   }
   // Both ratios of the current state in one pass over the balls (dem::ball_ratios: their bits).
   void ball_ratios() {
-    dem::BallRatios r;
-    if (dist_live_ && !fc_valid_) {  // on the ranks: the mean contact force and both ratios' sums
-      // in one set of collectives (DistDem::ratio_sums)
-      const dem::DistDem::RatioSums m = dist_->ratio_sums();
-      fc_ = m.fc;
-      fc_valid_ = true;
-      r = m.ratios();
-    } else {
-      r = dist_live_ ? dist_->ball_ratios(mean_contact_force()) : dem::ball_ratios(world_, mean_contact_force());
-    }
+    const dem::BallRatios r = dist_live_ ? dist_->ball_ratios(mean_contact_force()) : dem::ball_ratios(world_, mean_contact_force());
     ratio_ = r.unbalanced;
     skeleton_ = r.skeleton;
     ratio_valid_ = skeleton_valid_ = true;

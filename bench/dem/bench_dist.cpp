@@ -255,8 +255,8 @@ int model_state(const char* file, const char* hash, const char* spec) {
 // The DEM node's per-step work on the ranks after a step (dem_node/main.cpp, check_health and the
 // history row of a stage under gravity): the guard's finite and escape tests on each rank's rows
 // and a maximum over the ranks, the kinetic energy, the mean contact force, the critical step
-// (the node's dt_stable) and both ratios.
-// Returns the values (their bits: the same whatever the code path).
+// (the node's dt_stable) and both ratios. Returns the values (their bits: the same whatever the
+// code path).
 struct NodeMeasures {
   double kinetic, fc, dt, unbalanced, skeleton;
   std::size_t rattlers;
@@ -267,10 +267,9 @@ NodeMeasures node_measures(const DistDem& d, const Vec3& lo, const Vec3& hi, dou
   const DistDem::Screen sc = d.screen(lo, hi, true);
   m.bad = !sc.finite || sc.outside > margin;
   m.kinetic = sc.kinetic;
-  const DistDem::RatioSums rs = d.ratio_sums();
-  m.fc = rs.fc;
+  m.fc = d.mean_contact_force();
   m.dt = d.safe_step();
-  const BallRatios r = rs.ratios();
+  const BallRatios r = d.ball_ratios(m.fc);
   m.unbalanced = r.unbalanced;
   m.skeleton = r.skeleton.ratio;
   m.rattlers = r.skeleton.rattlers;

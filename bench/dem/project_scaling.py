@@ -21,6 +21,8 @@ the time per step split by part and the weak-scaling efficiency T(1) / T(P), for
          pass (a reverse message of 48 bytes per ghost to each neighbour brick, every step).
   next:  the same exchange and RCB, ghosts not integrated, the walls' sums as exact
          (order-free) accumulators in one allreduce.
+An allreduce is costed with the algorithm Open MPI 4.1.4 picks for its size and rank count
+(allreduce_us; before session 26: recursive doubling with the whole vector at 2 log2 P stages).
 
 Two sets of measured figures (--machine): "avx2", session 14 (AMD EPYC, 2 vCPUs, AVX2, the
 exchange of that session), and "avx512", session 19 (AMD EPYC, 2 vCPUs, AVX-512, the exchange of

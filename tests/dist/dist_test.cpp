@@ -152,7 +152,6 @@ void check(const Scene& sc) {
   // the node's step measurements on ranks: both ratios in one gather, the guard's screen with the
   // kinetic energy (a box of no volume: its distance outside is every centre's largest |x_k|)
   const BallRatios both = d.ball_ratios(fc);
-  const DistDem::RatioSums sums = d.ratio_sums();  // (the node's step report: one set of collectives)
   const Vec3 origin{0.0, 0.0, 0.0};
   const DistDem::Screen scr = d.screen(origin, origin, true);
   // gravity switched on and every 7th ball made a rattler (its contact part of the force exactly
@@ -165,7 +164,6 @@ void check(const Scene& sc) {
   };
   make_rattlers(d.world());
   const BallRatios rattled = d.ball_ratios(fc);
-  const BallRatios rattled_sums = d.ratio_sums().ratios();
   const BondCounts bonds = d.bond_counts();
   const std::int64_t failures = d.bond_failures();
   long long mine[3] = {static_cast<long long>(d.owned()), static_cast<long long>(d.ghosts()),
@@ -192,11 +190,6 @@ void check(const Scene& sc) {
         << "ball_ratios: skeleton " << both.skeleton.ratio << " vs " << both_ref.skeleton.ratio;
     EXPECT_EQ(both.skeleton.rattlers, both_ref.skeleton.rattlers);
     EXPECT_EQ(std::memcmp(&both.unbalanced, &ratio, sizeof ratio), 0) << "ball_ratios against unbalanced_ratio";
-    const BallRatios from_sums = sums.ratios();
-    EXPECT_EQ(std::memcmp(&sums.fc, &fc, sizeof fc), 0) << "ratio_sums: mean contact force " << sums.fc << " vs " << fc;
-    EXPECT_EQ(std::memcmp(&from_sums.unbalanced, &ratio, sizeof ratio), 0) << "ratio_sums: unbalanced ratio";
-    EXPECT_EQ(std::memcmp(&from_sums.skeleton.ratio, &skel, sizeof skel), 0) << "ratio_sums: skeleton ratio";
-    EXPECT_EQ(sums.balls, ref->num_balls());
     std::vector<double> scratch;
     const BallScreen scr_ref = screen_balls(*ref, origin, origin, true, scratch);
     EXPECT_TRUE(scr.finite);
@@ -213,10 +206,6 @@ void check(const Scene& sc) {
     EXPECT_EQ(std::memcmp(&rattled.unbalanced, &rattled_ref.unbalanced, sizeof(double)), 0)
         << "with rattlers: unbalanced " << rattled.unbalanced << " vs " << rattled_ref.unbalanced;
     EXPECT_EQ(rattled.skeleton.rattlers, skel_rattled.rattlers);
-    EXPECT_EQ(std::memcmp(&rattled_sums.skeleton.ratio, &skel_rattled.ratio, sizeof(double)), 0)
-        << "ratio_sums with rattlers: skeleton " << rattled_sums.skeleton.ratio << " vs " << skel_rattled.ratio;
-    EXPECT_EQ(std::memcmp(&rattled_sums.unbalanced, &rattled_ref.unbalanced, sizeof(double)), 0);
-    EXPECT_EQ(rattled_sums.skeleton.rattlers, skel_rattled.rattlers);
     EXPECT_GE(rattled.skeleton.rattlers, ref->num_balls() / 7);
     if (sc.order_free) {  // the plain sums of the same state: the last bits apart
       World& plain = *ref;

@@ -451,7 +451,7 @@ struct DistDem::Buffers {
   // the node's measurements, every step: each rank's terms, rank 0's gathered terms, the values
   // of order-free sums; the kept merge orders of ordered_sums (ball terms, contact terms)
   std::vector<World::ContactTerm> m_terms, m_all;
-  std::vector<double> m_vals, m_rows, m_crows, m_bound, m_res, m_scratch, m_mine, m_gathered, m_part;
+  std::vector<double> m_vals, m_rows, m_bound, m_res, m_scratch;
   std::vector<OrderFreeSum> m_folds;
   std::vector<int> m_counts, m_displ;
   OrderCache order_cache[2];
@@ -1712,94 +1712,70 @@ void DistDem::sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const 
 
 void DistDem::ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
                            double* sums, std::int64_t* count, double* also_max, int n_max) const {
-  SumPart part{which, n, vals, K, &keys, positive, sums, count};
-  ordered_sums(&part, 1, also_max, n_max);
-}
-
-void DistDem::ordered_sums(SumPart* parts, int np, double* also_max, int n_max) const {
-  const std::size_t nm = static_cast<std::size_t>(n_max);
+  const std::size_t k = static_cast<std::size_t>(K);
   if (p_.order_free_sums) {  // each column's order-free sum (order_free_sum.hpp): no keys, no gather
-    // the columns' bounds and the maxima asked for in one maximum-allreduce (a NaN anywhere: NaN),
-    // the folds of every column (and the counts) in one sum-allreduce
+    // the columns' bounds and the maxima asked for in one maximum-allreduce (a NaN anywhere: NaN)
     std::vector<double>& col = buf_->m_vals;
     std::vector<double>& b = buf_->m_bound;
-    b.clear();
-    for (int q = 0; q < np; ++q) {
-      const SumPart& pt = parts[q];
-      col.resize(pt.n);
-      for (int c = 0; c < pt.K; ++c) {
-        for (std::size_t j = 0; j < pt.n; ++j) col[j] = pt.vals[j * static_cast<std::size_t>(pt.K) + static_cast<std::size_t>(c)];
-        b.push_back(pt.positive ? max_positive_of(col.data(), pt.n) : max_abs_of(col.data(), pt.n));
-      }
+    b.assign(k + static_cast<std::size_t>(n_max), 0.0);
+    col.resize(n);
+    for (std::size_t c = 0; c < k; ++c) {
+      for (std::size_t j = 0; j < n; ++j) col[j] = vals[j * k + c];
+      b[c] = positive ? max_positive_of(col.data(), n) : max_abs_of(col.data(), n);
     }
-    const std::size_t nb = b.size();
-    b.insert(b.end(), also_max, also_max + nm);
+    for (int m = 0; m < n_max; ++m) b[k + static_cast<std::size_t>(m)] = also_max[m];
     MPI_Allreduce(MPI_IN_PLACE, b.data(), static_cast<int>(b.size()), MPI_DOUBLE, MPI_MAX, comm_);
-    std::copy(b.begin() + static_cast<std::ptrdiff_t>(nb), b.end(), also_max);
+    for (int m = 0; m < n_max; ++m) also_max[m] = b[k + static_cast<std::size_t>(m)];
     std::vector<OrderFreeSum>& f = buf_->m_folds;
     f.clear();
-    double c_pos = 0.0;  // (one part at most counts: the mean contact force)
-    for (int q = 0; q < np; ++q) {
-      const SumPart& pt = parts[q];
-      col.resize(pt.n);
-      for (int c = 0; c < pt.K; ++c) {
-        for (std::size_t j = 0; j < pt.n; ++j) col[j] = pt.vals[j * static_cast<std::size_t>(pt.K) + static_cast<std::size_t>(c)];
-        f.push_back(fold_terms(col.data(), pt.n, b[f.size()], pt.positive));
-        if (pt.positive) c_pos += static_cast<double>(count_positive(col.data(), pt.n));
-      }
+    double c_pos = 0.0;
+    for (std::size_t c = 0; c < k; ++c) {
+      for (std::size_t j = 0; j < n; ++j) col[j] = vals[j * k + c];
+      f.push_back(fold_terms(col.data(), n, b[c], positive));
+      if (positive) c_pos += static_cast<double>(count_positive(col.data(), n));
     }
-    sum_folds(f.data(), f.size(), &c_pos);  // (an integer count below 2^53 adds exactly)
-    std::size_t at = 0;
-    for (int q = 0; q < np; ++q) {
-      for (int c = 0; c < parts[q].K; ++c) parts[q].sums[c] = f[at++].result();
-      if (parts[q].count) *parts[q].count = static_cast<std::int64_t>(c_pos);
-    }
+    sum_folds(f.data(), k, positive ? &c_pos : nullptr);  // (an integer count below 2^53 adds exactly)
+    for (std::size_t c = 0; c < k; ++c) sums[c] = f[c].result();
+    if (count) *count = static_cast<std::int64_t>(c_pos);
     return;
   }
-  // The merge order of a kind of terms is formed again only when their keys may have changed:
-  // the owned balls change only at an exchange or a load (layout_gen_), the contacts also at a
-  // rebuild, and a rank whose count changed makes every rank form it again (one maximum-allreduce
-  // decides for every part, with the maxima asked for). Else only the values travel (8 bytes a
-  // term and column, not the 32-byte keyed terms; every part's in one gather) and rank 0 adds them
-  // in the kept order: the same additions.
+  // The merge order is formed again only when the terms' keys may have changed: the owned balls
+  // change only at an exchange or a load (layout_gen_), the contacts also at a rebuild, and a
+  // rank whose count changed makes every rank form it again (one maximum-allreduce decides, with
+  // the maxima asked for). Else only the values travel (8 bytes a term and column, not the
+  // 32-byte keyed terms) and rank 0 adds them in the kept order: the same additions.
+  OrderCache& oc = buf_->order_cache[which];
+  const std::int64_t key[2] = {layout_gen_, which == kContactTerms ? w_->rebuild_count() : 0};
   std::vector<double>& mx = buf_->m_bound;
-  mx.assign(static_cast<std::size_t>(np), 0.0);
-  for (int q = 0; q < np; ++q) {
-    const SumPart& pt = parts[q];
-    const OrderCache& oc = buf_->order_cache[pt.which];
-    const std::int64_t key[2] = {layout_gen_, pt.which == kContactTerms ? w_->rebuild_count() : 0};
-    mx[static_cast<std::size_t>(q)] = key[0] != oc.key[0] || key[1] != oc.key[1] || pt.n != oc.local ? 1.0 : 0.0;
-  }
-  mx.insert(mx.end(), also_max, also_max + nm);
+  mx.assign(1 + static_cast<std::size_t>(n_max), 0.0);
+  mx[0] = key[0] != oc.key[0] || key[1] != oc.key[1] || n != oc.local ? 1.0 : 0.0;
+  for (int m = 0; m < n_max; ++m) mx[1 + static_cast<std::size_t>(m)] = also_max[m];
   MPI_Allreduce(MPI_IN_PLACE, mx.data(), static_cast<int>(mx.size()), MPI_DOUBLE, MPI_MAX, comm_);
-  std::copy(mx.begin() + np, mx.end(), also_max);
-  for (int q = 0; q < np; ++q) {
-    if (mx[static_cast<std::size_t>(q)] == 0.0) continue;
-    const SumPart& pt = parts[q];
-    OrderCache& oc = buf_->order_cache[pt.which];
+  for (int m = 0; m < n_max; ++m) also_max[m] = mx[1 + static_cast<std::size_t>(m)];
+  if (mx[0] != 0.0) {
     using T = World::ContactTerm;
     const auto key_less = [](const T& x, const T& y) { return std::tie(x.set, x.a, x.b) < std::tie(y.set, y.a, y.b); };
     std::vector<T>& t = buf_->m_terms;
     t.clear();
-    (*pt.keys)(t);  // this rank's keys, in the values' order
+    keys(t);  // this rank's keys, in the values' order
     // In key order (they nearly always are: rows and lists in id order); else the permutation
     // that sorts them, kept with the merge order.
     oc.lperm.clear();
     if (!std::is_sorted(t.begin(), t.end(), key_less)) {
-      oc.lperm.resize(pt.n);
-      for (std::size_t j = 0; j < pt.n; ++j) oc.lperm[j] = static_cast<std::uint32_t>(j);
+      oc.lperm.resize(n);
+      for (std::size_t j = 0; j < n; ++j) oc.lperm[j] = static_cast<std::uint32_t>(j);
       std::sort(oc.lperm.begin(), oc.lperm.end(), [&](std::uint32_t x, std::uint32_t y) { return key_less(t[x], t[y]); });
       std::vector<T>& sorted = buf_->m_all;
-      sorted.resize(pt.n);
-      for (std::size_t j = 0; j < pt.n; ++j) sorted[j] = t[oc.lperm[j]];
+      sorted.resize(n);
+      for (std::size_t j = 0; j < n; ++j) sorted[j] = t[oc.lperm[j]];
       t.swap(sorted);
     }
     // rank 0 merges the ranks' runs pairwise: O(n log ranks), not a sort of every term
     std::vector<std::size_t> at;
     std::vector<T>& all = buf_->m_all;
     gather_on_root(comm_, t, all, &at);
-    oc.key[0] = layout_gen_, oc.key[1] = pt.which == kContactTerms ? w_->rebuild_count() : 0;
-    oc.local = pt.n;
+    oc.key[0] = key[0], oc.key[1] = key[1];
+    oc.local = n;
     if (rank_ == 0) {
       oc.counts.resize(static_cast<std::size_t>(size_));
       oc.displ.resize(static_cast<std::size_t>(size_));
@@ -1812,92 +1788,52 @@ void DistDem::ordered_sums(SumPart* parts, int np, double* also_max, int n_max) 
       merge_runs(oc.perm, at, [&](std::uint32_t x, std::uint32_t y) { return key_less(all[x], all[y]); });
     }
   }
-  // This rank's values of every part in key order, one after the other, gathered on rank 0 in one
-  // message per rank (the parts' counts per rank are in the caches).
-  const double* mine = parts[0].vals;
-  std::size_t mine_n = parts[0].n * static_cast<std::size_t>(parts[0].K);
-  if (np > 1 || !buf_->order_cache[parts[0].which].lperm.empty()) {
-    std::vector<double>& m = buf_->m_mine;
-    m.clear();
-    for (int q = 0; q < np; ++q) {
-      const SumPart& pt = parts[q];
-      const std::vector<std::uint32_t>& lp = buf_->order_cache[pt.which].lperm;
-      const std::size_t k = static_cast<std::size_t>(pt.K);
-      if (lp.empty()) {
-        m.insert(m.end(), pt.vals, pt.vals + pt.n * k);
-      } else {
-        for (std::size_t j = 0; j < pt.n; ++j)
-          for (std::size_t c = 0; c < k; ++c) m.push_back(pt.vals[lp[j] * k + c]);
-      }
-    }
-    mine = m.data();
-    mine_n = m.size();
+  // this rank's values in key order, gathered on rank 0 (K per term)
+  const double* mine = vals;
+  if (!oc.lperm.empty()) {
+    oc.mine.resize(n * k);
+    for (std::size_t j = 0; j < n; ++j)
+      for (std::size_t c = 0; c < k; ++c) oc.mine[j * k + c] = vals[oc.lperm[j] * k + c];
+    mine = oc.mine.data();
   }
   std::vector<int>& cnt = buf_->m_counts;
   std::vector<int>& dsp = buf_->m_displ;
-  std::vector<double>& all = buf_->m_gathered;
   if (rank_ == 0) {
-    cnt.assign(static_cast<std::size_t>(size_), 0);
-    dsp.assign(static_cast<std::size_t>(size_), 0);
-    for (std::size_t r = 0; r < static_cast<std::size_t>(size_); ++r)
-      for (int q = 0; q < np; ++q) cnt[r] += buf_->order_cache[parts[q].which].counts[r] * parts[q].K;
-    for (std::size_t r = 1; r < static_cast<std::size_t>(size_); ++r) dsp[r] = dsp[r - 1] + cnt[r - 1];
-    all.resize(static_cast<std::size_t>(dsp.back() + cnt.back()));
+    oc.all.resize(oc.perm.size() * k);
+    cnt.resize(static_cast<std::size_t>(size_));
+    dsp.resize(static_cast<std::size_t>(size_));
+    for (std::size_t r = 0; r < static_cast<std::size_t>(size_); ++r) cnt[r] = oc.counts[r] * K, dsp[r] = oc.displ[r] * K;
   }
-  MPI_Gatherv(mine, static_cast<int>(mine_n), MPI_DOUBLE, all.data(), cnt.data(), dsp.data(), MPI_DOUBLE, 0, comm_);
+  MPI_Gatherv(mine, static_cast<int>(n * k), MPI_DOUBLE, oc.all.data(), cnt.data(), dsp.data(), MPI_DOUBLE, 0, comm_);
   std::vector<double>& res = buf_->m_res;
-  res.clear();
-  for (int q = 0; q < np; ++q) res.resize(res.size() + static_cast<std::size_t>(parts[q].K) + 1, 0.0);
+  res.assign(k + 1, 0.0);
   if (rank_ == 0) {
-    std::vector<double>& v = buf_->m_part;  // one part's values of every rank, in rank order
-    std::size_t ro = 0;  // the part's results in res
-    std::vector<std::size_t> off(static_cast<std::size_t>(size_), 0);  // each rank's next part
-    for (int q = 0; q < np; ++q) {
-      const SumPart& pt = parts[q];
-      const OrderCache& oc = buf_->order_cache[pt.which];
-      const std::size_t k = static_cast<std::size_t>(pt.K);
-      const double* src = all.data();
-      if (np > 1) {  // (one part: the gathered values are its own, in the cache's rank order)
-        v.resize(oc.perm.size() * k);
-        for (std::size_t r = 0; r < static_cast<std::size_t>(size_); ++r) {
-          const std::size_t len = static_cast<std::size_t>(oc.counts[r]) * k;
-          std::copy_n(all.data() + dsp[r] + off[r], len, v.data() + static_cast<std::size_t>(oc.displ[r]) * k);
-          off[r] += len;
-        }
-        src = v.data();
+    const double* v = oc.all.data();
+    if (positive) {  // the mean's rule (K = 1): only the terms that carry a force
+      // (adding +0 for the others leaves the sum's bits: it starts at +0 and never is -0)
+      double s = 0.0;
+      std::int64_t c = 0;
+      for (std::uint32_t j : oc.perm) {
+        const bool on = v[j] > 0.0;
+        s += on ? v[j] : 0.0;
+        c += on;
       }
-      if (pt.positive) {  // the mean's rule (K = 1): only the terms that carry a force
-        // (adding +0 for the others leaves the sum's bits: it starts at +0 and never is -0)
-        double s = 0.0;
-        std::int64_t c = 0;
-        for (std::uint32_t j : oc.perm) {
-          const bool on = src[j] > 0.0;
-          s += on ? src[j] : 0.0;
-          c += on;
-        }
-        res[ro] = s;
-        res[ro + k] = static_cast<double>(c);
-      } else if (k == 1) {
-        double s = 0.0;
-        for (std::uint32_t j : oc.perm) s += src[j];
-        res[ro] = s;
-      } else {  // K chains of additions side by side, each in key order from +0
-        double s[kMaxColumns] = {};
-        for (std::uint32_t j : oc.perm)
-          for (std::size_t c = 0; c < k; ++c) s[c] += src[j * k + c];
-        for (std::size_t c = 0; c < k; ++c) res[ro + c] = s[c];
-      }
-      ro += k + 1;
+      res[0] = s;
+      res[1] = static_cast<double>(c);
+    } else if (K == 1) {
+      double s = 0.0;
+      for (std::uint32_t j : oc.perm) s += v[j];
+      res[0] = s;
+    } else {  // K chains of additions side by side, each in key order from +0
+      double s[kMaxColumns] = {};
+      for (std::uint32_t j : oc.perm)
+        for (std::size_t c = 0; c < k; ++c) s[c] += v[j * k + c];
+      for (std::size_t c = 0; c < k; ++c) res[c] = s[c];
     }
   }
   MPI_Bcast(res.data(), static_cast<int>(res.size()), MPI_DOUBLE, 0, comm_);
-  std::size_t ro = 0;
-  for (int q = 0; q < np; ++q) {
-    const std::size_t k = static_cast<std::size_t>(parts[q].K);
-    for (std::size_t c = 0; c < k; ++c) parts[q].sums[c] = res[ro + c];
-    if (parts[q].count) *parts[q].count = static_cast<std::int64_t>(res[ro + k]);
-    ro += k + 1;
-  }
+  for (std::size_t c = 0; c < k; ++c) sums[c] = res[c];
+  if (count) *count = static_cast<std::int64_t>(res[k]);
 }
 
 void DistDem::owned_sums(const std::vector<double>& v, int K, double* sums, double* also_max, int n_max) const {
@@ -1943,13 +1879,9 @@ BallRatios DistDem::ball_ratios(double fc) const {
         t[2] = r ? 1.0 : 0.0;
       },
       s);
-  RatioSums m;
-  m.unbalanced_sum = s[0];
-  m.skeleton_sum = s[1];
-  m.rattlers = static_cast<std::size_t>(s[2]);
-  m.balls = num_balls();
-  m.fc = fc;
-  return m.ratios();
+  const std::size_t n = num_balls();
+  if (n == 0) return {0.0, skeleton_ratio_of(s[1], static_cast<std::size_t>(s[2]), 0, fc)};
+  return {World::unbalanced_ratio_of(s[0], n, fc), skeleton_ratio_of(s[1], static_cast<std::size_t>(s[2]), n, fc)};
 }
 
 DistDem::Screen DistDem::screen(const Vec3& lo, const Vec3& hi, bool box) const {
@@ -1964,51 +1896,6 @@ DistDem::Screen DistDem::screen(const Vec3& lo, const Vec3& hi, bool box) const 
   out.finite = mx[0] == 0.0;
   out.outside = mx[1];
   return out;
-}
-
-DistDem::RatioSums DistDem::ratio_sums() const {
-  // each owned ball's three terms of ball_ratios and each contact's force norm: two parts of one
-  // ordered_sums call
-  const auto& g = w_->ghost_rows();
-  const auto& pt = w_->balls();
-  const Vec3 grav = w_->gravity();
-  std::vector<double>& v = buf_->m_rows;
-  v.resize(pt.size() * 3);
-  std::size_t j = 0;
-  for (std::size_t i = 0; i < pt.size(); ++i) {
-    if (!g.empty() && g[i]) continue;
-    bool r = false;
-    const double t = dem::unbalanced_term(*w_, i, grav, r);
-    v[3 * j] = t;
-    v[3 * j + 1] = r ? 0.0 : t;
-    v[3 * j + 2] = r ? 1.0 : 0.0;
-    ++j;
-  }
-  std::vector<double>& cv = buf_->m_crows;
-  cv.clear();
-  w_->contact_force_norms(cv);
-  const KeyFill ball_keys = [&](std::vector<World::ContactTerm>& out) {
-    for (std::size_t i = 0; i < pt.size(); ++i)
-      if (g.empty() || !g[i]) out.push_back({0, pt.id[i], 0, 0.0});
-  };
-  const KeyFill contact_keys = [this](std::vector<World::ContactTerm>& out) { w_->contact_force_keys(out); };
-  double bs[3], fs = 0.0;
-  std::int64_t fn = 0;
-  SumPart parts[2] = {{kBallTerms, j, v.data(), 3, &ball_keys, false, bs, nullptr},
-                      {kContactTerms, cv.size(), cv.data(), 1, &contact_keys, true, &fs, &fn}};
-  ordered_sums(parts, 2, nullptr, 0);
-  RatioSums m;
-  m.unbalanced_sum = bs[0];
-  m.skeleton_sum = bs[1];
-  m.rattlers = static_cast<std::size_t>(bs[2]);
-  m.balls = num_balls();
-  m.fc = fn ? fs / double(fn) : 0.0;  // (mean_contact_force's rule)
-  return m;
-}
-
-BallRatios DistDem::RatioSums::ratios() const {
-  if (balls == 0) return {0.0, skeleton_ratio_of(skeleton_sum, rattlers, 0, fc)};
-  return {World::unbalanced_ratio_of(unbalanced_sum, balls, fc), skeleton_ratio_of(skeleton_sum, rattlers, balls, fc)};
 }
 
 double DistDem::safe_step() const {

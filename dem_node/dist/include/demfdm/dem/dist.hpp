@@ -298,17 +298,6 @@ class DistDem {
     double kinetic = 0.0;  // [J]
   };
   Screen screen(const Vec3& lo, const Vec3& hi, bool box) const;
-  /// The step's report of one state in one set of collectives: the sums of both ratios
-  /// (ball_ratios' terms) and the mean contact force, each with the bits of its own call.
-  struct RatioSums {
-    double unbalanced_sum = 0.0;  // [N]
-    double skeleton_sum = 0.0;    // [N]
-    std::size_t rattlers = 0, balls = 0;
-    double fc = 0.0;  // [N] the mean contact force
-    /// ball_ratios(fc) from the sums.
-    BallRatios ratios() const;
-  };
-  RatioSums ratio_sums() const;
   /// World::contact_scan's step (dt_safety x the critical step) of one World: the smallest over
   /// the ranks; a ball's stiffness sums are complete on the rank that owns it and a ghost's
   /// partial ones only give a longer step (collective).
@@ -383,19 +372,6 @@ class DistDem {
   using KeyFill = std::function<void(std::vector<World::ContactTerm>&)>;
   void ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
                     double* sums, std::int64_t* count = nullptr, double* also_max = nullptr, int n_max = 0) const;
-  /// Several such sums (of different kinds of terms) in one set of collectives: one decision,
-  /// one gather of every part's values, one broadcast of every result.
-  struct SumPart {
-    int which;
-    std::size_t n;
-    const double* vals;
-    int K;
-    const KeyFill* keys;
-    bool positive;
-    double* sums;
-    std::int64_t* count;
-  };
-  void ordered_sums(SumPart* parts, int np, double* also_max, int n_max) const;
   /// ordered_sums' kept merge order of one kind of terms: the layout key it holds for, this rank's
   /// term count and the permutation that puts its terms in key order (empty: they are), rank 0's
   /// permutation of the gathered terms and the ranks' counts and offsets.
