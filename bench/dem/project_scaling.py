@@ -196,6 +196,23 @@ def wall_root_us(P, m):
             return tab[lo] + f * (tab[hi] - tab[lo])
 
 
+# Open MPI 4.1.4's allreduce choice for commutative operations (ompi_coll_tuned_allreduce_intra_dec_fixed):
+# for communicators below each size, the first (message size limit in bytes, algorithm) whose
+# limit the message is below; Rabenseifner's beyond the last. "ring" stands for the ring and the
+# segmented ring alike.
+OMPI_ALLREDUCE = [
+    (4, [(8, "ring"), (4096, "rd"), (8192, "ring"), (16384, "rd"), (65536, "ring"), (262144, "ring")]),
+    (8, [(16, "ring"), (8192, "rd")]),
+    (16, [(8192, "rd")]),
+    (32, [(64, "ring"), (4096, "rd")]),
+    (64, [(128, "ring")]),
+    (128, [(262144, "rd")]),
+    (256, [(131072, "nonover"), (262144, "rd")]),
+    (512, [(4096, "nonover")]),
+    (2048, [(2048, "nonover"), (16384, "rd")]),
+]
+
+
 def allreduce_us(P, nbytes, net):
     """One MPI_Allreduce of nbytes over P ranks (a commutative operation: MPI_SUM, MPI_MAX) with
     the algorithm Open MPI 4.1.4 (Debian 12's) picks by default (coll/tuned's fixed decision,
@@ -213,28 +230,10 @@ def allreduce_us(P, nbytes, net):
     ring = 2 * (P - 1) * (a + nbytes / (P * beta))
     rab = 2 * lg * a + 2 * (P - 1) / P * nbytes / beta
     nonover = 2 * lg * (a + nbytes / beta)
-    # (P, size) -> algorithm, as the decision function's table (sizes in bytes)
-    if P < 4:
-        table = [(8, ring), (4096, rd), (8192, ring), (16384, rd), (65536, ring), (262144, ring)]
-    elif P < 8:
-        table = [(16, ring), (8192, rd)]
-    elif P < 16:
-        table = [(8192, rd)]
-    elif P < 32:
-        table = [(64, ring), (4096, rd)]
-    elif P < 64:
-        table = [(128, ring)]
-    elif P < 128:
-        table = [(262144, rd)]
-    elif P < 256:
-        table = [(131072, nonover), (262144, rd)]
-    elif P < 512:
-        table = [(4096, nonover)]
-    else:  # 512 to 2,047 ranks
-        table = [(2048, nonover), (16384, rd)]
-    for limit, cost in table:
-        if nbytes < limit:
-            return cost
+    cost = dict(rd=rd, ring=ring, nonover=nonover)
+    for below, table in OMPI_ALLREDUCE:
+        if P < below:
+            return next((cost[alg] for limit, alg in table if nbytes < limit), rab)
     return rab
 
 
