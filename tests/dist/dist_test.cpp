@@ -268,6 +268,64 @@ void check(const Scene& sc) {
 
 }  // namespace
 
+// DistDem::ordered_sums on terms a rank lists out of key order (the node's terms nearly always
+// come in key order; this is the path for those that do not): every rank's terms, keyed by id and
+// listed in descending id, with values whose sum depends on the order of the additions. The sums
+// must be the additions in ascending id of every rank's terms, in the first call (the merge order
+// formed) and in a second with new values (the kept order and local permutation, values only);
+// the mean's rule (positive, count) likewise; and the largest of the maxima asked for.
+TEST(Dist, OrderedSumsOfUnsortedTermsAddInKeyOrder) {
+  BrickGrid g;
+  g.lo = {0, 0, 0};
+  g.len = {1, 1, 1};
+  g.n[0] = g_size;
+  const DistDem d(MPI_COMM_WORLD, WorldParams{}, g);
+  const std::size_t n = 500;
+  // rank r holds the ids r, r + P, r + 2P, ... (interleaved with every other rank's), descending
+  auto id_of = [](std::size_t j) { return static_cast<std::uint64_t>(g_rank) + static_cast<std::uint64_t>(g_size) * (n - 1 - j); };
+  // id 0 is 1e16 (ulp 2): after it, each term near 1 is lost to rounding; before it, they add up
+  auto value = [](std::uint64_t id, int round, int col) {
+    if (id == 0) return 1e16 * (1.0 + 0.125 * col);
+    return (id % 5 == 3 ? -0.5 : 1.0) + 0.125 * col + round * 0.25;
+  };
+  const DistDem::KeyFill keys = [&](std::vector<World::ContactTerm>& out) {
+    for (std::size_t j = 0; j < n; ++j) out.push_back({0, id_of(j), 0, 0.0});
+  };
+  for (int round = 0; round < 2; ++round) {
+    std::vector<double> v(2 * n);
+    for (std::size_t j = 0; j < n; ++j)
+      for (int c = 0; c < 2; ++c) v[2 * j + static_cast<std::size_t>(c)] = value(id_of(j), round, c);
+    double got[2];
+    double mx[1] = {static_cast<double>(g_rank) + 0.5};
+    d.ordered_sums(n, v.data(), 2, keys, DistDem::kBallTerms, false, got, nullptr, mx, 1);
+    // the reference: every id in ascending order, one chain per column from +0
+    double want[2] = {0.0, 0.0}, plain[2] = {0.0, 0.0};
+    for (std::uint64_t id = 0; id < n * static_cast<std::uint64_t>(g_size); ++id)
+      for (int c = 0; c < 2; ++c) want[c] += value(id, round, c);
+    for (std::size_t j = 0; j < n; ++j)  // (this rank's own terms in its listed order: not the sum)
+      for (int c = 0; c < 2; ++c) plain[c] += v[2 * j + static_cast<std::size_t>(c)];
+    for (int c = 0; c < 2; ++c)
+      EXPECT_EQ(std::memcmp(&got[c], &want[c], sizeof(double)), 0)
+          << "round " << round << " column " << c << ": " << got[c] << " vs " << want[c];
+    EXPECT_EQ(mx[0], g_size - 0.5) << "the maximum over the ranks";
+    if (g_size == 1) {
+      EXPECT_NE(std::memcmp(&plain[0], &want[0], sizeof(double)), 0) << "the values must make the order matter";
+    }
+  }
+  // the mean's rule: only the terms > 0, and their count (contacts' kind: its own kept order)
+  std::vector<double> v(n);
+  for (std::size_t j = 0; j < n; ++j) v[j] = value(id_of(j), 0, 0);
+  double s = 0.0;
+  std::int64_t count = -1;
+  d.ordered_sums(n, v.data(), 1, keys, DistDem::kBallTerms, true, &s, &count);
+  double want = 0.0;
+  std::int64_t want_count = 0;
+  for (std::uint64_t id = 0; id < n * static_cast<std::uint64_t>(g_size); ++id)
+    if (const double x = value(id, 0, 0); x > 0.0) want += x, ++want_count;
+  EXPECT_EQ(std::memcmp(&s, &want, sizeof s), 0) << s << " vs " << want;
+  EXPECT_EQ(count, want_count);
+}
+
 TEST(Dist, LinearPeriodicStrainedSameBits) { check({"linear periodic, cut along x", ContactModel::kLinear, true}); }
 TEST(Dist, LinearFreeSameBits) {
   check({"linear free, cut along z", ContactModel::kLinear, false, false, 2, 200});

@@ -316,6 +316,21 @@ class DistDem {
   };
   Balls gather() const;
 
+  /// Σ of every rank's terms in one World's key order, on every rank, for K value columns at once
+  /// (`sums[0..K)`). `vals`: this rank's n terms, K values each, in the order in which `keys`
+  /// appends their keys; `keys` is called only when the merge order is formed again (which:
+  /// the kind of terms, whose merge order is kept until their keys can change; ball terms: an
+  /// exchange or a load; contact terms: also a rebuild). `positive` (K = 1): only terms > 0 are
+  /// added, and `count` gets how many. With WorldParams::order_free_sums, each column's
+  /// order-free sum instead (no keys, no gather). `also_max[0..n_max)`: replaced by their maxima
+  /// over the ranks, in the same collective (a NaN anywhere: NaN). Collective; contact terms need
+  /// a loaded World (its rebuild count keys their merge order).
+  enum { kBallTerms = 0, kContactTerms = 1 };
+  static constexpr int kMaxColumns = 3;
+  using KeyFill = std::function<void(std::vector<World::ContactTerm>&)>;
+  void ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
+                    double* sums, std::int64_t* count = nullptr, double* also_max = nullptr, int n_max = 0) const;
+
  private:
   /// Where the rows, pairs and wall contacts of a whole World go (load, load_from_root): per
   /// row its owner; per rank its rows (ascending), the pairs it computes and its balls' wall
@@ -359,19 +374,6 @@ class DistDem {
   /// The folds of the S sums (the same boundaries on every rank) added over the ranks, in place,
   /// and `extra`, if given, with them: one sum-allreduce (collective).
   void sum_folds(OrderFreeSum* sums, std::size_t S, double* extra) const;
-  /// Σ of every rank's terms in one World's key order, on every rank, for K value columns at once
-  /// (`sums[0..K)`). `vals`: this rank's n terms, K values each, in the order in which `keys`
-  /// appends their keys; `keys` is called only when the merge order is formed again (which:
-  /// the kind of terms, whose merge order is kept until their keys can change; ball terms: an
-  /// exchange or a load; contact terms: also a rebuild). `positive` (K = 1): only terms > 0 are
-  /// added, and `count` gets how many. With WorldParams::order_free_sums, each column's
-  /// order-free sum instead (no keys, no gather). `also_max[0..n_max)`: replaced by their maxima
-  /// over the ranks, in the same collective (a NaN anywhere: NaN).
-  enum { kBallTerms = 0, kContactTerms = 1 };
-  static constexpr int kMaxColumns = 3;
-  using KeyFill = std::function<void(std::vector<World::ContactTerm>&)>;
-  void ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
-                    double* sums, std::int64_t* count = nullptr, double* also_max = nullptr, int n_max = 0) const;
   /// ordered_sums' kept merge order of one kind of terms: the layout key it holds for, this rank's
   /// term count and the permutation that puts its terms in key order (empty: they are), rank 0's
   /// permutation of the gathered terms and the ranks' counts and offsets.
