@@ -451,7 +451,7 @@ struct DistDem::Buffers {
   // the node's measurements, every step: each rank's terms, rank 0's gathered terms, the values
   // of order-free sums; the kept merge orders of ordered_sums (ball terms, contact terms)
   std::vector<World::ContactTerm> m_terms, m_all;
-  std::vector<double> m_vals, m_rows, m_bound, m_res, m_scratch;
+  std::vector<double> m_vals, m_rows, m_bound, m_res;
   std::vector<OrderFreeSum> m_folds;
   std::vector<int> m_counts, m_displ;
   OrderCache order_cache[2];

@@ -507,9 +507,9 @@ class World {
   void contact_force_norms(std::vector<double>& out) const;
   /// The keys of those terms, in the same order (their `v` is 0).
   void contact_force_keys(std::vector<ContactTerm>& out) const;
-  /// The same norms without their keys, after a scan of the force norms (contact_scan with
-  /// want_fc): the terms of an order-free mean contact force; `pairs` false: the wall contacts'
-  /// only.
+  /// The same norms without forming the pass's first: for a caller that has just scanned them
+  /// (contact_scan with want_fc; the terms of an order-free mean contact force); `pairs` false:
+  /// the wall contacts' only.
   void force_norm_values(std::vector<double>& out, bool pairs = true) const;
   Vec3 cell_strain_since_reset() const { return cell_strain_; }
 
