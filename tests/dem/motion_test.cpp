@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <memory>
 #include <random>
 
 #include "demfdm/dem/world.hpp"
@@ -214,4 +216,38 @@ TEST(Kernels, ShearRotationKeepsPlaneAndMagnitude) {
   }
   EXPECT_LT(err_plane, 1e-14);
   EXPECT_LT(err_mag, 1e-14);
+}
+
+// World::set_moving_rows (a rank's ghosts in rows of their own, DistDem with newton on): the
+// rows from n on keep their x, v and ω; the rows before it move with the bits of a World that
+// moves every row (lane blocks and the scalar tail alike: 37 rows, 13 moving).
+TEST(Motion, RowsFromTheMovingRowsOnStayPut) {
+  auto make = [] {
+    WorldParams p;
+    p.dt_fixed = 1e-7;
+    p.local_damping = 0.3;
+    auto w = std::make_unique<World>(p);
+    std::mt19937 g(7);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    for (int i = 0; i < 37; ++i) w->add_ball({i * 5e-4, 0.0, 0.0}, 1e-4);  // apart: no contact
+    for (std::size_t i = 0; i < w->balls().size(); ++i) {
+      w->balls().v[i] = {u(g), u(g), u(g)};
+      w->balls().w[i] = {100 * u(g), 100 * u(g), 100 * u(g)};
+    }
+    w->add_effect(std::make_unique<GravityEffect>(Vec3{0.0, 0.0, -9.81e3}));
+    return w;
+  };
+  auto all = make(), part = make();
+  part->set_moving_rows(13);
+  const Particles before = part->balls();
+  all->step(5);
+  part->step(5);
+  const Particles &a = all->balls(), &p = part->balls();
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const Particles& want = i < 13 ? a : before;
+    EXPECT_EQ(std::memcmp(&p.x[i], &want.x[i], sizeof(Vec3)), 0) << "row " << i;
+    EXPECT_EQ(std::memcmp(&p.v[i], &want.v[i], sizeof(Vec3)), 0) << "row " << i;
+    EXPECT_EQ(std::memcmp(&p.w[i], &want.w[i], sizeof(Vec3)), 0) << "row " << i;
+  }
+  EXPECT_NE(std::memcmp(&a.x[20], &before.x[20], sizeof(Vec3)), 0) << "a moving row must move";
 }

@@ -408,8 +408,30 @@ TEST(Dist, LinearFreeRcbBalancedSameBits) { check(free_rcb_balanced("linear free
 // for a bound in the range of round-off (positions to 1e-8 of a radius, forces and torques to
 // 1e-6 of the largest); a second run on the same ranks gives the same bits. The free cluster
 // moves pairs with their ball A to its new owner (about 900-1,650 migrations at 2-4 ranks).
+// With newton on more than one rank the ghosts are rows of their own (DistDem::own_first): the
+// owned rows first, then the ghosts, each part in id order, and only the owned rows integrated;
+// the pair list stays sorted by (row A, row B) with A < B, and every A is owned. This rank's
+// faults against that (0 on one rank, whose rows are all owned and in id order).
+long long layout_faults(const DistDem& d) {
+  const World& w = d.world();
+  const auto& gh = w.ghost_rows();
+  const auto& id = w.balls().id;
+  const std::size_t n = id.size(), own = d.owned();
+  long long bad = w.moving_rows() != own;
+  for (std::size_t i = 0; i < n; ++i) {
+    bad += (!gh.empty() && gh[i]) != (i >= own);
+    bad += i > 0 && i != own && !(id[i - 1] < id[i]);
+  }
+  const PairContacts& pc = w.pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    bad += !(pc.a[c] < pc.b[c]) || pc.a[c] >= own;
+    bad += c > 0 && !(std::tie(pc.a[c - 1], pc.b[c - 1]) < std::tie(pc.a[c], pc.b[c]));
+  }
+  return bad;
+}
+
 void check_newton(const Scene& sc, double pos_tol, double force_tol) {
-  long long migrated = 0;
+  long long migrated = 0, layout_bad = 0;
   // (the second run loads from rank 0 alone, DistDem::load_from_root: the same bits again)
   auto run = [&](DistDem::Balls& got, long long& listed, double& dt_end, bool from_root) {
     std::unique_ptr<World> full = build(sc, true);
@@ -422,15 +444,18 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
       d.load(*full);
     }
     d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
+    long long faults = layout_faults(d);  // as loaded, then after the exchanges of the run
     d.step(sc.steps);
+    faults += layout_faults(d);
     got = d.gather();
     dt_end = d.world().dt();
-    long long mine[2] = {static_cast<long long>(d.world().pair_contacts().size()),
-                         static_cast<long long>(d.migrated())};
-    long long sum[2] = {0, 0};
-    MPI_Reduce(mine, sum, 2, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+    long long mine[3] = {static_cast<long long>(d.world().pair_contacts().size()),
+                         static_cast<long long>(d.migrated()), faults};
+    long long sum[3] = {0, 0, 0};
+    MPI_Reduce(mine, sum, 3, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
     listed = sum[0];
     migrated = sum[1];
+    layout_bad += sum[2];
     return d.ghosts();
   };
   DistDem::Balls got, again;
@@ -459,6 +484,7 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
                 sc.name.c_str(), g_size, sc.steps, listed, ref->pair_contacts().size(), all_gh, migrated,
                 static_cast<long long>(ref->rebuild_count()), dx / kR, df / fmax, dtq / tmax);
     EXPECT_EQ(listed, static_cast<long long>(ref->pair_contacts().size())) << "every pair computed once";
+    EXPECT_EQ(layout_bad, 0) << "the ghosts in rows of their own after the owned rows, each part in id order";
     EXPECT_TRUE(test::same_bits(got.x, again.x) && test::same_bits(got.f, again.f) && test::same_bits(got.t, again.t))
         << "two runs on the same ranks (the second loaded from rank 0) must give the same bits";
     EXPECT_EQ(std::memcmp(&dt_end, &dt2, sizeof dt2), 0);
@@ -547,9 +573,12 @@ void check_stretched(bool newton) {
   double widest = 0.0;  // largest gap of a pair over the run, in skins (the reference's)
   d.step(steps);
   const DistDem::Balls got = d.gather();
-  long long mine = static_cast<long long>(d.world().pair_contacts().size()), listed = 0;
-  MPI_Reduce(&mine, &listed, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  long long mine[2] = {static_cast<long long>(d.world().pair_contacts().size()), newton ? layout_faults(d) : 0};
+  long long sum[2] = {0, 0};
+  MPI_Reduce(mine, sum, 2, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  const long long listed = sum[0];
   if (g_rank == 0) {
+    EXPECT_EQ(sum[1], 0) << "the ghosts in rows of their own (newton on)";
     std::unique_ptr<World> ref = build2();
     for (int s = 0; s < steps; ++s) {
       ref->step(1);

@@ -151,9 +151,14 @@ if all(os.path.exists(os.path.join(d, "dem_history.csv")) for d in box.values())
 
 # dem.newton = true on 2 ranks (each pair across the cut computed once, its force on the other
 # rank's ball sent back): not one process's bits (a ball adds its remote pairs after its local
-# ones), but the same bits twice, the gravity stage within round-off grown (its end values to
-# 1e-3 relative; measured 5e-5 for the ratio), the elastic branch's stiffness to 1e-6, the
-# interface balance at round-off, and the node names the mode. Past the first bond failures the
+# ones), but the same bits twice, the gravity stage within round-off grown, the elastic branch's
+# stiffness to 1e-6, the interface balance at round-off, and the node names the mode. The
+# gravity stage's end values: the strain energy and the facets' force to 1e-5 relative (measured
+# 6e-7 and 1e-7 with the ghosts in rows of their own); the residuals of the settled specimen, the
+# unbalanced ratio and the kinetic energy, are near zero, so their relative differences are
+# those of the forces amplified a thousandfold (1.6e-3 and 3e-4 measured): they are held to 1e-5
+# of their scale instead, the ratio as a fraction of the mean contact force (its own unit) and
+# the kinetic energy as a fraction of the strain energy (measured 1.5e-6 and 6e-10). Past the first bond failures the
 # penetration is another draw of this brittle 476-ball specimen (docs/scaling.md).
 newton = []
 for k in (1, 2):
@@ -178,16 +183,21 @@ if all(os.path.exists(os.path.join(d, "history_5_penetrate.csv")) for d in newto
         return dict((k, float(v)) for k, v in re.findall(r"(\w+)=([-0-9.e+]+)", line.split("values:")[1]))
 
     one, two = stage_values(ref, "4 'gravity'"), stage_values(newton[0], "4 'gravity'")
-    worst = max(abs(two[k] - one[k]) / abs(one[k]) for k in ("ratio", "energy_kinetic_J", "energy_strain_J", "facet_fz_N"))
+    worst = max(abs(two[k] - one[k]) / abs(one[k]) for k in ("energy_strain_J", "facet_fz_N"))
+    resid = max(abs(two["ratio"] - one["ratio"]),
+                abs(two["energy_kinetic_J"] - one["energy_kinetic_J"]) / abs(one["energy_strain_J"]))
     k1 = re.search(r"k_e ([0-9.e+]+)", open(os.path.join(ref, "summary.txt")).read()).group(1)
     k2 = re.search(r"k_e ([0-9.e+]+)", open(os.path.join(newton[0], "summary.txt")).read()).group(1)
     hist = open(os.path.join(newton[0], "history_5_penetrate.csv")).read().split("\n")
     kk = hist[0].split(",").index("continuum.iface_imbalance")
     imb = max(abs(float(l.split(",")[kk])) for l in hist[1:] if l)
-    print("dem.newton on 2 ranks: two runs the same bytes (%d files); gravity end values within %.1e of one process's; "
-          "k_e %s against %s N/m; interface imbalance %.1e" % (len(same), worst, k2, k1, imb))
-    if not worst < 1e-3:
+    print("dem.newton on 2 ranks: two runs the same bytes (%d files); gravity end values within %.1e of one process's "
+          "(residuals %.1e of their scale); k_e %s against %s N/m; interface imbalance %.1e"
+          % (len(same), worst, resid, k2, k1, imb))
+    if not worst < 1e-5:
         failures.append("dem.newton: the gravity stage's end values differ by %.1e" % worst)
+    if not resid < 1e-5:
+        failures.append("dem.newton: the gravity stage's residuals differ by %.1e of their scale" % resid)
     if abs(float(k2) - float(k1)) > 1e-6 * float(k1):
         failures.append("dem.newton: k_e %s against %s" % (k2, k1))
     if not imb < 1e-12:

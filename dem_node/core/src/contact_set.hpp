@@ -26,7 +26,7 @@ struct SetContext {
   double& e_soft_dead;    // [J] bond dissipation of retired contacts
   std::int64_t& bond_failures;  // ball-ball bonds that left the intact state
   const std::uint8_t* ghost;    // per row: a ghost (a copy of another rank's ball), or null
-  bool newton = false;          // a pair is listed only where its ball A is not a ghost
+  bool newton = false;          // a pair is listed only where its lower-id ball is not a ghost
 };
 
 /// One set of contacts, in the cycle's order: the ball-ball pairs first, then the wall kinds.

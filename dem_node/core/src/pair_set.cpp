@@ -128,10 +128,14 @@ void PairSet::rebuild(SetContext& cx) {
     }
   };
   // A rank's world (cx.ghost): a pair of two ghosts acts on ghosts only and is not kept; with
-  // `newton`, neither is a pair whose ball A (the lower row) is a ghost: its owner computes it.
+  // `newton`, neither is a pair whose lower-id ball is a ghost: its owner computes it. (With
+  // rows in id order that is ball a, the lower row; with the ghosts in rows of their own after
+  // the owned ones, a ghost b may have the lower id.)
   const std::uint8_t* G = cx.ghost;
   const bool newton = cx.newton;
-  auto elsewhere = [&](std::uint32_t a, std::uint32_t b) { return G && (newton ? G[a] != 0 : (G[a] & G[b]) != 0); };
+  auto elsewhere = [&](std::uint32_t a, std::uint32_t b) {
+    return G && (newton ? (G[a] != 0 || (G[b] != 0 && pt.id[b] < pt.id[a])) : (G[a] & G[b]) != 0);
+  };
   for (const auto& e : np)
     if (!elsewhere(e.a, e.b)) push(e.a, e.b, e.s);
   // bonded contacts beyond the cut-off are kept (a bond never disappears in a rebuild)

@@ -318,8 +318,8 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
   const double* __restrict__ Ms = pt_.m.data();
   const double* __restrict__ Is = pt_.inertia.data();
   const std::uint8_t* __restrict__ Fx = pt_.fix.data();
-  // A rank's world: a ghost row moves too (its owner's state replaces it), but its damping work
-  // is its owner's to count.
+  // A rank's world: a ghost row among the moving rows moves too (its owner's state replaces
+  // it), but its damping work is its owner's to count.
   const std::uint8_t* __restrict__ G = ghost_.empty() ? nullptr : ghost_.data();
   double e_ghost = 0.0;
   auto row = [&](std::size_t i) __attribute__((always_inline)) {
@@ -378,7 +378,7 @@ void World::integrate_rows(std::size_t i0, std::size_t i1, double dt, const Vec3
 }
 
 void World::integrate(double dt) {
-  const std::size_t n = pt_.size();
+  const std::size_t n = std::min(pt_.size(), moving_rows_);
   const bool per = p_.periodic.enabled;
   Vec3 sc{1.0 + edot_.x * dt, 1.0 + edot_.y * dt, 1.0 + edot_.z * dt};
   const bool energy = p_.track_energy;

@@ -378,6 +378,43 @@ void fill_rows(Particles& q, const Particles& pt, const std::vector<BallRec>& bi
   fill_column(q.fix, pt.fix, bin, src, &BallRec::fix);
 }
 
+// The row of ball `id` in rows whose ids ascend in [0, split) and in [split, n) (DistDem::split_;
+// one run when split = n), or -1.
+std::int64_t find_row(const std::vector<std::uint64_t>& ids, std::size_t split, std::uint64_t id) {
+  auto in = [&](std::size_t lo, std::size_t hi) -> std::int64_t {
+    const auto b = ids.begin() + static_cast<std::ptrdiff_t>(lo), e = ids.begin() + static_cast<std::ptrdiff_t>(hi);
+    const auto it = std::lower_bound(b, e, id);
+    return (it != e && *it == id) ? it - ids.begin() : -1;
+  };
+  const std::int64_t r = in(0, std::min(split, ids.size()));
+  return r >= 0 || split >= ids.size() ? r : in(split, ids.size());
+}
+
+// A pair list sorted by (A row, B id) within each A's run, put in (A row, B row) order, where the
+// rows of the partners below `split` ascend with their ids and so do those from `split` on: in
+// each run, stably, the partners below `split` first (the ghosts in rows of their own come after
+// the owned rows). `b` and `src` (each pair's source) move together; `tb`, `ts` are scratch.
+void partners_by_row(const std::vector<std::uint32_t>& a, std::vector<std::uint32_t>& b, std::vector<std::int64_t>& src,
+                     std::size_t split, std::vector<std::uint32_t>& tb, std::vector<std::int64_t>& ts) {
+  const std::size_t m = a.size();
+  for (std::size_t c0 = 0; c0 < m;) {
+    std::size_t c1 = c0 + 1;
+    while (c1 < m && a[c1] == a[c0]) ++c1;
+    tb.clear(), ts.clear();
+    std::size_t w = c0;
+    for (std::size_t c = c0; c < c1; ++c) {
+      if (b[c] < split) {
+        b[w] = b[c], src[w] = src[c], ++w;
+      } else {
+        tb.push_back(b[c]), ts.push_back(src[c]);
+      }
+    }
+    std::copy(tb.begin(), tb.end(), b.begin() + static_cast<std::ptrdiff_t>(w));
+    std::copy(ts.begin(), ts.end(), src.begin() + static_cast<std::ptrdiff_t>(w));
+    c0 = c1;
+  }
+}
+
 BallRec ball_rec(const Particles& pt, std::size_t i) {
   return BallRec{pt.id[i], pt.x[i], pt.v[i], pt.w[i], pt.f[i], pt.t[i], pt.fa[i], pt.ta[i], pt.x_ref[i],
                  pt.r[i],  pt.m[i], pt.inertia[i], pt.fix[i]};
@@ -460,7 +497,9 @@ struct DistDem::Buffers {
   std::vector<int> own, old_owner, holders, dest, near_all;
   std::vector<std::uint32_t> hold_off, off, near_off, fill;
   std::vector<std::uint8_t> keep;
-  std::vector<std::int64_t> new_row, src, psrc;
+  std::vector<std::int64_t> new_row, src, psrc, src2, ts;
+  // with the ghosts in rows of their own: the old rows and contacts in id order, and scratch
+  std::vector<std::uint32_t> ido, cord, tb;
   std::vector<std::vector<std::uint64_t>> kout;
   std::vector<std::uint64_t> kin;
   std::vector<std::uint32_t> order, order2;
@@ -806,7 +845,8 @@ void DistDem::take(std::unique_ptr<World> w, bool platens) {
   // Otherwise: prepared here, as `full.prepare()` would.
   run_disp2_ = 0.0;
   // The forward lists (with newton, reversed, they send the ghosts' forces and stiffness sums
-  // back to their owners, from a prepare's force pass on).
+  // back to their owners, from a prepare's force pass on), after the ghosts are put last.
+  ghosts_last();
   build_forward();
   if (newton_)
     w_->set_newton([this](Vec3* f, Vec3* t) { reverse(&f->x, &t->x, 3); },
@@ -818,6 +858,65 @@ void DistDem::take(std::unique_ptr<World> w, bool platens) {
   }
   reduce_walls();
   exchanges_ = 0;
+}
+
+// With own_first(): the part's rows, in id order, become [owned | ghosts], each part in id
+// order. The pairs' rows are renamed and each ball A's partners put in row order again (its
+// owned partners first: partners_by_row); the wall contacts' rows are renamed (only owned balls
+// have them, so their order stays). Histories and last forces move with their rows and
+// contacts, and the World's counters stay as they were: a prepared part steps on as it was.
+void DistDem::ghosts_last() {
+  const Particles& pt = w_->balls();
+  const std::size_t n = pt.size();
+  split_ = n;
+  if (!own_first()) return;
+  const auto& gh = w_->ghost_rows();
+  auto ghost_at = [&](std::size_t i) { return !gh.empty() && gh[i] != 0; };
+  Buffers& bf = *buf_;
+  std::vector<std::int64_t>& src = bf.src;
+  src.clear();
+  for (std::size_t i = 0; i < n; ++i)
+    if (!ghost_at(i)) src.push_back(static_cast<std::int64_t>(i));
+  const std::size_t split = src.size();
+  for (std::size_t i = 0; i < n; ++i)
+    if (ghost_at(i)) src.push_back(static_cast<std::int64_t>(i));
+  std::vector<std::int64_t>& to = bf.new_row;
+  to.assign(n, -1);
+  for (std::size_t j = 0; j < n; ++j) to[static_cast<std::size_t>(src[j])] = static_cast<std::int64_t>(j);
+  Particles q;
+  fill_rows(q, pt, {}, src);
+  std::vector<std::uint8_t> ghost(n, 0);
+  std::fill(ghost.begin() + static_cast<std::ptrdiff_t>(split), ghost.end(), std::uint8_t{1});
+  const PairContacts& pc = w_->pair_contacts();
+  PairContacts nc;
+  std::vector<std::int64_t>& psrc = bf.psrc;
+  psrc.resize(pc.size());
+  std::iota(psrc.begin(), psrc.end(), std::int64_t{0});
+  nc.a.resize(pc.size());
+  nc.b.resize(pc.size());
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    if (ghost_at(pc.a[c]))
+      throw std::logic_error("DistDem: rank " + std::to_string(rank_) + " lists a pair of ball " +
+                             std::to_string(pt.id[pc.a[c]]) + ", a ghost, as its ball A with newton on.");
+    nc.a[c] = static_cast<std::uint32_t>(to[pc.a[c]]);
+    nc.b[c] = static_cast<std::uint32_t>(to[pc.b[c]]);
+  }
+  partners_by_row(nc.a, nc.b, psrc, split, bf.tb, bf.ts);
+  const std::vector<PairRec> none;
+  fill_column(nc.shift, pc.shift, none, psrc, &PairRec::s);
+  fill_column(nc.h, pc.h, none, psrc, &PairRec::h);
+  if (!pc.bond.empty()) fill_column(nc.bond, pc.bond, none, psrc, &PairRec::b);
+  std::array<WallContacts, 3> wc;
+  const auto wl = wall_lists(*w_);
+  for (std::size_t k = 0; k < 3; ++k) {
+    wc[k] = *wl[k];
+    for (std::uint32_t& i : wc[k].ball) i = static_cast<std::uint32_t>(to[i]);
+  }
+  const World::Counters kc = w_->counters();
+  w_->swap_balls(q, nc, wc, ghost);
+  w_->set_counters(kc);
+  w_->set_moving_rows(split);
+  split_ = split;
 }
 
 namespace {
@@ -1228,9 +1327,9 @@ void DistDem::exchange() {
   }
   std::vector<std::pair<std::uint32_t, int>> need_rows;  // (own row, rank that needs it)
   for (std::size_t k = 0; k + 1 < needs.size(); k += 2) {
-    const auto it = std::lower_bound(pt.id.begin(), pt.id.end(), needs[k]);
-    const std::size_t i = static_cast<std::size_t>(it - pt.id.begin());
-    if (it == pt.id.end() || *it != needs[k] || !mine(i))
+    const std::int64_t r = find_row(pt.id, split_, needs[k]);
+    const std::size_t i = static_cast<std::size_t>(r);
+    if (r < 0 || !mine(i))
       throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " was asked for ball " +
                              std::to_string(needs[k]) + ", which it does not own.");
     need_rows.emplace_back(static_cast<std::uint32_t>(i), static_cast<int>(needs[k + 1]));
@@ -1349,11 +1448,11 @@ void DistDem::exchange() {
   }
   // the rows kept: own rows that stay, and the rows some owner named
   for (std::uint64_t id : kin) {
-    const auto it = std::lower_bound(pt.id.begin(), pt.id.end(), id);
-    if (it == pt.id.end() || *it != id)
+    const std::int64_t r = find_row(pt.id, split_, id);
+    if (r < 0)
       throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " was asked to keep ball " +
                              std::to_string(id) + ", which it does not hold.");
-    keep[static_cast<std::size_t>(it - pt.id.begin())] = 1;
+    keep[static_cast<std::size_t>(r)] = 1;
   }
   // the new rows: one copy per id (every sender sends the same bits)
   std::vector<std::uint32_t>& bo = buf_->order;
@@ -1362,7 +1461,17 @@ void DistDem::exchange() {
   std::sort(bo.begin(), bo.end(), [&](std::uint32_t x, std::uint32_t y) { return bin[x].id < bin[y].id; });
   // merge the kept rows and the new ones in id order; new_row[old row] for the kept. First the
   // order (src[j]: the old row of row j, or ~k for the new record bin[k]), then each array
-  // filled in one pass.
+  // filled in one pass. With the ghosts in rows of their own the old rows are read in id order
+  // (ido: the owned and the ghost rows merged), and the new rows become [owned | ghosts].
+  const bool two = split_ < n;
+  std::vector<std::uint32_t>& ido = bf.ido;
+  if (two) {
+    ido.resize(n);
+    std::size_t x = 0, y = split_, at = 0;
+    while (x < split_ || y < n)
+      ido[at++] = static_cast<std::uint32_t>((y >= n || (x < split_ && pt.id[x] < pt.id[y])) ? x++ : y++);
+  }
+  auto old_at = [&](std::size_t j) -> std::size_t { return two ? ido[j] : j; };
   Particles& q = q_;
   std::vector<std::uint8_t>& ghost = ghost_buf_;
   ghost.clear();
@@ -1370,20 +1479,21 @@ void DistDem::exchange() {
   new_row.assign(n, -1);
   std::vector<std::int64_t>& src = bf.src;
   src.clear();
-  std::size_t i = 0, k = 0;
+  std::size_t j = 0, k = 0;
   std::uint64_t last = 0;
   bool any = false;
-  while (i < n || k < bo.size()) {
-    while (i < n && !keep[i]) ++i;
-    if (i >= n && k >= bo.size()) break;
-    if (k >= bo.size() || (i < n && pt.id[i] < bin[bo[k]].id)) {
+  while (j < n || k < bo.size()) {
+    while (j < n && !keep[old_at(j)]) ++j;
+    if (j >= n && k >= bo.size()) break;
+    const std::size_t i = j < n ? old_at(j) : 0;
+    if (k >= bo.size() || (j < n && pt.id[i] < bin[bo[k]].id)) {
       new_row[i] = static_cast<std::int64_t>(src.size());
       src.push_back(static_cast<std::int64_t>(i));
       ghost.push_back(own[i] != rank_);
       last = pt.id[i], any = true;
-      ++i;
+      ++j;
     } else {
-      if (i < n && pt.id[i] == bin[bo[k]].id)
+      if (j < n && pt.id[i] == bin[bo[k]].id)
         throw std::logic_error("DistDem::exchange: rank " + std::to_string(rank_) + " got ball " +
                                std::to_string(pt.id[i]) + " whole, but holds it.");
       const BallRec& b = bin[bo[k]];
@@ -1395,12 +1505,23 @@ void DistDem::exchange() {
       ++k;
     }
   }
+  std::size_t split = src.size();
+  if (own_first()) {  // the owned rows first, then the ghosts, each in id order
+    std::vector<std::int64_t>& s2 = bf.src2;
+    s2.clear();
+    for (std::size_t r = 0; r < src.size(); ++r)
+      if (!ghost[r]) s2.push_back(src[r]);
+    split = s2.size();
+    for (std::size_t r = 0; r < src.size(); ++r)
+      if (ghost[r]) s2.push_back(src[r]);
+    src.swap(s2);
+    std::fill(ghost.begin(), ghost.begin() + static_cast<std::ptrdiff_t>(split), std::uint8_t{0});
+    std::fill(ghost.begin() + static_cast<std::ptrdiff_t>(split), ghost.end(), std::uint8_t{1});
+    for (std::size_t r = 0; r < src.size(); ++r)
+      if (src[r] >= 0) new_row[static_cast<std::size_t>(src[r])] = static_cast<std::int64_t>(r);
+  }
   fill_rows(q, pt, bin, src);
-  const std::vector<std::uint64_t>& ids = q.id;
-  auto row_of = [&](std::uint64_t id) -> std::int64_t {
-    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
-    return (it != ids.end() && *it == id) ? it - ids.begin() : -1;
-  };
+  auto row_of = [&](std::uint64_t id) { return find_row(q.id, split, id); };
   // contacts: the kept ones (an own ball after the exchange, both balls kept), in (a, b) order,
   // merged with the received ones (one copy per pair)
   std::vector<std::uint32_t>& po = buf_->order2;
@@ -1410,7 +1531,26 @@ void DistDem::exchange() {
     return pin[x].ia != pin[y].ia ? pin[x].ia < pin[y].ia : pin[x].ib < pin[y].ib;
   });
   // First the list (rows a, b and psrc: the old contact, or ~k for the record pin[k]), then the
-  // shifts and histories copied in one pass per array.
+  // shifts and histories copied in one pass per array. With the ghosts in rows of their own the
+  // kept contacts are read in (A id, B id) order (cord: each A's owned and ghost partners
+  // merged), and each A's new partners put in row order after the merge (partners_by_row).
+  std::vector<std::uint32_t>& cord = bf.cord;
+  if (two) {
+    cord.resize(pc.size());
+    std::size_t at = 0;
+    for (std::size_t c0 = 0; c0 < pc.size();) {
+      std::size_t c1 = c0 + 1;
+      while (c1 < pc.size() && pc.a[c1] == pc.a[c0]) ++c1;
+      std::size_t y = c0;
+      while (y < c1 && pc.b[y] < split_) ++y;
+      std::size_t x = c0;
+      const std::size_t s = y;
+      while (x < s || y < c1)
+        cord[at++] = static_cast<std::uint32_t>((y >= c1 || (x < s && pt.id[pc.b[x]] < pt.id[pc.b[y]])) ? x++ : y++);
+      c0 = c1;
+    }
+  }
+  auto old_c = [&](std::size_t c) -> std::size_t { return two ? cord[c] : c; };
   PairContacts& nc = nc_;
   nc.a.clear(), nc.b.clear();
   std::vector<std::int64_t>& psrc = bf.psrc;
@@ -1425,14 +1565,15 @@ void DistDem::exchange() {
   const PairRec* prev = nullptr;
   while (c < pc.size() || kk < po.size()) {
     // the next kept contact
-    while (c < pc.size() && (new_row[pc.a[c]] < 0 || new_row[pc.b[c]] < 0)) ++c;
+    while (c < pc.size() && (new_row[pc.a[old_c(c)]] < 0 || new_row[pc.b[old_c(c)]] < 0)) ++c;
     const bool have_c = c < pc.size();
     const bool have_r = kk < po.size();
     if (!have_c && !have_r) break;
     bool take_c = have_c;
     if (have_c && have_r) {
       const PairRec& r = pin[po[kk]];
-      const std::uint64_t ia = pt.id[pc.a[c]], ib = pt.id[pc.b[c]];
+      const std::size_t oc = old_c(c);
+      const std::uint64_t ia = pt.id[pc.a[oc]], ib = pt.id[pc.b[oc]];
       if (r.ia == ia && r.ib == ib) {  // also received: the same pair, one copy
         ++kk;
         continue;
@@ -1440,7 +1581,8 @@ void DistDem::exchange() {
       take_c = ia != r.ia ? ia < r.ia : ib < r.ib;
     }
     if (take_c) {
-      push_pair(new_row[pc.a[c]], new_row[pc.b[c]], static_cast<std::int64_t>(c));
+      const std::size_t oc = old_c(c);
+      push_pair(new_row[pc.a[oc]], new_row[pc.b[oc]], static_cast<std::int64_t>(oc));
       ++c;
     } else {
       const std::uint32_t rk = po[kk++];
@@ -1454,6 +1596,7 @@ void DistDem::exchange() {
       push_pair(a, b, ~static_cast<std::int64_t>(rk));
     }
   }
+  if (own_first()) partners_by_row(nc.a, nc.b, psrc, split, bf.tb, bf.ts);
   fill_column(nc.shift, pc.shift, pin, psrc, &PairRec::s);
   fill_column(nc.h, pc.h, pin, psrc, &PairRec::h);
   if (has_bond) fill_column(nc.bond, pc.bond, pin, psrc, &PairRec::b);
@@ -1497,6 +1640,8 @@ void DistDem::exchange() {
     }
   }
   w_->swap_balls(q, nc, wc, ghost);  // q_, nc_, the wall lists, ghost_buf_ now hold the old arrays
+  split_ = split;
+  if (own_first()) w_->set_moving_rows(split);
   ++exchanges_;
   ++layout_gen_;
   build_forward();
@@ -1687,9 +1832,9 @@ void DistDem::build_forward() {
   for (int r = 0; r < size_; ++r)
     for (int j = 0; j < rcnt[static_cast<std::size_t>(r)]; ++j) {
       const std::uint64_t id = req[k++];
-      const auto it = std::lower_bound(q.id.begin(), q.id.end(), id);
-      const std::size_t i = static_cast<std::size_t>(it - q.id.begin());
-      if (it == q.id.end() || *it != id || (!ghost.empty() && ghost[i]))
+      const std::int64_t row = find_row(q.id, split_, id);
+      const std::size_t i = static_cast<std::size_t>(row);
+      if (row < 0 || (!ghost.empty() && ghost[i]))
         throw std::logic_error("DistDem: rank " + std::to_string(r) + " asked rank " + std::to_string(rank_) +
                                " for ball " + std::to_string(id) + ", which it does not own.");
       send_rows_[static_cast<std::size_t>(r)].push_back(static_cast<std::uint32_t>(i));

@@ -295,6 +295,11 @@ class World {
   /// Rows that are ghosts, copies of balls another rank owns (1 = ghost; empty: none): a pair
   /// of two ghosts is not kept in the list (it acts on ghosts only).
   const std::vector<std::uint8_t>& ghost_rows() const { return ghost_; }
+  /// Rows [0, n) are integrated, the rows from n on are not (default: every row). A rank's
+  /// World whose ghosts are rows of their own after the owned ones (DistDem with `newton`)
+  /// leaves them out: their x, v and ω are replaced by their owners' before anything reads them.
+  void set_moving_rows(std::size_t n) { moving_rows_ = n; }
+  std::size_t moving_rows() const { return std::min(moving_rows_, pt_.size()); }
   /// The state's counters and flags (time, step, the cached step and its recompute counter, the
   /// rebuild test's reference, the energies of local damping and of dropped contacts, ...): what
   /// a checkpoint saves besides the arrays (checkpoint.cpp), and what DistDem::unload sets when
@@ -554,6 +559,7 @@ class World {
   std::vector<double> chunk_e_;
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
+  std::size_t moving_rows_ = ~std::size_t{0};  // set_moving_rows
   std::function<double(double)> step_reduction_;  // set_step_reduction
   std::function<void(Vec3*, Vec3*)> newton_reverse_;  // set_newton (set: newton on)
   std::function<void(double*, double*)> newton_stiffness_;

@@ -1,7 +1,8 @@
 // The DEM on MPI ranks (issue 17; docs/scaling.md): space cut into bricks (a grid, or the leaves
 // of an RCB tree), one brick per rank. A rank's World holds the balls whose centres lie in its
-// brick (owned) and copies of the balls within reach of it (ghosts), every row in ball-id order,
-// and the ball-ball pairs that have an owned ball. A pair of an owned ball and a ghost is
+// brick (owned) and copies of the balls within reach of it (ghosts), every row in ball-id order
+// (with newton on: the owned rows in id order, then the ghosts in id order, which the World does
+// not integrate), and the ball-ball pairs that have an owned ball. A pair of an owned ball and a ghost is
 // computed on both ranks, from the same inputs, so both keep the same history (LAMMPS's
 // `newton off` for pairs). With set_newton(true) it is computed once, on the owner of its ball
 // A, and its force on the ghost goes back to the ghost's owner (`newton on`; not one World's
@@ -366,6 +367,13 @@ class DistDem {
                     const std::vector<std::vector<std::uint32_t>>& in_rows, std::size_t per_row, int tag, Pack pack,
                     Unpack unpack);
   void build_forward();  // the forward lists of the current rows
+  /// With the ghosts in rows of their own (own_first): rows in id order (take) put as [owned |
+  /// ghosts], each part in id order; sets split_ and the World's moving rows.
+  void ghosts_last();
+  /// `newton` on more than one rank: the ghosts are rows of their own after the owned rows, and
+  /// the World does not integrate them (their x, v, ω are forwarded before anything reads them).
+  /// With newton off the rows stay in id order: a ball's sums must add its partners in id order.
+  bool own_first() const { return newton_ && size_ > 1; }
   void reduce_walls();   // every wall's sums from every rank's contacts, in one World's order
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
   void balance_cuts(const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt, const std::vector<std::uint8_t>& skip);
@@ -402,6 +410,9 @@ class DistDem {
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
   std::int64_t exchanges_ = 0, migrated_ = 0, rebalances_ = 0, sparse_exchanges_ = 0;
   std::int64_t layout_gen_ = 0;  // +1 at every load and exchange: the rows may have changed
+  /// The rows' ids ascend in [0, split_) and in [split_, n): the owned rows and the ghosts with
+  /// own_first(), else split_ = n (every row in id order).
+  std::size_t split_ = 0;
   mutable std::int64_t balls_gen_ = -1;  // num_balls(): the layout its count was summed for
   mutable std::size_t balls_ = 0;
   std::vector<int> peers_;                   // peer_ranks()
