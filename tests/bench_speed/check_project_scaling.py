@@ -1,7 +1,7 @@
 #!/usr/bin/python3
 """ctest bench_project_scaling: bench/dem/project_scaling.py (docs/scaling.md), both workloads,
 both networks, against invariants of its cost model:
-- one rank: efficiency 1.00, no communication (exchange, forward, reduce, walls all 0);
+- one rank: efficiency 1.000, no communication (exchange, forward, reduce, walls all 0);
 - every part >= 0 and the total their sum (to the printed rounding);
 - more ranks never cost less in any part than 2 ranks, and the efficiency never rises with the
   rank count within a design (the walls' sums may fall by up to 2 %: Open MPI changes its
@@ -55,7 +55,7 @@ for wl in ("bench", "footing"):
         for design in sorted({r["design"] for r in rows}):
             rs = sorted((r for r in rows if r["design"] == design), key=lambda r: int(r["ranks"]))
             one = rs[0]
-            check(one["ranks"] == "1" and one["efficiency"] == "1.00", "%s %s %s: one rank %s" % (wl, net, design, one))
+            check(one["ranks"] == "1" and one["efficiency"] == "1.000", "%s %s %s: one rank %s" % (wl, net, design, one))
             check(all(float(one[k]) == 0.0 for k in parts[1:]), "%s %s %s: one rank communicates" % (wl, net, design))
             for r in rs:
                 vals = [float(r[k]) for k in parts]
@@ -96,7 +96,7 @@ for P in (2, 8, 64, 256, 1024):
                   "%s %s: Ethernet faster than InfiniBand at %d ranks" % (wl, design, P))
 grow = lambda d: cell("footing", "ib", d, 1024, "walls_ms") / cell("footing", "ib", d, 64, "walls_ms")
 check(grow("today") > grow("order-free"), "footing: the gathered walls' sums grow no faster than the order-free ones")
-print("project_scaling.py: %d tables checked; footing at 64 ranks, InfiniBand: today %.2f, order-free %.2f, newton %.2f" %
+print("project_scaling.py: %d tables checked; footing at 64 ranks, InfiniBand: today %.3f, order-free %.3f, newton %.3f" %
       (len(tables), cell("footing", "ib", "today", 64, "efficiency"), cell("footing", "ib", "order-free", 64, "efficiency"),
        cell("footing", "ib", "newton", 64, "efficiency")))
 for f in fails:
