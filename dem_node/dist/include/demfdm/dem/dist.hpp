@@ -176,7 +176,8 @@ class DistDem {
   ~DistDem();
 
   /// Take the balls and ball-ball contacts of `full`, the same World on every rank (built the
-  /// same way): each rank keeps its own balls, their ghosts and their pairs, in id order. A
+  /// same way): each rank keeps its own balls, their ghosts and their pairs, in id order (with
+  /// newton on, the ghosts after the owned balls). A
   /// prepared `full` (stepped or not since) is taken as it is, lists, histories, wall candidates
   /// and last forces included, so the ranks step on as `full` would; an unprepared one is
   /// prepared on the ranks, as `full.prepare()` would.
@@ -228,11 +229,13 @@ class DistDem {
   /// follow measured times differ from run to run.
   void set_balance(const Balance& b);
   /// `newton on` (LAMMPS's name; before load): a pair across a brick face is computed once, on
-  /// the rank that owns its ball A (the lower id), and the forces and torques it puts on a ghost
-  /// go back to the ghost's owner after the pair pass (reverse communication), as do the
+  /// the rank that owns its lower-id ball (its ball A), and the forces and torques it puts on a
+  /// ghost go back to the ghost's owner after the pair pass (reverse communication), as do the
   /// ghost's stiffness sums for the critical step. A pair's history lives on A's owner and
-  /// migrates with A. It saves the ghost pairs' second computation, but a ball's sum then adds
-  /// its remote pairs after its local ones: the results depend on the rank count (within
+  /// migrates with A. The ghosts are rows of their own after the owned rows, and the World does
+  /// not integrate them (own_first). It saves the ghost pairs' second computation and the ghosts'
+  /// motion, but a ball's sum then adds its remote pairs after its local ones and its ghost
+  /// partners after its owned ones: the results depend on the rank count and the cuts (within
   /// round-off at first), unlike `newton off` (the default), whose bits are one World's.
   void set_newton(bool on);
   /// The largest message [bytes] of load_from_root's parts and of unload to rank 0 (default
