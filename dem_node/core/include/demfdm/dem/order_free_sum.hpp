@@ -24,6 +24,8 @@
 
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
+#include <cstring>
 #include <vector>
 
 namespace demfdm::dem {
@@ -36,6 +38,24 @@ struct OrderFreeSum {
   int folds = 0;       // boundaries in use (0: every term is 0)
   bool plain = false;  // a bound that is not finite: fold[0] is the plain sum
 
+  /// 2^k for k in the normal range [-1022, 1023], exactly (std::ldexp(1.0, k) without the call).
+  static double pow2(int k) {
+    const std::uint64_t bits = static_cast<std::uint64_t>(k + 1023) << 52;
+    double d;
+    std::memcpy(&d, &bits, sizeof d);
+    return d;
+  }
+  /// The e of max_abs = m 2^e with m in [0.5, 1) (std::frexp's), for a finite max_abs > 0: read
+  /// from the exponent field of a normal number, from frexp for a subnormal one.
+  static int exponent_of(double max_abs) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &max_abs, sizeof bits);
+    const int biased = static_cast<int>((bits >> 52) & 0x7ff);
+    if (biased != 0) return biased - 1022;
+    int e = 0;
+    std::frexp(max_abs, &e);
+    return e;
+  }
   /// The boundaries for terms with |x| <= max_abs (the largest over every part).
   explicit OrderFreeSum(double max_abs) {
     if (!std::isfinite(max_abs)) {
@@ -43,17 +63,16 @@ struct OrderFreeSum {
       return;
     }
     if (!(max_abs > 0.0)) return;  // every term is +-0: the sum is +0
-    int e = 0;
-    std::frexp(max_abs, &e);  // max_abs = m 2^e, m in [0.5, 1): |x| <= 2^e
+    const int e = exponent_of(max_abs);  // |x| <= 2^e
     if (e + kCountBits > 1000 || e + kCountBits < -968) {  // beyond any physical sum: plain
       plain = true;
       return;
     }
-    double s = std::ldexp(1.0, e + kCountBits);
-    for (int k = 0; k < kFolds && s >= 0x1p-968; ++k) {  // the q's (2^-53 sigma) stay normal
-      sigma[k] = s;
+    // sigma_1 = 2^(e + 32), each next one 2^-21 of the last, while the q's (2^-53 sigma) stay
+    // normal (sigma >= 2^-968); every power here is a normal number
+    for (int k = e + kCountBits, j = 0; j < kFolds && k >= -968; ++j, k += kCountBits - 53) {
+      sigma[j] = pow2(k);
       ++folds;
-      s = std::ldexp(s, kCountBits - 53);
     }
   }
   [[gnu::always_inline]] void add(double x) {
