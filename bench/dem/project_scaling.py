@@ -169,12 +169,17 @@ MEASURED_FOOTING_AVX2 = dict(
     wall_ref_balls=38075,
     wall_record_bytes=144,
     wall_share_root_us=0.36e3 / 4828,
-    # order-free sums: each rank folds its own contacts' terms, 0.28 ms for about 2,400 facet
-    # contacts on the rank that did not wait (2 ranks, bench_dist --run, BENCH_DIST_PER_RANK):
-    # 0.12 us per contact; the largest rank is a corner brick of the block, with three of its faces
-    # on the interface (the sides and the floor; the top is free); slots: 4 per interface vertex
-    # (185 vertices) plus the totals, 746, growing as the interface, P^(2/3)
-    fold_us_per_contact=0.28e3 / 2400,
+    # order-free sums: each rank folds its own contacts' terms. Session 25: 0.28 ms for about 2,400
+    # facet contacts on the rank that did not wait (2 ranks, bench_dist --run, BENCH_DIST_PER_RANK),
+    # 0.12 us per contact. Session 27, the walls' path by its share of perf samples (wall_sum_terms,
+    # the bounds, the folds: CPU only, no wait), 2 ranks on session 25's penetration-end
+    # checkpoint, 2,414 facet contacts per rank: 0.196-0.215 ms per step and rank after the
+    # boundaries were built from bits (28c5164), 0.232-0.288 ms before (3 alternated pairs; 0.096-
+    # 0.119 us per contact, session 25's figure at its top): 0.085 us per contact. The largest rank
+    # is a corner brick of the block, with three of its faces on the interface (the sides and the
+    # floor; the top is free); slots: 4 per interface vertex (185 vertices) plus the totals, 746,
+    # growing as the interface, P^(2/3)
+    fold_us_per_contact=0.205e3 / 2414,
     wall_area_ref=4.0 * 4.0 + 4 * 4.0 * 10.0,  # [mm^2] the interface: four sides and the floor
     wall_values=746,
 )
