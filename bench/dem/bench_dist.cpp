@@ -22,7 +22,10 @@
 // (DistDem::load_from_root, as the DEM node does) instead of every rank cutting its own (load);
 // the last column, load_ms, is the wall time of either.
 // BENCH_DIST_DECOMP=rcb: recursive coordinate bisection (BrickGrid::set_rcb) instead of the cut
-// along one axis; `balance` then moves every cut of the tree.
+// along one axis; `balance` then moves every cut of the tree. BENCH_DIST_AXIS=x|y|z: strong and
+// footing cut across that axis instead (the strong cell's z side is half its x and y sides, so a
+// cut across z doubles the ghosts of one across x at the same ranks and balls per rank).
+// With --run, BENCH_DIST_DECOMP=slabs cuts slabs across the longest side or BENCH_DIST_AXIS.
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
@@ -556,10 +559,14 @@ int main(int argc, char** argv) {
   g.len = p.periodic.length;
   for (bool& per : g.periodic) per = !footing;
   const char* decomp = std::getenv("BENCH_DIST_DECOMP");
-  if (decomp && std::string(decomp) == "rcb")
+  if (decomp && std::string(decomp) == "rcb") {
     g.set_rcb(P);
-  else
-    g.n[footing ? 2 : 0] = P;
+  } else {
+    int axis = footing ? 2 : 0;
+    if (const char* ax = std::getenv("BENCH_DIST_AXIS"); ax && copies == 1)  // slabs across y or z instead
+      axis = std::clamp(ax[0] - 'x', 0, 2);
+    g.n[axis] = P;
+  }
   DistDem d(MPI_COMM_WORLD, p, g);
   const DistDem::Balance bal = newton_and_balance(d, balance);
   if (!std::getenv("BENCH_DIST_BALANCE_AFTER_LOAD")) d.set_balance(bal);  // (before the load: its first cut balanced too)
