@@ -44,11 +44,10 @@ double reference(const std::vector<double>& x) {
   return static_cast<double>(s);
 }
 
-// The boundaries and folds as first written (frexp and ldexp, the loop over the folds): the
-// reference of the constructor's reading of the exponent field.
+// The boundaries as first written (frexp and ldexp): the reference of the constructor's reading
+// of the exponent field.
 struct ReferenceSum {
   double sigma[OrderFreeSum::kFolds] = {0.0, 0.0, 0.0, 0.0};
-  double fold[OrderFreeSum::kFolds] = {0.0, 0.0, 0.0, 0.0};
   int folds = 0;
   bool plain = false;
   explicit ReferenceSum(double max_abs) {
@@ -70,17 +69,6 @@ struct ReferenceSum {
       s = std::ldexp(s, 32 - 53);
     }
   }
-  void add(double x) {
-    if (plain) {
-      fold[0] += x;
-      return;
-    }
-    for (int k = 0; k < folds; ++k) {
-      const double q = (sigma[k] + x) - sigma[k];
-      fold[k] += q;
-      x -= q;
-    }
-  }
 };
 
 }  // namespace
@@ -88,9 +76,8 @@ struct ReferenceSum {
 // OrderFreeSum's boundaries read from the bound's exponent field (frexp only for a subnormal)
 // and built as powers of two without ldexp, against the reference above: the same sigmas, fold
 // count and plain flag for bounds over the whole double range (subnormal, powers of two and
-// their neighbours, the edges of the plain range), and the same fold bits after 2,000 terms of
-// mixed sign and magnitude for each.
-TEST(OrderFreeSum, BoundariesAndFoldsAreTheReferenceAlgorithms) {
+// their neighbours, the edges of the plain range). (The folds read only these.)
+TEST(OrderFreeSum, BoundariesAreTheReferenceAlgorithms) {
   std::mt19937_64 rng(11);
   std::vector<double> bounds = {0.0, -0.0, 0x1p-1074, 0x1p-1060, 3.3e-310, 0x1p-1022, 0x1p-1001, 0x1p-1000,
                                 0x1p-999, 0x1p-940, 0x1p-937, 0x1p-936, 1e-300, 0.5, 1.0, 0x1p967, 0x1p968,
@@ -103,25 +90,16 @@ TEST(OrderFreeSum, BoundariesAndFoldsAreTheReferenceAlgorithms) {
     const double p = std::ldexp(1.0, k);
     bounds.insert(bounds.end(), {p, std::nextafter(p, 0.0), std::nextafter(p, 1e308)});
   }
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  int folded = 0;
+  int four = 0;
   for (const double b : bounds) {
     const OrderFreeSum got(b);
-    ReferenceSum want(b);
+    const ReferenceSum want(b);
     ASSERT_EQ(got.folds, want.folds) << "bound " << b;
     ASSERT_EQ(got.plain, want.plain) << "bound " << b;
     for (int k = 0; k < OrderFreeSum::kFolds; ++k) ASSERT_TRUE(same_bits(got.sigma[k], want.sigma[k])) << "bound " << b;
-    if (!std::isfinite(b) || !(b > 0.0)) continue;
-    OrderFreeSum sum(b);
-    for (int j = 0; j < 2000; ++j) {  // terms within the bound, over 60 orders of magnitude
-      const double x = b * u(rng) * std::pow(2.0, -std::floor(60.0 * std::abs(u(rng))));
-      sum.add(x);
-      want.add(x);
-    }
-    for (int k = 0; k < OrderFreeSum::kFolds; ++k) ASSERT_TRUE(same_bits(sum.fold[k], want.fold[k])) << "bound " << b;
-    folded += sum.folds == OrderFreeSum::kFolds;
+    four += got.folds == OrderFreeSum::kFolds;
   }
-  EXPECT_GT(folded, 300) << "most bounds take four folds";
+  EXPECT_GT(four, 300) << "most bounds take four folds";
 }
 
 // Every order and every grouping into parts (each part folded with the common bound, the parts'
