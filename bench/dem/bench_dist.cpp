@@ -25,7 +25,6 @@
 // along one axis; `balance` then moves every cut of the tree. BENCH_DIST_AXIS=x|y|z: strong and
 // footing cut across that axis instead (the strong cell's z side is half its x and y sides, so a
 // cut across z doubles the ghosts of one across x at the same ranks and balls per rank).
-// With --run, BENCH_DIST_DECOMP=slabs cuts slabs across the longest side or BENCH_DIST_AXIS.
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
@@ -68,6 +67,12 @@
 using namespace demfdm::dem;
 
 namespace {
+
+// The axis BENCH_DIST_AXIS names (x, y or z), else `fallback`.
+int axis_from_env(int fallback) {
+  const char* ax = std::getenv("BENCH_DIST_AXIS");
+  return ax ? std::clamp(ax[0] - 'x', 0, 2) : fallback;
+}
 
 // The projection's imbalance (docs/scaling.md): the balancing weight of every ball (1 + listed
 // contacts) of the final state, gathered on rank 0 and cut by a model grid of nx x ny x nz
@@ -323,9 +328,7 @@ int run_state(int argc, char** argv) {
     int axis = 0;
     for (int k = 1; k < 3; ++k)
       if (g.len[k] > g.len[axis]) axis = k;
-    if (const char* ax = std::getenv("BENCH_DIST_AXIS"))  // x, y or z instead of the longest side
-      axis = std::clamp(ax[0] - 'x', 0, 2);
-    g.n[axis] = P;
+    g.n[axis_from_env(axis)] = P;  // (the longest side unless named)
   } else {
     g.set_rcb(P);
   }
@@ -562,10 +565,8 @@ int main(int argc, char** argv) {
   if (decomp && std::string(decomp) == "rcb") {
     g.set_rcb(P);
   } else {
-    int axis = footing ? 2 : 0;
-    if (const char* ax = std::getenv("BENCH_DIST_AXIS"); ax && copies == 1)  // slabs across y or z instead
-      axis = std::clamp(ax[0] - 'x', 0, 2);
-    g.n[axis] = P;
+    const int axis = footing ? 2 : 0;
+    g.n[copies == 1 ? axis_from_env(axis) : axis] = P;  // (weak: across x, where the copies lie)
   }
   DistDem d(MPI_COMM_WORLD, p, g);
   const DistDem::Balance bal = newton_and_balance(d, balance);

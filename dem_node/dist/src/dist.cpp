@@ -390,6 +390,22 @@ std::int64_t find_row(const std::vector<std::uint64_t>& ids, std::size_t split, 
   return r >= 0 || split >= ids.size() ? r : in(split, ids.size());
 }
 
+// Rows given by their sources `src` with their ghost flags put as [owned | ghosts], each part in
+// the order it had (a stable partition; `ghost` follows). Returns the owned count. `tmp`: scratch.
+std::size_t put_ghosts_last(std::vector<std::int64_t>& src, std::vector<std::uint8_t>& ghost,
+                            std::vector<std::int64_t>& tmp) {
+  tmp.clear();
+  for (std::size_t r = 0; r < src.size(); ++r)
+    if (!ghost[r]) tmp.push_back(src[r]);
+  const std::size_t split = tmp.size();
+  for (std::size_t r = 0; r < src.size(); ++r)
+    if (ghost[r]) tmp.push_back(src[r]);
+  src.swap(tmp);
+  std::fill(ghost.begin(), ghost.begin() + static_cast<std::ptrdiff_t>(split), std::uint8_t{0});
+  std::fill(ghost.begin() + static_cast<std::ptrdiff_t>(split), ghost.end(), std::uint8_t{1});
+  return split;
+}
+
 // A pair list sorted by (A row, B id) within each A's run, put in (A row, B row) order, where the
 // rows of the partners below `split` ascend with their ids and so do those from `split` on: in
 // each run, stably, the partners below `split` first (the ghosts in rows of their own come after
@@ -874,19 +890,16 @@ void DistDem::ghosts_last() {
   auto ghost_at = [&](std::size_t i) { return !gh.empty() && gh[i] != 0; };
   Buffers& bf = *buf_;
   std::vector<std::int64_t>& src = bf.src;
-  src.clear();
-  for (std::size_t i = 0; i < n; ++i)
-    if (!ghost_at(i)) src.push_back(static_cast<std::int64_t>(i));
-  const std::size_t split = src.size();
-  for (std::size_t i = 0; i < n; ++i)
-    if (ghost_at(i)) src.push_back(static_cast<std::int64_t>(i));
+  src.resize(n);
+  std::iota(src.begin(), src.end(), std::int64_t{0});
+  std::vector<std::uint8_t> ghost(n, 0);
+  if (!gh.empty()) ghost = gh;
+  const std::size_t split = put_ghosts_last(src, ghost, bf.src2);
   std::vector<std::int64_t>& to = bf.new_row;
   to.assign(n, -1);
   for (std::size_t j = 0; j < n; ++j) to[static_cast<std::size_t>(src[j])] = static_cast<std::int64_t>(j);
   Particles q;
   fill_rows(q, pt, {}, src);
-  std::vector<std::uint8_t> ghost(n, 0);
-  std::fill(ghost.begin() + static_cast<std::ptrdiff_t>(split), ghost.end(), std::uint8_t{1});
   const PairContacts& pc = w_->pair_contacts();
   PairContacts nc;
   std::vector<std::int64_t>& psrc = bf.psrc;
@@ -1113,7 +1126,8 @@ double DistDem::owned_max_disp2() const {
   const Particles& pt = w_->balls();
   const auto& g = w_->ghost_rows();
   double d = 0.0;
-  for (std::size_t i = 0; i < pt.size(); ++i)
+  const std::size_t end = own_first() ? split_ : pt.size();  // (the ghosts in rows of their own: after)
+  for (std::size_t i = 0; i < end; ++i)
     if (g.empty() || !g[i]) d = std::max(d, norm2(pt.x[i] - pt.x_ref[i]));
   return d;
 }
@@ -1507,16 +1521,7 @@ void DistDem::exchange() {
   }
   std::size_t split = src.size();
   if (own_first()) {  // the owned rows first, then the ghosts, each in id order
-    std::vector<std::int64_t>& s2 = bf.src2;
-    s2.clear();
-    for (std::size_t r = 0; r < src.size(); ++r)
-      if (!ghost[r]) s2.push_back(src[r]);
-    split = s2.size();
-    for (std::size_t r = 0; r < src.size(); ++r)
-      if (ghost[r]) s2.push_back(src[r]);
-    src.swap(s2);
-    std::fill(ghost.begin(), ghost.begin() + static_cast<std::ptrdiff_t>(split), std::uint8_t{0});
-    std::fill(ghost.begin() + static_cast<std::ptrdiff_t>(split), ghost.end(), std::uint8_t{1});
+    split = put_ghosts_last(src, ghost, bf.src2);
     for (std::size_t r = 0; r < src.size(); ++r)
       if (src[r] >= 0) new_row[static_cast<std::size_t>(src[r])] = static_cast<std::int64_t>(r);
   }
