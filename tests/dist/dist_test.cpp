@@ -117,10 +117,12 @@ double weight_imbalance(const World& w, const BrickGrid& g) {
 // every rank passes or fails together.
 void check(const Scene& sc) {
   std::unique_ptr<World> full = build(sc, true);
-  // from_root: the other ranks run 2 threads, rank 0 sc.threads (each rank keeps its own count;
-  // the bits do not depend on it)
+  // from_root: the other ranks run 2 threads, rank 0 sc.threads while its whole World says one
+  // more (as a checkpoint from another machine: bench_dist --run); each rank keeps its own count,
+  // and the bits do not depend on it
   WorldParams own = full->params();
   if (sc.from_root && g_rank != 0) own.threads = 2;
+  if (sc.from_root && g_rank == 0) full->mutable_params().threads = own.threads + 1;
   DistDem d(MPI_COMM_WORLD, own, grid(sc));
   if (sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
   if (sc.from_root) {

@@ -732,7 +732,9 @@ std::unique_ptr<World> DistDem::part_of(const World& full, const Cut& k, int r,
 
 // The parameters and the halo of the ranks' Worlds, from the whole World.
 void DistDem::params_from(const World& full) {
+  const int threads = p_.threads;  // this rank's own, as the constructor set it (see load_from_root)
   p_ = full.params();
+  p_.threads = threads;
   p_.skin = full.skin();  // the full world's skin, not one from this rank's smallest ball
   // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
   // thread count.

@@ -180,7 +180,8 @@ class DistDem {
   /// newton on, the ghosts after the owned balls). A
   /// prepared `full` (stepped or not since) is taken as it is, lists, histories, wall candidates
   /// and last forces included, so the ranks step on as `full` would; an unprepared one is
-  /// prepared on the ranks, as `full.prepare()` would.
+  /// prepared on the ranks, as `full.prepare()` would. A rank's thread count is the one of the
+  /// parameters it constructed this DistDem with, not `full`'s.
   void load(const World& full);
   /// As load(full), with the whole World on rank 0 only (collective): the other ranks' `full` is
   /// not read (an empty World will do), so a rank other than 0 never holds more than its part.
