@@ -3,7 +3,8 @@
 //
 // Usage: mpirun -np P bench_dist [packing] [linear|softbond] [steps] [strong|weak|footing] [balance]
 //   strong:  the packing as it is, shared by the P ranks, cut along x;
-//   weak:    the packing repeated P times along x (P x 25,835 balls), one copy's worth per rank;
+//   weak:    the packing repeated P times along x (P x 25,835 balls), one copy's worth per rank
+//            (BENCH_DIST_AXIS: along that axis, cut across it);
 //   footing: penetration: the packing in a box of five planes (floor and sides), gravity (100 g),
 //            and the footing (diameter half the width) pushed into the top by two mean radii in
 //            the run; cut along z, so the top brick holds the work under the footing.
@@ -23,8 +24,9 @@
 // the last column, load_ms, is the wall time of either.
 // BENCH_DIST_DECOMP=rcb: recursive coordinate bisection (BrickGrid::set_rcb) instead of the cut
 // along one axis; `balance` then moves every cut of the tree. BENCH_DIST_AXIS=x|y|z: strong and
-// footing cut across that axis instead (the strong cell's z side is half its x and y sides, so a
-// cut across z doubles the ghosts of one across x at the same ranks and balls per rank).
+// footing cut across that axis instead, and weak repeats the packing along it (the cell's z side is
+// half its x and y sides, so a cut across z doubles the ghosts of one across x at the same ranks
+// and balls per rank).
 // BENCH_DIST_MODEL_GRID=nx,ny,nz: also print the imbalance of the final state cut by a model grid
 // of that many bricks, with even cuts, shifted cuts and RCB (model_grid below).
 // bench_dist --state FILE SCENE_HASH nx,ny,nz: the same for a World saved in a checkpoint.
@@ -55,6 +57,7 @@
 #include <filesystem>
 #include <numeric>
 #include <random>
+#include <stdexcept>
 #include <string>
 
 #include "coordinator/core/checkpoint.hpp"
@@ -374,6 +377,16 @@ int run_state(int argc, char** argv) {
     for (int r = 0; r < P; ++r) {
       if (r == rank) {
         const PhaseTimes& pt = d.world().phase_times();
+        // the listed pairs by what the pass does with them: a bond (intact or softening: vector lanes),
+        // an unbonded contact that touches (the scalar law), an unbonded pair apart (skipped)
+        const PairContacts& pc = d.world().pair_contacts();
+        std::size_t bonded_n = 0, touching = 0;
+        for (std::size_t c = 0; c < pc.size(); ++c) {
+          if (!pc.bond.empty() && bonded(pc.bond[c].state)) ++bonded_n;
+          else if (pc.h[c].flags & ContactHist::kActive) ++touching;
+        }
+        std::printf("rank,%d,bonded,%zu,unbonded_touching,%zu,unbonded_apart,%zu\n", rank, bonded_n, touching,
+                    pc.size() - bonded_n - touching);
         std::printf("rank,%d,owned,%zu,ghosts,%zu,pairs,%zu,facet_contacts,%zu,motion_ms,%.4f,forces_ms,%.4f,pair_ms,%.4f,"
                     "facet_ms,%.4f,rebuild_ms,%.4f,walls_ms,%.4f\n",
                     rank, d.owned(), d.ghosts(), d.world().pair_contacts().size(), d.world().facet_contacts().size(),
@@ -463,7 +476,13 @@ int main(int argc, char** argv) {
   if (argc == 4 && std::string(argv[1]) == "--merge") return merge_bench(std::atoi(argv[2]), std::atol(argv[3]));
   MPI_Init(&argc, &argv);
   if (argc >= 3 && std::string(argv[1]) == "--run") {
-    const int rc = run_state(argc, argv);
+    int rc = 0;
+    try {
+      rc = run_state(argc, argv);
+    } catch (const std::exception& e) {  // a wrong or unreadable checkpoint: one line, not an abort's trace
+      std::fprintf(stderr, "bench_dist --run: %s\n", e.what());
+      MPI_Abort(MPI_COMM_WORLD, 2);
+    }
     MPI_Finalize();
     return rc;
   }
@@ -484,6 +503,7 @@ int main(int argc, char** argv) {
   const bool footing = mode == "footing";
   Packing pk = load(file);
   const int copies = mode == "weak" ? P : 1;
+  const int copy_axis = axis_from_env(0);  // weak: the copies lie along it, the cuts across it
   if (footing && std::getenv("BENCH_DIST_REPLICATE")) {  // K x K x K copies of the periodic packing
     const int K = std::atoi(std::getenv("BENCH_DIST_REPLICATE"));
     const Vec3 L = pk.hi - pk.lo;
@@ -511,7 +531,8 @@ int main(int argc, char** argv) {
   p.threads = omp_get_max_threads();
   p.periodic.enabled = true;
   p.periodic.origin = pk.lo;
-  p.periodic.length = {L0.x * copies, L0.y, L0.z};
+  p.periodic.length = L0;
+  p.periodic.length[copy_axis] *= copies;
   p.ball_ball.model = model == "softbond" ? ContactModel::kSoftBond : ContactModel::kLinear;
   p.ball_ball.linear.kn_fixed = 2.55e5;
   p.ball_ball.linear.kratio = 2.4;
@@ -531,9 +552,12 @@ int main(int argc, char** argv) {
     const double r = pk.r[k];
     return x.x - r > pk.lo.x && x.x + r < pk.hi.x && x.y - r > pk.lo.y && x.y + r < pk.hi.y && x.z - r > pk.lo.z;
   };
-  for (int c = 0; c < copies; ++c)
+  for (int c = 0; c < copies; ++c) {
+    Vec3 shift{};
+    shift[copy_axis] = c * L0[copy_axis];
     for (std::size_t k : order)
-      if (!footing || inside(k)) full.add_ball(pk.x[k] + Vec3{c * L0.x, 0.0, 0.0}, pk.r[k]);
+      if (!footing || inside(k)) full.add_ball(pk.x[k] + shift, pk.r[k]);
+  }
   double rmean = 0.0, ztop = -1e300;
   for (std::size_t i = 0; i < pk.r.size(); ++i) {
     rmean += pk.r[i] / double(pk.r.size());
@@ -566,7 +590,7 @@ int main(int argc, char** argv) {
     g.set_rcb(P);
   } else {
     const int axis = footing ? 2 : 0;
-    g.n[copies == 1 ? axis_from_env(axis) : axis] = P;  // (weak: across x, where the copies lie)
+    g.n[axis_from_env(axis)] = P;  // (weak: across the axis the copies lie along)
   }
   DistDem d(MPI_COMM_WORLD, p, g);
   const DistDem::Balance bal = newton_and_balance(d, balance);
