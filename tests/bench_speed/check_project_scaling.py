@@ -13,6 +13,8 @@ both networks, against invariants of its cost model:
   (one per 23) at every rank count above 1, and its walls' sums gathered on rank 0 ("today") grow
   faster with the rank count than its order-free ones;
 - Ethernet is never faster than InfiniBand;
+- a faster core (--compute-scale 0.5) halves the compute of every row and raises no efficiency
+  above 1, and none above its own at scale 1;
 - the ghosts per owned ball of a cubic brick of 25,835 balls at the bench's density and halo:
   ((a + 2 h)^3 - a^3) / a^3 from the script's own figures, 0.469.
 Usage: check_project_scaling.py REPO_ROOT
@@ -94,6 +96,12 @@ for P in (2, 8, 64, 256, 1024):
         for design in ("today", "order-free", "newton", "next"):
             check(cell(wl, "ethernet", design, P, "total_ms") >= cell(wl, "ib", design, P, "total_ms"),
                   "%s %s: Ethernet faster than InfiniBand at %d ranks" % (wl, design, P))
+_, fast = run("--workload", "footing", "--network", "ib", "--compute-scale", "0.5")
+for r, r1 in zip(fast, tables[("footing", "ib")]):
+    check(abs(float(r["compute_ms"]) - 0.5 * float(r1["compute_ms"])) <= 0.002,
+          "compute-scale 0.5: %s %s compute %s against %s" % (r["design"], r["ranks"], r["compute_ms"], r1["compute_ms"]))
+    check(float(r["efficiency"]) <= float(r1["efficiency"]) and float(r["efficiency"]) <= 1.0,
+          "compute-scale 0.5: %s %s efficiency %s against %s" % (r["design"], r["ranks"], r["efficiency"], r1["efficiency"]))
 grow = lambda d: cell("footing", "ib", d, 1024, "walls_ms") / cell("footing", "ib", d, 64, "walls_ms")
 check(grow("today") > grow("order-free"), "footing: the gathered walls' sums grow no faster than the order-free ones")
 print("project_scaling.py: %d tables checked; footing at 64 ranks, InfiniBand: today %.3f, order-free %.3f, newton %.3f" %
