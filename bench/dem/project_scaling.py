@@ -124,19 +124,20 @@ MEASURED_AVX512 = dict(
 # its 119,136) are ghost pairs at 2 ranks; the footing's block has no wraps, so the model takes
 # the whole pair-pass gain as theirs: c = -0.001 + 0.088 = 0.087 (s.e. 0.023), an upper estimate.
 # (Session 27's weak form across x, 80 pairs, 0.1194 ghosts per owned ball: 0.07, s.e. 0.09.)
-# --newton-ghost-coeff overrides it: the footing workload's newton at 64 ranks gives 0.852 at
-# 0.087 (0.883 without the time-per-weight factor below), 0.836 at 0.133 (two standard errors
-# above), 0.822 at session 23's derived 0.176, 0.884 at the measured -0.001.
+# --newton-ghost-coeff overrides it: the footing workload's newton at 64 ranks gives 0.860 at
+# 0.087 (0.883 without the time-per-weight factor below), 0.844 at 0.133 (two standard errors
+# above), 0.830 at session 23's derived 0.176, 0.892 at the measured -0.001.
 NEWTON_GHOST_COEFF = 0.087
 # newton cannot balance by measured time (its results follow the cuts; time-weighted cuts differ
 # from run to run), only by contacts, and a contact's cost varies over the block. Session 28, the
 # default scene's penetration-end state (`bench_dist --run ... 2000 1`, order-free sums, newton on,
 # 2 ranks, RCB balanced by contacts, after the rank-0 thread count fix): time imbalance 1.026
-# (s.e. 0.006, 10 runs) at a weight imbalance of 1.000. The cut is across depth; a time per
-# weight that changes linearly with depth gives the two halves +-x/2 and the outer of four layers
-# (a 4 x 4 x 4 grid) +-3x/4, so the newton designs multiply RCB's weight imbalance by
-# 1 + 1.5 x 0.026 = 1.039 (the measured 1.026 gives 0.862 at 64 ranks; 1.039 gives 0.852).
-NEWTON_TIME_PER_WEIGHT = 1.0 + 1.5 * 0.026
+# (s.e. 0.006, 10 runs) with every contact counting 1, 1.019 (0.004, 22 runs) with a facet
+# contact counting kFacetContactWeight = 5, at a weight imbalance of 1.000. The cut is across
+# depth; a time per weight that changes linearly with depth gives the two halves +-x/2 and the
+# outer of four layers (a 4 x 4 x 4 grid) +-3x/4, so the newton designs multiply RCB's weight
+# imbalance by 1 + 1.5 x 0.019.
+NEWTON_TIME_PER_WEIGHT = 1.0 + 1.5 * 0.019
 REVERSE_BYTES = 48
 # The ghosts in rows of their own, not integrated (session 27, AVX2 AMD EPYC, bench_dist linear,
 # 600 steps, newton on): the motion phase against the build before, 8 alternated pairs each,

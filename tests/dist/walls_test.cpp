@@ -248,14 +248,15 @@ void check(const WallScene& sc) {
     if (g_size > 1) {
       EXPECT_GT(sum[1], 0) << "balls must cross brick faces";
       // Every record of these runs goes to a brick within the halo and the skin: point to point
-      // with the neighbours only, unless the reach is 0 (every exchange then all-to-all). Cuts
-      // balanced by measured time move by what the clock saw: a rebalance may move one far enough
+      // with the neighbours only, unless the reach is 0 (every exchange then all-to-all). Balanced
+      // cuts move by what the weights saw (measured time; or contacts, where the floor's facet
+      // contacts, 5 each, come and go: 9 ranks across z): a rebalance may move one far enough
       // that the next exchange falls back to all-to-all (DistDem::exchange; the bits above hold
       // either way), so there are at most as many fallbacks as rebalances (seen: 94 of 95
-      // exchanges with the neighbours only).
+      // exchanges with the neighbours only, by time at 2 ranks and by contacts at 9).
       if (sc.reach == 0.0)
         EXPECT_EQ(d.neighbour_exchanges(), 0);
-      else if (sc.weight == DistDem::Weight::kTime)
+      else if (sc.balance_every > 0)
         EXPECT_GE(d.neighbour_exchanges(), d.exchanges() - d.rebalances());
       else
         EXPECT_EQ(d.neighbour_exchanges(), d.exchanges());
@@ -380,4 +381,27 @@ TEST(DistWalls, TimeBalancedCutsAlongXSameBits) {
   sc.balance_every = 3;
   sc.weight = DistDem::Weight::kTime;
   check(sc);
+}
+// The balancing's weights (contact_weights): 1 per ball, 1 per end of a listed pair, 1 per plane
+// or footing contact and kFacetContactWeight = 5 per facet contact (a facet contact's pass took
+// 5.4 times a listed pair's on the default scene's penetration, docs/scaling.md): their total
+// over the balls of the floor scene after 200 steps, with contacts of every kind.
+TEST(DistWalls, ContactWeightsCountAFacetContactAsFive) {
+  WallScene sc{"walls, linear floor, weights"};
+  const Floor floor;
+  std::unique_ptr<World> w = build(sc, floor, true);
+  w->step(200);
+  const std::size_t pairs = w->pair_contacts().size(), planes = w->plane_contacts().size(),
+                    facets = w->facet_contacts().size(), footing = w->footing_contacts().size();
+  ASSERT_GT(pairs, 0u);
+  ASSERT_GT(planes, 0u);
+  ASSERT_GT(facets, 0u) << "the scene must touch its floor";
+  std::vector<std::int64_t> wt;
+  contact_weights(*w, wt);
+  ASSERT_EQ(wt.size(), w->num_balls());
+  std::int64_t total = 0;
+  for (std::int64_t v : wt) total += v;
+  EXPECT_EQ(kFacetContactWeight, 5);
+  EXPECT_EQ(total, static_cast<std::int64_t>(w->num_balls() + 2 * pairs + planes + footing) +
+                       kFacetContactWeight * static_cast<std::int64_t>(facets));
 }

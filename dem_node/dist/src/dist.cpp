@@ -1658,8 +1658,9 @@ void contact_weights(const World& w, std::vector<std::int64_t>& wt) {
   wt.assign(w.num_balls(), 1);
   const PairContacts& pc = w.pair_contacts();
   for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
-  for (const WallContacts* wc : wall_lists(w))
-    for (std::uint32_t i : wc->ball) ++wt[i];
+  const auto wl = wall_lists(w);
+  for (int k = 0; k < 3; ++k)
+    for (std::uint32_t i : wl[static_cast<std::size_t>(k)]->ball) wt[i] += k == 1 ? kFacetContactWeight : 1;
 }
 
 std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int n, double len) {

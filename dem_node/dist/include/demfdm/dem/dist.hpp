@@ -88,8 +88,12 @@ struct BrickGrid {
   void near(const Vec3& x, double halo, std::vector<int>& out) const;
 };
 
+/// What a facet contact weighs in contact_weights: its pass (the closest point on the facets, the
+/// law, the equivalent vertex forces) took 5.4 times a listed pair's on the default scene's
+/// penetration (session 28: 271 against 51 ns, 2 ranks, bench_dist --run; docs/scaling.md).
+inline constexpr std::int64_t kFacetContactWeight = 5;
 /// The balancing's weight of every row of `w`: 1 plus its listed contacts (pairs and wall
-/// contacts); the pair pass's work grows with them.
+/// contacts, a facet contact counting kFacetContactWeight); the passes' work grows with them.
 void contact_weights(const World& w, std::vector<std::int64_t>& wt);
 
 /// The inner cuts of `n` slabs of equal weight along an axis of length `len`, from the weights of
@@ -209,7 +213,8 @@ class DistDem {
   /// Dynamic balancing (as LAMMPS's `fix balance ... shift`): at every `every`-th exchange (0:
   /// never) the cuts along each axis with more than one brick move so that the slabs between
   /// them carry equal weight. A ball's weight is, by `weight`:
-  ///   kContacts: 1 plus its listed contacts (the pair pass's work grows with them);
+  ///   kContacts: contact_weights: 1 plus its listed contacts, a facet contact counting 5 (the
+  ///              passes' work grows with them);
   ///   kTime: its rank's compute time (motion and forces) since the last balancing, shared
   ///          evenly by the rank's own balls (LAMMPS's `weight time`), in nanoseconds.
   /// With RCB (BrickGrid::parts) every cut of the tree moves instead, level by level, so that each
