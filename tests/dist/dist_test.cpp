@@ -100,8 +100,8 @@ BrickGrid grid(const Scene& sc) {
   return g;
 }
 
-// The largest brick's balancing weight (contact_weights: 1 + listed contacts per ball) over the mean, for the
-// balls of `w` cut by `g`.
+// The largest brick's balancing weight (contact_weights: 1 + listed contacts per ball) over the
+// mean, for the balls of `w` cut by `g`.
 double weight_imbalance(const World& w, const BrickGrid& g) {
   std::vector<std::int64_t> wt, per(static_cast<std::size_t>(g.count()), 0);
   contact_weights(w, wt);

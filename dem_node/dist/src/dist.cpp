@@ -1658,7 +1658,7 @@ void contact_weights(const World& w, std::vector<std::int64_t>& wt) {
   wt.assign(w.num_balls(), 1);
   const PairContacts& pc = w.pair_contacts();
   for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
-  const auto wl = wall_lists(w);
+  const auto wl = wall_lists(w);  // planes, facets, the footing
   for (int k = 0; k < 3; ++k)
     for (std::uint32_t i : wl[static_cast<std::size_t>(k)]->ball) wt[i] += k == 1 ? kFacetContactWeight : 1;
 }
