@@ -44,8 +44,8 @@
 // ranks); imbalance (largest compute time over the mean); ghosts per owned ball; ghost states
 // received per step and rank; rebuilds; balls that changed rank; rebalances; owned balls per
 // rank (min/max); weight_imbalance (the balancing's weight, contact_weights: 1 + listed contacts
-// per own ball, at the end: largest over mean; free of timing noise); the footing force [N] (footing mode); the
-// World's rebuild and ball-ball pass [ms]; the `newton` reverse [ms] (its communication, counted in
+// per own ball, at the end: largest over mean; free of timing noise); the footing force [N]
+// (footing mode); the World's rebuild and ball-ball pass [ms]; the `newton` reverse [ms] (its communication, counted in
 // comm_share); the pairs listed over the ranks at the end (one World's count with newton on); the
 // wall time of the load [ms] (every rank cutting its part, or rank 0 sending them: BENCH_DIST_FROM_ROOT).
 #include <mpi.h>
