@@ -685,7 +685,7 @@ class DemParticipant : public node::Participant {
     const std::string weight = s_.string("dem.balance_weight");
     const bool by_time = weight == "time" || (weight == "auto" && !s_.boolean("dem.newton"));
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
-                        by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts});
+                        by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts, {}});
     {
       node::Timed t(effect_s_["ranks.load"]);
       dist_->load_from_root(world_);  // the other ranks hold only their part

@@ -43,8 +43,9 @@
 // exchange, walls; comm_share (forward + reduce + exchange + walls over the step, mean over
 // ranks); imbalance (largest compute time over the mean); ghosts per owned ball; ghost states
 // received per step and rank; rebuilds; balls that changed rank; rebalances; owned balls per
-// rank (min/max); weight_imbalance (the balancing's weight, contact_weights: 1 + listed contacts
-// per own ball, at the end: largest over mean; free of timing noise); the footing force [N]
+// rank (min/max); weight_imbalance (the balancing's weight, contact_weights: the modelled cost of
+// the own balls, ContactCost or BENCH_DIST_COST, at the end: largest over mean; free of timing
+// noise); the footing force [N]
 // (footing mode); the World's rebuild and ball-ball pass [ms]; the `newton` reverse [ms] (its communication, counted in
 // comm_share); the pairs listed over the ranks at the end (one World's count with newton on); the
 // wall time of the load [ms] (every rank cutting its part, or rank 0 sending them: BENCH_DIST_FROM_ROOT).
@@ -52,6 +53,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <cinttypes>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -77,28 +79,49 @@ int axis_from_env(int fallback) {
   return ax ? std::clamp(ax[0] - 'x', 0, 2) : fallback;
 }
 
-// The projection's imbalance (docs/scaling.md): the balancing weight of every ball (1 + listed
-// contacts) of the final state, gathered on rank 0 and cut by a model grid of nx x ny x nz
+// BENCH_DIST_COST=ball,bonded,touching,apart,facet,plane: the balancing's costs (ContactCost: a
+// row, an end of a bonded / touching / apart pair, a facet, a plane or footing contact) instead of
+// the model's; e.g. 1,1,1,1,5,1 for session 28's weights.
+ContactCost bench_cost() {
+  ContactCost c;
+  if (const char* s = std::getenv("BENCH_DIST_COST"); s && *s) {
+    std::int64_t v[6];
+    const int got = std::sscanf(s, "%" SCNd64 ",%" SCNd64 ",%" SCNd64 ",%" SCNd64 ",%" SCNd64 ",%" SCNd64,
+                                &v[0], &v[1], &v[2], &v[3], &v[4], &v[5]);
+    if (got != 6 || v[0] < 1 || *std::min_element(v + 1, v + 6) < 0)
+      throw std::invalid_argument(std::string("BENCH_DIST_COST: expected six integers (a row's >= 1, the others >= 0), found '") +
+                                  s + "'");
+    c = {v[0], v[1], v[2], v[3], v[4], v[5]};
+  }
+  return c;
+}
+
+// The projection's imbalance (docs/scaling.md): the balancing weight of every ball (contact_weights,
+// its modelled cost) of the final state, gathered on rank 0 and cut by a model grid of nx x ny x nz
 // bricks over the same box, three ways: even cuts; shifted cuts (DistDem's balancing: per axis,
 // equal-weight slabs from a 2,048-bin histogram); recursive coordinate bisection (RCB, LAMMPS's
 // tiled balance: the longest side halved at the weighted median, recursively; any brick count).
 // Prints the largest brick weight over the mean for each, and for RCB as DistDem cuts it
-// (rcb_cuts: each cut at the end of one of 2,048 bins, imbalance_rcb_code).
+// (rcb_cuts: each cut at the end of one of 2,048 bins, imbalance_rcb_code), and for those cuts
+// the largest brick's modelled cost (the model's ContactCost, whatever BENCH_DIST_COST weighs the
+// cuts by) over the mean, cost_imbalance_rcb_code: with BENCH_DIST_COST=1,1,1,1,5,1 the time
+// imbalance the model expects of session 28's weights.
 struct WB {
   Vec3 x;
-  std::int64_t w;
+  std::int64_t w, cost;
 };
 
 void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len, const char* spec);
 
 void model_grid(const DistDem& d, const BrickGrid& g, const char* spec) {
-  std::vector<std::int64_t> wt;
-  contact_weights(d.world(), wt);
+  std::vector<std::int64_t> wt, ct;
+  contact_weights(d.world(), wt, bench_cost());
+  contact_weights(d.world(), ct);
   const World& w = d.world();
   const auto& gh = w.ghost_rows();
   std::vector<WB> mine;
   for (std::size_t i = 0; i < w.num_balls(); ++i)
-    if (gh.empty() || !gh[i]) mine.push_back({w.balls().x[i], wt[i]});
+    if (gh.empty() || !gh[i]) mine.push_back({w.balls().x[i], wt[i], ct[i]});
   int rank = 0;
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   const std::vector<WB> all = gather_on_root(MPI_COMM_WORLD, mine);
@@ -175,12 +198,18 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
   std::vector<std::int64_t> ws;
   for (const WB& b : all) xs.push_back(b.x), ws.push_back(b.w);
   rcb_cuts(g, xs, ws, {}, 2048, [](std::vector<std::int64_t>&) {});
-  std::vector<std::int64_t> code(static_cast<std::size_t>(B), 0);
-  for (const WB& b : all) code[static_cast<std::size_t>(g.owner(b.x))] += b.w;
+  std::vector<std::int64_t> code(static_cast<std::size_t>(B), 0), cost(static_cast<std::size_t>(B), 0);
+  std::int64_t cost_total = 0;
+  for (const WB& b : all) {
+    code[static_cast<std::size_t>(g.owner(b.x))] += b.w;
+    cost[static_cast<std::size_t>(g.owner(b.x))] += b.cost;
+    cost_total += b.cost;
+  }
+  const double cost_imb = double(*std::max_element(cost.begin(), cost.end())) * B / double(cost_total);
   std::printf("model_grid,%dx%dx%d,balls,%zu,balls_per_brick,%.0f,imbalance_even,%.4f,imbalance_shift,%.4f,imbalance_rcb,%.4f,"
-              "imbalance_rcb_code,%.4f\n",
+              "imbalance_rcb_code,%.4f,cost_imbalance_rcb_code,%.4f\n",
               n[0], n[1], n[2], all.size(), double(all.size()) / B, imbalance(even), imbalance(shift), imbalance(rcb),
-              imbalance(code));
+              imbalance(code), cost_imb);
 }
 
 // BENCH_DIST_NEWTON onto `d`, and the balancing of every `every` exchanges with BENCH_DIST_WEIGHT's
@@ -189,6 +218,7 @@ DistDem::Balance newton_and_balance(DistDem& d, int every) {
   if (const char* nw = std::getenv("BENCH_DIST_NEWTON")) d.set_newton(std::string(nw) == "1");
   DistDem::Balance bal;
   bal.every = every;
+  bal.cost = bench_cost();
   if (const char* wgt = std::getenv("BENCH_DIST_WEIGHT"); wgt && std::string(wgt) == "time")
     bal.weight = DistDem::Weight::kTime;
   return bal;
@@ -250,11 +280,12 @@ int model_state(const char* file, const char* hash, const char* spec) {
   World w(WorldParams{});
   load_state_file(w, file, std::stoull(hash, nullptr, 16));
   std::vector<WB> all;
-  std::vector<std::int64_t> wt;
-  contact_weights(w, wt);
+  std::vector<std::int64_t> wt, ct;
+  contact_weights(w, wt, bench_cost());
+  contact_weights(w, ct);
   Vec3 lo = w.balls().x[0], hi = lo;
   for (std::size_t i = 0; i < w.num_balls(); ++i) {
-    all.push_back({w.balls().x[i], wt[i]});
+    all.push_back({w.balls().x[i], wt[i], ct[i]});
     for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], w.balls().x[i][k]), hi[k] = std::max(hi[k], w.balls().x[i][k]);
   }
   std::printf("state,%s,step,%lld,footing_z,%.6g\n", file, static_cast<long long>(w.step_count()),

@@ -33,8 +33,11 @@ Two workloads (--workload): "bench", the above (the strained periodic bench pack
 one rebuild per 23 steps, a fixed set of wall contacts); "footing", the default scene's
 penetration measured in session 25 on the AVX2 machine (soft bond, one rebuild per 699 steps, the
 interface's facet contacts and vertices growing with the block's surface, P^(2/3)).
+Without --csv it also prints newton's efficiency at 64 ranks with its standard error, from those
+of its two measured inputs (newton_uncertainty).
 Usage: project_scaling.py [--machine avx2|avx512] [--workload bench|footing] [--network ib|ethernet]
-                          [--balls N] [--newton-ghost-coeff C] [--compute-scale F] [--csv]
+                          [--balls N] [--newton-ghost-coeff C] [--time-per-weight X]
+                          [--compute-scale F] [--csv]
 """
 import argparse
 import math
@@ -124,20 +127,35 @@ MEASURED_AVX512 = dict(
 # its 119,136) are ghost pairs at 2 ranks; the footing's block has no wraps, so the model takes
 # the whole pair-pass gain as theirs: c = -0.001 + 0.088 = 0.087 (s.e. 0.023), an upper estimate.
 # (Session 27's weak form across x, 80 pairs, 0.1194 ghosts per owned ball: 0.07, s.e. 0.09.)
-# --newton-ghost-coeff overrides it: the footing workload's newton at 64 ranks gives 0.860 at
-# 0.087 (0.883 without the time-per-weight factor below), 0.844 at 0.133 (two standard errors
-# above), 0.830 at session 23's derived 0.176, 0.892 at the measured -0.001.
-NEWTON_GHOST_COEFF = 0.087
+# Session 29 ran 160 more pairs (bench/dem/ghost_coeff.py, another build): forces 0.9956 (s.e.
+# 0.0036), pair pass 0.9747 (0.0036), c = -0.020 + 0.117 = 0.097 (0.017). The two sessions'
+# 320 pairs, each phase's mean weighted by its inverse variance: forces 0.9971 (0.0029), pair
+# pass 0.9769 (0.0029): c = (0.9971 - 0.9769) / 0.2159 = 0.093 (s.e. 0.013, the forces phase's).
+# --newton-ghost-coeff overrides it (`project_scaling.py --workload footing` prints newton at 64
+# ranks with the standard errors of this and of the time per weight below).
+NEWTON_GHOST_COEFF = 0.093
+NEWTON_GHOST_COEFF_SE = 0.013
 # newton cannot balance by measured time (its results follow the cuts; time-weighted cuts differ
-# from run to run), only by contacts, and a contact's cost varies over the block. Session 28, the
-# default scene's penetration-end state (`bench_dist --run ... 2000 1`, order-free sums, newton on,
-# 2 ranks, RCB balanced by contacts, after the rank-0 thread count fix): time imbalance 1.026
-# (s.e. 0.006, 10 runs) with every contact counting 1, 1.019 (0.004, 22 runs) with a facet
-# contact counting kFacetContactWeight = 5, at a weight imbalance of 1.000. The cut is across
-# depth; a time per weight that changes linearly with depth gives the two halves +-x/2 and the
-# outer of four layers (a 4 x 4 x 4 grid) +-3x/4, so the newton designs multiply RCB's weight
-# imbalance by 1 + 1.5 x 0.019.
-NEWTON_TIME_PER_WEIGHT = 1.0 + 1.5 * 0.019
+# from run to run), only by a deterministic weight, and what it leaves is a time per weight that
+# differs between the bricks. Session 28 weighed a ball 1 plus its listed contacts (a facet contact
+# 5); session 29 weighs it by the modelled cost of its contacts by kind (ContactCost in
+# dem_node/dist: fitted to the per-rank phase times under five cuts). The default scene's
+# penetration-end state (`bench_dist --run ... 2000 1`, order-free sums, newton on, 2 ranks, RCB
+# balanced by the weight), 60 runs of each weight in alternated pairs over two builds: time
+# imbalance (largest rank's compute over the mean, the noise of each run included) 1.0196 (s.e.
+# 0.0019) with session 28's weights, 1.0128 (0.0017) with the costs; the ranks' compute ratio
+# 1.0378 (0.0045) against 0.9995 (0.0047): the costs leave no bias that the runs resolve, so what
+# is left is the runs' own noise, kept here as the time per weight (conservative). The cut is
+# across depth; a time per weight that changes linearly with depth gives the two halves +-x/2 and
+# the outer of four layers (a 4 x 4 x 4 grid) +-3x/4, so the newton designs multiply RCB's weight
+# imbalance by 1 + 1.5 x (--time-per-weight overrides x). With the costs the modelled time of a
+# brick is its weight, so RCB's 64 bricks carry the weight imbalance above in time too; session
+# 28's weights cut those bricks to a modelled time imbalance of 1.078 (gravity end) and 1.092
+# (penetration end) (`bench_dist --state ... 4,4,4` with BENCH_DIST_COST=1,1,1,1,5,1, its
+# cost_imbalance_rcb_code; the interface's facet contacts weighed 5 and cost 9 bonded pair ends),
+# where the projection had taken 1.0088 x 1.0285 = 1.038.
+NEWTON_TIME_PER_WEIGHT_X = 0.0128
+NEWTON_TIME_PER_WEIGHT_X_SE = 0.0017
 REVERSE_BYTES = 48
 # The ghosts in rows of their own, not integrated (session 27, AVX2 AMD EPYC, bench_dist linear,
 # 600 steps, newton on): the motion phase against the build before, 8 alternated pairs each,
@@ -154,6 +172,7 @@ NEWTON_EXCHANGE_RATIO = 1.13
 NEWTON_DESIGNS = ("newton", "next")
 for _m in (MEASURED_AVX2, MEASURED_AVX512):
     _m["ghost_pair_coeff_newton"] = NEWTON_GHOST_COEFF  # (a property of the ghosts, not the machine)
+    _m["time_per_weight_x"] = NEWTON_TIME_PER_WEIGHT_X
 # The footing workload (session 25): the default scene's penetration, the soft-bond law, measured
 # on the AVX2 AMD EPYC (2 vCPUs) with `bench_dist --run` on the default scene's penetration-end
 # checkpoint (38,075 balls, 148,172 pairs, 4,828 facet contacts, 62 footing contacts; a run of
@@ -286,7 +305,7 @@ def step_time(P, n, m, net, design):
     comp = n * m["compute_us"] * (1.0 + coeff * g)
     # the ghosts' motion: integrated (newton off), or in rows of their own and left out (newton)
     comp += n * g * m["motion_us"] * ((1.0 - GHOSTS_OUT_SAVED) if newton else 1.0)
-    imb = 1.0 if one else m["imbalance_rcb_code"] * (NEWTON_TIME_PER_WEIGHT if newton else 1.0)
+    imb = 1.0 if one else m["imbalance_rcb_code"] * ((1.0 + 1.5 * m["time_per_weight_x"]) if newton else 1.0)
     parts["compute"] = comp * imb
     if one:  # one rank: no exchange, no messages
         parts["exchange"] = parts["forward"] = parts["reduce"] = parts["walls"] = 0.0
@@ -336,6 +355,21 @@ def scale_compute(m, f):
     return dict(m, **{k: m[k] * f for k in keys if k in m})
 
 
+def newton_uncertainty(P, n, m, net):
+    """newton's efficiency at P ranks and its standard error from those of its two measured
+    inputs (the ghost coefficient, the time per weight), propagated linearly (one standard error
+    each way, in quadrature)."""
+    def eff(mm):
+        return step_time(1, n, mm, net, "newton")["total"] / step_time(P, n, mm, net, "newton")["total"]
+    e = eff(m)
+    var = 0.0
+    for key, se in (("ghost_pair_coeff_newton", NEWTON_GHOST_COEFF_SE), ("time_per_weight_x", NEWTON_TIME_PER_WEIGHT_X_SE)):
+        down = min(se, m[key]) if key == "time_per_weight_x" else se  # (an excess below 0 means nothing)
+        hi, lo = eff(dict(m, **{key: m[key] + se})), eff(dict(m, **{key: m[key] - down}))
+        var += ((hi - lo) / (se + down) * se) ** 2
+    return e, math.sqrt(var)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--machine", choices=sorted(MACHINES), default="avx512")
@@ -346,7 +380,11 @@ def main():
     ap.add_argument("--balls", type=int, default=25835, help="balls per rank (weak scaling)")
     ap.add_argument("--newton-ghost-coeff", type=float, default=None,
                     help="newton's ghost coefficient of the forces phase instead of the model's "
-                         "0.087 (docs/scaling.md, session 28: measured in weak form, s.e. 0.023)")
+                         "%.3f (docs/scaling.md: measured in weak form, s.e. %.3f)" % (NEWTON_GHOST_COEFF, NEWTON_GHOST_COEFF_SE))
+    ap.add_argument("--time-per-weight", type=float, default=None,
+                    help="newton's time per weight at 2 ranks, the excess x over 1, instead of the model's "
+                         "%.4f (session 29, s.e. %.4f); the newton designs multiply RCB's weight imbalance "
+                         "by 1 + 1.5 x" % (NEWTON_TIME_PER_WEIGHT_X, NEWTON_TIME_PER_WEIGHT_X_SE))
     ap.add_argument("--compute-scale", type=float, default=1.0,
                     help="the compute per ball (the step's, the motion's and the walls' fold) times this: "
                          "below 1 a faster core with the same network")
@@ -355,6 +393,8 @@ def main():
     m, net = WORKLOADS[args.workload] or MACHINES[args.machine], NETWORKS[args.network]
     if args.newton_ghost_coeff is not None:
         m = dict(m, ghost_pair_coeff_newton=args.newton_ghost_coeff)
+    if args.time_per_weight is not None:
+        m = dict(m, time_per_weight_x=args.time_per_weight)
     m = scale_compute(m, args.compute_scale)
     what = f"machine {args.machine}" if args.workload == "bench" else "workload footing (AVX2)"
     print(f"# {what}; network {args.network}: alpha {net['alpha_us']} us, beta {net['beta_gbs']} GB/s; "
@@ -372,6 +412,11 @@ def main():
                                       ("compute", "exchange", "forward", "reduce", "walls", "total")]
             row.append(f"{t1 / p['total']:.3f}")
             print(",".join(row) if args.csv else "| " + " | ".join(row) + " |")
+    if not args.csv:  # newton at 64 ranks with the standard errors of its two measured inputs
+        e, se = newton_uncertainty(64, args.balls, m, net)
+        print(f"\nnewton at 64 ranks: {e:.3f} +- {se:.3f} (the standard errors of the ghost coefficient, "
+              f"{NEWTON_GHOST_COEFF_SE}, and of the time per weight, {NEWTON_TIME_PER_WEIGHT_X_SE}; "
+              f"the network model and the depth trend not included)")
 
 
 if __name__ == "__main__":

@@ -315,16 +315,18 @@ void declare_dem(config::Section& root) {
             "rcb; slabs: LAMMPS's fix balance shift; docs/scaling.md); the first cut, at a stage's start, "
             "is balanced by contacts. Balancing moves balls between ranks, never a bit of the results. "
             "0: the geometric cuts (on the default scene's penetration at 2 ranks, a time imbalance of "
-            "1.19 against 1.02 balanced by contacts; session 28).")
+            "1.14 against 1.013 balanced by contacts; session 29).")
       .min(0);
   d.choice("balance_weight", {"auto", "contacts", "time"}, std::string("auto"),
-           "What dem.balance_every weighs: a ball's listed contacts plus one, a facet contact counting 5 "
-           "(contacts), or its rank's "
-           "measured compute time shared by the rank's balls (time, LAMMPS's weight time; the cuts then "
-           "differ from run to run, the results do not, unless dem.newton is on: refused with it). "
-           "auto: time, and contacts with dem.newton on. Contacts miss part of what a contact costs: on the "
-           "default scene's penetration at 2 ranks, cuts balanced by contacts leave a time imbalance of "
-           "1.019 (docs/scaling.md, session 28).");
+           "What dem.balance_every weighs: a ball's modelled cost per step from its contacts (contacts: "
+           "the ball itself, half of each listed pair by what the pass does with it, a bond, a contact "
+           "that touches or a pair apart, and its wall contacts, a facet contact weighing about five "
+           "bonded pairs; costs fitted to the default scene's penetration, docs/scaling.md), or its "
+           "rank's measured compute time shared by the rank's balls (time, LAMMPS's weight time; the "
+           "cuts then differ from run to run, the results do not, unless dem.newton is on: refused "
+           "with it). auto: time, and contacts with dem.newton on. On the default scene's penetration "
+           "at 2 ranks, cuts balanced by contacts leave a time imbalance of 1.013 (s.e. 0.002; the "
+           "ranks' compute ratio 1.000, s.e. 0.005; session 29).");
   d.boolean("newton", false,
             "With dem.ranks > 1 (LAMMPS's newton on; docs/scaling.md): a ball-ball pair across two ranks' "
             "bricks is computed once, on the rank of its lower-id ball, and its force on the other ball is "

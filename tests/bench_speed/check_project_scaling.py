@@ -15,6 +15,9 @@ both networks, against invariants of its cost model:
 - Ethernet is never faster than InfiniBand;
 - a faster core (--compute-scale 0.5) halves the compute of every row and raises no efficiency
   above 1, and none above its own at scale 1;
+- an even time per weight (--time-per-weight 0) raises the newton designs above 1 rank and
+  leaves every other row as it was; the "newton at 64 ranks: E +- S" line matches the table,
+  with 0 < S < 0.05;
 - the ghosts per owned ball of a cubic brick of 25,835 balls at the bench's density and halo:
   ((a + 2 h)^3 - a^3) / a^3 from the script's own figures, 0.469.
 Usage: check_project_scaling.py REPO_ROOT
@@ -102,6 +105,22 @@ for r, r1 in zip(fast, tables[("footing", "ib")]):
           "compute-scale 0.5: %s %s compute %s against %s" % (r["design"], r["ranks"], r["compute_ms"], r1["compute_ms"]))
     check(float(r["efficiency"]) <= float(r1["efficiency"]) and float(r["efficiency"]) <= 1.0,
           "compute-scale 0.5: %s %s efficiency %s against %s" % (r["design"], r["ranks"], r["efficiency"], r1["efficiency"]))
+# the time per weight only moves the newton designs, and an even one (0) raises them
+_, even = run("--workload", "footing", "--network", "ib", "--time-per-weight", "0")
+for r, r1 in zip(even, tables[("footing", "ib")]):
+    if r["design"] in ("newton", "next") and r["ranks"] != "1":
+        check(float(r["efficiency"]) > float(r1["efficiency"]),
+              "time-per-weight 0: %s %s efficiency %s not above %s" % (r["design"], r["ranks"], r["efficiency"], r1["efficiency"]))
+    else:
+        check(r == r1, "time-per-weight 0 moved %s %s" % (r["design"], r["ranks"]))
+# the standard error line: newton at 64 ranks as in the table, a positive error
+out = subprocess.run([sys.executable, script, "--workload", "footing"], capture_output=True, text=True, timeout=60).stdout
+mm = re.search(r"newton at 64 ranks: ([0-9.]+) \+- ([0-9.]+)", out)
+check(mm is not None, "no 'newton at 64 ranks: E +- S' line")
+if mm:
+    check(abs(float(mm.group(1)) - cell("footing", "ib", "newton", 64, "efficiency")) <= 0.0005,
+          "newton at 64 ranks %s, the table %s" % (mm.group(1), cell("footing", "ib", "newton", 64, "efficiency")))
+    check(0.0 < float(mm.group(2)) < 0.05, "newton's standard error %s" % mm.group(2))
 grow = lambda d: cell("footing", "ib", d, 1024, "walls_ms") / cell("footing", "ib", d, 64, "walls_ms")
 check(grow("today") > grow("order-free"), "footing: the gathered walls' sums grow no faster than the order-free ones")
 print("project_scaling.py: %d tables checked; footing at 64 ranks, InfiniBand: today %.3f, order-free %.3f, newton %.3f" %

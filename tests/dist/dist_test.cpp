@@ -100,7 +100,7 @@ BrickGrid grid(const Scene& sc) {
   return g;
 }
 
-// The largest brick's balancing weight (contact_weights: 1 + listed contacts per ball) over the
+// The largest brick's balancing weight (contact_weights: a ball's modelled cost) over the
 // mean, for the balls of `w` cut by `g`.
 double weight_imbalance(const World& w, const BrickGrid& g) {
   std::vector<std::int64_t> wt, per(static_cast<std::size_t>(g.count()), 0);
@@ -124,7 +124,7 @@ void check(const Scene& sc) {
   if (sc.from_root && g_rank != 0) own.threads = 2;
   if (sc.from_root && g_rank == 0) full->mutable_params().threads = own.threads + 1;
   DistDem d(MPI_COMM_WORLD, own, grid(sc));
-  if (sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
+  if (sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts, {}});
   if (sc.from_root) {
     if (g_rank != 0) full = std::make_unique<World>(own);  // no ball
     d.load_from_root(*full);
@@ -144,7 +144,7 @@ void check(const Scene& sc) {
     EXPECT_LT(first, g_size == 2 ? 1.02 : g_size <= 4 ? 1.25 : 1.4) << "the first cut must carry equal weight";
     EXPECT_GT(geometric, 1.5) << "the scene must need balancing";
   }
-  if (!sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
+  if (!sc.balance_at_load) d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts, {}});
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
   const double dt_end = d.world().dt();
@@ -445,7 +445,7 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
     } else {
       d.load(*full);
     }
-    d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts});
+    d.set_balance({sc.balance_every, 2048, DistDem::Weight::kContacts, {}});
     long long faults = layout_faults(d);  // as loaded, then after the exchanges of the run
     d.step(sc.steps);
     faults += layout_faults(d);
@@ -794,6 +794,22 @@ TEST(Dist, RcbCutsGiveEveryBrickItsShareOfTheWeight) {
   }
 }
 
+// contact_weights on a bonded specimen (the soft bond law): every ball's weight against its
+// counts of bonded pairs, unbonded pairs that touch and pairs listed apart after 600 strained
+// steps (one process), with the model's costs and with costs of different orders of magnitude.
+TEST(Dist, ContactWeightsOfABondedSpecimen) {
+  if (g_rank != 0) return;
+  std::unique_ptr<World> w = build({"softbond periodic, weights", ContactModel::kSoftBond, true, true}, true);
+  w->step(600);
+  const test::CostCounts n = test::cost_counts(*w);
+  std::printf("  bonded %zu, touching %zu, apart %zu\n", n.bonded, n.touching, n.apart);
+  ASSERT_GT(n.bonded, 0u);
+  ASSERT_GT(n.touching, 0u);
+  ASSERT_GT(n.apart, 0u);
+  EXPECT_EQ(test::weights(*w), n.row);
+  EXPECT_EQ(test::weights(*w, test::kDistinctCosts), test::cost_counts(*w, test::kDistinctCosts).row);
+}
+
 // radix_order is std::stable_sort's order of the keys (duplicates in index order), for keys of
 // 1 to 64 bits; order_wall_shares puts 2-40 sorted runs of shares, with keys repeated across
 // runs, in one World's order as a stable sort does (the same records in the same places), on
@@ -861,13 +877,13 @@ int main(int argc, char** argv) {
 // newton's results follow the cuts, and time-weighted cuts differ from run to run.
 TEST(Dist, NewtonWithTimeWeightedCutsIsRefused) {
   Scene sc{"refusal", ContactModel::kLinear, true};
-  const DistDem::Balance by_time{1, 2048, DistDem::Weight::kTime}, by_contacts{1, 2048, DistDem::Weight::kContacts};
+  const DistDem::Balance by_time{1, 2048, DistDem::Weight::kTime, {}}, by_contacts{1, 2048, DistDem::Weight::kContacts, {}};
   {
     DistDem d(MPI_COMM_WORLD, WorldParams{}, grid(sc));
     d.set_newton(true);
     EXPECT_THROW(d.set_balance(by_time), std::invalid_argument);
     EXPECT_NO_THROW(d.set_balance(by_contacts));
-    EXPECT_NO_THROW(d.set_balance({0, 2048, DistDem::Weight::kTime}));  // no balancing: no cuts to follow
+    EXPECT_NO_THROW(d.set_balance({0, 2048, DistDem::Weight::kTime, {}}));  // no balancing: no cuts to follow
   }
   {
     DistDem d(MPI_COMM_WORLD, WorldParams{}, grid(sc));

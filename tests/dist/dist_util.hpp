@@ -47,6 +47,43 @@ inline void expect_same_measures(const World& ref, double ke, double fc, double 
   EXPECT_GT(want[1], 0.0);
 }
 
+/// `w`'s contacts by kind, and the weight that contact_weights should give every row from them
+/// (`cost`: a row, both ends of every listed pair by what the pass does with it, every wall
+/// contact), with its total.
+struct CostCounts {
+  std::size_t bonded = 0, touching = 0, apart = 0, planes = 0, facets = 0;
+  std::vector<std::int64_t> row;
+  std::int64_t total = 0;
+};
+inline CostCounts cost_counts(const World& w, const ContactCost& cost = {}) {
+  CostCounts n;
+  n.row.assign(w.num_balls(), cost.ball);
+  const PairContacts& pc = w.pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    std::int64_t e = cost.apart_end;
+    if (!pc.bond.empty() && bonded(pc.bond[c].state)) ++n.bonded, e = cost.bonded_end;
+    else if (pc.h[c].flags & ContactHist::kActive) ++n.touching, e = cost.touching_end;
+    else ++n.apart;
+    n.row[pc.a[c]] += e;
+    n.row[pc.b[c]] += e;
+  }
+  for (const WallContacts* wc : {&w.plane_contacts(), &w.footing_contacts()})
+    for (std::uint32_t i : wc->ball) n.row[i] += cost.plane, ++n.planes;
+  for (std::uint32_t i : w.facet_contacts().ball) n.row[i] += cost.facet, ++n.facets;
+  for (std::int64_t v : n.row) n.total += v;
+  return n;
+}
+
+/// contact_weights of `w` with `cost`.
+inline std::vector<std::int64_t> weights(const World& w, const ContactCost& cost = {}) {
+  std::vector<std::int64_t> wt;
+  contact_weights(w, wt, cost);
+  return wt;
+}
+
+/// Costs of six different orders of magnitude: a row's weight then shows each of its counts.
+inline constexpr ContactCost kDistinctCosts{1, 10, 100, 1000, 100000, 10000};
+
 /// Call on every rank after rank 0 has run its EXPECTs.
 inline void share_verdict() {
   int ok = g_rank == 0 ? !::testing::Test::HasFailure() : 1;

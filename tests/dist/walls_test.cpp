@@ -173,7 +173,7 @@ void check(const WallScene& sc) {
   } else {
     d.load(*full);
   }
-  d.set_balance({sc.balance_every, 2048, sc.weight});
+  d.set_balance({sc.balance_every, 2048, sc.weight, {}});
   d.set_neighbour_reach(sc.reach);
   std::vector<Vec3> hist;
   run(d.world(), floor, sc.steps / sc.per_call, hist, [&] { d.step(sc.per_call); });
@@ -383,26 +383,51 @@ TEST(DistWalls, TimeBalancedCutsAlongXSameBits) {
   sc.weight = DistDem::Weight::kTime;
   check(sc);
 }
-// The balancing's weights (contact_weights): 1 per ball, 1 per end of a listed pair, 1 per plane
-// or footing contact and kFacetContactWeight = 5 per facet contact (a facet contact's pass took
-// 5.4 times a listed pair's on the default scene's penetration, docs/scaling.md): their total
-// over the balls of the floor scene after 200 steps, with contacts of every kind.
-TEST(DistWalls, ContactWeightsCountAFacetContactAsFive) {
+// The balancing's weights (contact_weights, ContactCost) of every ball of the floor scene after 200
+// steps, with pairs that touch and pairs apart, plane, footing and facet contacts, against its
+// counts of each kind: with the model's costs, with costs of six different orders of magnitude
+// and with session 28's weights (1 per ball, pair end and plane contact, 5 per facet contact).
+TEST(DistWalls, ContactWeightsAreTheModelledCostOfEachKindOfContact) {
   WallScene sc{"walls, linear floor, weights"};
   const Floor floor;
   std::unique_ptr<World> w = build(sc, floor, true);
   w->step(200);
-  const std::size_t pairs = w->pair_contacts().size(), planes = w->plane_contacts().size(),
-                    facets = w->facet_contacts().size(), footing = w->footing_contacts().size();
-  ASSERT_GT(pairs, 0u);
-  ASSERT_GT(planes, 0u);
-  ASSERT_GT(facets, 0u) << "the scene must touch its floor";
-  std::vector<std::int64_t> wt;
-  contact_weights(*w, wt);
-  ASSERT_EQ(wt.size(), w->num_balls());
+  const test::CostCounts n = test::cost_counts(*w);
+  ASSERT_GT(n.touching, 0u);
+  ASSERT_GT(n.apart, 0u);
+  ASSERT_GT(w->plane_contacts().size(), 0u);
+  ASSERT_GT(w->footing_contacts().size(), 0u);
+  ASSERT_GT(n.facets, 0u) << "the scene must touch its floor";
+  EXPECT_EQ(test::weights(*w), n.row);
+  EXPECT_EQ(test::weights(*w, test::kDistinctCosts), test::cost_counts(*w, test::kDistinctCosts).row);
+  const ContactCost s28{1, 1, 1, 1, 5, 1};
   std::int64_t total = 0;
-  for (std::int64_t v : wt) total += v;
-  EXPECT_EQ(kFacetContactWeight, 5);
-  EXPECT_EQ(total, static_cast<std::int64_t>(w->num_balls() + 2 * pairs + planes + footing) +
-                       kFacetContactWeight * static_cast<std::int64_t>(facets));
+  for (std::int64_t v : test::weights(*w, s28)) total += v;
+  EXPECT_EQ(total, static_cast<std::int64_t>(w->num_balls() + 2 * w->pair_contacts().size() + n.planes + 5 * n.facets));
+}
+
+// The ranks' weights (DistDem::weight: each rank's own balls, with Balance::cost) add up to one
+// World's after 200 steps on the ranks (newton off: a pair across two bricks is listed on both,
+// each rank weighing its own ball's end), with costs of six different orders of magnitude.
+TEST(DistWalls, RankWeightsAddUpToOneWorldsWithTheBalanceCosts) {
+  WallScene sc{"walls, linear floor, rank weights", ContactModel::kLinear, 2};
+  const Floor floor;
+  std::unique_ptr<World> full = build(sc, floor, true);
+  BrickGrid g;
+  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
+  g.len = {kL, kL, kL};
+  g.n[sc.axis] = g_size;
+  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  d.load(*full);
+  d.set_balance({0, 2048, DistDem::Weight::kContacts, test::kDistinctCosts});
+  std::vector<Vec3> hist, rh;
+  run(d.world(), floor, 200, hist, [&] { d.step(1); });
+  long long mine = d.weight(), sum = 0;
+  MPI_Allreduce(&mine, &sum, 1, MPI_LONG_LONG, MPI_SUM, MPI_COMM_WORLD);
+  std::unique_ptr<World> ref = build(sc, floor, true);
+  run(*ref, floor, 200, rh, [&] { ref->step(1); });
+  const test::CostCounts n = test::cost_counts(*ref, test::kDistinctCosts);
+  ASSERT_GT(n.touching, 0u);
+  ASSERT_GT(n.apart, 0u);
+  EXPECT_EQ(sum, n.total);
 }

@@ -1654,13 +1654,20 @@ void DistDem::exchange() {
   build_forward();
 }
 
-void contact_weights(const World& w, std::vector<std::int64_t>& wt) {
-  wt.assign(w.num_balls(), 1);
+void contact_weights(const World& w, std::vector<std::int64_t>& wt, const ContactCost& cost) {
+  wt.assign(w.num_balls(), cost.ball);
   const PairContacts& pc = w.pair_contacts();
-  for (std::size_t c = 0; c < pc.size(); ++c) ++wt[pc.a[c]], ++wt[pc.b[c]];
+  const bool bonds = !pc.bond.empty();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const std::int64_t e = bonds && bonded(pc.bond[c].state)       ? cost.bonded_end
+                           : (pc.h[c].flags & ContactHist::kActive) ? cost.touching_end
+                                                                    : cost.apart_end;
+    wt[pc.a[c]] += e;
+    wt[pc.b[c]] += e;
+  }
   const auto wl = wall_lists(w);  // planes, facets, the footing
   for (int k = 0; k < 3; ++k)
-    for (std::uint32_t i : wl[static_cast<std::size_t>(k)]->ball) wt[i] += k == 1 ? kFacetContactWeight : 1;
+    for (std::uint32_t i : wl[static_cast<std::size_t>(k)]->ball) wt[i] += k == 1 ? cost.facet : cost.plane;
 }
 
 std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int n, double len) {
@@ -1682,7 +1689,7 @@ std::vector<double> equal_weight_cuts(const std::vector<std::int64_t>& hist, int
 
 std::int64_t DistDem::weight() const {
   std::vector<std::int64_t> wt;
-  contact_weights(*w_, wt);
+  contact_weights(*w_, wt, bal_.cost);
   const auto& gh = w_->ghost_rows();
   std::int64_t s = 0;
   for (std::size_t i = 0; i < wt.size(); ++i)
@@ -1701,7 +1708,7 @@ void DistDem::rebalance() {
     const auto per = static_cast<std::int64_t>(std::llround(mine ? t * 1e9 / double(mine) : 0.0));
     wt.assign(n, std::max<std::int64_t>(per, 1));
   } else {
-    contact_weights(*w_, wt);
+    contact_weights(*w_, wt, bal_.cost);
   }
   balance_cuts(pt.x, wt, w_->ghost_rows());
   ++rebalances_;
@@ -1743,7 +1750,7 @@ void DistDem::balance_at_load(const World* full) {
   if (bal_.every <= 0 || size_ < 2) return;
   std::vector<std::int64_t> wt;
   if (full) {
-    contact_weights(*full, wt);
+    contact_weights(*full, wt, bal_.cost);
     balance_cuts(full->balls().x, wt, {});
   } else {
     balance_cuts({}, {}, {});

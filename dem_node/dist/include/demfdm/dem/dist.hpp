@@ -88,13 +88,28 @@ struct BrickGrid {
   void near(const Vec3& x, double halo, std::vector<int>& out) const;
 };
 
-/// What a facet contact weighs in contact_weights: its pass (the closest point on the facets, the
-/// law, the equivalent vertex forces) took 5.4 times a listed pair's on the default scene's
-/// penetration (session 28: 271 against 51 ns, 2 ranks, bench_dist --run; docs/scaling.md).
-inline constexpr std::int64_t kFacetContactWeight = 5;
-/// The balancing's weight of every row of `w`: 1 plus its listed contacts (pairs and wall
-/// contacts, a facet contact counting kFacetContactWeight); the passes' work grows with them.
-void contact_weights(const World& w, std::vector<std::int64_t>& wt);
+/// The balancing's cost model (contact_weights): what one step costs a rank per row and per
+/// contact, in nanoseconds of one core, fitted to the per-rank phase times of the default scene's
+/// penetration state (soft bond law; session 29: 2 ranks under five cuts, bench_dist --run,
+/// AVX2 AMD EPYC; docs/scaling.md): the motion and the per-ball rest of the forces phase 20 ns
+/// per ball; the pair pass 51 ns per bonded pair and 22 ns per pair apart, with the rebuild's
+/// 3 ns per listed pair; the facet pass (the closest point, the law, the equivalent vertex
+/// forces) 249 ns per facet contact. A pair's cost is shared by its two balls. Unbonded pairs
+/// that touch (0.1 % of that state's pairs) take the bonded figure, plane and footing contacts a
+/// pair's law: neither is resolved by that state. Other laws and machines may set their own
+/// (DistDem::Balance::cost; LAMMPS's fix balance takes user weights likewise).
+struct ContactCost {
+  std::int64_t ball = 20;
+  std::int64_t bonded_end = 27;    // (51 + 3) / 2
+  std::int64_t touching_end = 27;  // as bonded (not resolved)
+  std::int64_t apart_end = 12;     // (22 + 3) / 2
+  std::int64_t facet = 250;
+  std::int64_t plane = 54;  // plane and footing contacts: a pair's law (not resolved)
+};
+/// The balancing's weight of every row of `w`: its modelled cost per step (ContactCost): the row
+/// itself, half of each listed pair by what the pass does with it (a bond, a contact that touches,
+/// a pair apart) and each of its wall contacts (a facet contact, a plane or the footing).
+void contact_weights(const World& w, std::vector<std::int64_t>& wt, const ContactCost& cost = {});
 
 /// The inner cuts of `n` slabs of equal weight along an axis of length `len`, from the weights of
 /// `hist.size()` even bins: cut j at the end of the first bin where the running weight reaches
@@ -213,8 +228,8 @@ class DistDem {
   /// Dynamic balancing (as LAMMPS's `fix balance ... shift`): at every `every`-th exchange (0:
   /// never) the cuts along each axis with more than one brick move so that the slabs between
   /// them carry equal weight. A ball's weight is, by `weight`:
-  ///   kContacts: contact_weights: 1 plus its listed contacts, a facet contact counting 5 (the
-  ///              passes' work grows with them);
+  ///   kContacts: contact_weights: its modelled cost, from its listed contacts by kind and its
+  ///              wall contacts (`cost`; the passes' work grows with them);
   ///   kTime: its rank's compute time (motion and forces) since the last balancing, shared
   ///          evenly by the rank's own balls (LAMMPS's `weight time`), in nanoseconds.
   /// With RCB (BrickGrid::parts) every cut of the tree moves instead, level by level, so that each
@@ -230,6 +245,7 @@ class DistDem {
     int every = 0;
     int bins = 2048;
     Weight weight = Weight::kContacts;
+    ContactCost cost;  // kContacts' costs
   };
   /// Refused with `newton` on and time weights: newton's results follow the cuts, and cuts that
   /// follow measured times differ from run to run.
@@ -250,7 +266,8 @@ class DistDem {
   bool newton() const { return newton_; }
   const BrickGrid& grid() const { return grid_; }
   std::int64_t rebalances() const { return rebalances_; }
-  /// This rank's load as the balancing weighs it: Σ over its own balls of 1 + listed contacts.
+  /// This rank's load as the balancing weighs it: Σ over its own balls of contact_weights
+  /// (Balance::cost).
   std::int64_t weight() const;
 
   World& world() { return *w_; }
