@@ -684,8 +684,10 @@ class DemParticipant : public node::Participant {
     // (auto: measured time, but contacts with newton on, whose results follow the cuts)
     const std::string weight = s_.string("dem.balance_weight");
     const bool by_time = weight == "time" || (weight == "auto" && !s_.boolean("dem.newton"));
+    const std::vector<std::int64_t> k = s_.integers("dem.balance_costs");  // (six, checked by the schema)
     dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
-                        by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts, {}});
+                        by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts,
+                        dem::ContactCost{k[0], k[1], k[2], k[3], k[4], k[5]}});
     {
       node::Timed t(effect_s_["ranks.load"]);
       dist_->load_from_root(world_);  // the other ranks hold only their part

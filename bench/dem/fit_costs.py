@@ -13,7 +13,8 @@ times against its counts, least squares through the origin over every rank-run:
   rebuild     = listed pairs x r
   rest of the forces phase = owned balls x o
 and prints them in ns with each fit's rms relative residual, then the integer costs
-(BENCH_DIST_COST order: ball, bonded end, touching end, apart end, facet, plane) that they give:
+(BENCH_DIST_COST and the scene key dem.balance_costs, in the order ball, bonded end, touching
+end, apart end, facet, plane) that they give:
 the ball m + o, a pair's end (its pass + r) / 2, the plane and footing contacts a bonded pair's
 cost (not fitted). Every run's JSON record is appended to --out.
 
@@ -114,9 +115,11 @@ def main():
     r = rc[0] * ns
     costs = [max(1, round((mc[0] + oc[0]) * ns)), round((bonded + r) / 2), round((touch + r) / 2),
              round((apart + r) / 2), round(fc[0] * ns), round(bonded + r)]
-    print("BENCH_DIST_COST=" + ",".join(str(max(0, c)) for c in costs) +
+    costs = [max(0, c) for c in costs]
+    print("BENCH_DIST_COST=" + ",".join(str(c) for c in costs) +
           "  (ball, bonded end, touching end, apart end, facet, plane)" +
           ("" if touching else "; touching as bonded: too few unbonded pairs that touch"))
+    print("scene: [dem] balance_costs = [" + ", ".join(str(c) for c in costs) + "]")
 
 
 if __name__ == "__main__":

@@ -1,5 +1,6 @@
 #include "common/schema/scene_schema.hpp"
 
+#include "demfdm/dem/balance_cost.hpp"
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/params.hpp"
 #include "demfdm/dem/specimen.hpp"
@@ -327,6 +328,18 @@ void declare_dem(config::Section& root) {
            "with it). auto: time, and contacts with dem.newton on. On the default scene's penetration "
            "at 2 ranks, cuts balanced by contacts leave a time imbalance of 1.013 (s.e. 0.002; the "
            "ranks' compute ratio 1.000, s.e. 0.005; session 29).");
+  {
+    const dem::ContactCost c;
+    d.integers("balance_costs", "ns",
+               std::vector<std::int64_t>{c.ball, c.bonded_end, c.touching_end, c.apart_end, c.facet, c.plane},
+               "What dem.balance_weight = contacts charges a ball per step, in ns of one core: [the ball, each "
+               "end of a bonded pair, of an unbonded pair that touches, of a pair listed apart, each facet "
+               "contact, each plane or footing contact]; the ball's at least 1. The defaults were fitted to "
+               "the default scene's penetration (soft bond law) on an AVX2 core; bench/dem/fit_costs.py fits "
+               "them to a run's own checkpoint on the machine at hand (docs/scaling.md, session 29).")
+        .length(6)
+        .min(0);
+  }
   d.boolean("newton", false,
             "With dem.ranks > 1 (LAMMPS's newton on; docs/scaling.md): a ball-ball pair across two ranks' "
             "bricks is computed once, on the rank of its lower-id ball, and its force on the other ball is "
@@ -600,6 +613,10 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
              "\"contacts\" or \"auto\" with dem.newton = true (newton's results follow the cuts, and cuts "
              "balanced by measured time differ from run to run: two runs of the scene would differ)",
              "\"time\"");
+  // A ball that weighs nothing leaves a brick of them without weight (the geometric cut).
+  if (sc.has("dem") && sc.integers("dem.balance_costs")[0] < 1)
+    ctx.fail("dem.balance_costs", "a ball's cost (the first number) of at least 1 ns",
+             std::to_string(sc.integers("dem.balance_costs")[0]));
   // The couple stage bonds the balls to the interface facets (docs/theory.md 2.6).
   if (has_action("couple") && !can_bond("dem.ball_facet.model"))
     ctx.fail("dem.ball_facet.model", "'pbond' or 'softbond' (a couple stage bonds the balls to the interface facets)",

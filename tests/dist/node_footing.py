@@ -28,8 +28,10 @@ shutil.rmtree(work, ignore_errors=True)
 os.makedirs(work)
 
 # (name, ranks, threads, more overrides): 3 ranks balance their cuts by contacts every 2nd
-# rebuild, 2 x 2 by measured time every 3rd (the cuts then differ from run to run, the bits not).
-runs = [("ranks1", 1, 1, []), ("ranks2", 2, 1, []), ("ranks3", 3, 1, ["dem.balance_every=2"]),
+# rebuild (with session 28's weights through dem.balance_costs), 2 x 2 by measured time every 3rd
+# (the cuts then differ from run to run, the bits not).
+runs = [("ranks1", 1, 1, []), ("ranks2", 2, 1, []),
+        ("ranks3", 3, 1, ["dem.balance_every=2", "dem.balance_costs=[1,1,1,1,5,1]"]),
         ("ranks2_threads2", 2, 2, ["dem.balance_every=3", "dem.balance_weight=time", "dem.decomposition=slabs"])]
 env = dict(os.environ, DEMFDM_BUILD=build)
 for name, ranks, threads, more in runs:

@@ -189,6 +189,9 @@ TEST(SceneErrors, CrossFieldAndNodeChecksRefuseAtCheck) {
       {"stage.generate.nodes=[\"dem\", \"continuum\"]", "stage.generate.nodes"},  // a continuum cannot generate
       // newton's results follow the cuts, and time-weighted cuts differ from run to run
       {"dem.balance_weight=\"time\"", "dem.balance_weight", "dem.newton=true"},
+      {"dem.balance_costs=[20,27,27,12,250]", "dem.balance_costs"},       // six costs
+      {"dem.balance_costs=[0,27,27,12,250,54]", "dem.balance_costs"},     // a ball that weighs nothing
+      {"dem.balance_costs=[20,27,27,-12,250,54]", "dem.balance_costs"},   // a negative cost
   };
   const auto dir = scratch("demfdm-crossfield-" + std::to_string(getpid()));
   fs::create_directories(dir);
