@@ -201,8 +201,9 @@ void model_imbalance(const std::vector<WB>& all, const Vec3& lo, const Vec3& len
   std::vector<std::int64_t> code(static_cast<std::size_t>(B), 0), cost(static_cast<std::size_t>(B), 0);
   std::int64_t cost_total = 0;
   for (const WB& b : all) {
-    code[static_cast<std::size_t>(g.owner(b.x))] += b.w;
-    cost[static_cast<std::size_t>(g.owner(b.x))] += b.cost;
+    const auto o = static_cast<std::size_t>(g.owner(b.x));
+    code[o] += b.w;
+    cost[o] += b.cost;
     cost_total += b.cost;
   }
   const double cost_imb = double(*std::max_element(cost.begin(), cost.end())) * B / double(cost_total);

@@ -29,6 +29,8 @@ import sys
 
 import numpy as np
 
+from bench_env import bench_dist, mpi_env
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 CUTS = {
     "rcb": ({}, "0"),
@@ -74,17 +76,8 @@ def main():
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--out", default=None, help="append every run's JSON record here")
     args = ap.parse_args()
-    exe = os.path.join(args.build, "bin", "bench_dist")
-    if not os.access(exe, os.X_OK):
-        sys.exit(f"fit_costs.py: no bench_dist at {exe} (--build DIR)")
-    env = dict(os.environ, BENCH_DIST_NEWTON="1", BENCH_DIST_ORDER_FREE="1", BENCH_DIST_PER_RANK="1",
-               OMP_NUM_THREADS="1")
-    for k, v in (("OMPI_MCA_btl", "self,vader"), ("OMPI_MCA_btl_vader_single_copy_mechanism", "none"),
-                 ("OMPI_MCA_oob_tcp_if_include", "lo")):  # (launch/run's defaults: one host, loopback)
-        env.setdefault(k, v)
-    if os.geteuid() == 0:
-        env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-        env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    exe = bench_dist(args.build, "fit_costs.py")
+    env = mpi_env(BENCH_DIST_NEWTON="1", BENCH_DIST_ORDER_FREE="1", BENCH_DIST_PER_RANK="1", OMP_NUM_THREADS="1")
     rows = []
     for rnd in range(args.rounds):
         for name, (cut_env, balance) in CUTS.items():

@@ -24,6 +24,8 @@ import statistics as st
 import subprocess
 import sys
 
+from bench_env import bench_dist, mpi_env
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 PHASES = ("forces_ms", "pair_ms", "rebuild_ms", "motion_ms")
 
@@ -49,16 +51,9 @@ def main():
     ap.add_argument("--steps", type=int, default=600)
     ap.add_argument("--out", default=None, help="append every run's CSV line here (with pair and role)")
     args = ap.parse_args()
-    exe = os.path.join(args.build, "bin", "bench_dist")
+    exe = bench_dist(args.build, "ghost_coeff.py")
     pk = os.path.join(HERE, "data", "bench_packing_25835.txt")
-    if not os.access(exe, os.X_OK):
-        sys.exit(f"ghost_coeff.py: no bench_dist at {exe} (--build DIR)")
-    env = dict(os.environ, BENCH_DIST_NEWTON="1", OMP_NUM_THREADS="1")
-    for k, v in (("OMPI_MCA_btl", "self,vader"), ("OMPI_MCA_btl_vader_single_copy_mechanism", "none"),
-                 ("OMPI_MCA_oob_tcp_if_include", "lo")):  # (launch/run's defaults: one host, loopback)
-        env.setdefault(k, v)
-    if os.geteuid() == 0:
-        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    env = mpi_env(BENCH_DIST_NEWTON="1", OMP_NUM_THREADS="1")
     base = [exe, pk, "linear", str(args.steps)]
     weak_cmd = ["mpirun", "-n", "2"] + base + ["weak"]
     ref_cmds = [["taskset", "-c", str(k), "mpirun", "--bind-to", "none", "-n", "1"] + base + ["strong"] for k in (0, 1)]

@@ -614,9 +614,8 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
              "balanced by measured time differ from run to run: two runs of the scene would differ)",
              "\"time\"");
   // A ball that weighs nothing leaves a brick of them without weight (the geometric cut).
-  if (sc.has("dem") && sc.integers("dem.balance_costs")[0] < 1)
-    ctx.fail("dem.balance_costs", "a ball's cost (the first number) of at least 1 ns",
-             std::to_string(sc.integers("dem.balance_costs")[0]));
+  if (const std::int64_t ball = sc.has("dem") ? sc.integers("dem.balance_costs")[0] : 1; ball < 1)
+    ctx.fail("dem.balance_costs", "a ball's cost (the first number) of at least 1 ns", std::to_string(ball));
   // The couple stage bonds the balls to the interface facets (docs/theory.md 2.6).
   if (has_action("couple") && !can_bond("dem.ball_facet.model"))
     ctx.fail("dem.ball_facet.model", "'pbond' or 'softbond' (a couple stage bonds the balls to the interface facets)",

@@ -158,14 +158,19 @@ void run(World& w, const Floor& floor, int steps, std::vector<Vec3>& history, St
   }
 }
 
+// The block cut into g_size slabs across sc.axis, the cuts on planes of ball centres.
+BrickGrid grid(const WallScene& sc) {
+  BrickGrid g;
+  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
+  g.len = {kL, kL, kL};
+  g.n[sc.axis] = g_size;
+  return g;
+}
+
 void check(const WallScene& sc) {
   const Floor floor;
   std::unique_ptr<World> full = build(sc, floor, true);  // prepared: taken as it is (the node's case)
-  BrickGrid g;
-  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};  // cuts on planes of ball centres
-  g.len = {kL, kL, kL};
-  g.n[sc.axis] = g_size;
-  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
   if (sc.from_root) {
     if (g_rank != 0) full = std::make_unique<World>(full->params());  // no ball, no wall, no effect
     d.set_part_chunk(4096);  // each part and each assembled share in many messages
@@ -315,11 +320,7 @@ static void check_refusal(bool from_root) {
   std::unique_ptr<World> full = build({"refusal"}, floor, true);
   full->add_effect(std::make_unique<PeriodicServo>(ServoParams{}, kR));
   if (from_root && g_rank != 0) full = std::make_unique<World>(full->params());
-  BrickGrid g;
-  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
-  g.len = {kL, kL, kL};
-  g.n[0] = g_size;
-  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  DistDem d(MPI_COMM_WORLD, full->params(), grid({"refusal"}));
   try {
     if (from_root)
       d.load_from_root(*full);
@@ -413,11 +414,7 @@ TEST(DistWalls, RankWeightsAddUpToOneWorldsWithTheBalanceCosts) {
   WallScene sc{"walls, linear floor, rank weights", ContactModel::kLinear, 2};
   const Floor floor;
   std::unique_ptr<World> full = build(sc, floor, true);
-  BrickGrid g;
-  g.lo = {-0.5 * kS, -0.5 * kS, -0.5 * kS};
-  g.len = {kL, kL, kL};
-  g.n[sc.axis] = g_size;
-  DistDem d(MPI_COMM_WORLD, full->params(), g);
+  DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
   d.load(*full);
   d.set_balance({0, 2048, DistDem::Weight::kContacts, test::kDistinctCosts});
   std::vector<Vec3> hist, rh;
