@@ -296,8 +296,11 @@ class DemParticipant : public node::Participant {
     energy_pending_ = true;  // the stage's energy balance starts at its first step
     if (part_only()) {
       // Rank 0 sets the stage up on the whole World and sends this rank its part at the first
-      // step of a stage on the ranks (enter_dist).
+      // step of a stage on the ranks (enter_dist); the REV's expansion and servo step on every
+      // rank.
       effect_s_.clear();
+      if (st.kind == schema::Action::kGenerate) generate();
+      if (st.kind == schema::Action::kServo) servo_on_ranks();
       return {};
     }
     open_outputs();
@@ -327,7 +330,7 @@ class DemParticipant : public node::Participant {
     proto::Values v;
     switch (st.kind) {
       case schema::Action::kGenerate: v = report(generate()); break;
-      case schema::Action::kServo: v = report(servo()); break;
+      case schema::Action::kServo: v = report(g_ranks.size > 1 ? servo_on_ranks() : servo()); break;
       case schema::Action::kBond:
         v = report(dem::install_bonds(world_, -std::numeric_limits<double>::infinity(), dem::scene::bond_gap(s_)));
         break;
@@ -823,17 +826,56 @@ class DemParticipant : public node::Participant {
     world_.prepare();
   }
 
+  // The generate stage: the REV, then bonds over the gaps that give Table 1's Z (docs/ucs-study.md),
+  // at least 1e-3 d_min apart. On ranks the REV's radius expansion runs on every rank (every rank
+  // calls this; the bonds are rank 0's, on the assembled REV).
   dem::StageReport generate() {
-    // Bonds over the gaps that give Table 1's Z (docs/ucs-study.md), at least 1e-3 d_min apart.
     const double z = s_.real_or_word("dem.specimen.bond_coordination").value_or(0.0);
-    return dem::generate_specimen(world_, dem::scene::rev(s_), z,
-                                  1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale"));
+    const double gap_floor = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
+    if (g_ranks.size <= 1) return dem::generate_specimen(world_, dem::scene::rev(s_), z, gap_floor);
+    dem::DistDem d(g_ranks.comm, world_.params(), rev_grid());
+    dem::StageReport r = dem::generate_rev(d, world_, dem::scene::rev(s_));
+    spdlog::info("dem: the REV's radius expansion ran on {} ranks ({} exchanges)", g_ranks.size, d.exchanges());
+    if (!part_only()) dem::bond_specimen(world_, r, z, gap_floor);
+    return r;
+  }
+  // The bricks of the REV's periodic cell on the ranks (RCB), from rank 0's cell.
+  dem::BrickGrid rev_grid() {
+    double c[6] = {world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
+                   world_.cell_length().x, world_.cell_length().y, world_.cell_length().z};
+    MPI_Bcast(c, 6, MPI_DOUBLE, 0, g_ranks.comm);
+    dem::BrickGrid g;
+    g.lo = {c[0], c[1], c[2]};
+    g.len = {c[3], c[4], c[5]};
+    g.periodic[0] = g.periodic[1] = g.periodic[2] = true;
+    g.set_rcb(g_ranks.size);
+    return g;
   }
 
+  // Hold the servo's criterion for 160 critical steps (docs/theory.md 4.11; 200 steps at dt_safety 0.8).
+  static constexpr double kServoHold = 160.0;
   dem::StageReport servo() {
     const auto sv = dem::scene::servo(s_, block_);
-    // Hold the criterion for 160 critical steps (docs/theory.md 4.11; 200 steps at dt_safety 0.8).
-    return dem::servo_specimen(world_, sv.p, sv.tol, sv.ratio, 160.0, sv.budget, sv.fric);
+    return dem::servo_specimen(world_, sv.p, sv.tol, sv.ratio, kServoHold, sv.budget, sv.fric);
+  }
+  // The REV's servo on the ranks (docs/scaling.md, "the REV's expansion and servo on the ranks"):
+  // rank 0's REV cut by RCB over its periodic cell (rev_grid) and sent to the ranks, the servo run
+  // by every rank (one World's steps, report and specimen, bit for bit), the REV assembled on
+  // rank 0 again, which sets the next stages up. Every rank calls it; the report is rank 0's.
+  dem::StageReport servo_on_ranks() {
+    dem::DistDem d(g_ranks.comm, world_.params(), rev_grid());
+    {
+      node::Timed t(effect_s_["ranks.load"]);
+      d.load_from_root(world_);
+    }
+    const auto sv = dem::scene::servo(s_, block_);
+    dem::StageReport r = dem::servo_specimen(d, sv.p, sv.tol, sv.ratio, kServoHold, sv.budget, sv.fric);
+    {
+      node::Timed t(effect_s_["ranks.unload"]);
+      d.unload(world_, true);
+    }
+    spdlog::info("dem: the REV's servo ran on {} ranks ({} exchanges)", g_ranks.size, d.exchanges());
+    return r;
   }
 
   proto::Values report(const dem::StageReport& r) {

@@ -33,6 +33,12 @@
 // mpirun -np P bench_dist --run DIR [steps] [balance]: a run's checkpoint (its DEM World) stepped
 // on the ranks as the DEM node steps it (run_state below).
 // bench_dist --merge P N: rank 0's merge of the walls' shares, P runs of N (merge_bench below).
+// mpirun -np P bench_dist --rev N [seed]: the REV's preparation on the ranks (rev_bench below): N balls
+// of the paper's PSD at upscaling 1.5 drawn into a cube at porosity 0.52042, their radius expansion
+// (5 increments), bonds to Z = 6.82 on rank 0, and the soft-bond REV's servo (compaction at friction
+// 0.1, then the final one, to (6.25, 6.25, 12.5) kPa), as the DEM node runs them with dem.ranks = P. One line per phase:
+// phase, ranks, balls, steps, wall_s, particle_steps_per_s, converged; on one rank also both phases
+// on one World without DistDem (as the node at dem.ranks = 1), the same steps.
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
 // cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
 // the run. Ball ids follow a Morton order of the packing (rows in id order are then local in
@@ -503,10 +509,76 @@ int merge_bench(int P, long N) {
   return 0;
 }
 
+// `mpirun -np P bench_dist --rev N [seed]` (above).
+int rev_bench(long n, std::uint64_t seed) {
+  int rank = 0, P = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &P);
+  RevParams rp = scene_rev_defaults();
+  rp.seed = seed;
+  rp.n_particles = static_cast<std::size_t>(n);
+  rp.porosity_final = 0.52042;
+  const double L = std::cbrt(static_cast<double>(n) / psd_expected_count(rp.psd, 1.0, rp.porosity_final));
+  WorldParams p;
+  p.periodic.enabled = true;
+  p.periodic.length = {L, L, L};
+  p.ball_ball.model = ContactModel::kSoftBond;
+  p.skin_factor = 0.8;  // (the default scene's)
+  p.dt_fixed = 0.0;
+  p.threads = 1;
+  p.thread_independent = true;
+  World full(p);
+  BrickGrid g;
+  g.lo = {0.0, 0.0, 0.0};
+  g.len = {L, L, L};
+  for (bool& q : g.periodic) q = true;
+  g.set_rcb(P);
+  DistDem d(MPI_COMM_WORLD, p, g);
+  MPI_Barrier(MPI_COMM_WORLD);
+  double t0 = MPI_Wtime();
+  StageReport gen = generate_rev(d, full, rp);
+  const double t_gen = MPI_Wtime() - t0;
+  // bonds to the paper's Z on rank 0 (as the node's generate stage)
+  if (rank == 0) bond_specimen(full, gen, 6.82, 1e-3 * rp.psd.d_min * rp.psd.scale);
+  DistDem s(MPI_COMM_WORLD, p, g);
+  s.load_from_root(full);
+  MPI_Barrier(MPI_COMM_WORLD);
+  t0 = MPI_Wtime();
+  const StageReport sv = servo_specimen(s, ServoParams{}, 0.005, 1e-4, 160.0, 16000.0, 0.1);
+  const double t_servo = MPI_Wtime() - t0;
+  if (rank == 0) {
+    std::printf("phase,ranks,balls,steps,wall_s,particle_steps_per_s,converged\n");
+    if (P == 1) {  // one World without DistDem (the node at dem.ranks = 1): the ranks' overhead at 1 rank
+      World w(p);
+      double t1 = MPI_Wtime();
+      StageReport wg = generate_rev(w, rp);
+      const double tw_gen = MPI_Wtime() - t1;
+      bond_specimen(w, wg, 6.82, 1e-3 * rp.psd.d_min * rp.psd.scale);
+      t1 = MPI_Wtime();
+      const StageReport ws = servo_specimen(w, ServoParams{}, 0.005, 1e-4, 160.0, 16000.0, 0.1);
+      const double tw_servo = MPI_Wtime() - t1;
+      std::printf("expansion_one_world,1,%zu,%" PRId64 ",%.3f,%.4g,%d\n", wg.count, wg.steps, tw_gen,
+                  static_cast<double>(wg.count) * static_cast<double>(wg.steps) / tw_gen, wg.converged ? 1 : 0);
+      std::printf("servo_one_world,1,%zu,%" PRId64 ",%.3f,%.4g,%d\n", wg.count, ws.steps, tw_servo,
+                  static_cast<double>(wg.count) * static_cast<double>(ws.steps) / tw_servo, ws.converged ? 1 : 0);
+    }
+    std::printf("expansion,%d,%zu,%" PRId64 ",%.3f,%.4g,%d\n", P, gen.count, gen.steps, t_gen,
+                static_cast<double>(gen.count) * static_cast<double>(gen.steps) / t_gen, gen.converged ? 1 : 0);
+    std::printf("servo,%d,%zu,%" PRId64 ",%.3f,%.4g,%d\n", P, gen.count, sv.steps, t_servo,
+                static_cast<double>(gen.count) * static_cast<double>(sv.steps) / t_servo, sv.converged ? 1 : 0);
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   if (argc == 5 && std::string(argv[1]) == "--state") return model_state(argv[2], argv[3], argv[4]);
   if (argc == 4 && std::string(argv[1]) == "--merge") return merge_bench(std::atoi(argv[2]), std::atol(argv[3]));
   MPI_Init(&argc, &argv);
+  if (argc >= 3 && std::string(argv[1]) == "--rev") {
+    const int rc = rev_bench(std::atol(argv[2]), argc > 3 ? std::strtoull(argv[3], nullptr, 10) : 1);
+    MPI_Finalize();
+    return rc;
+  }
   if (argc >= 3 && std::string(argv[1]) == "--run") {
     int rc = 0;
     try {

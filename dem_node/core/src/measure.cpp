@@ -28,12 +28,13 @@ Mat3 cell_stress(const World& w) {
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const Vec3 F = w.pair_force(c);
     if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
-    const Vec3 l = w.branch(c);
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) s[3 * i + j] -= F[i] * l[j];
+    add_cell_stress_term(s, F, w.branch(c));
   }
-  const double V = w.cell_volume();
-  for (double& x : s) x /= V;
+  return cell_stress_of(s, w.cell_volume());
+}
+
+Mat3 cell_stress_of(Mat3 s, double volume) {
+  for (double& x : s) x /= volume;
   symmetrise(s);
   return s;
 }
@@ -92,8 +93,8 @@ double porosity(const World& w, const Region& r) {
 double cell_porosity(const World& w) {
   const auto& pt = w.balls();
   double vs = 0.0;
-  for (std::size_t i = 0; i < pt.size(); ++i) vs += 4.0 / 3.0 * kPi * pt.r[i] * pt.r[i] * pt.r[i];
-  return 1.0 - vs / w.cell_volume();
+  for (std::size_t i = 0; i < pt.size(); ++i) vs += ball_volume_term(pt.r[i]);
+  return cell_porosity_of(vs, w.cell_volume());
 }
 
 Coordination coordination(const World& w) {

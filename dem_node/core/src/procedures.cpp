@@ -250,6 +250,11 @@ void StageEnergy::load(io::SectionReader& r) {
 
 StageReport generate_specimen(World& w, const RevParams& p, double bond_coordination, double gap_floor) {
   auto r = generate_rev(w, p);
+  bond_specimen(w, r, bond_coordination, gap_floor);
+  return r;
+}
+
+void bond_specimen(World& w, StageReport& r, double bond_coordination, double gap_floor) {
   if (bond_coordination > 0) {
     const double z0 = coordination(w).z;  // touching contacts only
     const auto b = install_bonds_to_coordination(w, bond_coordination, gap_floor);
@@ -261,24 +266,6 @@ StageReport generate_specimen(World& w, const RevParams& p, double bond_coordina
     r.what += "; " + b.what + z.str();
     r.count = w.num_balls();
   }
-  return r;
-}
-
-StageReport servo_specimen(World& w, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
-                           double budget, double compaction_fric) {
-  auto& fric = w.mutable_params().ball_ball.linear.fric;
-  const double mu = fric;
-  fric = std::min(mu, compaction_fric);
-  w.refresh_contact_constants();
-  auto r1 = servo_until(w, p, stress_tol, ratio_tol, hold, budget);
-  if (!r1.converged) return r1;
-  w.mutable_params().ball_ball.linear.fric = mu;
-  w.refresh_contact_constants();
-  auto r2 = servo_until(w, p, stress_tol, ratio_tol, hold, budget / 2);
-  r2.steps += r1.steps;
-  r2.what = "servo to sigma_v " + std::to_string(p.target.z) + " Pa, sigma_h " + std::to_string(p.target.x) +
-            " Pa: " + r1.what + "; at final friction: " + r2.what;
-  return r2;
 }
 
 double ball_weight(const World& w) {

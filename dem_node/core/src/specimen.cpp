@@ -8,18 +8,13 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "demfdm/dem/procedures.hpp"
+#include "demfdm/dem/specimen_steps.hpp"
+
 namespace demfdm::dem {
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;
-
-void fill_report(World& w, StageReport& r) {
-  r.ratio = w.unbalanced_ratio();
-  if (w.periodic()) {
-    r.stress = cell_stress(w);
-    r.porosity = cell_porosity(w);
-  }
-}
 
 double min_diameter(const World& w) {
   double d = std::numeric_limits<double>::infinity();
@@ -33,32 +28,44 @@ void quench(World& w) {
   std::fill(pt.w.begin(), pt.w.end(), Vec3{});
 }
 
-// Cycle until ratio < tol (checked every `every` steps) or budget; returns steps run.
-// With quench_every > 0 the velocities are zeroed every quench_every steps (a multiple of
-// the check interval is used).
-std::int64_t cycle(World& w, double tol, std::int64_t budget, bool& ok, std::int64_t every = 50,
-                   std::int64_t quench_every = 0) {
-  std::int64_t s = 0;
-  ok = false;
-  if (quench_every > 0) every = std::min(every, quench_every);
-  while (s < budget) {
-    const std::int64_t k = std::min<std::int64_t>(every, budget - s);
-    w.step(k);
-    s += k;
-    if (w.unbalanced_ratio() < tol) { ok = true; break; }
-    if (quench_every > 0 && s % quench_every == 0) quench(w);
-  }
-  return s;
-}
+using detail::require_automatic_step;
 
-// Specimen preparation steps on the automatic step f t_c (steps_for converts its rules).
-void require_automatic_step(const World& w, const char* what) {
-  if (w.params().dt_fixed > 0.0) {
-    std::ostringstream s;
-    s << what << ": specimen preparation counts its rules in critical steps and must run on the automatic step "
-      << "(dt_fixed = 0), found dt_fixed = " << w.params().dt_fixed << " s.";
-    throw std::invalid_argument(s.str());
+// The preparation's system: one World (specimen_steps.hpp).
+struct OneWorld {
+  World& w;
+  const World& world() const { return w; }
+  PeriodicServo* add_servo(const ServoParams& p, double d_min) {
+    return static_cast<PeriodicServo*>(w.add_effect(std::make_unique<PeriodicServo>(p, d_min)));
   }
+  void remove_servo(PeriodicServo* e) { w.remove_effect(e); }
+  void step(std::int64_t n) { w.step(n); }
+  void scale_radii(double f) {
+    for (std::size_t i = 0; i < w.num_balls(); ++i) w.set_radius(i, w.balls().r[i] * f);
+    w.prepare();
+    w.refresh_contact_constants();
+  }
+  void set_contact_params(double mu, UnbondedMoments m) {
+    w.mutable_params().ball_ball.linear.fric = mu;
+    w.mutable_params().ball_ball.softbond.moments = m;
+    w.refresh_contact_constants();
+  }
+  std::size_t num_balls() const { return w.num_balls(); }
+  void quench() { dem::quench(w); }
+  void stop_cell() { w.set_strain_rate({}); }
+  double friction() const { return w.params().ball_ball.linear.fric; }
+  void set_friction(double mu) {
+    w.mutable_params().ball_ball.linear.fric = mu;
+    w.refresh_contact_constants();
+  }
+  double ratio() const { return w.unbalanced_ratio(); }
+  Mat3 stress() const { return cell_stress(w); }
+  double porosity() const { return cell_porosity(w); }
+  double min_diameter() const { return dem::min_diameter(w); }
+};
+
+void fill_report(World& w, StageReport& r) {
+  OneWorld sys{w};
+  detail::fill_report_on(sys, r);
 }
 }  // namespace
 
@@ -92,11 +99,11 @@ double psd_diameter(const PsdParams& p, double u) {
   return 1.0 / std::sqrt(ia - u * (ia - ib));
 }
 
-std::uint64_t Rng::next() {  // splitmix64
-  std::uint64_t z = (s_ += 0x9e3779b97f4a7c15ULL);
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
-  return z ^ (z >> 31);
+RevBall rev_ball(const RevParams& p, std::size_t np, const Vec3& o, const Vec3& L, std::size_t i) {
+  const std::uint64_t k = np + 3 * static_cast<std::uint64_t>(i);
+  return RevBall{psd_diameter(p.psd, Rng::uniform_at(p.seed, i)),
+                 {o.x + Rng::uniform_at(p.seed, k) * L.x, o.y + Rng::uniform_at(p.seed, k + 1) * L.y,
+                  o.z + Rng::uniform_at(p.seed, k + 2) * L.z}};
 }
 
 double psd_mean_volume(const PsdParams& p) {
@@ -108,7 +115,7 @@ double psd_expected_count(const PsdParams& p, double volume, double porosity) {
   return (1.0 - porosity) * volume / psd_mean_volume(p);
 }
 
-StageReport generate_rev(World& w, const RevParams& p) {
+RevStart generate_rev_balls(World& w, const RevParams& p) {
   if (!w.periodic())
     throw std::invalid_argument("generate_rev: the world must have a periodic cell (periodic.enabled = true).");
   if (w.num_balls() != 0)
@@ -138,23 +145,16 @@ StageReport generate_rev(World& w, const RevParams& p) {
       << p.initial_scale << " and " << p.increments << ".";
     throw std::invalid_argument(s.str());
   }
-  Rng rng(p.seed);
   const Vec3 o = w.cell_origin(), L = w.cell_length();
   const double V = w.cell_volume();
-  std::vector<double> d;
-  double vs = 0.0;
   // N_p: the given count, or the PSD's expected count at the final porosity (§0.4); the radius
   // expansion then reaches n₁ exactly whatever the sampled volume.
   const std::size_t np = p.n_particles ? p.n_particles
                                        : static_cast<std::size_t>(std::llround(psd_expected_count(p.psd, V, p.porosity_final)));
   if (np == 0) throw std::invalid_argument("generate_rev: the cell holds no ball at this PSD and porosity.");
-  while (d.size() < np) {
-    d.push_back(psd_diameter(p.psd, rng.uniform()));
-    vs += kPi / 6.0 * d.back() * d.back() * d.back();
-  }
-  for (double di : d) {
-    const Vec3 x{o.x + rng.uniform() * L.x, o.y + rng.uniform() * L.y, o.z + rng.uniform() * L.z};
-    w.add_ball(x, 0.5 * di * p.initial_scale);
+  for (std::size_t i = 0; i < np; ++i) {  // each ball's draws keyed by its index (rev_ball)
+    const RevBall b = rev_ball(p, np, o, L, i);
+    w.add_ball(b.x, 0.5 * b.d * p.initial_scale);
   }
   // low friction during generation (§4.3 step 2); restored afterwards
   const double mu_final = w.params().ball_ball.linear.fric;
@@ -169,40 +169,13 @@ StageReport generate_rev(World& w, const RevParams& p) {
   w.mutable_params().ball_ball.softbond.moments = UnbondedMoments::kNone;
   w.prepare();
   w.refresh_contact_constants();
-  const double n0 = cell_porosity(w);
-  const double mtot = std::cbrt((1.0 - n1) / (1.0 - n0));
-  const double minc = std::pow(mtot, 1.0 / p.increments);
-  StageReport r;
-  bool ok_all = true;
-  // §4.11: the intervals and the budget in critical steps (50, 50 and 20,000 steps at f = 0.8).
-  const std::int64_t budget = steps_for(w, p.increment_budget), every = steps_for(w, p.check_every),
-                     quench_steps = steps_for(w, p.quench_every);
-  int failed = -1;
-  for (int k = 0; k < p.increments; ++k) {
-    for (std::size_t i = 0; i < w.num_balls(); ++i) w.set_radius(i, w.balls().r[i] * minc);
-    w.prepare();
-    w.refresh_contact_constants();
-    bool ok;
-    r.steps += cycle(w, p.ratio_tol, budget, ok, every, quench_steps);
-    if (!ok && failed < 0) failed = k;
-    ok_all &= ok;
-  }
-  quench(w);  // the REV starts at rest
-  w.mutable_params().ball_ball.linear.fric = mu_final;
-  w.mutable_params().ball_ball.softbond.moments = moments_final;
-  w.refresh_contact_constants();
-  fill_report(w, r);
-  r.count = w.num_balls();
-  r.converged = ok_all;
-  std::ostringstream s;
-  s << "generated " << r.count << " balls (seed " << p.seed << ", PSD scale " << p.psd.scale
-    << ") and expanded radii from porosity " << n0 << " to " << r.porosity << " in "
-    << p.increments << " increments";
-  if (failed >= 0)
-    s << "; increment " << failed + 1 << " of " << p.increments << " did not reach the unbalanced ratio "
-      << p.ratio_tol << " within " << p.increment_budget << " critical steps (" << budget << " steps)";
-  r.what = s.str();
-  return r;
+  return RevStart{n1, mu_final, moments_final};
+}
+
+StageReport generate_rev(World& w, const RevParams& p) {
+  const RevStart st = generate_rev_balls(w, p);
+  OneWorld sys{w};
+  return detail::expand_rev_on(sys, p, st);
 }
 
 // §4.5: ε̇ = −α_s K⁻¹(s* − s)/t_c, |ε̇_a| ≤ max_face_step d_min/(L_a t_c), with t_c = Δt/f the
@@ -225,33 +198,52 @@ void PlatenServo::apply(World& w, Phase) {
   pw.p.velocity = vn * pw.p.normal;
 }
 
-void PeriodicServo::apply(World& w, Phase) {
-  stress_ = cell_stress(w);
-  const double V = w.cell_volume();
-  const Vec3 L = w.cell_length();
+ServoTerm servo_term(const World& w, std::size_t c) {
   const auto& pc = w.pair_contacts();
-  double K[3][3] = {};
-  const ContactFamilyParams& fam = w.params().ball_ball;
-  for (std::size_t c = 0; c < pc.size(); ++c) {
-    const ContactHist& h = pc.h[c];
-    const BondHist* bh = pc.bond.empty() ? nullptr : &pc.bond[c];
-    if (!(h.flags & ContactHist::kActive) && !(bh && bonded(bh->state))) continue;
-    // The law's translational springs (the rotational ones do not strain the cell).
+  ServoTerm t;
+  t.F = w.pair_force(c);
+  t.l = w.branch(c);
+  const ContactHist& h = pc.h[c];
+  const BondHist* bh = pc.bond.empty() ? nullptr : &pc.bond[c];
+  t.stiff = (h.flags & ContactHist::kActive) || (bh && bonded(bh->state));
+  if (t.stiff) {
+    const ContactFamilyParams& fam = w.params().ball_ball;
     const ContactStiffness st = visit_law(fam.model, [&](auto law) {
       return decltype(law)::stiffness(h, bh, fam, w.balls().r[pc.a[c]], w.balls().r[pc.b[c]]);
     });
-    const double kn = st.k, ks = st.ks;
-    const Vec3 l = w.branch(c);
-    const Vec3 n = l * (1.0 / norm(l));
-    for (int a = 0; a < 3; ++a) {
-      if (p_.stiffness == ServoStiffness::kApparent) {
-        K[a][a] += kn * l[a] * l[a];
-        continue;
-      }
-      for (int b = 0; b < 3; ++b) K[a][b] += (kn - ks) * l[a] * n[a] * n[b] * l[b];
-      K[a][a] += ks * l[a] * l[a];
-    }
+    t.kn = st.k;
+    t.ks = st.ks;
   }
+  return t;
+}
+
+void ServoSums::add(const ServoTerm& t, ServoStiffness kind) {
+  add_cell_stress_term(s, t.F, t.l);
+  if (!t.stiff) return;
+  const Vec3& l = t.l;
+  const Vec3 n = l * (1.0 / norm(l));
+  for (int a = 0; a < 3; ++a) {
+    if (kind == ServoStiffness::kApparent) {
+      K[a][a] += t.kn * l[a] * l[a];
+      continue;
+    }
+    for (int b = 0; b < 3; ++b) K[a][b] += (t.kn - t.ks) * l[a] * n[a] * n[b] * l[b];
+    K[a][a] += t.ks * l[a] * l[a];
+  }
+}
+
+void PeriodicServo::apply(World& w, Phase) {
+  ServoSums sums;
+  if (reduce_) {
+    sums = reduce_(w, p_.stiffness);
+  } else {
+    const std::size_t nc = w.pair_contacts().size();
+    for (std::size_t c = 0; c < nc; ++c) sums.add(servo_term(w, c), p_.stiffness);
+  }
+  const double V = w.cell_volume();
+  stress_ = cell_stress_of(sums.s, V);
+  const Vec3 L = w.cell_length();
+  const auto& K = sums.K;
   const double tc = (w.dt() > 0.0 ? w.dt() : 1.0) / w.params().dt_safety;
   double err[3] = {0, 0, 0};
   int idx[3], na = 0;
@@ -294,58 +286,14 @@ void PeriodicServo::apply(World& w, Phase) {
 
 StageReport servo_until(World& w, const ServoParams& p, double stress_tol, double ratio_tol,
                         double hold, double budget_tc, double* overshoot) {
-  if (!w.periodic()) throw std::invalid_argument("servo_until: the world must have a periodic cell.");
-  require_automatic_step(w, "servo_until");
-  // §4.11: the check interval (8 t_c: 10 steps at f = 0.8), the hold and the budget in critical steps.
-  const std::int64_t every = steps_for(w, 8.0), hold_steps = steps_for(w, hold), budget = steps_for(w, budget_tc),
-                     quench_steps = steps_for(w, p.quench_every);
-  for (int a = 0; a < 3; ++a)
-    if (p.active[a] && !(p.target[a] > 0.0)) {
-      std::ostringstream s;
-      s << "servo_until: 'target[" << a << "]' must be > 0 Pa (compressive), found " << p.target[a] << ".";
-      throw std::invalid_argument(s.str());
-    }
-  auto* servo = static_cast<PeriodicServo*>(w.add_effect(std::make_unique<PeriodicServo>(p, min_diameter(w))));
-  StageReport r;
-  std::int64_t held = 0;
-  double over = 0.0;
-  // Overshoot: excursion past the target on the side opposite to the starting stress.
-  double side[3] = {0, 0, 0};
-  {
-    const Mat3 s0 = cell_stress(w);
-    for (int a = 0; a < 3; ++a) side[a] = (-s0[4 * a] <= p.target[a]) ? 1.0 : -1.0;
-  }
-  r.converged = false;
-  while (r.steps < budget) {
-    w.step();
-    ++r.steps;
-    const Mat3& s = servo->last_stress();
-    bool in = true;
-    for (int a = 0; a < 3; ++a) {
-      if (!p.active[a]) continue;
-      const double rel = (-s[4 * a] - p.target[a]) / p.target[a];
-      over = std::max(over, side[a] * rel);
-      in &= std::abs(rel) <= stress_tol;
-    }
-    if (quench_steps > 0 && r.steps % quench_steps == 0) quench(w);
-    if (r.steps % every == 0) {
-      if (in && w.unbalanced_ratio() < ratio_tol) held += every;
-      else held = 0;
-      if (held >= hold_steps) { r.converged = true; break; }
-    }
-  }
-  w.remove_effect(servo);
-  w.set_strain_rate({});
-  fill_report(w, r);
-  if (overshoot) *overshoot = over;
-  std::ostringstream o;
-  o << "servo to (" << p.target.x << ", " << p.target.y << ", " << p.target.z << ") Pa "
-    << (r.converged ? "converged" : "did not converge") << " in " << r.steps << " steps";
-  if (!r.converged)
-    o << " (criterion: |s - s*| <= " << stress_tol << " s* and unbalanced ratio < " << ratio_tol << " for " << hold
-      << " critical steps within " << budget_tc << " critical steps; reached ratio " << w.unbalanced_ratio() << ")";
-  r.what = o.str();
-  return r;
+  OneWorld sys{w};
+  return detail::servo_until_on(sys, p, stress_tol, ratio_tol, hold, budget_tc, overshoot);
+}
+
+StageReport servo_specimen(World& w, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                           double budget, double compaction_fric) {
+  OneWorld sys{w};
+  return detail::servo_specimen_on(sys, p, stress_tol, ratio_tol, hold, budget, compaction_fric);
 }
 
 StageReport install_bonds(World& w, double lo, double hi) {
@@ -639,7 +587,8 @@ StageReport set_gravity(World& w, bool on, double g_level) {
 StageReport cycle_to_equilibrium(World& w, double ratio_tol, std::int64_t budget) {
   StageReport r;
   bool ok;
-  r.steps = cycle(w, ratio_tol, budget, ok);
+  OneWorld sys{w};
+  r.steps = detail::cycle_on(sys, ratio_tol, budget, ok);
   r.converged = ok;
   fill_report(w, r);
   std::ostringstream s;

@@ -482,16 +482,23 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
     const double b = KR[i] > 0.0 ? I[i] / KR[i] : kInf;
     q = std::min(std::min(q, a), b);
   }
+  // On ranks (set_step_reduction) the smallest over every rank, before the fallback below: a
+  // rank whose rows touch nothing must not take it while another rank's contacts set the step.
+  if (step_reduction_) step_reduction_(&q, 1);
   double dt = std::sqrt(q);
   if (!std::isfinite(dt)) {
     // No active contact: use one contact with an equal ball (the law's reference stiffness;
-    // linear springs: k_n = π R E*/2, §7.2).
+    // linear springs: k_n = π R E*/2, §7.2). The smallest ratio, then its root: the root of
+    // every ball's smallest, bit for bit (the root is monotonic and correctly rounded).
+    double qf = kInf;
     visit_law(p_.ball_ball.model, [&](auto law) {
       for (std::size_t i = 0; i < n; ++i) {
         const double k = decltype(law)::reference_stiffness(pt_.r[i], p_.ball_ball);
-        if (k > 0.0) dt = std::min(dt, std::sqrt(pt_.m[i] / k));
+        if (k > 0.0) qf = std::min(qf, pt_.m[i] / k);
       }
     });
+    if (step_reduction_) step_reduction_(&qf, 1);
+    dt = std::sqrt(qf);
     if (!std::isfinite(dt)) dt = 1e-6;
   }
   out.dt = p_.dt_safety * dt;
@@ -516,7 +523,7 @@ void World::prepare() {
   lap(times_.rebuild);
   force_pass(0.0);
   Lap lap_dt;
-  dt_ = p_.dt_fixed > 0.0 ? p_.dt_fixed : reduced_step(critical_timestep());
+  dt_ = p_.dt_fixed > 0.0 ? p_.dt_fixed : critical_timestep();
   lap_dt(times_.motion);
   last_dt_step_ = step_;
   prepared_ = true;
@@ -545,7 +552,7 @@ void World::step_motion() {
   if (p_.dt_fixed > 0.0) {
     dt_ = p_.dt_fixed;
   } else if (last_dt_step_ < 0 || step_ - last_dt_step_ >= dt_interval()) {
-    dt_ = reduced_step(critical_timestep());
+    dt_ = critical_timestep();
     last_dt_step_ = step_;
   }
   integrate(dt_);
@@ -605,14 +612,13 @@ void World::set_counters(const Counters& k) {
   e_damp_ = k.e_damp, max_disp2_ = k.max_disp2, e_slip_dead_ = k.e_slip_dead, e_soft_dead_ = k.e_soft_dead;
 }
 
-void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }
+void World::set_step_reduction(std::function<void(double*, int)> reduce) { step_reduction_ = std::move(reduce); }
 
 void World::set_newton(std::function<void(Vec3*, Vec3*)> reverse, std::function<void(double*, double*)> stiffness) {
   newton_reverse_ = std::move(reverse);
   newton_stiffness_ = std::move(stiffness);
 }
 
-double World::reduced_step(double dt) const { return step_reduction_ ? step_reduction_(dt) : dt; }
 
 void World::step(std::int64_t n) {
   for (std::int64_t k = 0; k < n; ++k) step();

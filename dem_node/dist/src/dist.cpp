@@ -5,6 +5,7 @@
 
 #include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/procedures.hpp"
+#include "demfdm/dem/specimen_steps.hpp"
 #include "demfdm/dem/specimen.hpp"
 
 #include <algorithm>
@@ -123,6 +124,18 @@ int BrickGrid::owner(const Vec3& x) const {
     idx[k] = std::clamp(i, 0, n[k] - 1);
   }
   return idx[0] + n[0] * (idx[1] + n[1] * idx[2]);
+}
+
+void BrickGrid::follow_cell(const Vec3& origin, const Vec3& length) {
+  for (int k = 0; k < 3; ++k) {
+    if (!periodic[k] || len[k] == length[k]) continue;
+    const double f = length[k] / len[k];
+    lo[k] = origin[k] + (lo[k] - origin[k]) * f;
+    for (double& c : cuts[k]) c *= f;
+    for (Cut& c : rcb)
+      if (c.axis == k) c.at *= f;
+    len[k] = length[k];
+  }
 }
 
 void BrickGrid::near(const Vec3& x, double halo, std::vector<int>& out) const {
@@ -507,7 +520,7 @@ struct DistDem::Buffers {
   std::vector<double> m_vals, m_rows, m_bound, m_res;
   std::vector<OrderFreeSum> m_folds;
   std::vector<int> m_counts, m_displ;
-  OrderCache order_cache[2];
+  OrderCache order_cache[3];
   // the exchange's per-row and per-destination arrays, kept from one exchange to the next (a
   // fresh allocation of each cost page faults at every rebuild)
   std::vector<int> own, old_owner, holders, dest, near_all;
@@ -574,7 +587,8 @@ std::vector<PlatenServoParams> loadable(const World& full) {
       continue;
     }
     throw std::invalid_argument("DistDem::load: the world has the effect '" + std::string(e->name()) +
-                                "', which the DEM on MPI ranks cannot run yet (docs/scaling.md); run it on one rank.");
+                                "', which the DEM on MPI ranks cannot take with the world (docs/scaling.md; a periodic "
+                                "servo is added on the ranks after the load: DistDem::add_periodic_servo).");
   }
   return platens;
 }
@@ -848,14 +862,14 @@ void DistDem::load_from_root(const World& full) {
 // newton hooks, and the walls' sums of every rank.
 void DistDem::take(std::unique_ptr<World> w, bool platens) {
   w_ = std::move(w);
+  servo_ = nullptr;  // (a periodic servo is added after the load)
   ++layout_gen_;  // (ordered_sums' kept merge orders)
   walls_every_step_ = platens;
   const World::Counters k = w_->counters();
-  // The automatic step: the smallest over the ranks (a minimum, so the same bits at any count).
-  w_->set_step_reduction([this](double dt) {
-    double g = dt;
-    MPI_Allreduce(&dt, &g, 1, MPI_DOUBLE, MPI_MIN, comm_);
-    return g;
+  // The automatic step: its ratios the smallest over the ranks (minima, so the same bits at any
+  // count), the no-contact fallback only where no rank has a contact (World::contact_scan).
+  w_->set_step_reduction([this](double* v, int n) {
+    MPI_Allreduce(MPI_IN_PLACE, v, n, MPI_DOUBLE, MPI_MIN, comm_);
   });
   // A prepared World: its lists, histories and last forces are this rank's state as they are
   // (a checkpoint's load is the same), so the ranks continue with one World's bits; preparing
@@ -1150,6 +1164,7 @@ void DistDem::step(std::int64_t n) {
     t1 = MPI_Wtime();
     times_.reduce += t1 - t0;
     if (rebuild) {
+      if (w_->periodic()) grid_.follow_cell(w_->cell_origin(), w_->cell_length());
       if (bal_.every > 0 && (exchanges_ + 1) % bal_.every == 0) rebalance();
       exchange();
       run_disp2_ = 0.0;
@@ -1899,13 +1914,48 @@ void DistDem::ordered_sums(std::size_t n, const double* vals, int K, const KeyFi
     if (count) *count = static_cast<std::int64_t>(c_pos);
     return;
   }
+  std::vector<double>& res = buf_->m_res;
+  res.assign(k + 1, 0.0);
+  ordered_fold(n, vals, K, keys, which, also_max, n_max, [&](const double* v, const std::vector<std::uint32_t>& perm) {
+    if (positive) {  // the mean's rule (K = 1): only the terms that carry a force
+      // (adding +0 for the others leaves the sum's bits: it starts at +0 and never is -0)
+      double s = 0.0;
+      std::int64_t c = 0;
+      for (std::uint32_t j : perm) {
+        const bool on = v[j] > 0.0;
+        s += on ? v[j] : 0.0;
+        c += on;
+      }
+      res[0] = s;
+      res[1] = static_cast<double>(c);
+    } else if (K == 1) {
+      double s = 0.0;
+      for (std::uint32_t j : perm) s += v[j];
+      res[0] = s;
+    } else {  // K chains of additions side by side, each in key order from +0
+      double s[kMaxColumns] = {};
+      for (std::uint32_t j : perm)
+        for (std::size_t c = 0; c < k; ++c) s[c] += v[j * k + c];
+      for (std::size_t c = 0; c < k; ++c) res[c] = s[c];
+    }
+  });
+  MPI_Bcast(res.data(), static_cast<int>(res.size()), MPI_DOUBLE, 0, comm_);
+  for (std::size_t c = 0; c < k; ++c) sums[c] = res[c];
+  if (count) *count = static_cast<std::int64_t>(res[k]);
+}
+
+// ordered_sums' gather and merge, for any fold of the terms in one World's order (the periodic
+// servo's sums: servo_sums).
+void DistDem::ordered_fold(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, double* also_max,
+                           int n_max, const Fold& fold) const {
+  const std::size_t k = static_cast<std::size_t>(K);
   // The merge order is formed again only when the terms' keys may have changed: the owned balls
   // change only at an exchange or a load (layout_gen_), the contacts also at a rebuild, and a
   // rank whose count changed makes every rank form it again (one maximum-allreduce decides, with
   // the maxima asked for). Else only the values travel (8 bytes a term and column, not the
   // 32-byte keyed terms) and rank 0 adds them in the kept order: the same additions.
   OrderCache& oc = buf_->order_cache[which];
-  const std::int64_t key[2] = {layout_gen_, which == kContactTerms ? w_->rebuild_count() : 0};
+  const std::int64_t key[2] = {layout_gen_, which != kBallTerms ? w_->rebuild_count() : 0};
   std::vector<double>& mx = buf_->m_bound;
   mx.assign(1 + static_cast<std::size_t>(n_max), 0.0);
   mx[0] = key[0] != oc.key[0] || key[1] != oc.key[1] || n != oc.local ? 1.0 : 0.0;
@@ -1965,35 +2015,7 @@ void DistDem::ordered_sums(std::size_t n, const double* vals, int K, const KeyFi
     for (std::size_t r = 0; r < static_cast<std::size_t>(size_); ++r) cnt[r] = oc.counts[r] * K, dsp[r] = oc.displ[r] * K;
   }
   MPI_Gatherv(mine, static_cast<int>(n * k), MPI_DOUBLE, oc.all.data(), cnt.data(), dsp.data(), MPI_DOUBLE, 0, comm_);
-  std::vector<double>& res = buf_->m_res;
-  res.assign(k + 1, 0.0);
-  if (rank_ == 0) {
-    const double* v = oc.all.data();
-    if (positive) {  // the mean's rule (K = 1): only the terms that carry a force
-      // (adding +0 for the others leaves the sum's bits: it starts at +0 and never is -0)
-      double s = 0.0;
-      std::int64_t c = 0;
-      for (std::uint32_t j : oc.perm) {
-        const bool on = v[j] > 0.0;
-        s += on ? v[j] : 0.0;
-        c += on;
-      }
-      res[0] = s;
-      res[1] = static_cast<double>(c);
-    } else if (K == 1) {
-      double s = 0.0;
-      for (std::uint32_t j : oc.perm) s += v[j];
-      res[0] = s;
-    } else {  // K chains of additions side by side, each in key order from +0
-      double s[kMaxColumns] = {};
-      for (std::uint32_t j : oc.perm)
-        for (std::size_t c = 0; c < k; ++c) s[c] += v[j * k + c];
-      for (std::size_t c = 0; c < k; ++c) res[c] = s[c];
-    }
-  }
-  MPI_Bcast(res.data(), static_cast<int>(res.size()), MPI_DOUBLE, 0, comm_);
-  for (std::size_t c = 0; c < k; ++c) sums[c] = res[c];
-  if (count) *count = static_cast<std::int64_t>(res[k]);
+  if (rank_ == 0) fold(oc.all.data(), oc.perm);
 }
 
 void DistDem::owned_sums(const std::vector<double>& v, int K, double* sums, double* also_max, int n_max) const {
@@ -2059,9 +2081,7 @@ DistDem::Screen DistDem::screen(const Vec3& lo, const Vec3& hi, bool box) const 
 }
 
 double DistDem::safe_step() const {
-  double dt = w_->contact_scan(true, false).dt, g = dt;
-  MPI_Allreduce(&dt, &g, 1, MPI_DOUBLE, MPI_MIN, comm_);
-  return g;
+  return w_->contact_scan(true, false).dt;  // (the scan reduces its ratios over the ranks: take)
 }
 
 double DistDem::kinetic_energy() const {
@@ -2115,6 +2135,193 @@ double DistDem::unbalanced_ratio(double fc) const {
   double s = 0.0;
   ball_sums<1>([this](std::size_t i, double* t) { t[0] = w_->unbalanced_force_of(i); }, &s);
   return World::unbalanced_ratio_of(s, n, fc);
+}
+
+// ------------------------------------------------------------------------------------------
+// specimen preparation on the ranks: the periodic servo and its measurements
+
+// Every term goes to rank 0 whatever WorldParams::order_free_sums says: one World's servo and its
+// cell measurements add in list order (specimen.cpp, measure.cpp), so the ranks do too.
+ServoSums DistDem::servo_sums(ServoStiffness kind) const {
+  const World& w = *w_;
+  const auto& pc = w.pair_contacts();
+  const auto& g = w.ghost_rows();
+  const Particles& pt = w.balls();
+  auto mine = [&](std::size_t c) { return g.empty() || !g[pc.a[c]]; };  // (contact_force_keys' rule)
+  std::vector<double>& v = buf_->m_rows;
+  v.clear();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    if (!mine(c)) continue;
+    const ServoTerm t = servo_term(w, c);
+    v.insert(v.end(), {t.F.x, t.F.y, t.F.z, t.l.x, t.l.y, t.l.z, t.kn, t.ks, t.stiff ? 1.0 : 0.0});
+  }
+  const KeyFill keys = [&](std::vector<World::ContactTerm>& out) {
+    for (std::size_t c = 0; c < pc.size(); ++c)
+      if (mine(c)) out.push_back({0, pt.id[pc.a[c]], pt.id[pc.b[c]], 0.0});
+  };
+  ServoSums sums;
+  ordered_fold(v.size() / 9, v.data(), 9, keys, kServoTerms, nullptr, 0,
+               [&](const double* all, const std::vector<std::uint32_t>& perm) {
+                 for (std::uint32_t j : perm) {
+                   const double* q = all + 9 * static_cast<std::size_t>(j);
+                   ServoTerm t;
+                   t.F = {q[0], q[1], q[2]};
+                   t.l = {q[3], q[4], q[5]};
+                   t.kn = q[6];
+                   t.ks = q[7];
+                   t.stiff = q[8] != 0.0;
+                   sums.add(t, kind);
+                 }
+               });
+  double b[18];
+  std::copy(sums.s.begin(), sums.s.end(), b);
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) b[9 + 3 * a + c] = sums.K[a][c];
+  MPI_Bcast(b, 18, MPI_DOUBLE, 0, comm_);
+  std::copy(b, b + 9, sums.s.begin());
+  for (int a = 0; a < 3; ++a)
+    for (int c = 0; c < 3; ++c) sums.K[a][c] = b[9 + 3 * a + c];
+  return sums;
+}
+
+PeriodicServo* DistDem::add_periodic_servo(const ServoParams& p, double d_min) {
+  if (servo_) throw std::logic_error("DistDem::add_periodic_servo: the ranks run a periodic servo already.");
+  if (!w_->periodic()) throw std::invalid_argument("DistDem::add_periodic_servo: the world must have a periodic cell.");
+  auto e = std::make_unique<PeriodicServo>(p, d_min);
+  e->set_reduce([this](World&, ServoStiffness kind) { return servo_sums(kind); });
+  servo_ = static_cast<PeriodicServo*>(w_->add_effect(std::move(e)));
+  return servo_;
+}
+
+void DistDem::remove_periodic_servo() {
+  if (servo_) w_->remove_effect(servo_);
+  servo_ = nullptr;
+}
+
+Mat3 DistDem::cell_stress() const {
+  // the stress half of the servo's sums (the stiffness half adds nothing to it)
+  return cell_stress_of(servo_sums(ServoStiffness::kApparent).s, w_->cell_volume());
+}
+
+double DistDem::cell_porosity() const {
+  const auto& g = w_->ghost_rows();
+  const Particles& pt = w_->balls();
+  std::vector<double>& v = buf_->m_vals;
+  v.clear();
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (g.empty() || !g[i]) v.push_back(ball_volume_term(pt.r[i]));
+  const KeyFill keys = [&](std::vector<World::ContactTerm>& out) {
+    for (std::size_t i = 0; i < pt.size(); ++i)
+      if (g.empty() || !g[i]) out.push_back({0, pt.id[i], 0, 0.0});
+  };
+  double solid = 0.0;
+  ordered_fold(v.size(), v.data(), 1, keys, kBallTerms, nullptr, 0,
+               [&](const double* all, const std::vector<std::uint32_t>& perm) {
+                 for (std::uint32_t j : perm) solid += all[j];
+               });
+  MPI_Bcast(&solid, 1, MPI_DOUBLE, 0, comm_);
+  return cell_porosity_of(solid, w_->cell_volume());
+}
+
+double DistDem::min_diameter() const {
+  double d = std::numeric_limits<double>::infinity();  // (a minimum: exact in any order)
+  for (double r : w_->balls().r) d = std::min(d, 2.0 * r);
+  MPI_Allreduce(MPI_IN_PLACE, &d, 1, MPI_DOUBLE, MPI_MIN, comm_);
+  return d;
+}
+
+void DistDem::quench() {
+  Particles& pt = w_->balls();
+  std::fill(pt.v.begin(), pt.v.end(), Vec3{});
+  std::fill(pt.w.begin(), pt.w.end(), Vec3{});
+}
+
+void DistDem::scale_radii(double f) {
+  World& w = *w_;
+  double rmax = 0.0;
+  for (std::size_t i = 0; i < w.num_balls(); ++i) {
+    w.set_radius(i, w.balls().r[i] * f);  // (a ghost's too: the same bits as its owner's)
+    rmax = std::max(rmax, w.balls().r[i]);
+  }
+  MPI_Allreduce(MPI_IN_PLACE, &rmax, 1, MPI_DOUBLE, MPI_MAX, comm_);
+  halo_ = 2.0 * rmax + p_.skin;  // (params_from's rule with the new radii)
+  exchange();  // the ghosts within the new halo
+  run_disp2_ = 0.0;
+  w.prepare();  // a rebuild and a force pass, as one World's
+  reduce_walls();
+  w.refresh_contact_constants();
+}
+
+namespace {
+// The preparation's system on the ranks (specimen_steps.hpp).
+struct Ranks {
+  DistDem& d;
+  const World& world() const { return d.world(); }
+  PeriodicServo* add_servo(const ServoParams& p, double d_min) { return d.add_periodic_servo(p, d_min); }
+  void remove_servo(PeriodicServo*) { d.remove_periodic_servo(); }
+  void step(std::int64_t n) { d.step(n); }
+  void scale_radii(double f) { d.scale_radii(f); }
+  void set_contact_params(double mu, UnbondedMoments m) {  // every rank's World
+    d.world().mutable_params().ball_ball.linear.fric = mu;
+    d.world().mutable_params().ball_ball.softbond.moments = m;
+    d.world().refresh_contact_constants();
+  }
+  std::size_t num_balls() const { return d.num_balls(); }
+  void quench() { d.quench(); }
+  void stop_cell() { d.world().set_strain_rate({}); }
+  double friction() const { return d.world().params().ball_ball.linear.fric; }
+  void set_friction(double mu) {  // every rank's World (its ghosts' contacts too)
+    d.world().mutable_params().ball_ball.linear.fric = mu;
+    d.world().refresh_contact_constants();
+  }
+  double ratio() const { return d.unbalanced_ratio(d.mean_contact_force()); }
+  Mat3 stress() const { return d.cell_stress(); }
+  double porosity() const { return d.cell_porosity(); }
+  double min_diameter() const { return d.min_diameter(); }
+};
+}  // namespace
+
+StageReport servo_until(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                        double budget, double* overshoot) {
+  Ranks sys{d};
+  return detail::servo_until_on(sys, p, stress_tol, ratio_tol, hold, budget, overshoot);
+}
+
+StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                           double budget, double compaction_fric) {
+  Ranks sys{d};
+  return detail::servo_specimen_on(sys, p, stress_tol, ratio_tol, hold, budget, compaction_fric);
+}
+
+StageReport generate_rev(DistDem& d, World& full, const RevParams& p) {
+  // every rank: the final contact parameters from its own World (the scene's), and n1
+  RevStart st{p.porosity_target < 0.0 ? p.porosity_final : p.porosity_target, full.params().ball_ball.linear.fric,
+              full.params().ball_ball.softbond.moments};
+  std::string refused;  // rank 0's verdict on `p` and `full` is every rank's
+  if (d.rank() == 0) {
+    try {
+      st = generate_rev_balls(full, p);
+    } catch (const std::invalid_argument& e) {
+      refused = e.what();
+    }
+  }
+  int len = static_cast<int>(refused.size());
+  MPI_Bcast(&len, 1, MPI_INT, 0, d.comm());
+  if (len > 0) {
+    refused.resize(static_cast<std::size_t>(len));
+    MPI_Bcast(refused.data(), len, MPI_CHAR, 0, d.comm());
+    throw std::invalid_argument(refused);
+  }
+  d.load_from_root(full);
+  Ranks sys{d};
+  const StageReport r = detail::expand_rev_on(sys, p, st);
+  d.unload(full, true);
+  if (d.rank() == 0) {  // the final contact parameters on the assembled REV too, as on one World
+    full.mutable_params().ball_ball.linear.fric = st.mu_final;
+    full.mutable_params().ball_ball.softbond.moments = st.moments_final;
+    full.refresh_contact_constants();
+  }
+  return r;
 }
 
 DistDem::Balls DistDem::gather() const {

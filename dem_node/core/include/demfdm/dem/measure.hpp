@@ -15,6 +15,15 @@ using Mat3 = std::array<double, 9>;
 
 /// Love–Weber stress of the periodic cell: σ = −(1/V) Σ F ⊗ ℓ, symmetrised (§4.4).
 Mat3 cell_stress(const World& w);
+/// Its two steps, for sums formed elsewhere (the periodic servo on MPI ranks): one contact's
+/// term (a contact that carries no force adds nothing), added into the running sum `s` in
+/// contact order from +0; and the stress from the finished sum: s / V, symmetrised.
+inline void add_cell_stress_term(Mat3& s, const Vec3& F, const Vec3& l) {
+  if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) return;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) s[3 * i + j] -= F[i] * l[j];
+}
+Mat3 cell_stress_of(Mat3 s, double volume);
 
 /// Measurement region: an axis-aligned box or a sphere.
 struct Region {
@@ -34,6 +43,10 @@ Mat3 region_stress(const World& w, const Region& r);
 /// Porosity of a region: 1 − Σ V_p(centre inside)/V (the periodic cell: exact solid volume).
 double porosity(const World& w, const Region& r);
 double cell_porosity(const World& w);
+/// Its term (a ball's volume), added in row order from +0, and the porosity from the sum (the
+/// ranks' one World's bits: DistDem::cell_porosity).
+inline double ball_volume_term(double r) { return 4.0 / 3.0 * 3.14159265358979323846 * r * r * r; }
+inline double cell_porosity_of(double solid, double volume) { return 1.0 - solid / volume; }
 
 struct Coordination {
   double z = 0.0;             // [-] 2 N_c / N_p over active ball–ball contacts (§4.3)

@@ -156,6 +156,8 @@ std::size_t kick_highest_ball(World& w, const Vec3& v);
 /// the generation's, the bonding and the coordination (of the touching contacts before it, of
 /// every active contact after it) appended to `what`, `count` the balls.
 StageReport generate_specimen(World& w, const RevParams& p, double bond_coordination, double gap_floor);
+/// Its bonding half, on a generated REV: appends to `r` (nothing when bond_coordination <= 0).
+void bond_specimen(World& w, StageReport& r, double bond_coordination, double gap_floor);
 
 /// The servo stage of the REV (docs/theory.md 4.5, 4.3 step 4): compaction with the ball-ball
 /// friction lowered to min(mu, compaction_fric), then at the final friction mu (the linear law's,

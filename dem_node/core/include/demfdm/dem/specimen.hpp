@@ -5,6 +5,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include "demfdm/dem/measure.hpp"
@@ -38,13 +39,25 @@ double psd_diameter(const PsdParams& p, double u);
 /// how finely the same physical procedure is integrated, not the procedure.
 std::int64_t steps_for(const World& w, double tc);
 
-/// Deterministic uniform generator (splitmix64): identical on every platform.
+/// Deterministic uniform generator (splitmix64): identical on every platform. Its k-th draw
+/// (from 0) is a function of the seed and k alone, at(seed, k): splitmix64 is a counter (the
+/// state after k + 1 draws is seed + (k + 1) γ) hashed, so any draw can be made anywhere, in any
+/// order, on any rank, without the draws before it.
 class Rng {
  public:
   explicit Rng(std::uint64_t seed) : s_(seed) {}
-  std::uint64_t next();
-  double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
+  std::uint64_t next() { return mix(s_ += kGamma); }
+  double uniform() { return to_unit(next()); }  // [0, 1)
+  static std::uint64_t at(std::uint64_t seed, std::uint64_t k) { return mix(seed + (k + 1) * kGamma); }
+  static double uniform_at(std::uint64_t seed, std::uint64_t k) { return to_unit(at(seed, k)); }
  private:
+  static constexpr std::uint64_t kGamma = 0x9e3779b97f4a7c15ULL;
+  static std::uint64_t mix(std::uint64_t z) {
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+  }
+  static double to_unit(std::uint64_t u) { return double(u >> 11) * 0x1.0p-53; }
   std::uint64_t s_;
 };
 
@@ -102,11 +115,34 @@ void describe(V& v, RevParams& p) {
 /// declared range, or d_min >= d_max.
 void validate(const RevParams& p);
 
+/// Ball i of an REV of np balls (0 <= i < np) as generate_rev draws it, keyed by its index
+/// (issue 17 item 2: the same ball whoever draws it, in whatever order): its diameter from draw
+/// i of the seed, its position in the cell [o, o + L) from draws np + 3i, np + 3i + 1 and
+/// np + 3i + 2 (the draws of one generator that draws the np diameters first, then the
+/// positions ball by ball).
+struct RevBall {
+  double d;  // [m] diameter (the PSD's, before the initial scale s0)
+  Vec3 x;    // [m] centre
+};
+RevBall rev_ball(const RevParams& p, std::size_t np, const Vec3& o, const Vec3& L, std::size_t i);
+
 /// Generate balls in the periodic cell of `w` (which must be empty and periodic and step on the
 /// automatic step, dt_fixed = 0). The quench interval, the check interval and the budgets are
 /// counted in critical steps (steps_for). `converged` is false when an increment ran out of its
 /// budget; the caller decides (the DEM node stops the run).
 StageReport generate_rev(World& w, const RevParams& p);
+
+/// generate_rev in two halves (the DEM on MPI ranks runs the second on the ranks: dist.hpp's
+/// generate_rev): generate_rev_balls checks `p`, draws the balls into the empty periodic World
+/// (rev_ball), sets the generation's contact parameters (friction p.fric, no unbonded moments) and
+/// prepares it; it returns what the expansion needs: the porosity to reach and the final contact
+/// parameters (the World's before). The expansion is detail::expand_rev_on (specimen_steps.hpp).
+struct RevStart {
+  double n1 = 0.0;        // [-] porosity the expansion reaches
+  double mu_final = 0.0;  // [-] the ball-ball friction after the generation
+  UnbondedMoments moments_final = UnbondedMoments::kNone;
+};
+RevStart generate_rev_balls(World& w, const RevParams& p);
 
 /// Servo stiffness estimate (§4.5, U15).
 enum class ServoStiffness : std::uint8_t {
@@ -153,18 +189,42 @@ void describe(V& v, ServoSettings& s) {
 /// declared range.
 void validate(const ServoSettings& s);
 
-/// Effect that sets the cell strain rate each step from the last stress (kPreStep).
+/// What pair contact c gives the periodic servo's sums (§4.5): its force on A and its branch
+/// vector (the cell stress), and, when it is active or bonded (`stiff`), its law's translational
+/// stiffnesses (the affine stiffness K; the rotational springs do not strain the cell).
+struct ServoTerm {
+  Vec3 F{}, l{};
+  double kn = 0.0, ks = 0.0;
+  bool stiff = false;
+};
+ServoTerm servo_term(const World& w, std::size_t c);
+/// The servo's two sums over the pair contacts, each added in contact order from +0: the cell
+/// stress's Σ −F ⊗ ℓ (add_cell_stress_term) and the affine stiffness K (times V). One World adds
+/// its contacts in list order; the ranks add every rank's terms in one World's order (DistDem).
+struct ServoSums {
+  Mat3 s{};
+  double K[3][3] = {};
+  void add(const ServoTerm& t, ServoStiffness kind);
+};
+
+/// Effect that sets the cell strain rate each step from the last stress (kPreStep). Its sums
+/// are the World's own contacts', or, with a `Reduce` set (DistDem::add_periodic_servo: every
+/// rank's World runs the servo), what it returns: every rank's contacts' in one World's order.
 class PeriodicServo final : public Effect {
  public:
+  using Reduce = std::function<ServoSums(World&, ServoStiffness)>;
   explicit PeriodicServo(const ServoParams& p, double d_min) : p_(p), d_min_(d_min) {}
   unsigned phases() const override { return kPreStep; }
   void apply(World& w, Phase) override;
   const char* name() const override { return "periodic_servo"; }
   const Mat3& last_stress() const { return stress_; }
+  const ServoParams& params() const { return p_; }
+  void set_reduce(Reduce r) { reduce_ = std::move(r); }
  private:
   ServoParams p_;
   double d_min_;
   Mat3 stress_{};
+  Reduce reduce_;
 };
 
 /// Stress servo of a planar wall along its normal (a platen, as in the UCS test's seating):

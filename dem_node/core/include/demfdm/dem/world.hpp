@@ -360,10 +360,12 @@ class World {
   /// order_free_sums; order_free_sum.hpp): the force pass calls it after the sets' passes,
   /// unless a caller forms them from several Worlds' contacts (a rank's World: DistDem).
   void set_wall_sums_by_caller(bool by_caller) { wall_sums_by_caller_ = by_caller; }
-  /// Applied to every automatic step before use (prepare, step_motion): a rank passes the
-  /// smallest over every rank (a ghost's partial stiffness sum gives a step no smaller than its
-  /// owner's). Collective for such a caller: every rank computes the step at the same steps.
-  void set_step_reduction(std::function<double(double)> reduce);
+  /// The critical step on MPI ranks (contact_scan): `reduce(v, n)` replaces v[0..n) by their
+  /// minima over every rank. A rank passes its smallest mass-over-stiffness ratio (a ghost's
+  /// partial stiffness sum gives a ratio no smaller than its owner's), and, only when no rank has
+  /// an active contact, its smallest ratio of the no-contact fallback: one World's step. Collective
+  /// for such a caller: every rank scans for the step at the same steps.
+  void set_step_reduction(std::function<void(double*, int)> reduce);
   /// A rank's World with `newton` on (DistDem::set_newton, docs/scaling.md): a ball-ball pair
   /// is listed only where its ball A (the lower row, so the lower id) is not a ghost, and its
   /// force on a ghost B stays in the ghost's row; `reverse` is called right after the pair pass
@@ -560,10 +562,9 @@ class World {
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
   std::size_t moving_rows_ = ~std::size_t{0};  // set_moving_rows
-  std::function<double(double)> step_reduction_;  // set_step_reduction
+  std::function<void(double*, int)> step_reduction_;  // set_step_reduction
   std::function<void(Vec3*, Vec3*)> newton_reverse_;  // set_newton (set: newton on)
   std::function<void(double*, double*)> newton_stiffness_;
-  double reduced_step(double dt) const;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
   mutable std::vector<double> scratch_ball_;       // ordered_ball_sum: per-ball terms
   mutable std::vector<double> scratch_fc_;         // contact_scan, order-free: the force norms

@@ -84,6 +84,10 @@ struct BrickGrid {
     return cuts[k].empty() ? i * (len[k] / n[k]) : cuts[k][static_cast<std::size_t>(i - 1)];
   }
   int owner(const Vec3& x) const;
+  /// A periodic cell that strained (the servo): on each periodic axis the grid is mapped as the
+  /// World maps the positions, affinely about the cell's origin, onto [origin, origin + length):
+  /// the bricks keep their share of the cell and their balls (DistDem::step, before an exchange).
+  void follow_cell(const Vec3& origin, const Vec3& length);
   /// Every rank whose brick, grown by `halo` on each side, holds x or (periodic axes) an image of
   /// x; ascending, without repeats.
   void near(const Vec3& x, double halo, std::vector<int>& out) const;
@@ -308,12 +312,35 @@ class DistDem {
     double kinetic = 0.0;  // [J]
   };
   Screen screen(const Vec3& lo, const Vec3& hi, bool box) const;
-  /// World::contact_scan's step (dt_safety x the critical step) of one World: the smallest over
-  /// the ranks; a ball's stiffness sums are complete on the rank that owns it and a ghost's
-  /// partial ones only give a longer step (collective).
+  /// World::contact_scan's step (dt_safety x the critical step) of one World: the scan's ratios
+  /// are the smallest over the ranks (World::set_step_reduction; a ball's stiffness sums are
+  /// complete on the rank that owns it and a ghost's partial ones only give a longer step), and
+  /// the no-contact fallback is taken only when no rank has an active contact (collective).
   double safe_step() const;
   /// The number of balls over every rank.
   std::size_t num_balls() const;
+
+  /// Specimen preparation on the ranks (docs/scaling.md "Specimen procedures on ranks"): the
+  /// periodic servo (§4.5) runs on every rank's World, its sums (ServoSums: the cell stress and
+  /// the affine stiffness) formed from every rank's pair contacts in one World's order on rank 0
+  /// and broadcast, so every rank sets one World's strain rate. Returns this rank's effect
+  /// (last_stress). Collective, after a load; remove_periodic_servo takes it off again.
+  PeriodicServo* add_periodic_servo(const ServoParams& p, double d_min);
+  void remove_periodic_servo();
+  /// The servo's sums of one World holding every ball, the same bits (collective).
+  ServoSums servo_sums(ServoStiffness kind) const;
+  /// cell_stress, cell_porosity and the smallest ball diameter of one World, the same bits
+  /// (collective).
+  Mat3 cell_stress() const;
+  double cell_porosity() const;
+  double min_diameter() const;
+  /// Every row's velocity and spin set to zero (a ghost's are its owner's, zero too).
+  void quench();
+  /// Every radius times f (the REV's radius expansion), the halo grown with them, the ghosts
+  /// exchanged again, then every rank's World prepared (a rebuild and a force pass) and its contact
+  /// constants refreshed, as one World does it (collective).
+  void scale_radii(double f);
+  MPI_Comm comm() const { return comm_; }
   /// Bond counts by state (measure.hpp's bond_counts) and World::bond_failures() of one World:
   /// each rank counts the pairs whose ball A it owns; integer sums (collective).
   BondCounts bond_counts() const;
@@ -335,11 +362,17 @@ class DistDem {
   /// order-free sum instead (no keys, no gather). `also_max[0..n_max)`: replaced by their maxima
   /// over the ranks, in the same collective (a NaN anywhere: NaN). Collective; contact terms need
   /// a loaded World (its rebuild count keys their merge order).
-  enum { kBallTerms = 0, kContactTerms = 1 };
+  enum { kBallTerms = 0, kContactTerms = 1, kServoTerms = 2 };
   static constexpr int kMaxColumns = 3;
   using KeyFill = std::function<void(std::vector<World::ContactTerm>&)>;
   void ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
                     double* sums, std::int64_t* count = nullptr, double* also_max = nullptr, int n_max = 0) const;
+  /// ordered_sums' gather alone: on rank 0 `fold(v, perm)` gets every rank's terms (K values
+  /// each, v[j K + c]) and the order of one World's keys (perm), to add them as it must (the
+  /// periodic servo's sums). Collective; nothing is returned to the other ranks.
+  using Fold = std::function<void(const double* v, const std::vector<std::uint32_t>& perm)>;
+  void ordered_fold(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, double* also_max,
+                    int n_max, const Fold& fold) const;
 
  private:
   /// Where the rows, pairs and wall contacts of a whole World go (load, load_from_root): per
@@ -414,6 +447,7 @@ class DistDem {
   std::unique_ptr<World> w_;
   double halo_ = 0.0;
   bool walls_every_step_ = false;  // a platen servo: the walls' sums reduced after every step (load)
+  PeriodicServo* servo_ = nullptr;  // add_periodic_servo's effect on this rank's World
   bool newton_ = false;            // set_newton
   long long chunk_ = 1LL << 30;    // set_part_chunk
   double run_disp2_ = 0.0;  // largest squared displacement of an owned ball since the rebuild
@@ -446,5 +480,22 @@ class DistDem {
   std::vector<double> msg_in_;
   std::vector<MPI_Request> msg_req_;
 };
+
+/// servo_until (specimen.hpp) on the ranks: the same steps, report and specimen as one World
+/// holding every ball, bit for bit (specimen_steps.hpp: the loop written once). Collective, on a
+/// loaded periodic DistDem.
+StageReport servo_until(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                        double budget, double* overshoot = nullptr);
+/// generate_rev (specimen.hpp) with its radius expansion on the ranks: rank 0 draws the balls
+/// into its empty periodic World `full` (generate_rev_balls; the other ranks' `full` holds the
+/// scene's parameters, read for the final contact parameters), cuts it by `d`'s grid and sends the
+/// parts (load_from_root); the ranks expand and cycle them (specimen_steps.hpp); the REV is
+/// assembled on rank 0 again (unload). The same REV, steps and report as one World, bit for bit.
+/// Collective; bad parameters are refused on every rank with rank 0's words.
+StageReport generate_rev(DistDem& d, World& full, const RevParams& p);
+/// servo_specimen (procedures.hpp) on the ranks, the same way (the REV's servo stage of the DEM
+/// node on ranks).
+StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                           double budget, double compaction_fric);
 
 }  // namespace demfdm::dem

@@ -1,0 +1,184 @@
+// The stepping halves of specimen preparation (docs/theory.md §4.3, §4.5, §4.11), written once for
+// one World (specimen.cpp) and for the DEM on MPI ranks (DistDem, dist.cpp): the REV's radius
+// expansion (expand_rev_on, with cycle_on) and its servo (servo_until_on, servo_specimen_on).
+// A system S gives:
+//   const World& world()       the World whose parameters and cell the rules read (on the ranks:
+//                              this rank's part; every rank's parameters and cell are the same)
+//   void step(std::int64_t n), void quench()        n steps; every velocity and spin zeroed
+//   void scale_radii(double f)  every radius times f, then prepare and refresh the contact constants
+//   void set_contact_params(double mu, UnbondedMoments m)   the ball-ball friction and the soft
+//                              bond's unbonded moments, the contact constants refreshed
+//   double friction(), void set_friction(double)   the ball-ball friction (constants refreshed)
+//   PeriodicServo* add_servo(const ServoParams&, double d_min), void remove_servo(PeriodicServo*)
+//   void stop_cell()           the cell's strain rate set to 0
+//   double ratio(), Mat3 stress(), double porosity(), double min_diameter(), size_t num_balls()
+//                              the unbalanced ratio, cell_stress, cell_porosity, the smallest
+//                              diameter and the ball count of the whole packing (on the ranks:
+//                              collective, one World's bits)
+// On the ranks every rank runs the loops: every decision reads values that are the same bits on
+// every rank, so the ranks take the same branches and meet in the same collectives.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "demfdm/dem/measure.hpp"
+#include "demfdm/dem/specimen.hpp"
+
+namespace demfdm::dem::detail {
+
+// Specimen preparation steps on the automatic step f t_c (steps_for converts its rules).
+inline void require_automatic_step(const World& w, const char* what) {
+  if (w.params().dt_fixed > 0.0) {
+    std::ostringstream s;
+    s << what << ": specimen preparation counts its rules in critical steps and must run on the automatic step "
+      << "(dt_fixed = 0), found dt_fixed = " << w.params().dt_fixed << " s.";
+    throw std::invalid_argument(s.str());
+  }
+}
+
+// Cycle until ratio < tol (checked every `every` steps) or budget; returns steps run. With
+// quench_every > 0 the velocities are zeroed every quench_every steps (a multiple of the check
+// interval is used).
+template <class S>
+std::int64_t cycle_on(S& sys, double tol, std::int64_t budget, bool& ok, std::int64_t every = 50,
+                      std::int64_t quench_every = 0) {
+  std::int64_t s = 0;
+  ok = false;
+  if (quench_every > 0) every = std::min(every, quench_every);
+  while (s < budget) {
+    const std::int64_t k = std::min<std::int64_t>(every, budget - s);
+    sys.step(k);
+    s += k;
+    if (sys.ratio() < tol) { ok = true; break; }
+    if (quench_every > 0 && s % quench_every == 0) sys.quench();
+  }
+  return s;
+}
+
+template <class S>
+void fill_report_on(S& s, StageReport& r) {
+  r.ratio = s.ratio();
+  if (s.world().periodic()) {
+    r.stress = s.stress();
+    r.porosity = s.porosity();
+  }
+}
+
+template <class S>
+StageReport servo_until_on(S& sys, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                           double budget_tc, double* overshoot) {
+  const World& w = sys.world();
+  if (!w.periodic()) throw std::invalid_argument("servo_until: the world must have a periodic cell.");
+  require_automatic_step(w, "servo_until");
+  // §4.11: the check interval (8 t_c: 10 steps at f = 0.8), the hold and the budget in critical steps.
+  const std::int64_t every = steps_for(w, 8.0), hold_steps = steps_for(w, hold), budget = steps_for(w, budget_tc),
+                     quench_steps = steps_for(w, p.quench_every);
+  for (int a = 0; a < 3; ++a)
+    if (p.active[a] && !(p.target[a] > 0.0)) {
+      std::ostringstream s;
+      s << "servo_until: 'target[" << a << "]' must be > 0 Pa (compressive), found " << p.target[a] << ".";
+      throw std::invalid_argument(s.str());
+    }
+  PeriodicServo* servo = sys.add_servo(p, sys.min_diameter());
+  StageReport r;
+  std::int64_t held = 0;
+  double over = 0.0;
+  // Overshoot: excursion past the target on the side opposite to the starting stress.
+  double side[3] = {0, 0, 0};
+  {
+    const Mat3 s0 = sys.stress();
+    for (int a = 0; a < 3; ++a) side[a] = (-s0[4 * a] <= p.target[a]) ? 1.0 : -1.0;
+  }
+  r.converged = false;
+  while (r.steps < budget) {
+    sys.step(1);
+    ++r.steps;
+    const Mat3& s = servo->last_stress();
+    bool in = true;
+    for (int a = 0; a < 3; ++a) {
+      if (!p.active[a]) continue;
+      const double rel = (-s[4 * a] - p.target[a]) / p.target[a];
+      over = std::max(over, side[a] * rel);
+      in &= std::abs(rel) <= stress_tol;
+    }
+    if (quench_steps > 0 && r.steps % quench_steps == 0) sys.quench();
+    if (r.steps % every == 0) {
+      if (in && sys.ratio() < ratio_tol) held += every;
+      else held = 0;
+      if (held >= hold_steps) { r.converged = true; break; }
+    }
+  }
+  sys.remove_servo(servo);
+  sys.stop_cell();
+  fill_report_on(sys, r);
+  if (overshoot) *overshoot = over;
+  std::ostringstream o;
+  o << "servo to (" << p.target.x << ", " << p.target.y << ", " << p.target.z << ") Pa "
+    << (r.converged ? "converged" : "did not converge") << " in " << r.steps << " steps";
+  if (!r.converged)
+    o << " (criterion: |s - s*| <= " << stress_tol << " s* and unbalanced ratio < " << ratio_tol << " for " << hold
+      << " critical steps within " << budget_tc << " critical steps; reached ratio " << sys.ratio() << ")";
+  r.what = o.str();
+  return r;
+}
+
+// generate_rev's radius expansion (§4.3) of the balls that generate_rev_balls placed: `increments`
+// equal factors to the porosity n1, each cycled to the unbalanced ratio; the REV ends at rest with
+// the final contact parameters. Returns generate_rev's report.
+template <class S>
+StageReport expand_rev_on(S& sys, const RevParams& p, const RevStart& st) {
+  const World& w = sys.world();
+  const double n0 = sys.porosity();
+  const double mtot = std::cbrt((1.0 - st.n1) / (1.0 - n0));
+  const double minc = std::pow(mtot, 1.0 / p.increments);
+  StageReport r;
+  bool ok_all = true;
+  // §4.11: the intervals and the budget in critical steps (50, 50 and 20,000 steps at f = 0.8).
+  const std::int64_t budget = steps_for(w, p.increment_budget), every = steps_for(w, p.check_every),
+                     quench_steps = steps_for(w, p.quench_every);
+  int failed = -1;
+  for (int k = 0; k < p.increments; ++k) {
+    sys.scale_radii(minc);
+    bool ok;
+    r.steps += cycle_on(sys, p.ratio_tol, budget, ok, every, quench_steps);
+    if (!ok && failed < 0) failed = k;
+    ok_all &= ok;
+  }
+  sys.quench();  // the REV starts at rest
+  sys.set_contact_params(st.mu_final, st.moments_final);
+  fill_report_on(sys, r);
+  r.count = sys.num_balls();
+  r.converged = ok_all;
+  std::ostringstream s;
+  s << "generated " << r.count << " balls (seed " << p.seed << ", PSD scale " << p.psd.scale
+    << ") and expanded radii from porosity " << n0 << " to " << r.porosity << " in "
+    << p.increments << " increments";
+  if (failed >= 0)
+    s << "; increment " << failed + 1 << " of " << p.increments << " did not reach the unbalanced ratio "
+      << p.ratio_tol << " within " << p.increment_budget << " critical steps (" << budget << " steps)";
+  r.what = s.str();
+  return r;
+}
+
+// servo_specimen (procedures.hpp): compaction at the lowered friction, then at the final one.
+template <class S>
+StageReport servo_specimen_on(S& sys, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
+                              double budget, double compaction_fric) {
+  const double mu = sys.friction();
+  sys.set_friction(std::min(mu, compaction_fric));
+  auto r1 = servo_until_on(sys, p, stress_tol, ratio_tol, hold, budget, nullptr);
+  if (!r1.converged) return r1;
+  sys.set_friction(mu);
+  auto r2 = servo_until_on(sys, p, stress_tol, ratio_tol, hold, budget / 2, nullptr);
+  r2.steps += r1.steps;
+  r2.what = "servo to sigma_v " + std::to_string(p.target.z) + " Pa, sigma_h " + std::to_string(p.target.x) +
+            " Pa: " + r1.what + "; at final friction: " + r2.what;
+  return r2;
+}
+
+}  // namespace demfdm::dem::detail

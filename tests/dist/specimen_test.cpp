@@ -1,0 +1,287 @@
+// Specimen preparation on MPI ranks (issue 17 item 2; docs/scaling.md "the REV's expansion and
+// servo on the ranks"), against one World holding every ball:
+//  * the REV's periodic servo (servo_until, §4.5): every rank generates the same REV
+//    (generate_rev: its draws are keyed by ball index, specimen.hpp); rank 0 also servos one World
+//    (the reference); the ranks servo the REV cut into bricks. The report (steps, verdict, ratio,
+//    stress, porosity, overshoot, its sentence), the cell and every ball's state must be the same
+//    bits. The loose REV's servo compacts it by several per cent of the cell's edge, so the bricks
+//    follow the cell (BrickGrid::follow_cell) and balls cross the cuts and the cell's faces;
+//  * the REV's radius expansion (generate_rev on a DistDem): the report and the REV assembled on
+//    rank 0, byte for byte as a checkpoint holds it;
+//  * BrickGrid::follow_cell itself.
+#include <gtest/gtest.h>
+#include <mpi.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "demfdm/dem/checkpoint.hpp"
+#include "demfdm/dem/dist.hpp"
+#include "demfdm/dem/specimen.hpp"
+#include "tests/dist/dist_util.hpp"
+
+using namespace demfdm::dem;
+using test::g_rank;
+using test::g_size;
+
+namespace {
+
+struct ServoScene {
+  std::string name;
+  ContactModel model = ContactModel::kLinear;
+  bool rcb = false;        // RCB instead of slabs across z
+  bool from_root = false;  // load_from_root: the other ranks never hold the REV
+  bool order_free = false; // WorldParams::order_free_sums (the servo's sums stay one World's)
+  double tol = 0.02, ratio = 1e-3;  // the servo's criterion
+  double budget = 700.0;            // [t_c]
+  double target = 4e5;              // [Pa] the lateral target
+  double vertical = 2.0;            // the vertical target over the lateral one
+  double porosity = 0.62;           // the REV's (loose: the servo then compacts it)
+};
+
+constexpr std::size_t kBalls = 700;
+
+RevParams rev_params(const ServoScene& sc) {
+  RevParams r;
+  r.psd.scale = 1.5;
+  r.seed = 7;
+  r.n_particles = kBalls;
+  r.porosity_final = sc.porosity;
+  r.increments = 2;
+  r.ratio_tol = 2e-2;
+  r.increment_budget = 400.0;
+  return r;
+}
+
+// The REV's periodic cell and parameters (no ball yet).
+WorldParams rev_world(const ServoScene& sc) {
+  const RevParams r = rev_params(sc);
+  const double V = psd_expected_count(r.psd, 1.0, r.porosity_final);  // balls per m^3 at that porosity
+  const double L = std::cbrt(static_cast<double>(kBalls) / V);
+  WorldParams p;
+  p.periodic.enabled = true;
+  p.periodic.origin = {0.0, 0.0, 0.0};
+  p.periodic.length = {L, L, L};
+  p.ball_ball.model = sc.model;
+  p.ball_ball.linear.fric = 0.3;
+  p.dt_fixed = 0.0;  // specimen preparation steps on the automatic step
+  p.thread_independent = true;
+  p.order_free_sums = sc.order_free;
+  return p;
+}
+
+// The loose REV, as every rank makes it (the same bits: one generator, keyed draws).
+std::unique_ptr<World> rev(const ServoScene& sc) {
+  auto w = std::make_unique<World>(rev_world(sc));
+  const StageReport g = generate_rev(*w, rev_params(sc));
+  EXPECT_EQ(g.count, kBalls);
+  return w;
+}
+
+ServoParams servo_params(const ServoScene& sc) {
+  ServoParams sp;
+  sp.target = {sc.target, sc.target, sc.vertical * sc.target};
+  sp.max_face_step = 0.02;  // fast: the test wants strain, not a quasi-static compaction
+  sp.quench_every = 40.0;
+  return sp;
+}
+constexpr double kHold = 16.0;
+
+BrickGrid grid(const World& w, const ServoScene& sc);
+
+// generate_rev's radius expansion on the ranks (dist.hpp): rank 0 draws the balls, the ranks
+// expand them (the halo grows with the radii, the ghosts are exchanged again at every increment)
+// and the REV is assembled on rank 0: its report and its state (state_bytes: every ball, pair,
+// history and counter) are one World's, byte for byte. The other ranks hold only their parts.
+void check_generate(const ServoScene& sc) {
+  World full(rev_world(sc));
+  const Vec3 L0 = full.cell_length();
+  DistDem d(MPI_COMM_WORLD, full.params(), grid(full, sc));
+  const StageReport got = generate_rev(d, full, rev_params(sc));
+  long long mine[2] = {static_cast<long long>(d.exchanges()), static_cast<long long>(full.num_balls())}, most[2] = {0, 0};
+  MPI_Reduce(mine, most, 2, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
+  long long others = g_rank == 0 ? 0 : mine[1], other_balls = 0;
+  MPI_Reduce(&others, &other_balls, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  if (g_rank == 0) {
+    World ref(rev_world(sc));
+    const StageReport want = generate_rev(ref, rev_params(sc));
+    std::printf("%s on %d ranks: %s; %zu steps, %lld exchanges\n", sc.name.c_str(), g_size, got.what.c_str(),
+                static_cast<std::size_t>(got.steps), most[0]);
+    EXPECT_EQ(got.what, want.what);
+    EXPECT_EQ(got.steps, want.steps);
+    EXPECT_EQ(got.count, want.count);
+    EXPECT_EQ(got.converged, want.converged);
+    EXPECT_EQ(std::memcmp(&got.ratio, &want.ratio, sizeof(double)), 0) << got.ratio << " vs " << want.ratio;
+    EXPECT_EQ(std::memcmp(got.stress.data(), want.stress.data(), sizeof(Mat3)), 0) << "the report's stress";
+    EXPECT_EQ(std::memcmp(&got.porosity, &want.porosity, sizeof(double)), 0) << got.porosity << " vs " << want.porosity;
+    // the dissipated energies are the ranks' sums in rank order (round-off apart, as on every
+    // DistDem unload: walls_test.cpp); with those set equal the state is one World's
+    World::Counters k = full.counters();
+    const World::Counters kr = ref.counters();
+    EXPECT_NEAR(k.e_damp, kr.e_damp, 1e-12 * std::abs(kr.e_damp));
+    EXPECT_NEAR(k.e_slip_dead, kr.e_slip_dead, 1e-12 * std::abs(kr.e_slip_dead));
+    EXPECT_GT(kr.e_damp, 0.0);
+    k.e_damp = kr.e_damp, k.e_slip_dead = kr.e_slip_dead, k.e_soft_dead = kr.e_soft_dead;
+    full.set_counters(k);
+    EXPECT_TRUE(state_bytes(full, CheckpointMeta{}) == state_bytes(ref, CheckpointMeta{}))
+        << "the REV assembled on rank 0 is not one World's";
+    EXPECT_EQ(full.cell_length().x, L0.x);
+    EXPECT_GT(want.steps, 200);
+    if (g_size > 1) {
+      EXPECT_GT(most[0], 2) << "every increment exchanges the ghosts again";
+    }
+    EXPECT_EQ(other_balls, 0) << "the other ranks' Worlds hold no ball";
+  }
+  test::share_verdict();
+}
+
+BrickGrid grid(const World& w, const ServoScene& sc) {
+  BrickGrid g;
+  g.lo = w.cell_origin();
+  g.len = w.cell_length();
+  for (bool& p : g.periodic) p = true;
+  if (sc.rcb)
+    g.set_rcb(g_size);
+  else
+    g.n[2] = g_size;
+  return g;
+}
+
+void check(const ServoScene& sc) {
+  std::unique_ptr<World> full = rev(sc);
+  const Vec3 L0 = full->cell_length();
+  DistDem d(MPI_COMM_WORLD, full->params(), grid(*full, sc));
+  if (sc.from_root) {
+    if (g_rank != 0) full = std::make_unique<World>(full->params());  // no ball
+    d.load_from_root(*full);
+  } else {
+    d.load(*full);
+  }
+  double over = 0.0;
+  const StageReport got = servo_until(d, servo_params(sc), sc.tol, sc.ratio, kHold, sc.budget, &over);
+  const DistDem::Balls balls = d.gather();
+  const Vec3 L = d.world().cell_length(), edot = d.world().strain_rate();
+  long long mine[2] = {static_cast<long long>(d.owned()), static_cast<long long>(d.migrated())}, sum[2] = {0, 0};
+  MPI_Reduce(mine, sum, 2, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  const bool servo_left = !d.world().effect_names().empty();
+  EXPECT_FALSE(servo_left) << "the servo must be taken off at the end";
+  if (g_rank == 0) {
+    std::unique_ptr<World> ref = rev(sc);
+    double over_ref = 0.0;
+    const StageReport want = servo_until(*ref, servo_params(sc), sc.tol, sc.ratio, kHold, sc.budget, &over_ref);
+    std::printf("%s on %d ranks: %s; stress %.4g %.4g %.4g Pa, porosity %.4f; cell %.4f %.4f %.4f of its start, %lld "
+                "exchanges, %lld migrations\n",
+                sc.name.c_str(), g_size, got.what.c_str(), -got.stress[0], -got.stress[4], -got.stress[8], got.porosity,
+                L.x / L0.x, L.y / L0.y, L.z / L0.z,
+                static_cast<long long>(d.exchanges()), sum[1]);
+    EXPECT_EQ(got.what, want.what);
+    EXPECT_EQ(got.steps, want.steps);
+    EXPECT_EQ(got.converged, want.converged);
+    EXPECT_EQ(std::memcmp(&got.ratio, &want.ratio, sizeof(double)), 0) << got.ratio << " vs " << want.ratio;
+    EXPECT_EQ(std::memcmp(got.stress.data(), want.stress.data(), sizeof(Mat3)), 0) << "the report's stress";
+    EXPECT_EQ(std::memcmp(&got.porosity, &want.porosity, sizeof(double)), 0) << got.porosity << " vs " << want.porosity;
+    EXPECT_EQ(std::memcmp(&over, &over_ref, sizeof(double)), 0) << "overshoot " << over << " vs " << over_ref;
+    const Vec3 L_ref = ref->cell_length();
+    EXPECT_EQ(std::memcmp(&L, &L_ref, sizeof(Vec3)), 0) << "the cell differs";
+    EXPECT_EQ(edot.x, 0.0);
+    EXPECT_EQ(edot.z, 0.0);
+    test::expect_same_balls(balls, *ref, static_cast<std::size_t>(sum[0]));
+    // the scene must strain the cell (the bricks follow it) and run the servo for a while
+    if (sc.porosity > 0.5) {
+      EXPECT_LT(L.z / L0.z, 0.95) << "the servo must compact the REV";
+      if (g_size > 1) {
+        EXPECT_GT(sum[1], 0) << "balls must cross the cuts";
+      }
+    }
+    EXPECT_GT(got.steps, sc.porosity > 0.5 ? 100 : 20);
+    EXPECT_EQ(got.converged, sc.ratio > 0.1) << "the scene's criterion";
+  }
+  test::share_verdict();
+}
+
+}  // namespace
+
+TEST(DistSpecimen, ServoLinearSlabsSameBits) { check({"servo, linear, slabs across z"}); }
+TEST(DistSpecimen, ServoSoftBondRcbFromRootSameBits) {
+  ServoScene sc{"servo, soft bond law, RCB, from rank 0", ContactModel::kSoftBond};
+  sc.rcb = sc.from_root = true;
+  check(sc);
+}
+// A dense REV (porosity 0.45): after the expansion few balls touch, and at 3 slabs the middle
+// rank's rows hold no active contact. Its World alone would take the no-contact fallback step
+// (one contact per ball at the law's reference stiffness, a shorter step); the ranks reduce the
+// ratios first and take the fallback only when no rank has a contact (World::contact_scan).
+TEST(DistSpecimen, ServoDenseRevSameBits) {
+  ServoScene sc{"servo, linear, dense REV, slabs across z"};
+  sc.porosity = 0.45;
+  check(sc);
+}
+TEST(DistSpecimen, GenerateLinearSlabsSameBits) { check_generate({"generate, linear, slabs across z"}); }
+TEST(DistSpecimen, GenerateSoftBondRcbSameBits) {
+  ServoScene sc{"generate, soft bond law, RCB", ContactModel::kSoftBond};
+  sc.rcb = true;
+  sc.porosity = 0.45;
+  check_generate(sc);
+}
+// a criterion that the servo meets: the hold's checks of the ratio run, and the loop ends there
+TEST(DistSpecimen, ServoConvergesOrderFreeSumsSameBits) {
+  ServoScene sc{"servo, linear, order-free sums elsewhere, a loose criterion", ContactModel::kLinear};
+  sc.order_free = true;
+  sc.tol = 0.05;
+  sc.ratio = 0.5;
+  sc.budget = 2400.0;
+  sc.vertical = 1.0;  // (at twice the lateral stress a loose packing at friction 0.3 keeps flowing)
+  sc.porosity = 0.40;
+  sc.target = 2e6;
+  check(sc);
+}
+
+// BrickGrid::follow_cell: a cell strained about its origin (as World::integrate maps the balls)
+// maps the bricks with it: every ball keeps its brick, and a ball next to a face that moved in
+// is a ghost across that face again. Without it the grid keeps the old cell's length: the bricks'
+// shares change, and across a periodic face the images sit a cell's old length away.
+TEST(DistSpecimen, BricksFollowTheStrainedCell) {
+  for (const bool rcb : {false, true}) {
+    BrickGrid g;
+    g.lo = {-1.0, 0.0, 2.0};  // the cell's origin
+    g.len = {1.0, 2.0, 3.0};
+    for (bool& p : g.periodic) p = true;
+    if (rcb) {
+      g.set_rcb(5);
+    } else {
+      g.n[1] = 2;
+      g.n[2] = 3;
+      g.cuts[2] = {0.5, 2.0};
+    }
+    const Vec3 o = g.lo, f{0.9, 1.0, 0.7};  // the strain: x and z shrink, y keeps
+    const Vec3 L{g.len.x * f.x, g.len.y * f.y, g.len.z * f.z};
+    BrickGrid h = g;
+    h.follow_cell(o, L);
+    EXPECT_EQ(h.len.x, L.x);
+    EXPECT_EQ(h.len.z, L.z);
+    int moved_without = 0;
+    for (int i = 0; i < 20; ++i)
+      for (int k = 0; k < 20; ++k) {
+        const Vec3 x{o.x + (i + 0.5) / 20.0 * g.len.x, o.y + 0.3, o.z + (k + 0.5) / 20.0 * g.len.z};
+        const Vec3 y{o.x + (x.x - o.x) * f.x, x.y, o.z + (x.z - o.z) * f.z};
+        EXPECT_EQ(h.owner(y), g.owner(x)) << (rcb ? "rcb " : "grid ") << i << " " << k;
+        moved_without += g.owner(y) != g.owner(x);
+      }
+    EXPECT_GT(moved_without, 0) << "the strain must move balls between bricks of the old grid";
+    // a ball just below the strained cell's top face is within the halo of the bottom bricks
+    // through the face: a ghost there
+    const double halo = 0.05;
+    const Vec3 top{o.x + 0.1, o.y + 0.3, o.z + L.z - 0.01};
+    std::vector<int> near_h, near_g;
+    h.near(top, halo, near_h);
+    g.near(top, halo, near_g);
+    const int bottom = h.owner({top.x, top.y, o.z + 0.001});
+    EXPECT_NE(std::find(near_h.begin(), near_h.end(), bottom), near_h.end()) << "a ghost across the top face";
+    EXPECT_EQ(std::find(near_g.begin(), near_g.end(), bottom), near_g.end()) << "(the old grid's image is too far)";
+  }
+}
