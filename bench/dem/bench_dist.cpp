@@ -538,6 +538,7 @@ int rev_bench(long n, std::uint64_t seed) {
   double t0 = MPI_Wtime();
   StageReport gen = generate_rev(d, full, rp);
   const double t_gen = MPI_Wtime() - t0;
+  const DistDem::Times tg = d.times();
   // bonds to the paper's Z on rank 0 (as the node's generate stage)
   if (rank == 0) bond_specimen(full, gen, 6.82, 1e-3 * rp.psd.d_min * rp.psd.scale);
   DistDem s(MPI_COMM_WORLD, p, g);
@@ -546,6 +547,13 @@ int rev_bench(long n, std::uint64_t seed) {
   t0 = MPI_Wtime();
   const StageReport sv = servo_specimen(s, ServoParams{}, 0.005, 1e-4, 160.0, 16000.0, 0.1);
   const double t_servo = MPI_Wtime() - t0;
+  const DistDem::Times ts = s.times();
+  // where each phase's time went on this rank [s]: motion (the servo's sums inside), forces,
+  // forward, reduce, exchange; rank 0 prints every rank's
+  const double mine[10] = {tg.motion, tg.forces, tg.forward, tg.reduce, tg.exchange,
+                           ts.motion, ts.forces, ts.forward, ts.reduce, ts.exchange};
+  std::vector<double> all(rank == 0 ? 10 * static_cast<std::size_t>(P) : 0);
+  MPI_Gather(mine, 10, MPI_DOUBLE, all.data(), 10, MPI_DOUBLE, 0, MPI_COMM_WORLD);
   if (rank == 0) {
     std::printf("phase,ranks,balls,steps,wall_s,particle_steps_per_s,converged\n");
     if (P == 1) {  // one World without DistDem (the node at dem.ranks = 1): the ranks' overhead at 1 rank
@@ -566,6 +574,12 @@ int rev_bench(long n, std::uint64_t seed) {
                 static_cast<double>(gen.count) * static_cast<double>(gen.steps) / t_gen, gen.converged ? 1 : 0);
     std::printf("servo,%d,%zu,%" PRId64 ",%.3f,%.4g,%d\n", P, gen.count, sv.steps, t_servo,
                 static_cast<double>(gen.count) * static_cast<double>(sv.steps) / t_servo, sv.converged ? 1 : 0);
+    for (int r = 0; r < P; ++r) {
+      const double* a = all.data() + 10 * r;
+      std::printf("times,rank,%d,expansion_motion_forces_forward_reduce_exchange_s,%.3f,%.3f,%.3f,%.3f,%.3f,"
+                  "servo_motion_forces_forward_reduce_exchange_s,%.3f,%.3f,%.3f,%.3f,%.3f\n",
+                  r, a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], a[8], a[9]);
+    }
   }
   return 0;
 }
