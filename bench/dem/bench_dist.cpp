@@ -33,12 +33,14 @@
 // mpirun -np P bench_dist --run DIR [steps] [balance]: a run's checkpoint (its DEM World) stepped
 // on the ranks as the DEM node steps it (run_state below).
 // bench_dist --merge P N: rank 0's merge of the walls' shares, P runs of N (merge_bench below).
-// mpirun -np P bench_dist --rev N [seed]: the REV's preparation on the ranks (rev_bench below): N balls
-// of the paper's PSD at upscaling 1.5 drawn into a cube at porosity 0.52042, their radius expansion
-// (5 increments), bonds to Z = 6.82 on rank 0, and the soft-bond REV's servo (compaction at friction
-// 0.1, then the final one, to (6.25, 6.25, 12.5) kPa), as the DEM node runs them with dem.ranks = P. One line per phase:
-// phase, ranks, balls, steps, wall_s, particle_steps_per_s, converged; on one rank also both phases
-// on one World without DistDem (as the node at dem.ranks = 1), the same steps.
+// mpirun -np P bench_dist --rev N [seed]: the REV's preparation on the ranks (rev_bench below): N
+// balls of the paper's PSD at upscaling 1.5 drawn into a cube at porosity 0.52042, their radius
+// expansion (5 increments), bonds to Z = 6.82 on rank 0, and the soft-bond REV's servo (compaction
+// at friction 0.1, then the final one, to (6.25, 6.25, 12.5) kPa), as the DEM node runs them with
+// dem.ranks = P. One line per phase: phase, ranks, balls, steps, wall_s, particle_steps_per_s,
+// converged; on one rank also both phases on one World without DistDem (as the node at
+// dem.ranks = 1), the same steps; then each rank's phase times (motion, which runs the servo's
+// sums, forces, forward, reduce, exchange) [s].
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
 // cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
 // the run. Ball ids follow a Morton order of the packing (rows in id order are then local in

@@ -1,7 +1,7 @@
 // Specimen preparation on MPI ranks (issue 17 item 2; docs/scaling.md "the REV's expansion and
 // servo on the ranks"), against one World holding every ball:
-//  * the REV's periodic servo (servo_until, §4.5): every rank generates the same REV
-//    (generate_rev: its draws are keyed by ball index, specimen.hpp); rank 0 also servos one World
+//  * the REV's periodic servo (servo_until, §4.5): every rank generates the same REV (one World's
+//    generate_rev, deterministic); rank 0 also servos one World
 //    (the reference); the ranks servo the REV cut into bricks. The report (steps, verdict, ratio,
 //    stress, porosity, overshoot, its sentence), the cell and every ball's state must be the same
 //    bits. The loose REV's servo compacts it by several per cent of the cell's edge, so the bricks
@@ -42,6 +42,7 @@ struct ServoScene {
   double target = 4e5;              // [Pa] the lateral target
   double vertical = 2.0;            // the vertical target over the lateral one
   double porosity = 0.62;           // the REV's (loose: the servo then compacts it)
+  bool idle_rank = false;           // at 3 slabs a rank's rows touch nothing as loaded
 };
 
 constexpr std::size_t kBalls = 700;
@@ -75,7 +76,7 @@ WorldParams rev_world(const ServoScene& sc) {
   return p;
 }
 
-// The loose REV, as every rank makes it (the same bits: one generator, keyed draws).
+// The REV, as every rank makes it (one World's generate_rev: the same bits on every rank).
 std::unique_ptr<World> rev(const ServoScene& sc) {
   auto w = std::make_unique<World>(rev_world(sc));
   const StageReport g = generate_rev(*w, rev_params(sc));
@@ -103,7 +104,8 @@ void check_generate(const ServoScene& sc) {
   const Vec3 L0 = full.cell_length();
   DistDem d(MPI_COMM_WORLD, full.params(), grid(full, sc));
   const StageReport got = generate_rev(d, full, rev_params(sc));
-  long long mine[2] = {static_cast<long long>(d.exchanges()), static_cast<long long>(full.num_balls())}, most[2] = {0, 0};
+  long long mine[2] = {static_cast<long long>(d.exchanges()), static_cast<long long>(full.num_balls())};
+  long long most[2] = {0, 0};
   MPI_Reduce(mine, most, 2, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
   long long others = g_rank == 0 ? 0 : mine[1], other_balls = 0;
   MPI_Reduce(&others, &other_balls, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
@@ -162,6 +164,15 @@ void check(const ServoScene& sc) {
   } else {
     d.load(*full);
   }
+  // the touching or bonded pairs whose ball A this rank owns, as loaded (the dense REV's premise)
+  long long touching = 0, fewest = 0;
+  {
+    const auto& pc = d.world().pair_contacts();
+    const auto& gh = d.world().ghost_rows();
+    for (std::size_t c = 0; c < pc.size(); ++c)
+      if ((gh.empty() || !gh[pc.a[c]]) && servo_term(d.world(), c).stiff) ++touching;
+  }
+  MPI_Allreduce(&touching, &fewest, 1, MPI_LONG_LONG, MPI_MIN, MPI_COMM_WORLD);
   double over = 0.0;
   const StageReport got = servo_until(d, servo_params(sc), sc.tol, sc.ratio, kHold, sc.budget, &over);
   const DistDem::Balls balls = d.gather();
@@ -192,6 +203,9 @@ void check(const ServoScene& sc) {
     EXPECT_EQ(edot.z, 0.0);
     test::expect_same_balls(balls, *ref, static_cast<std::size_t>(sum[0]));
     // the scene must strain the cell (the bricks follow it) and run the servo for a while
+    if (sc.idle_rank && g_size == 3) {
+      EXPECT_EQ(fewest, 0) << "a rank whose rows touch nothing (the no-contact step's case)";
+    }
     if (sc.porosity > 0.5) {
       EXPECT_LT(L.z / L0.z, 0.95) << "the servo must compact the REV";
       if (g_size > 1) {
@@ -219,6 +233,7 @@ TEST(DistSpecimen, ServoSoftBondRcbFromRootSameBits) {
 TEST(DistSpecimen, ServoDenseRevSameBits) {
   ServoScene sc{"servo, linear, dense REV, slabs across z"};
   sc.porosity = 0.45;
+  sc.idle_rank = true;
   check(sc);
 }
 TEST(DistSpecimen, GenerateLinearSlabsSameBits) { check_generate({"generate, linear, slabs across z"}); }

@@ -44,19 +44,12 @@ struct OneWorld {
     w.prepare();
     w.refresh_contact_constants();
   }
-  void set_contact_params(double mu, UnbondedMoments m) {
-    w.mutable_params().ball_ball.linear.fric = mu;
-    w.mutable_params().ball_ball.softbond.moments = m;
-    w.refresh_contact_constants();
-  }
+  void set_contact_params(double mu, UnbondedMoments m) { detail::set_contact_params(w, mu, m); }
   std::size_t num_balls() const { return w.num_balls(); }
   void quench() { dem::quench(w); }
   void stop_cell() { w.set_strain_rate({}); }
   double friction() const { return w.params().ball_ball.linear.fric; }
-  void set_friction(double mu) {
-    w.mutable_params().ball_ball.linear.fric = mu;
-    w.refresh_contact_constants();
-  }
+  void set_friction(double mu) { detail::set_friction(w, mu); }
   double ratio() const { return w.unbalanced_ratio(); }
   Mat3 stress() const { return cell_stress(w); }
   double porosity() const { return cell_porosity(w); }

@@ -586,9 +586,12 @@ std::vector<PlatenServoParams> loadable(const World& full) {
       platens.push_back(ps->params());
       continue;
     }
-    throw std::invalid_argument("DistDem::load: the world has the effect '" + std::string(e->name()) +
-                                "', which the DEM on MPI ranks cannot take with the world (docs/scaling.md; a periodic "
-                                "servo is added on the ranks after the load: DistDem::add_periodic_servo).");
+    const std::string name = e->name();
+    throw std::invalid_argument("DistDem::load: the world has the effect '" + name +
+                                "', which the DEM on MPI ranks cannot take with the world (docs/scaling.md)" +
+                                (name == "periodic_servo" ? "; add it on the ranks after the load "
+                                                            "(DistDem::add_periodic_servo)."
+                                                          : "; run it on one rank."));
   }
   return platens;
 }
@@ -769,6 +772,19 @@ namespace {
 constexpr int kTagPart = 7303;                 // load_from_root's parts
 }  // namespace
 
+namespace {
+// Rank 0's verdict is every rank's: its refusal (empty: none) broadcast, and thrown on every
+// rank with rank 0's words (collective).
+void share_verdict(MPI_Comm comm, std::string refused) {
+  int len = static_cast<int>(refused.size());
+  MPI_Bcast(&len, 1, MPI_INT, 0, comm);
+  if (len == 0) return;
+  refused.resize(static_cast<std::size_t>(len));
+  MPI_Bcast(refused.data(), len, MPI_CHAR, 0, comm);
+  throw std::invalid_argument(refused);
+}
+}  // namespace
+
 // Rank 0 cuts `full` (one pass, cut) and sends each rank its part as a World's state file in
 // memory (the checkpoint format, dem/checkpoint.hpp: every field, bit for bit). The receiving
 // rank takes it as its World, the rows of other ranks' balls marked as ghosts, and steps as
@@ -788,13 +804,7 @@ void DistDem::load_from_root(const World& full) {
       refused = e.what();
     }
   }
-  int len = static_cast<int>(refused.size());
-  MPI_Bcast(&len, 1, MPI_INT, 0, comm_);
-  if (len > 0) {
-    refused.resize(static_cast<std::size_t>(len));
-    MPI_Bcast(refused.data(), len, MPI_CHAR, 0, comm_);
-    throw std::invalid_argument(refused);
-  }
+  share_verdict(comm_, refused);
   MPI_Bcast(hk, 2, MPI_DOUBLE, 0, comm_);
   halo_ = hk[0];
   balance_at_load(rank_ == 0 ? &full : nullptr);
@@ -2148,6 +2158,7 @@ ServoSums DistDem::servo_sums(ServoStiffness kind) const {
   const auto& g = w.ghost_rows();
   const Particles& pt = w.balls();
   auto mine = [&](std::size_t c) { return g.empty() || !g[pc.a[c]]; };  // (contact_force_keys' rule)
+  constexpr int K = 9;  // a term's doubles: F, l, k_n, k_s, stiff
   std::vector<double>& v = buf_->m_rows;
   v.clear();
   for (std::size_t c = 0; c < pc.size(); ++c) {
@@ -2160,10 +2171,10 @@ ServoSums DistDem::servo_sums(ServoStiffness kind) const {
       if (mine(c)) out.push_back({0, pt.id[pc.a[c]], pt.id[pc.b[c]], 0.0});
   };
   ServoSums sums;
-  ordered_fold(v.size() / 9, v.data(), 9, keys, kServoTerms, nullptr, 0,
+  ordered_fold(v.size() / K, v.data(), K, keys, kServoTerms, nullptr, 0,
                [&](const double* all, const std::vector<std::uint32_t>& perm) {
                  for (std::uint32_t j : perm) {
-                   const double* q = all + 9 * static_cast<std::size_t>(j);
+                   const double* q = all + K * static_cast<std::size_t>(j);
                    ServoTerm t;
                    t.F = {q[0], q[1], q[2]};
                    t.l = {q[3], q[4], q[5]};
@@ -2173,14 +2184,12 @@ ServoSums DistDem::servo_sums(ServoStiffness kind) const {
                    sums.add(t, kind);
                  }
                });
-  double b[18];
+  double b[18];  // the stress's 9 sums, then K's
   std::copy(sums.s.begin(), sums.s.end(), b);
-  for (int a = 0; a < 3; ++a)
-    for (int c = 0; c < 3; ++c) b[9 + 3 * a + c] = sums.K[a][c];
+  std::copy(&sums.K[0][0], &sums.K[0][0] + 9, b + 9);
   MPI_Bcast(b, 18, MPI_DOUBLE, 0, comm_);
   std::copy(b, b + 9, sums.s.begin());
-  for (int a = 0; a < 3; ++a)
-    for (int c = 0; c < 3; ++c) sums.K[a][c] = b[9 + 3 * a + c];
+  std::copy(b + 9, b + 18, &sums.K[0][0]);
   return sums;
 }
 
@@ -2261,19 +2270,12 @@ struct Ranks {
   void remove_servo(PeriodicServo*) { d.remove_periodic_servo(); }
   void step(std::int64_t n) { d.step(n); }
   void scale_radii(double f) { d.scale_radii(f); }
-  void set_contact_params(double mu, UnbondedMoments m) {  // every rank's World
-    d.world().mutable_params().ball_ball.linear.fric = mu;
-    d.world().mutable_params().ball_ball.softbond.moments = m;
-    d.world().refresh_contact_constants();
-  }
+  void set_contact_params(double mu, UnbondedMoments m) { detail::set_contact_params(d.world(), mu, m); }
   std::size_t num_balls() const { return d.num_balls(); }
   void quench() { d.quench(); }
   void stop_cell() { d.world().set_strain_rate({}); }
   double friction() const { return d.world().params().ball_ball.linear.fric; }
-  void set_friction(double mu) {  // every rank's World (its ghosts' contacts too)
-    d.world().mutable_params().ball_ball.linear.fric = mu;
-    d.world().refresh_contact_constants();
-  }
+  void set_friction(double mu) { detail::set_friction(d.world(), mu); }  // (every rank's World)
   double ratio() const { return d.unbalanced_ratio(d.mean_contact_force()); }
   Mat3 stress() const { return d.cell_stress(); }
   double porosity() const { return d.cell_porosity(); }
@@ -2294,24 +2296,22 @@ StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, 
 }
 
 StageReport generate_rev(DistDem& d, World& full, const RevParams& p) {
-  // every rank: the final contact parameters from its own World (the scene's), and n1
-  RevStart st{p.porosity_target < 0.0 ? p.porosity_final : p.porosity_target, full.params().ball_ball.linear.fric,
-              full.params().ball_ball.softbond.moments};
-  std::string refused;  // rank 0's verdict on `p` and `full` is every rank's
+  // Rank 0 draws; its verdict, the porosity to reach and the final contact parameters are every
+  // rank's (a failure of any kind there is every rank's error, not a rank left waiting).
+  RevStart st;
+  std::string refused;
   if (d.rank() == 0) {
     try {
       st = generate_rev_balls(full, p);
-    } catch (const std::invalid_argument& e) {
+    } catch (const std::exception& e) {
       refused = e.what();
+      if (refused.empty()) refused = "generate_rev: rank 0 failed";
     }
   }
-  int len = static_cast<int>(refused.size());
-  MPI_Bcast(&len, 1, MPI_INT, 0, d.comm());
-  if (len > 0) {
-    refused.resize(static_cast<std::size_t>(len));
-    MPI_Bcast(refused.data(), len, MPI_CHAR, 0, d.comm());
-    throw std::invalid_argument(refused);
-  }
+  share_verdict(d.comm(), refused);
+  double v[3] = {st.n1, st.mu_final, static_cast<double>(static_cast<int>(st.moments_final))};
+  MPI_Bcast(v, 3, MPI_DOUBLE, 0, d.comm());
+  st = RevStart{v[0], v[1], static_cast<UnbondedMoments>(static_cast<int>(v[2]))};
   d.load_from_root(full);
   Ranks sys{d};
   const StageReport r = detail::expand_rev_on(sys, p, st);

@@ -60,6 +60,18 @@ std::int64_t cycle_on(S& sys, double tol, std::int64_t budget, bool& ok, std::in
   return s;
 }
 
+// The ball-ball friction, and with it the soft bond's unbonded moments, of a World, its contact
+// constants refreshed (the systems' set_friction and set_contact_params).
+inline void set_friction(World& w, double mu) {
+  w.mutable_params().ball_ball.linear.fric = mu;
+  w.refresh_contact_constants();
+}
+inline void set_contact_params(World& w, double mu, UnbondedMoments m) {
+  w.mutable_params().ball_ball.linear.fric = mu;
+  w.mutable_params().ball_ball.softbond.moments = m;
+  w.refresh_contact_constants();
+}
+
 template <class S>
 void fill_report_on(S& s, StageReport& r) {
   r.ratio = s.ratio();

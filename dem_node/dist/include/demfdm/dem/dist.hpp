@@ -320,11 +320,12 @@ class DistDem {
   /// The number of balls over every rank.
   std::size_t num_balls() const;
 
-  /// Specimen preparation on the ranks (docs/scaling.md "Specimen procedures on ranks"): the
-  /// periodic servo (§4.5) runs on every rank's World, its sums (ServoSums: the cell stress and
-  /// the affine stiffness) formed from every rank's pair contacts in one World's order on rank 0
-  /// and broadcast, so every rank sets one World's strain rate. Returns this rank's effect
-  /// (last_stress). Collective, after a load; remove_periodic_servo takes it off again.
+  /// Specimen preparation on the ranks (docs/scaling.md, "the REV's expansion and servo on the
+  /// ranks"): the periodic servo (§4.5) runs on every rank's World, its sums (ServoSums: the cell
+  /// stress and the affine stiffness) formed from every rank's pair contacts in one World's order
+  /// on rank 0 and broadcast at every step, so every rank sets one World's strain rate. Returns
+  /// this rank's effect (last_stress). Call it on every rank after a load (the effect's steps are
+  /// collective); remove_periodic_servo takes it off again.
   PeriodicServo* add_periodic_servo(const ServoParams& p, double d_min);
   void remove_periodic_servo();
   /// The servo's sums of one World holding every ball, the same bits (collective).
