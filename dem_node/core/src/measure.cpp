@@ -86,7 +86,7 @@ double porosity(const World& w, const Region& r) {
   const auto& pt = w.balls();
   double vs = 0.0;
   for (std::size_t i = 0; i < pt.size(); ++i)
-    if (r.contains(pt.x[i])) vs += 4.0 / 3.0 * kPi * pt.r[i] * pt.r[i] * pt.r[i];
+    if (r.contains(pt.x[i])) vs += ball_volume_term(pt.r[i]);
   return 1.0 - vs / r.volume();
 }
 

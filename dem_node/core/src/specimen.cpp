@@ -16,18 +16,7 @@ namespace demfdm::dem {
 namespace {
 constexpr double kPi = 3.14159265358979323846;
 
-double min_diameter(const World& w) {
-  double d = std::numeric_limits<double>::infinity();
-  for (double r : w.balls().r) d = std::min(d, 2.0 * r);
-  return d;
-}
-
-void quench(World& w) {
-  auto& pt = w.balls();
-  std::fill(pt.v.begin(), pt.v.end(), Vec3{});
-  std::fill(pt.w.begin(), pt.w.end(), Vec3{});
-}
-
+using detail::quench;
 using detail::require_automatic_step;
 
 // The preparation's system: one World (specimen_steps.hpp).
@@ -46,14 +35,14 @@ struct OneWorld {
   }
   void set_contact_params(double mu, UnbondedMoments m) { detail::set_contact_params(w, mu, m); }
   std::size_t num_balls() const { return w.num_balls(); }
-  void quench() { dem::quench(w); }
+  void quench() { detail::quench(w); }
   void stop_cell() { w.set_strain_rate({}); }
   double friction() const { return w.params().ball_ball.linear.fric; }
   void set_friction(double mu) { detail::set_friction(w, mu); }
   double ratio() const { return w.unbalanced_ratio(); }
   Mat3 stress() const { return cell_stress(w); }
   double porosity() const { return cell_porosity(w); }
-  double min_diameter() const { return dem::min_diameter(w); }
+  double min_diameter() const { return detail::min_diameter(w); }
 };
 
 void fill_report(World& w, StageReport& r) {

@@ -484,7 +484,7 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
   }
   // On ranks (set_step_reduction) the smallest over every rank, before the fallback below: a
   // rank whose rows touch nothing must not take it while another rank's contacts set the step.
-  if (step_reduction_) step_reduction_(&q, 1);
+  if (step_reduction_) q = step_reduction_(q);
   double dt = std::sqrt(q);
   if (!std::isfinite(dt)) {
     // No active contact: use one contact with an equal ball (the law's reference stiffness;
@@ -497,7 +497,7 @@ World::ContactScan World::contact_scan(bool want_dt, bool want_fc) const {
         if (k > 0.0) qf = std::min(qf, pt_.m[i] / k);
       }
     });
-    if (step_reduction_) step_reduction_(&qf, 1);
+    if (step_reduction_) qf = step_reduction_(qf);
     dt = std::sqrt(qf);
     if (!std::isfinite(dt)) dt = 1e-6;
   }
@@ -612,13 +612,12 @@ void World::set_counters(const Counters& k) {
   e_damp_ = k.e_damp, max_disp2_ = k.max_disp2, e_slip_dead_ = k.e_slip_dead, e_soft_dead_ = k.e_soft_dead;
 }
 
-void World::set_step_reduction(std::function<void(double*, int)> reduce) { step_reduction_ = std::move(reduce); }
+void World::set_step_reduction(std::function<double(double)> reduce) { step_reduction_ = std::move(reduce); }
 
 void World::set_newton(std::function<void(Vec3*, Vec3*)> reverse, std::function<void(double*, double*)> stiffness) {
   newton_reverse_ = std::move(reverse);
   newton_stiffness_ = std::move(stiffness);
 }
-
 
 void World::step(std::int64_t n) {
   for (std::int64_t k = 0; k < n; ++k) step();

@@ -878,8 +878,9 @@ void DistDem::take(std::unique_ptr<World> w, bool platens) {
   const World::Counters k = w_->counters();
   // The automatic step: its ratios the smallest over the ranks (minima, so the same bits at any
   // count), the no-contact fallback only where no rank has a contact (World::contact_scan).
-  w_->set_step_reduction([this](double* v, int n) {
-    MPI_Allreduce(MPI_IN_PLACE, v, n, MPI_DOUBLE, MPI_MIN, comm_);
+  w_->set_step_reduction([this](double q) {
+    MPI_Allreduce(MPI_IN_PLACE, &q, 1, MPI_DOUBLE, MPI_MIN, comm_);
+    return q;
   });
   // A prepared World: its lists, histories and last forces are this rank's state as they are
   // (a checkpoint's load is the same), so the ranks continue with one World's bits; preparing
@@ -2233,17 +2234,12 @@ double DistDem::cell_porosity() const {
 }
 
 double DistDem::min_diameter() const {
-  double d = std::numeric_limits<double>::infinity();  // (a minimum: exact in any order)
-  for (double r : w_->balls().r) d = std::min(d, 2.0 * r);
+  double d = detail::min_diameter(*w_);  // (a minimum: exact in any order)
   MPI_Allreduce(MPI_IN_PLACE, &d, 1, MPI_DOUBLE, MPI_MIN, comm_);
   return d;
 }
 
-void DistDem::quench() {
-  Particles& pt = w_->balls();
-  std::fill(pt.v.begin(), pt.v.end(), Vec3{});
-  std::fill(pt.w.begin(), pt.w.end(), Vec3{});
-}
+void DistDem::quench() { detail::quench(*w_); }
 
 void DistDem::scale_radii(double f) {
   World& w = *w_;
@@ -2316,11 +2312,8 @@ StageReport generate_rev(DistDem& d, World& full, const RevParams& p) {
   Ranks sys{d};
   const StageReport r = detail::expand_rev_on(sys, p, st);
   d.unload(full, true);
-  if (d.rank() == 0) {  // the final contact parameters on the assembled REV too, as on one World
-    full.mutable_params().ball_ball.linear.fric = st.mu_final;
-    full.mutable_params().ball_ball.softbond.moments = st.moments_final;
-    full.refresh_contact_constants();
-  }
+  // the final contact parameters on the assembled REV too, as on one World
+  if (d.rank() == 0) detail::set_contact_params(full, st.mu_final, st.moments_final);
   return r;
 }
 

@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -58,6 +59,18 @@ std::int64_t cycle_on(S& sys, double tol, std::int64_t budget, bool& ok, std::in
     if (quench_every > 0 && s % quench_every == 0) sys.quench();
   }
   return s;
+}
+
+// Every ball's velocity and spin zeroed; the smallest ball diameter (+inf without balls).
+inline void quench(World& w) {
+  auto& pt = w.balls();
+  std::fill(pt.v.begin(), pt.v.end(), Vec3{});
+  std::fill(pt.w.begin(), pt.w.end(), Vec3{});
+}
+inline double min_diameter(const World& w) {
+  double d = std::numeric_limits<double>::infinity();
+  for (double r : w.balls().r) d = std::min(d, 2.0 * r);
+  return d;
 }
 
 // The ball-ball friction, and with it the soft bond's unbonded moments, of a World, its contact

@@ -360,12 +360,12 @@ class World {
   /// order_free_sums; order_free_sum.hpp): the force pass calls it after the sets' passes,
   /// unless a caller forms them from several Worlds' contacts (a rank's World: DistDem).
   void set_wall_sums_by_caller(bool by_caller) { wall_sums_by_caller_ = by_caller; }
-  /// The critical step on MPI ranks (contact_scan): `reduce(v, n)` replaces v[0..n) by their
-  /// minima over every rank. A rank passes its smallest mass-over-stiffness ratio (a ghost's
+  /// The critical step on MPI ranks (contact_scan): `reduce(q)` returns the minimum of q over
+  /// every rank. A rank passes its smallest mass-over-stiffness ratio (a ghost's
   /// partial stiffness sum gives a ratio no smaller than its owner's), and, only when no rank has
   /// an active contact, its smallest ratio of the no-contact fallback: one World's step. Collective
   /// for such a caller: every rank scans for the step at the same steps.
-  void set_step_reduction(std::function<void(double*, int)> reduce);
+  void set_step_reduction(std::function<double(double)> reduce);
   /// A rank's World with `newton` on (DistDem::set_newton, docs/scaling.md): a ball-ball pair
   /// is listed only where its ball A (the lower row, so the lower id) is not a ghost, and its
   /// force on a ghost B stays in the ghost's row; `reverse` is called right after the pair pass
@@ -562,7 +562,7 @@ class World {
   double max_disp2_ = 0.0;
   std::vector<std::uint8_t> ghost_;  // per row: a ghost of another rank's ball (swap_balls)
   std::size_t moving_rows_ = ~std::size_t{0};  // set_moving_rows
-  std::function<void(double*, int)> step_reduction_;  // set_step_reduction
+  std::function<double(double)> step_reduction_;  // set_step_reduction
   std::function<void(Vec3*, Vec3*)> newton_reverse_;  // set_newton (set: newton on)
   std::function<void(double*, double*)> newton_stiffness_;
   // Scratch of the O(balls) measurements (kept to avoid an allocation per call).
