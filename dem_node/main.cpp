@@ -301,6 +301,7 @@ class DemParticipant : public node::Participant {
       effect_s_.clear();
       if (st.kind == schema::Action::kGenerate) generate();
       if (st.kind == schema::Action::kServo) servo_on_ranks();
+      if (st.kind == schema::Action::kReplicate) replicate_on_ranks();
       return {};
     }
     open_outputs();
@@ -334,15 +335,9 @@ class DemParticipant : public node::Participant {
       case schema::Action::kBond:
         v = report(dem::install_bonds(world_, -std::numeric_limits<double>::infinity(), dem::scene::bond_gap(s_)));
         break;
-      case schema::Action::kReplicate: {
-        dem::ReplicateParams p;
-        p.nx = block_.nx;
-        p.ny = block_.ny;
-        p.nz = block_.nz;
-        p.keep_periodic = false;
-        v = report(dem::replicate(world_, p));
+      case schema::Action::kReplicate:
+        v = report(g_ranks.size > 1 ? replicate_on_ranks() : dem::replicate(world_, replication()));
         break;
-      }
       case schema::Action::kCouple:
         if (!st.coupled) throw std::invalid_argument("stage '" + st.name + "': action 'couple' needs coupled = true");
         coupling_setup_pending_ = true;  // done when the interface mesh arrives (set_interface_mesh)
@@ -665,23 +660,8 @@ class DemParticipant : public node::Participant {
                    world_.cell_length().x, world_.cell_length().y, world_.cell_length().z, user_dt_};
     MPI_Bcast(c, 8, MPI_DOUBLE, 0, g_ranks.comm);
     user_dt_ = c[7];
-    dem::BrickGrid g;
-    if (c[0] != 0.0) {
-      g.lo = {c[1], c[2], c[3]};
-      g.len = {c[4], c[5], c[6]};
-      g.periodic[0] = g.periodic[1] = g.periodic[2] = true;
-    } else {
-      g.lo = block_.origin;
-      g.len = {block_.width_x(), block_.width_y(), block_.height()};
-    }
-    if (s_.string("dem.decomposition") == "rcb") {
-      g.set_rcb(g_ranks.size);
-    } else {
-      int axis = 0;
-      for (int k = 1; k < 3; ++k)
-        if (g.len[k] > g.len[axis]) axis = k;
-      g.n[axis] = g_ranks.size;
-    }
+    const dem::BrickGrid g = c[0] != 0.0 ? block_grid({c[1], c[2], c[3]}, {c[4], c[5], c[6]}, true)
+                                         : block_grid(block_.origin, {block_.width_x(), block_.width_y(), block_.height()}, false);
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
     dist_->set_newton(s_.boolean("dem.newton"));
     // (auto: measured time, but contacts with newton on, whose results follow the cuts)
@@ -705,6 +685,23 @@ class DemParticipant : public node::Participant {
     dist_live_ = true;
     synced_ = false;
     safe_dt_key_ = {-1, -1, -1};
+  }
+  // The bricks of a block [lo, lo + len) on the ranks (dem.decomposition: RCB, or slabs across
+  // its longest axis).
+  dem::BrickGrid block_grid(const dem::Vec3& lo, const dem::Vec3& len, bool periodic) const {
+    dem::BrickGrid g;
+    g.lo = lo;
+    g.len = len;
+    g.periodic[0] = g.periodic[1] = g.periodic[2] = periodic;
+    if (s_.string("dem.decomposition") == "rcb") {
+      g.set_rcb(g_ranks.size);
+    } else {
+      int axis = 0;
+      for (int k = 1; k < 3; ++k)
+        if (g.len[k] > g.len[axis]) axis = k;
+      g.n[axis] = g_ranks.size;
+    }
+    return g;
   }
   // The ranks' state into world_ on every rank (a checkpoint, a frame, a guard finding).
   void sync_full() {
@@ -875,6 +872,40 @@ class DemParticipant : public node::Participant {
       d.unload(world_, true);
     }
     spdlog::info("dem: the REV's servo ran on {} ranks ({} exchanges)", g_ranks.size, d.exchanges());
+    return r;
+  }
+
+  // The replicate stage's copies of the REV (docs/theory.md 4.7): the block's, its faces free.
+  dem::ReplicateParams replication() const {
+    dem::ReplicateParams p;
+    p.nx = block_.nx;
+    p.ny = block_.ny;
+    p.nz = block_.nz;
+    p.keep_periodic = false;
+    return p;
+  }
+  // The replicate stage on the ranks (docs/scaling.md, "replication on the ranks"): rank 0's REV
+  // sent to every rank, each rank building only its part of the block (dem::replicate on a
+  // DistDem, one World's bits), cut as the later stages cut the block; the block is then
+  // assembled on rank 0, which sets the next stages up. Every rank calls it; the report is
+  // rank 0's.
+  dem::StageReport replicate_on_ranks() {
+    double c[6] = {world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
+                   world_.cell_length().x, world_.cell_length().y, world_.cell_length().z};
+    MPI_Bcast(c, 6, MPI_DOUBLE, 0, g_ranks.comm);
+    const dem::ReplicateParams p = replication();
+    dem::DistDem d(g_ranks.comm, world_.params(),
+                   block_grid({c[0], c[1], c[2]}, {p.nx * c[3], p.ny * c[4], p.nz * c[5]}, false));
+    dem::StageReport r;
+    {
+      node::Timed t(effect_s_["ranks.load"]);
+      r = dem::replicate(d, world_, p);
+    }
+    {
+      node::Timed t(effect_s_["ranks.unload"]);
+      d.unload(world_, true);
+    }
+    spdlog::info("dem: the block replicated on {} ranks, each its part", g_ranks.size);
     return r;
   }
 

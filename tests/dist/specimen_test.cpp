@@ -218,7 +218,103 @@ void check(const ServoScene& sc) {
   test::share_verdict();
 }
 
+// replicate on the ranks (DistDem::load_replicated): rank 0's REV (bonded to Z = 5 for the
+// bonded law) copied 2 x 2 x 3 by every rank into its own part only, against one World's
+// replicate: the report, the block assembled on rank 0 byte for byte as a checkpoint holds it
+// (with its dissipated energies set equal: the ranks' sums in rank order), then 40 steps of both
+// (with gravity pulling the block onto nothing: balls move and cross the cuts) and the block
+// again. With keep_periodic the block is a periodic cell and the grid periodic too. Every rank
+// other than 0 holds its part, less than the block.
+void check_replicate(const ServoScene& sc, bool keep_periodic) {
+  std::unique_ptr<World> r = rev(sc);
+  if (sc.model == ContactModel::kSoftBond) install_bonds_to_coordination(*r, 5.0, 1e-9);
+  const std::string rev_bytes = state_bytes(*r, CheckpointMeta{});
+  ReplicateParams p;
+  p.nx = 2, p.ny = 2, p.nz = 3;
+  p.keep_periodic = keep_periodic;
+  BrickGrid g;
+  g.lo = r->cell_origin();
+  g.len = {2 * r->cell_length().x, 2 * r->cell_length().y, 3 * r->cell_length().z};
+  for (bool& per : g.periodic) per = keep_periodic;
+  if (sc.rcb)
+    g.set_rcb(g_size);
+  else
+    g.n[2] = g_size;
+  World full(r->params());  // rank 0: the REV; the others: no ball
+  if (g_rank == 0) load_state_bytes(full, rev_bytes, 0, "the REV");
+  DistDem d(MPI_COMM_WORLD, r->params(), g);
+  const StageReport got = replicate(d, full, p);
+  long long part = static_cast<long long>(d.world().num_balls()), biggest = 0;
+  MPI_Reduce(&part, &biggest, 1, MPI_LONG_LONG, MPI_MAX, 0, MPI_COMM_WORLD);
+  World block(r->params());
+  d.unload(block, true);
+  auto same_state = [&](World& a, const World& b, const char* when) {
+    World::Counters k = a.counters();
+    const World::Counters kr = b.counters();
+    EXPECT_NEAR(k.e_damp, kr.e_damp, 1e-12 * std::abs(kr.e_damp)) << when;
+    EXPECT_NEAR(k.e_slip_dead, kr.e_slip_dead, 1e-12 * std::abs(kr.e_slip_dead)) << when;
+    EXPECT_NEAR(k.e_soft_dead, kr.e_soft_dead, 1e-12 * std::abs(kr.e_soft_dead)) << when;
+    k.e_damp = kr.e_damp, k.e_slip_dead = kr.e_slip_dead, k.e_soft_dead = kr.e_soft_dead;
+    a.set_counters(k);
+    EXPECT_TRUE(state_bytes(a, CheckpointMeta{}) == state_bytes(b, CheckpointMeta{}))
+        << "the block assembled on rank 0 is not one World's " << when;
+  };
+  std::unique_ptr<World> ref;
+  if (g_rank == 0) {
+    ref = std::make_unique<World>(r->params());
+    load_state_bytes(*ref, rev_bytes, 0, "the REV");
+    const StageReport want = replicate(*ref, p);
+    std::printf("%s, replicate%s on %d ranks: %s; parts of at most %lld balls\n", sc.name.c_str(),
+                keep_periodic ? " (periodic)" : "", g_size, got.what.c_str(), biggest);
+    EXPECT_EQ(got.what, want.what);
+    EXPECT_EQ(got.count, want.count);
+    EXPECT_EQ(got.count, 12 * kBalls);
+    EXPECT_EQ(std::memcmp(&got.ratio, &want.ratio, sizeof(double)), 0) << got.ratio << " vs " << want.ratio;
+    EXPECT_EQ(std::memcmp(&got.porosity, &want.porosity, sizeof(double)), 0);
+    EXPECT_EQ(std::memcmp(got.stress.data(), want.stress.data(), sizeof(Mat3)), 0);
+    same_state(block, *ref, "after the replication");
+    if (g_size > 1) {
+      EXPECT_LT(biggest, static_cast<long long>(got.count)) << "a rank holds the whole block";
+    }
+  }
+  // stepping on: gravity on the block (free), or a strained periodic cell
+  if (keep_periodic) {
+    d.world().set_strain_rate({-50.0, 0.0, 30.0});
+    if (ref) ref->set_strain_rate({-50.0, 0.0, 30.0});
+  } else {
+    d.world().set_gravity(true, 1000.0);  // (every rank's World: its own rows)
+    if (ref) ref->set_gravity(true, 1000.0), block.set_gravity(true, 1000.0);  // (unload keeps block's effects)
+  }
+  d.step(40);
+  const DistDem::Balls balls = d.gather();
+  long long owned = static_cast<long long>(d.owned()), all = 0;
+  MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  d.unload(block, true);
+  if (ref) {
+    for (int i = 0; i < 40; ++i) ref->step();
+    test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
+    same_state(block, *ref, "after 40 steps");
+  }
+  test::share_verdict();
+}
+
 }  // namespace
+
+TEST(DistSpecimen, ReplicateLinearSlabsSameBits) {
+  check_replicate({"linear, slabs across z"}, false);
+}
+TEST(DistSpecimen, ReplicateSoftBondRcbSameBits) {
+  ServoScene sc{"soft bond law, RCB", ContactModel::kSoftBond};
+  sc.rcb = true;
+  sc.porosity = 0.45;
+  check_replicate(sc, false);
+}
+TEST(DistSpecimen, ReplicatePeriodicRcbSameBits) {
+  ServoScene sc{"soft bond law, RCB", ContactModel::kSoftBond};
+  sc.rcb = true;
+  sc.porosity = 0.45;
+  check_replicate(sc, true);
+}
 
 TEST(DistSpecimen, ServoLinearSlabsSameBits) { check({"servo, linear, slabs across z"}); }
 TEST(DistSpecimen, ServoSoftBondRcbFromRootSameBits) {

@@ -330,59 +330,92 @@ StageReport install_bonds_to_coordination(World& w, double z_target, double gap_
   return r;
 }
 
-StageReport replicate(World& w, const ReplicateParams& p) {
-  if (!w.periodic()) throw std::invalid_argument("replicate: the world must have a periodic cell.");
+ReplicaLayout::ReplicaLayout(const World& rev, const ReplicateParams& p)
+    : n_{p.nx, p.ny, p.nz}, L_(rev.cell_length()), keep_(p.keep_periodic) {
+  if (!rev.periodic()) throw std::invalid_argument("replicate: the world must have a periodic cell.");
   if (p.nx < 1 || p.ny < 1 || p.nz < 1) {
     std::ostringstream s;
     s << "replicate: copies 'nx', 'ny', 'nz' must be >= 1, found " << p.nx << ", " << p.ny << ", " << p.nz << ".";
     throw std::invalid_argument(s.str());
   }
+}
+
+Vec3 ReplicaLayout::offset(int c) const {
+  int ci[3];
+  coords(c, ci);
+  return {ci[0] * L_.x, ci[1] * L_.y, ci[2] * L_.z};
+}
+
+int ReplicaLayout::partner(int c, const std::array<std::int8_t, 4>& s, std::array<std::int8_t, 4>& out) const {
+  int ci[3], cj[3];
+  coords(c, ci);
+  out = {0, 0, 0, 0};
+  for (int a = 0; a < 3; ++a) {
+    cj[a] = ci[a] + s[static_cast<std::size_t>(a)];
+    if (cj[a] < 0 || cj[a] >= n_[a]) {
+      if (!keep_) return -1;
+      const int wrap = cj[a] < 0 ? -1 : 1;
+      cj[a] -= wrap * n_[a];
+      out[static_cast<std::size_t>(a)] = static_cast<std::int8_t>(wrap);
+    }
+  }
+  return index(cj);
+}
+
+std::int64_t ReplicaLayout::kept(const std::array<std::int8_t, 4>& s) const {
+  if (keep_) return count();
+  std::int64_t k = 1;
+  for (int a = 0; a < 3; ++a) k *= std::max(0, n_[a] - std::abs(static_cast<int>(s[static_cast<std::size_t>(a)])));
+  return k;
+}
+
+std::string ReplicaLayout::what(std::size_t rev_balls, std::size_t block_balls, std::int64_t kept,
+                                std::int64_t dropped) const {
+  std::ostringstream s;
+  s << "replicated " << rev_balls << " balls " << n_[0] << "x" << n_[1] << "x" << n_[2] << " into " << block_balls
+    << " balls; " << kept << " contacts copied, " << dropped << " dropped on new boundaries";
+  return s.str();
+}
+
+double replica_density(const Particles& pt, std::size_t b) {
+  return pt.m[b] / (4.0 / 3.0 * kPi * pt.r[b] * pt.r[b] * pt.r[b]);
+}
+
+StageReport replicate(World& w, const ReplicateParams& p) {
+  const ReplicaLayout lay(w, p);
   w.prepare();  // wrap positions into the cell and refresh the image shifts
   const std::size_t n = w.num_balls();
-  const Vec3 L = w.cell_length(), o = w.cell_origin();
-  const int nc[3] = {p.nx, p.ny, p.nz};
-  const int ncopy = p.nx * p.ny * p.nz;
+  const Vec3 o = w.cell_origin();
+  const int ncopy = lay.count();
   // snapshot of the original contacts
   const PairContacts old = w.pair_contacts();
   auto& pt = w.balls();
   for (int c = 1; c < ncopy; ++c) {
-    const int i = c % p.nx, j = (c / p.nx) % p.ny, k = c / (p.nx * p.ny);
-    const Vec3 off{i * L.x, j * L.y, k * L.z};
+    const Vec3 off = lay.offset(c);
     for (std::size_t b = 0; b < n; ++b) {
-      const double rho = pt.m[b] / (4.0 / 3.0 * kPi * pt.r[b] * pt.r[b] * pt.r[b]);
-      const std::size_t row = w.add_ball(pt.x[b] + off, pt.r[b], rho);
+      const std::size_t row = w.add_ball(pt.x[b] + off, pt.r[b], replica_density(pt, b));
       pt.v[row] = pt.v[b];
       pt.w[row] = pt.w[b];
       pt.fix[row] = pt.fix[b];
     }
   }
   w.clear_contacts();
-  std::size_t kept = 0, dropped = 0;
-  for (int c = 0; c < ncopy; ++c) {
-    const int ci[3] = {c % p.nx, (c / p.nx) % p.ny, c / (p.nx * p.ny)};
+  std::int64_t kept = 0, dropped = 0;
+  for (int c = 0; c < ncopy; ++c)
     for (std::size_t q = 0; q < old.size(); ++q) {
-      int cj[3];
-      std::array<std::int8_t, 4> s{0, 0, 0, 0};
-      bool drop = false;
-      for (int a = 0; a < 3; ++a) {
-        cj[a] = ci[a] + old.shift[q][a];
-        if (cj[a] < 0 || cj[a] >= nc[a]) {
-          if (!p.keep_periodic) { drop = true; break; }
-          const int wrap = cj[a] < 0 ? -1 : 1;
-          cj[a] -= wrap * nc[a];
-          s[a] = static_cast<std::int8_t>(wrap);
-        }
+      std::array<std::int8_t, 4> s{};
+      const int c2 = lay.partner(c, old.shift[q], s);
+      if (c2 < 0) {
+        ++dropped;
+        continue;
       }
-      if (drop) { ++dropped; continue; }
-      const int c2 = (cj[2] * p.ny + cj[1]) * p.nx + cj[0];
-      const auto a = static_cast<std::uint32_t>(c * n + old.a[q]);
-      const auto b = static_cast<std::uint32_t>(c2 * n + old.b[q]);
+      const auto a = static_cast<std::uint32_t>(static_cast<std::size_t>(c) * n + old.a[q]);
+      const auto b = static_cast<std::uint32_t>(static_cast<std::size_t>(c2) * n + old.b[q]);
       w.append_pair(a, b, s, old.h[q], old.bond.empty() ? nullptr : &old.bond[q]);
       ++kept;
     }
-  }
   if (p.keep_periodic) {
-    w.set_cell(o, {p.nx * L.x, p.ny * L.y, p.nz * L.z});
+    w.set_cell(o, lay.length());
   } else {
     w.mutable_params().periodic.enabled = false;
   }
@@ -390,10 +423,7 @@ StageReport replicate(World& w, const ReplicateParams& p) {
   StageReport r;
   r.count = w.num_balls();
   fill_report(w, r);
-  std::ostringstream s;
-  s << "replicated " << n << " balls " << p.nx << "x" << p.ny << "x" << p.nz << " into " << r.count
-    << " balls; " << kept << " contacts copied, " << dropped << " dropped on new boundaries";
-  r.what = s.str();
+  r.what = lay.what(n, r.count, kept, dropped);
   return r;
 }
 

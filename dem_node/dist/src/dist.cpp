@@ -748,7 +748,7 @@ std::unique_ptr<World> DistDem::part_of(const World& full, const Cut& k, int r,
 }
 
 // The parameters and the halo of the ranks' Worlds, from the whole World.
-void DistDem::params_from(const World& full) {
+void DistDem::params_from(const World& full, double rmax_given) {
   const int threads = p_.threads;  // this rank's own, as the constructor set it (see load_from_root)
   p_ = full.params();
   p_.threads = threads;
@@ -756,8 +756,11 @@ void DistDem::params_from(const World& full) {
   // Inside a rank the ball sums keep the one-thread order: the bits of one World at any rank and
   // thread count.
   p_.thread_independent = true;
-  double rmax = 0.0;
-  for (double r : full.balls().r) rmax = std::max(rmax, r);
+  double rmax = rmax_given;
+  if (rmax < 0.0) {
+    rmax = 0.0;
+    for (double r : full.balls().r) rmax = std::max(rmax, r);
+  }
   halo_ = 2.0 * rmax + p_.skin;
 }
 
@@ -866,6 +869,158 @@ void DistDem::load_from_root(const World& full) {
   part->set_wall_sums_by_caller(size_ > 1);
   part->set_pair_kernel(static_cast<PairKernel>(static_cast<int>(hk[1])));
   take(std::move(part), !platens.empty());
+}
+
+// replicate's block without the block (docs/scaling.md, "replication on the ranks"): this rank
+// builds the copies of the REV's balls that its part of the block holds and the copied pairs
+// with one of its balls, in the block's orders (rows by copy then REV row: by id; pairs by copy
+// then REV pair), into `rev` itself, then cuts its part from that as load(block) would: the
+// copies it builds are a superset of the part's rows, and its pairs every pair the part computes.
+// Only the copies near this brick are visited (their boxes, grown by the halo, meet the brick,
+// and those a pair away), so the work is this brick's share of the block, not the block.
+DistDem::Replicated DistDem::load_replicated(World& rev, const ReplicateParams& p) {
+  const ReplicaLayout lay(rev, p);
+  const std::vector<PlatenServoParams> platens = loadable(rev);
+  const Particles& rp = rev.balls();
+  const PairContacts& rc = rev.pair_contacts();
+  const std::size_t n = rp.size();
+  const int ncopy = lay.count();
+  double rmax = 0.0;
+  for (double r : rp.r) rmax = std::max(rmax, r);
+  halo_ = 2.0 * rmax + rev.skin();  // (params_from's rule; set again below with the block's parameters)
+  // The copies whose box (the REV's cell, a little grown: its balls are wrapped into it) grown by
+  // the halo meets this brick (on a periodic axis of the grid: every copy), then those a pair's
+  // shift away (their balls may be partners of this brick's).
+  const Vec3 o = rev.cell_origin(), L = rev.cell_length();
+  double a0[3], a1[3];
+  grid_.box(rank_, a0, a1);
+  int reach[3] = {0, 0, 0};  // the largest |shift| of a REV pair per axis
+  for (const auto& sh : rc.shift)
+    for (int k = 0; k < 3; ++k) reach[k] = std::max(reach[k], std::abs(static_cast<int>(sh[static_cast<std::size_t>(k)])));
+  std::vector<int> local(static_cast<std::size_t>(ncopy), -1);  // copy -> its index among those visited
+  std::vector<std::uint8_t> near_brick(static_cast<std::size_t>(ncopy), 0);
+  int lo[3], hi[3];
+  for (int k = 0; k < 3; ++k) {
+    lo[k] = 0, hi[k] = lay.copies(k) - 1;
+    if (grid_.periodic[k]) continue;
+    const double tol = 1e-9 * L[k], lk = L[k];
+    const double b0 = a0[k] <= 0.0 ? -std::numeric_limits<double>::infinity() : a0[k] - halo_;
+    const double b1 = a1[k] >= grid_.len[k] ? std::numeric_limits<double>::infinity() : a1[k] + halo_;
+    // copy i spans [o + i L, o + (i + 1) L] from the grid's lo, grown by tol
+    const double base = o[k] - grid_.lo[k];
+    int first = hi[k] + 1, last = -1;
+    for (int i = 0; i <= hi[k]; ++i)
+      if (base + i * lk - tol <= b1 && base + (i + 1) * lk + tol >= b0) first = std::min(first, i), last = i;
+    lo[k] = first, hi[k] = last;
+  }
+  std::vector<int> visit;  // ascending
+  for (int c = 0; c < ncopy; ++c) {
+    int ci[3];
+    lay.coords(c, ci);
+    bool in = true, near = true;
+    for (int k = 0; k < 3; ++k) {
+      in = in && ci[k] >= lo[k] - reach[k] && ci[k] <= hi[k] + reach[k];
+      near = near && ci[k] >= lo[k] && ci[k] <= hi[k];
+    }
+    if (!in) continue;
+    local[static_cast<std::size_t>(c)] = static_cast<int>(visit.size());
+    near_brick[static_cast<std::size_t>(c)] = near;
+    visit.push_back(c);
+  }
+  // Per visited copy and REV row: 0 not in this rank's share, 1 in it, 2 owned by this rank.
+  std::vector<std::uint8_t> state(visit.size() * n, 0);
+  auto at = [&](int c, std::size_t b) -> std::uint8_t& {
+    return state[static_cast<std::size_t>(local[static_cast<std::size_t>(c)]) * n + b];
+  };
+  std::vector<int> nb;
+  for (int c : visit) {
+    if (!near_brick[static_cast<std::size_t>(c)]) continue;
+    const Vec3 off = lay.offset(c);
+    for (std::size_t b = 0; b < n; ++b) {
+      const Vec3 x = rp.x[b] + off;
+      if (grid_.owner(x) == rank_) {
+        at(c, b) = 2;
+        continue;
+      }
+      grid_.near(x, halo_, nb);
+      if (std::find(nb.begin(), nb.end(), rank_) != nb.end()) at(c, b) = 1;
+    }
+  }
+  // The pairs with one of this rank's balls, and their partners.
+  auto owned = [&](int c, std::size_t b) {
+    return local[static_cast<std::size_t>(c)] >= 0 && near_brick[static_cast<std::size_t>(c)] && at(c, b) == 2;
+  };
+  struct Copied {
+    int c, c2;
+    std::uint32_t q;
+    std::array<std::int8_t, 4> s;
+  };
+  std::vector<Copied> pairs;
+  std::int64_t kept = 0;
+  for (std::size_t q = 0; q < rc.size(); ++q) kept += lay.kept(rc.shift[q]);
+  for (int c : visit)
+    for (std::size_t q = 0; q < rc.size(); ++q) {
+      std::array<std::int8_t, 4> s{};
+      const int c2 = lay.partner(c, rc.shift[q], s);
+      if (c2 < 0) continue;
+      const bool oa = owned(c, rc.a[q]), ob = owned(c2, rc.b[q]);
+      if (!oa && !ob) continue;
+      // (a partner of an owned ball lies in a visited copy: its copy is a shift away)
+      if (oa && at(c2, rc.b[q]) == 0) at(c2, rc.b[q]) = 1;
+      if (ob && at(c, rc.a[q]) == 0) at(c, rc.a[q]) = 1;
+      pairs.push_back({c, c2, static_cast<std::uint32_t>(q), s});
+    }
+  // This rank's share of the block, as a World: the REV's walls, effects and counters (its next
+  // id past every copy's), the block's parameters and cell; not prepared (take prepares it).
+  Particles q;
+  std::vector<std::int64_t> row(state.size(), -1);
+  const std::uint64_t next = rev.counters().next_id;
+  for (int c : visit) {
+    const Vec3 off = lay.offset(c);
+    for (std::size_t b = 0; b < n; ++b) {
+      if (at(c, b) == 0) continue;
+      row[static_cast<std::size_t>(local[static_cast<std::size_t>(c)]) * n + b] = static_cast<std::int64_t>(q.size());
+      if (c == 0) {
+        push_ball(q, ball_rec(rp, b));
+        continue;
+      }
+      const std::uint64_t id = next + static_cast<std::uint64_t>(c - 1) * n + b;
+      const std::size_t i = q.add(rp.x[b] + off, rp.r[b], replica_density(rp, b), id);
+      q.v[i] = rp.v[b];
+      q.w[i] = rp.w[b];
+      q.fix[i] = rp.fix[b];
+    }
+  }
+  auto row_of = [&](int c, std::size_t b) {
+    return static_cast<std::uint32_t>(row[static_cast<std::size_t>(local[static_cast<std::size_t>(c)]) * n + b]);
+  };
+  PairContacts pc;
+  const bool has_bond = !rc.bond.empty();
+  for (const Copied& x : pairs) {
+    pc.a.push_back(row_of(x.c, rc.a[x.q]));
+    pc.b.push_back(row_of(x.c2, rc.b[x.q]));
+    pc.shift.push_back(x.s);
+    pc.h.push_back(rc.h[x.q]);
+    if (has_bond) pc.bond.push_back(rc.bond[x.q]);
+  }
+  const std::int64_t listed = static_cast<std::int64_t>(ncopy) * static_cast<std::int64_t>(rc.size());
+  World::Counters kc = rev.counters();
+  kc.next_id = next + static_cast<std::uint64_t>(ncopy - 1) * n;
+  kc.prepared = false;
+  std::array<WallContacts, 3> wc;
+  for (WallContacts& d : wc) d.cand_off.push_back(0);
+  std::vector<std::uint8_t> ghost;
+  World& share = rev;
+  share.swap_balls(q, pc, wc, ghost);
+  share.set_counters(kc);
+  if (p.keep_periodic) {
+    share.set_cell(o, lay.length());
+  } else {
+    share.mutable_params().periodic.enabled = false;
+  }
+  params_from(share, rmax);
+  take(part_of(share, cut(share, false), rank_, platens), !platens.empty());
+  return {kept, listed - kept};
 }
 
 // The rank's World from its part: the step's reduction over the ranks, the forward lists, the
@@ -2317,6 +2472,39 @@ StageReport generate_rev(DistDem& d, World& full, const RevParams& p) {
   return r;
 }
 
+StageReport replicate(DistDem& d, World& rev, const ReplicateParams& p) {
+  // Rank 0's checks and its REV prepared (replicate's first step), then every rank's from its bytes.
+  std::string refused, bytes;
+  if (d.rank() == 0) {
+    try {
+      const ReplicaLayout check(rev, p);
+      rev.prepare();
+      bytes = state_bytes(rev, CheckpointMeta{});
+    } catch (const std::exception& e) {
+      refused = e.what();
+      if (refused.empty()) refused = "replicate: rank 0 failed";
+    }
+  }
+  share_verdict(d.comm(), refused);
+  long long nb = static_cast<long long>(bytes.size());
+  MPI_Bcast(&nb, 1, MPI_LONG_LONG, 0, d.comm());
+  bytes.resize(static_cast<std::size_t>(nb));
+  constexpr long long kChunk = 1LL << 30;
+  for (long long at = 0; at < nb; at += kChunk)
+    MPI_Bcast(bytes.data() + at, static_cast<int>(std::min(kChunk, nb - at)), MPI_CHAR, 0, d.comm());
+  World share(WorldParams{});
+  load_state_bytes(share, std::move(bytes), 0, "rank 0's REV");
+  const std::size_t rev_balls = share.num_balls();
+  const ReplicaLayout lay(share, p);
+  const DistDem::Replicated k = d.load_replicated(share, p);
+  StageReport r;
+  r.count = d.num_balls();
+  Ranks sys{d};
+  detail::fill_report_on(sys, r);
+  r.what = lay.what(rev_balls, r.count, k.kept, k.dropped);
+  return r;
+}
+
 DistDem::Balls DistDem::gather() const {
   struct Rec {
     std::uint64_t id;
@@ -2512,7 +2700,8 @@ void DistDem::unload(World& full, bool root_only) const {
   full.mutable_params().order_free_sums = own.order_free_sums;
   full.mutable_params().skin = own.skin;
   const World::Counters before = full.counters();
-  k.next_id = before.next_id, k.next_wall_id = before.next_wall_id;
+  // (the ranks add no ball, but a replicated block's next id is past its copies: load_replicated)
+  k.next_id = std::max(before.next_id, mine.next_id), k.next_wall_id = before.next_wall_id;
   k.max_disp2 = max_disp2;
   full.set_counters(k);
 }

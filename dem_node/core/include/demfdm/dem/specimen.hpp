@@ -277,6 +277,45 @@ struct ReplicateParams {
 };
 StageReport replicate(World& w, const ReplicateParams& p);
 
+/// replicate's copies, written once for one World and for the ranks (DistDem's replicate, which
+/// builds each rank's part of the block without the block): copy c (0 <= c < count(), x fastest)
+/// of the REV lies at offset(c) from it. Copy 0 is the REV's own rows; REV ball b's copy c > 0 has
+/// the id next_id + (c - 1) n + b (the REV's next id and ball count; ids in (copy, row) order) and
+/// the density replica_density(b). A REV pair (a, b, shift s) of copy c joins copy c's a and copy
+/// partner(c, s)'s b; on a free face of the block it is dropped. The constructor checks the
+/// REV (periodic) and the copy counts, with replicate's messages.
+class ReplicaLayout {
+ public:
+  ReplicaLayout(const World& rev, const ReplicateParams& p);
+  int count() const { return n_[0] * n_[1] * n_[2]; }
+  int copies(int axis) const { return n_[axis]; }
+  /// Copy c's index along each axis.
+  void coords(int c, int ci[3]) const {
+    ci[0] = c % n_[0];
+    ci[1] = (c / n_[0]) % n_[1];
+    ci[2] = c / (n_[0] * n_[1]);
+  }
+  int index(const int ci[3]) const { return (ci[2] * n_[1] + ci[1]) * n_[0] + ci[0]; }
+  Vec3 offset(int c) const;
+  /// The copy that holds the partner B of a pair of copy c whose REV shift is `s`, and the pair's
+  /// shift in the block (`out`); -1 when the pair is dropped (it crosses a free face).
+  int partner(int c, const std::array<std::int8_t, 4>& s, std::array<std::int8_t, 4>& out) const;
+  /// How many copies keep a REV pair whose shift is `s` (the others drop it).
+  std::int64_t kept(const std::array<std::int8_t, 4>& s) const;
+  /// The block's cell: the REV's origin and n times its length.
+  Vec3 length() const { return {n_[0] * L_.x, n_[1] * L_.y, n_[2] * L_.z}; }
+  /// replicate's report sentence.
+  std::string what(std::size_t rev_balls, std::size_t block_balls, std::int64_t kept, std::int64_t dropped) const;
+
+ private:
+  int n_[3];
+  Vec3 L_;
+  bool keep_;
+};
+/// The density REV ball b's copies get (their mass and moment of inertia follow from it, as
+/// World::add_ball makes them).
+double replica_density(const Particles& pt, std::size_t b);
+
 /// Depth scaling of contact forces (§4.9, U7).
 enum class DepthScaling : std::uint8_t {
   kDepthRatio = 0,    ///< default: f = (z_top − z_c)/H_D

@@ -197,6 +197,21 @@ class DistDem {
   /// rank. A `full` that load refuses is refused on every rank, with rank 0's message. A rank's
   /// thread count is the one of the parameters it constructed this DistDem with.
   void load_from_root(const World& full);
+  /// The block that replicate(rev, p) (specimen.hpp) would make of the REV `rev`, loaded as
+  /// load(block) would load it, without the block: each rank builds only the copies of the REV's
+  /// balls that its part holds (its brick's, those within the halo, the partners of its pairs)
+  /// and the copied pairs it computes, from the copy's index and the REV's rows and pairs
+  /// (ReplicaLayout), and prepares them on the ranks as block.prepare() would. The same bits as
+  /// replicate then load, on every rank (docs/scaling.md). `rev`: the prepared REV, the same bits
+  /// on every rank; it is taken (it becomes this rank's share of the block, from which the part
+  /// is cut). The grid is the block's (the REV's cell origin, n times its length; periodic axes
+  /// with keep_periodic). The first cut is the grid's as constructed: balancing starts at the
+  /// first rebalancing (set_balance). Returns the block's counts of REV pairs copied and dropped
+  /// on its free faces (replicate's report). Collective.
+  struct Replicated {
+    std::int64_t kept = 0, dropped = 0;
+  };
+  Replicated load_replicated(World& rev, const ReplicateParams& p);
   /// One World holding every ball, on every rank (collective): `full` gets the state one World
   /// stepped as this one was would have (balls, contact lists in that World's orders with their
   /// histories and last forces, wall contacts with their candidates, the walls, the counters), so
@@ -385,8 +400,9 @@ class DistDem {
     std::array<std::vector<std::vector<std::uint32_t>>, 3> walls;
     mutable std::vector<std::int64_t> row;  // part_of's scratch: a whole-World row's row in the part
   };
-  /// p_ and halo_ from the whole World (load).
-  void params_from(const World& full);
+  /// p_ and halo_ from the whole World (load); `rmax` >= 0: the largest radius, if `full` holds
+  /// only some of the balls (load_replicated).
+  void params_from(const World& full, double rmax = -1.0);
   /// One pass over `full` for every rank (all_ranks) or this one (halo_, grid_, newton_ set).
   Cut cut(const World& full, bool all_ranks) const;
   /// Rank r's part of `full` as a World (p_ set; load).
@@ -494,6 +510,12 @@ StageReport servo_until(DistDem& d, const ServoParams& p, double stress_tol, dou
 /// assembled on rank 0 again (unload). The same REV, steps and report as one World, bit for bit.
 /// Collective; bad parameters are refused on every rank with rank 0's words.
 StageReport generate_rev(DistDem& d, World& full, const RevParams& p);
+/// replicate (specimen.hpp) on the ranks: rank 0 prepares its REV `rev` (the other ranks' is
+/// not read: an empty World will do) and broadcasts it; every rank builds its part of the block
+/// (DistDem::load_replicated). The report is one World's, bit for bit; the block is not held
+/// whole anywhere (unload assembles it on rank 0 when a caller needs it). Collective; bad
+/// parameters are refused on every rank with rank 0's words.
+StageReport replicate(DistDem& d, World& rev, const ReplicateParams& p);
 /// servo_specimen (procedures.hpp) on the ranks, the same way (the REV's servo stage of the DEM
 /// node on ranks).
 StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
