@@ -57,8 +57,9 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // The DEM on MPI ranks (dem.ranks > 1, started by launch/run under mpirun; docs/scaling.md).
 // Rank 0 speaks on the bus and tells the other ranks every call it gets (RankedParticipant);
 // each rank runs the same adapter. Rank 0 alone holds the whole World: it sets the stages up
-// (specimen procedures, walls, the footing, the interface bonds) and steps the specimen
-// preparation stages; the steps of every other stage run on a dem::DistDem, each rank its brick
+// (walls, the footing, the interface bonds); the specimen procedures run on the ranks (the REV's
+// expansion, bonding and servo, and the replication, each rank building its part of the block),
+// their result assembled on rank 0; the steps of every other stage run on a dem::DistDem, each rank its brick
 // of the block, which rank 0 cuts and sends (DistDem::load_from_root). At a stage's end, a
 // checkpoint or a frame the ranks' parts are assembled into the whole World on rank 0
 // (DistDem::unload to rank 0). The other ranks never hold more than their part. Only rank 0
@@ -824,8 +825,8 @@ class DemParticipant : public node::Participant {
   }
 
   // The generate stage: the REV, then bonds over the gaps that give Table 1's Z (docs/ucs-study.md),
-  // at least 1e-3 d_min apart. On ranks the REV's radius expansion runs on every rank (every rank
-  // calls this; the bonds are rank 0's, on the assembled REV).
+  // at least 1e-3 d_min apart. On ranks the REV's radius expansion and its bonding run on every
+  // rank (every rank calls this; the REV is assembled on rank 0).
   dem::StageReport generate() {
     const double z = s_.real_or_word("dem.specimen.bond_coordination").value_or(0.0);
     const double gap_floor = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
@@ -833,7 +834,11 @@ class DemParticipant : public node::Participant {
     dem::DistDem d(g_ranks.comm, world_.params(), rev_grid());
     dem::StageReport r = dem::generate_rev(d, world_, dem::scene::rev(s_));
     spdlog::info("dem: the REV's radius expansion ran on {} ranks ({} exchanges)", g_ranks.size, d.exchanges());
-    if (!part_only()) dem::bond_specimen(world_, r, z, gap_floor);
+    if (z > 0) {  // the bonds on the ranks too, the bonded REV assembled on rank 0 again
+      dem::bond_specimen(d, r, z, gap_floor);
+      node::Timed t(effect_s_["ranks.unload"]);
+      d.unload(world_, true);
+    }
     return r;
   }
   // The bricks of the REV's periodic cell on the ranks (RCB), from rank 0's cell.

@@ -298,7 +298,89 @@ void check_replicate(const ServoScene& sc, bool keep_periodic) {
   test::share_verdict();
 }
 
+// The bonding and the depth scaling on the ranks (dist.hpp): the soft-bond REV loaded on RCB
+// from rank 0, its coordination, the gap for Z = 5 and the bonding (bond_specimen: the generate
+// stage's half), then the depth scaling over the cell's height, against one World: the gap and
+// the reports bit for bit, the coordination numbers, and the REV assembled on rank 0 byte for byte
+// (after each step and after 30 steps on). With newton on (each pair across a cut listed once):
+// the coordination, the gap and the bond count.
+void check_bonding(bool newton) {
+  ServoScene sc{"soft bond law, RCB", ContactModel::kSoftBond};
+  sc.rcb = true;
+  sc.porosity = 0.45;
+  std::unique_ptr<World> r = rev(sc);
+  const std::string rev_bytes = state_bytes(*r, CheckpointMeta{});
+  World full(r->params());
+  if (g_rank == 0) load_state_bytes(full, rev_bytes, 0, "the REV");
+  DistDem d(MPI_COMM_WORLD, r->params(), grid(*r, sc));
+  d.set_newton(newton);
+  d.load_from_root(full);
+  const Coordination z0 = d.coordination();
+  const double gap = gap_for_coordination(d, 5.0, 1e-9);
+  StageReport got;
+  got.what = "generated";
+  bond_specimen(d, got, 5.0, 1e-9);
+  const Coordination z1 = d.coordination();
+  DepthScaleParams dp;
+  dp.z_top = r->cell_origin().z + r->cell_length().z;
+  dp.height = r->cell_length().z;
+  const StageReport scaled = depth_scale(d, dp);
+  World block(r->params());
+  d.unload(block, true);
+  std::unique_ptr<World> ref;
+  if (g_rank == 0) {
+    ref = std::make_unique<World>(r->params());
+    load_state_bytes(*ref, rev_bytes, 0, "the REV");
+    const Coordination w0 = coordination(*ref);
+    const double want_gap = gap_for_coordination(*ref, 5.0, 1e-9);
+    StageReport want;
+    want.what = "generated";
+    bond_specimen(*ref, want, 5.0, 1e-9);
+    const Coordination w1 = coordination(*ref);
+    const StageReport want_scaled = depth_scale(*ref, dp);
+    std::printf("bonding on %d ranks%s: gap %.6g m; %s; %s\n", g_size, newton ? " (newton on)" : "", gap,
+                got.what.c_str(), scaled.what.c_str());
+    EXPECT_EQ(std::memcmp(&gap, &want_gap, sizeof gap), 0) << gap << " vs " << want_gap;
+    EXPECT_GT(gap, 1e-9) << "the gap must come from the separated pairs";
+    for (const auto& [a, b] : {std::pair{z0, w0}, std::pair{z1, w1}}) {
+      EXPECT_EQ(a.active, b.active);
+      EXPECT_EQ(a.rattlers, b.rattlers);
+      EXPECT_EQ(std::memcmp(&a.z, &b.z, sizeof(double)), 0) << a.z << " vs " << b.z;
+      EXPECT_EQ(std::memcmp(&a.z_no_rattlers, &b.z_no_rattlers, sizeof(double)), 0);
+    }
+    EXPECT_GT(w1.z, 4.99);
+    EXPECT_GT(w0.rattlers, 0u) << "a REV with rattlers: their counts must agree";
+    EXPECT_EQ(got.count, want.count);
+    EXPECT_EQ(scaled.count, want_scaled.count);
+    if (!newton) {
+      EXPECT_EQ(got.what, want.what);
+      EXPECT_EQ(scaled.what, want_scaled.what);
+      EXPECT_EQ(std::memcmp(&scaled.ratio, &want_scaled.ratio, sizeof(double)), 0);
+      World::Counters k = block.counters();
+      const World::Counters kr = ref->counters();
+      k.e_damp = kr.e_damp, k.e_slip_dead = kr.e_slip_dead, k.e_soft_dead = kr.e_soft_dead;
+      block.set_counters(k);
+      EXPECT_TRUE(state_bytes(block, CheckpointMeta{}) == state_bytes(*ref, CheckpointMeta{}))
+          << "the bonded, scaled REV assembled on rank 0 is not one World's";
+    }
+  }
+  if (!newton) {
+    d.step(30);
+    const DistDem::Balls balls = d.gather();
+    long long owned = static_cast<long long>(d.owned()), all = 0;
+    MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+    if (ref) {
+      ref->step(30);
+      test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
+    }
+  }
+  test::share_verdict();
+}
+
 }  // namespace
+
+TEST(DistSpecimen, BondingAndDepthScalingSameBits) { check_bonding(false); }
+TEST(DistSpecimen, BondingNewtonSameCounts) { check_bonding(true); }
 
 TEST(DistSpecimen, ReplicateLinearSlabsSameBits) {
   check_replicate({"linear, slabs across z"}, false);

@@ -8,11 +8,6 @@ namespace demfdm::dem {
 
 namespace {
 constexpr double kPi = 3.14159265358979323846;
-bool pair_active(const World& w, std::size_t c) {
-  const auto& pc = w.pair_contacts();
-  if (pc.h[c].flags & ContactHist::kActive) return true;
-  return !pc.bond.empty() && bonded(pc.bond[c].state);
-}
 void symmetrise(Mat3& s) {
   for (int i = 0; i < 3; ++i)
     for (int j = i + 1; j < 3; ++j) {
@@ -113,8 +108,15 @@ Coordination coordination(const World& w) {
     if (cnt[i] < 2) ++z.rattlers;
     else nc_nr += cnt[i];
   }
-  z.z = n ? 2.0 * double(z.active) / double(n) : 0.0;
-  z.z_no_rattlers = n > z.rattlers ? double(nc_nr) / double(n - z.rattlers) : 0.0;
+  return coordination_of(n, z.active, z.rattlers, nc_nr);
+}
+
+Coordination coordination_of(std::size_t balls, std::size_t active, std::size_t rattlers, std::size_t ends) {
+  Coordination z;
+  z.active = active;
+  z.rattlers = rattlers;
+  z.z = balls ? 2.0 * double(active) / double(balls) : 0.0;
+  z.z_no_rattlers = balls > rattlers ? double(ends) / double(balls - rattlers) : 0.0;
   return z;
 }
 

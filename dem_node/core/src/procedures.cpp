@@ -254,20 +254,6 @@ StageReport generate_specimen(World& w, const RevParams& p, double bond_coordina
   return r;
 }
 
-void bond_specimen(World& w, StageReport& r, double bond_coordination, double gap_floor) {
-  if (bond_coordination > 0) {
-    const double z0 = coordination(w).z;  // touching contacts only
-    const auto b = install_bonds_to_coordination(w, bond_coordination, gap_floor);
-    std::ostringstream z;
-    z.setf(std::ios::fixed);
-    z.precision(3);
-    z << "; Z " << coordination(w).z << " (touching before bonding: ";
-    z << z0 << ")";
-    r.what += "; " + b.what + z.str();
-    r.count = w.num_balls();
-  }
-}
-
 double ball_weight(const World& w) {
   double m = 0;
   for (double mi : w.balls().m) m += mi;

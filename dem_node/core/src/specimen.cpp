@@ -43,6 +43,14 @@ struct OneWorld {
   Mat3 stress() const { return cell_stress(w); }
   double porosity() const { return cell_porosity(w); }
   double min_diameter() const { return detail::min_diameter(w); }
+  World& part() { return w; }
+  void prepare() { w.prepare(); }
+  std::int64_t total(std::int64_t v) const { return v; }
+  double kth_smallest(std::vector<double>& v, std::int64_t k) const {
+    std::nth_element(v.begin(), v.begin() + (k - 1), v.end());
+    return v[static_cast<std::size_t>(k - 1)];
+  }
+  Coordination coordination() const { return dem::coordination(w); }
 };
 
 void fill_report(World& w, StageReport& r) {
@@ -279,55 +287,23 @@ StageReport servo_specimen(World& w, const ServoParams& p, double stress_tol, do
 }
 
 StageReport install_bonds(World& w, double lo, double hi) {
-  StageReport r;
-  r.count = w.bond_ball_ball(lo, hi);
-  fill_report(w, r);
-  std::ostringstream s;
-  s << "installed " << r.count << " " << to_string(w.params().ball_ball.model) << " bonds ("
-    << (w.num_balls() ? 2.0 * double(r.count) / double(w.num_balls()) : 0.0) << " per ball) on gaps in ["
-    << lo << ", " << hi << "] m";
-  r.what = s.str();
-  return r;
+  OneWorld sys{w};
+  return detail::install_bonds_on(sys, lo, hi);
 }
 
 double gap_for_coordination(World& w, double z_target, double gap_floor) {
-  if (!(z_target > 0.0)) {
-    std::ostringstream s;
-    s << "gap_for_coordination: target coordination number must be > 0, found " << z_target << ".";
-    throw std::invalid_argument(s.str());
-  }
-  w.prepare();
-  const auto& pc = w.pair_contacts();
-  const auto& pt = w.balls();
-  std::size_t have = 0;
-  std::vector<double> gaps;
-  for (std::size_t c = 0; c < pc.size(); ++c) {
-    const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
-    const Vec3 d = w.branch(c);
-    const double gap = norm(d) - pt.r[pc.a[c]] - pt.r[pc.b[c]];
-    if (bd || (pc.h[c].flags & ContactHist::kActive) || gap <= 0.0) { ++have; continue; }
-    gaps.push_back(gap);
-  }
-  const auto need = static_cast<std::size_t>(std::ceil(0.5 * z_target * double(w.num_balls())));
-  if (need <= have) return gap_floor;
-  const std::size_t extra = need - have;
-  if (extra > gaps.size()) {
-    std::ostringstream s;
-    s << "gap_for_coordination: Z = " << z_target << " needs " << extra << " more pairs but only " << gaps.size()
-      << " separated pairs lie within the Verlet skin (" << w.skin() << " m); the packing is too loose for this Z.";
-    throw std::invalid_argument(s.str());
-  }
-  std::nth_element(gaps.begin(), gaps.begin() + std::ptrdiff_t(extra - 1), gaps.end());
-  return std::max(gap_floor, gaps[extra - 1]);
+  OneWorld sys{w};
+  return detail::gap_for_coordination_on(sys, z_target, gap_floor);
 }
 
 StageReport install_bonds_to_coordination(World& w, double z_target, double gap_floor) {
-  const double g = gap_for_coordination(w, z_target, gap_floor);
-  StageReport r = install_bonds(w, -std::numeric_limits<double>::infinity(), g);
-  std::ostringstream s;
-  s << r.what << " (gap chosen for Z = " << z_target << ")";
-  r.what = s.str();
-  return r;
+  OneWorld sys{w};
+  return detail::install_bonds_to_coordination_on(sys, z_target, gap_floor);
+}
+
+void bond_specimen(World& w, StageReport& r, double bond_coordination, double gap_floor) {
+  OneWorld sys{w};
+  detail::bond_specimen_on(sys, r, bond_coordination, gap_floor);
 }
 
 ReplicaLayout::ReplicaLayout(const World& rev, const ReplicateParams& p)
@@ -428,41 +404,8 @@ StageReport replicate(World& w, const ReplicateParams& p) {
 }
 
 StageReport depth_scale(World& w, const DepthScaleParams& p) {
-  if (!(p.height > 0.0)) {
-    std::ostringstream s;
-    s << "depth_scale: 'height' (H_D) must be > 0 m, found " << p.height << ".";
-    throw std::invalid_argument(s.str());
-  }
-  auto& pc = w.pair_contacts();
-  const auto& pt = w.balls();
-  std::size_t cnt = 0;
-  for (std::size_t c = 0; c < pc.size(); ++c) {
-    const Vec3 d = w.branch(c);
-    const double dist = norm(d);
-    const double gap = dist - pt.r[pc.a[c]] - pt.r[pc.b[c]];
-    const double zc = pt.x[pc.a[c]].z + (pt.r[pc.a[c]] + 0.5 * gap) * d.z / dist;
-    double f = p.mode == DepthScaling::kDepthRatio ? (p.z_top - zc) / p.height
-                                                   : (zc - (p.z_top - p.height)) / p.height;
-    f = std::clamp(f, 0.0, 1.0);
-    ContactHist& h = pc.h[c];
-    h.fn *= f;
-    h.fs *= f;
-    h.flags |= ContactHist::kIncremental;  // otherwise K_n·overlap comes back (§4.9)
-    if (!pc.bond.empty()) {
-      BondHist& b = pc.bond[c];
-      b.nb *= f;
-      b.fsb *= f;
-      b.mt *= f;
-      b.mb *= f;
-    }
-    ++cnt;
-  }
-  StageReport r;
-  r.count = cnt;
-  fill_report(w, r);
-  r.what = std::string("scaled ") + std::to_string(cnt) + " ball-ball contact forces by the " +
-           (p.mode == DepthScaling::kDepthRatio ? "depth ratio (z_top - z)/H_D" : "paper-literal ratio z/H_D");
-  return r;
+  OneWorld sys{w};
+  return detail::depth_scale_on(sys, p);
 }
 
 namespace {

@@ -2405,11 +2405,44 @@ void DistDem::scale_radii(double f) {
   }
   MPI_Allreduce(MPI_IN_PLACE, &rmax, 1, MPI_DOUBLE, MPI_MAX, comm_);
   halo_ = 2.0 * rmax + p_.skin;  // (params_from's rule with the new radii)
-  exchange();  // the ghosts within the new halo
-  run_disp2_ = 0.0;
-  w.prepare();  // a rebuild and a force pass, as one World's
-  reduce_walls();
+  prepare();  // the ghosts within the new halo, a rebuild and a force pass, as one World's
   w.refresh_contact_constants();
+}
+
+void DistDem::prepare() {
+  exchange();
+  run_disp2_ = 0.0;
+  w_->prepare();
+  reduce_walls();
+}
+
+Coordination DistDem::coordination() {
+  const World& w = *w_;
+  const auto& pc = w.pair_contacts();
+  const auto& gh = w.ghost_rows();
+  const std::size_t n = w.num_balls();
+  std::vector<double> cnt(n, 0.0);  // (doubles: newton's reverse sends them; exact as counts)
+  std::int64_t k[3] = {0, 0, 0};     // active pairs, rattlers, contact ends on the other balls
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (pair_active(w, c)) {
+      cnt[pc.a[c]] += 1.0;
+      cnt[pc.b[c]] += 1.0;
+      k[0] += detail::owned_a(w, c);
+    }
+  if (newton_ && size_ > 1) {
+    std::vector<double> none(n, 0.0);
+    reverse(cnt.data(), none.data(), 1);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!gh.empty() && gh[i]) continue;
+    if (cnt[i] < 2.0)
+      ++k[1];
+    else
+      k[2] += static_cast<std::int64_t>(cnt[i]);
+  }
+  MPI_Allreduce(MPI_IN_PLACE, k, 3, MPI_INT64_T, MPI_SUM, comm_);
+  return coordination_of(num_balls(), static_cast<std::size_t>(k[0]), static_cast<std::size_t>(k[1]),
+                         static_cast<std::size_t>(k[2]));
 }
 
 namespace {
@@ -2431,6 +2464,32 @@ struct Ranks {
   Mat3 stress() const { return d.cell_stress(); }
   double porosity() const { return d.cell_porosity(); }
   double min_diameter() const { return d.min_diameter(); }
+  World& part() { return d.world(); }
+  void prepare() { d.prepare(); }
+  std::int64_t total(std::int64_t v) const {
+    MPI_Allreduce(MPI_IN_PLACE, &v, 1, MPI_INT64_T, MPI_SUM, d.comm());
+    return v;
+  }
+  // The k-th smallest of every rank's values (all > 0, so ordered as their bits): the smallest
+  // bit pattern at or below which k values lie over the ranks, by bisection (63 integer sums).
+  double kth_smallest(std::vector<double>& v, std::int64_t k) const {
+    std::sort(v.begin(), v.end());
+    auto value = [](std::uint64_t b) {
+      double x;
+      std::memcpy(&x, &b, sizeof x);
+      return x;
+    };
+    const double inf = std::numeric_limits<double>::infinity();
+    std::uint64_t lo = 0, hi = 0;  // at or below lo fewer than k values lie, at or below hi at least k
+    std::memcpy(&hi, &inf, sizeof hi);
+    while (hi - lo > 1) {
+      const std::uint64_t mid = lo + (hi - lo) / 2;
+      const auto at = static_cast<std::int64_t>(std::upper_bound(v.begin(), v.end(), value(mid)) - v.begin());
+      (total(at) >= k ? hi : lo) = mid;
+    }
+    return value(hi);
+  }
+  Coordination coordination() { return d.coordination(); }
 };
 }  // namespace
 
@@ -2444,6 +2503,31 @@ StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, 
                            double budget, double compaction_fric) {
   Ranks sys{d};
   return detail::servo_specimen_on(sys, p, stress_tol, ratio_tol, hold, budget, compaction_fric);
+}
+
+StageReport install_bonds(DistDem& d, double lo, double hi) {
+  Ranks sys{d};
+  return detail::install_bonds_on(sys, lo, hi);
+}
+
+double gap_for_coordination(DistDem& d, double z_target, double gap_floor) {
+  Ranks sys{d};
+  return detail::gap_for_coordination_on(sys, z_target, gap_floor);
+}
+
+StageReport install_bonds_to_coordination(DistDem& d, double z_target, double gap_floor) {
+  Ranks sys{d};
+  return detail::install_bonds_to_coordination_on(sys, z_target, gap_floor);
+}
+
+void bond_specimen(DistDem& d, StageReport& r, double bond_coordination, double gap_floor) {
+  Ranks sys{d};
+  detail::bond_specimen_on(sys, r, bond_coordination, gap_floor);
+}
+
+StageReport depth_scale(DistDem& d, const DepthScaleParams& p) {
+  Ranks sys{d};
+  return detail::depth_scale_on(sys, p);
 }
 
 StageReport generate_rev(DistDem& d, World& full, const RevParams& p) {

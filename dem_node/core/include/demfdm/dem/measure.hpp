@@ -55,6 +55,15 @@ struct Coordination {
   std::size_t rattlers = 0;   // balls with < 2 contacts
 };
 Coordination coordination(const World& w);
+/// The coordination numbers from their counts: the balls, the active contacts, the rattlers and
+/// the active contacts' ends on the other balls (coordination, and DistDem's from every rank's).
+Coordination coordination_of(std::size_t balls, std::size_t active, std::size_t rattlers, std::size_t ends);
+/// Whether ball-ball pair c of `w` is active: touching, or bonded.
+inline bool pair_active(const World& w, std::size_t c) {
+  const auto& pc = w.pair_contacts();
+  if (pc.h[c].flags & ContactHist::kActive) return true;
+  return !pc.bond.empty() && bonded(pc.bond[c].state);
+}
 
 struct BondCounts {
   std::size_t never_bonded = 0, intact = 0, softening = 0, broken_tension = 0, broken_shear = 0;

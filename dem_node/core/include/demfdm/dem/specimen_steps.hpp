@@ -15,6 +15,16 @@
 //                              the unbalanced ratio, cell_stress, cell_porosity, the smallest
 //                              diameter and the ball count of the whole packing (on the ranks:
 //                              collective, one World's bits)
+// and, for the bonding (§4.6) and the depth scaling (§4.9):
+//   World& part()              the World this process holds (one World: the World; on the ranks
+//                              this rank's part, whose list also holds the pairs of its balls
+//                              with another rank's ball A)
+//   void prepare()             World::prepare of the whole packing (on the ranks: collective)
+//   std::int64_t total(std::int64_t)   the sum over the ranks (one World: the value)
+//   double kth_smallest(std::vector<double>& v, std::int64_t k)   the k-th smallest (1-based)
+//                              of every rank's v together (v may be reordered)
+//   Coordination coordination()   measure.hpp's coordination of the whole packing
+// A count takes only the pairs whose ball A is no ghost (owned_a), so each pair counts once.
 // On the ranks every rank runs the loops: every decision reads values that are the same bits on
 // every rank, so the ranks take the same branches and meet in the same collectives.
 #pragma once
@@ -26,6 +36,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/specimen.hpp"
@@ -204,6 +215,140 @@ StageReport servo_specimen_on(S& sys, const ServoParams& p, double stress_tol, d
   r2.what = "servo to sigma_v " + std::to_string(p.target.z) + " Pa, sigma_h " + std::to_string(p.target.x) +
             " Pa: " + r1.what + "; at final friction: " + r2.what;
   return r2;
+}
+
+// Whether pair c's ball A is this process's own (not a ghost row): each pair counts once.
+inline bool owned_a(const World& w, std::size_t c) {
+  const auto& gh = w.ghost_rows();
+  return gh.empty() || !gh[w.pair_contacts().a[c]];
+}
+inline std::int64_t owned_intact(const World& w) {
+  const auto& pc = w.pair_contacts();
+  std::int64_t n = 0;
+  for (std::size_t c = 0; c < pc.bond.size(); ++c) n += owned_a(w, c) && pc.bond[c].state == BondState::kIntact;
+  return n;
+}
+
+// install_bonds (specimen.hpp): every pair of the packing with its gap in [lo, hi] bonded.
+template <class S>
+StageReport install_bonds_on(S& sys, double lo, double hi) {
+  World& w = sys.part();
+  if (!w.counters().prepared) sys.prepare();
+  const std::int64_t before = owned_intact(w);
+  w.bond_ball_ball(lo, hi);  // (each rank its list: a pair held by two ranks is bonded on both)
+  StageReport r;
+  r.count = static_cast<std::size_t>(sys.total(owned_intact(w) - before));
+  fill_report_on(sys, r);
+  const std::size_t n = sys.num_balls();
+  std::ostringstream s;
+  s << "installed " << r.count << " " << to_string(w.params().ball_ball.model) << " bonds ("
+    << (n ? 2.0 * double(r.count) / double(n) : 0.0) << " per ball) on gaps in [" << lo << ", " << hi << "] m";
+  r.what = s.str();
+  return r;
+}
+
+// gap_for_coordination (specimen.hpp).
+template <class S>
+double gap_for_coordination_on(S& sys, double z_target, double gap_floor) {
+  if (!(z_target > 0.0)) {
+    std::ostringstream s;
+    s << "gap_for_coordination: target coordination number must be > 0, found " << z_target << ".";
+    throw std::invalid_argument(s.str());
+  }
+  sys.prepare();
+  const World& w = sys.world();
+  const auto& pc = w.pair_contacts();
+  const auto& pt = w.balls();
+  std::int64_t have = 0;
+  std::vector<double> gaps;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    if (!owned_a(w, c)) continue;
+    const bool bd = !pc.bond.empty() && bonded(pc.bond[c].state);
+    const Vec3 d = w.branch(c);
+    const double gap = norm(d) - pt.r[pc.a[c]] - pt.r[pc.b[c]];
+    if (bd || (pc.h[c].flags & ContactHist::kActive) || gap <= 0.0) { ++have; continue; }
+    gaps.push_back(gap);
+  }
+  have = sys.total(have);
+  const std::int64_t separated = sys.total(static_cast<std::int64_t>(gaps.size()));
+  const auto need = static_cast<std::int64_t>(std::ceil(0.5 * z_target * double(sys.num_balls())));
+  if (need <= have) return gap_floor;
+  const std::int64_t extra = need - have;
+  if (extra > separated) {
+    std::ostringstream s;
+    s << "gap_for_coordination: Z = " << z_target << " needs " << extra << " more pairs but only " << separated
+      << " separated pairs lie within the Verlet skin (" << w.skin() << " m); the packing is too loose for this Z.";
+    throw std::invalid_argument(s.str());
+  }
+  return std::max(gap_floor, sys.kth_smallest(gaps, extra));
+}
+
+// install_bonds_to_coordination (specimen.hpp).
+template <class S>
+StageReport install_bonds_to_coordination_on(S& sys, double z_target, double gap_floor) {
+  const double g = gap_for_coordination_on(sys, z_target, gap_floor);
+  StageReport r = install_bonds_on(sys, -std::numeric_limits<double>::infinity(), g);
+  std::ostringstream s;
+  s << r.what << " (gap chosen for Z = " << z_target << ")";
+  r.what = s.str();
+  return r;
+}
+
+// bond_specimen (procedures.hpp): the generate stage's bonding half.
+template <class S>
+void bond_specimen_on(S& sys, StageReport& r, double bond_coordination, double gap_floor) {
+  if (!(bond_coordination > 0)) return;
+  const double z0 = sys.coordination().z;  // touching contacts only
+  const auto b = install_bonds_to_coordination_on(sys, bond_coordination, gap_floor);
+  std::ostringstream z;
+  z.setf(std::ios::fixed);
+  z.precision(3);
+  z << "; Z " << sys.coordination().z << " (touching before bonding: ";
+  z << z0 << ")";
+  r.what += "; " + b.what + z.str();
+  r.count = sys.num_balls();
+}
+
+// depth_scale (specimen.hpp): every listed pair's forces (on the ranks: every pair a rank holds,
+// from the same inputs on both ranks of a pair across a cut) times its depth factor.
+template <class S>
+StageReport depth_scale_on(S& sys, const DepthScaleParams& p) {
+  if (!(p.height > 0.0)) {
+    std::ostringstream s;
+    s << "depth_scale: 'height' (H_D) must be > 0 m, found " << p.height << ".";
+    throw std::invalid_argument(s.str());
+  }
+  World& w = sys.part();
+  auto& pc = w.pair_contacts();
+  const auto& pt = w.balls();
+  std::int64_t cnt = 0;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const Vec3 d = w.branch(c);
+    const double dist = norm(d);
+    const double gap = dist - pt.r[pc.a[c]] - pt.r[pc.b[c]];
+    const double zc = pt.x[pc.a[c]].z + (pt.r[pc.a[c]] + 0.5 * gap) * d.z / dist;
+    double f = p.mode == DepthScaling::kDepthRatio ? (p.z_top - zc) / p.height
+                                                   : (zc - (p.z_top - p.height)) / p.height;
+    f = std::clamp(f, 0.0, 1.0);
+    ContactHist& h = pc.h[c];
+    h.fn *= f;
+    h.fs *= f;
+    h.flags |= ContactHist::kIncremental;  // otherwise K_n·overlap comes back (§4.9)
+    if (!pc.bond.empty()) {
+      BondHist& b = pc.bond[c];
+      b.nb *= f;
+      b.fsb *= f;
+      b.mt *= f;
+      b.mb *= f;
+    }
+    cnt += owned_a(w, c);
+  }
+  StageReport r;
+  r.count = static_cast<std::size_t>(sys.total(cnt));
+  fill_report_on(sys, r);
+  r.what = std::string("scaled ") + std::to_string(r.count) + " ball-ball contact forces by the " +
+           (p.mode == DepthScaling::kDepthRatio ? "depth ratio (z_top - z)/H_D" : "paper-literal ratio z/H_D");
+  return r;
 }
 
 }  // namespace demfdm::dem::detail

@@ -356,6 +356,13 @@ class DistDem {
   /// exchanged again, then every rank's World prepared (a rebuild and a force pass) and its contact
   /// constants refreshed, as one World does it (collective).
   void scale_radii(double f);
+  /// Every rank's World prepared as one World's prepare (World::prepare): the ghosts exchanged,
+  /// a rebuild and a force pass, the step (collective).
+  void prepare();
+  /// measure.hpp's coordination of one World (collective): each rank counts the active pairs
+  /// whose ball A it owns, and its own balls' active contacts (with newton on, a ghost's counts
+  /// go back to its owner).
+  Coordination coordination();
   MPI_Comm comm() const { return comm_; }
   /// Bond counts by state (measure.hpp's bond_counts) and World::bond_failures() of one World:
   /// each rank counts the pairs whose ball A it owns; integer sums (collective).
@@ -516,6 +523,18 @@ StageReport generate_rev(DistDem& d, World& full, const RevParams& p);
 /// whole anywhere (unload assembles it on rank 0 when a caller needs it). Collective; bad
 /// parameters are refused on every rank with rank 0's words.
 StageReport replicate(DistDem& d, World& rev, const ReplicateParams& p);
+/// The bonding (§4.6) and the depth scaling (§4.9) of specimen.hpp and procedures.hpp on the
+/// ranks: the same bonds, forces, reports and gap as one World holding every ball, bit for bit
+/// (specimen_steps.hpp: written once). Each rank bonds or scales the pairs it holds (a pair across
+/// a cut on both ranks, from the same inputs, with newton off); the counts take each pair on the
+/// rank of its ball A; the gap for a coordination number is the k-th smallest separated gap of
+/// every rank, found exactly by bisecting its bits with one integer sum over the ranks per bit.
+/// Collective.
+StageReport install_bonds(DistDem& d, double gap_lo, double gap_hi);
+double gap_for_coordination(DistDem& d, double z_target, double gap_floor);
+StageReport install_bonds_to_coordination(DistDem& d, double z_target, double gap_floor);
+void bond_specimen(DistDem& d, StageReport& r, double bond_coordination, double gap_floor);
+StageReport depth_scale(DistDem& d, const DepthScaleParams& p);
 /// servo_specimen (procedures.hpp) on the ranks, the same way (the REV's servo stage of the DEM
 /// node on ranks).
 StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
