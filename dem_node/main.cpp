@@ -298,8 +298,10 @@ class DemParticipant : public node::Participant {
     if (part_only()) {
       // Rank 0 sets the stage up on the whole World and sends this rank its part at the first
       // step of a stage on the ranks (enter_dist); the REV's expansion and servo step on every
-      // rank.
+      // rank, the block is replicated on every rank, and the coupled set-up runs on the ranks
+      // when the interface mesh arrives.
       effect_s_.clear();
+      if (st.kind == schema::Action::kCouple && st.coupled) coupling_setup_pending_ = true;
       if (st.kind == schema::Action::kGenerate) generate();
       if (st.kind == schema::Action::kServo) servo_on_ranks();
       if (st.kind == schema::Action::kReplicate) replicate_on_ranks();
@@ -593,27 +595,39 @@ class DemParticipant : public node::Participant {
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
     leave_dist();
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
-    if (g_ranks.size > 1) {  // rank 0 sets the interface up; every rank learns the wall's index
-      if (!part_only()) interface_setup(m);
-      MPI_Bcast(&wall_, 1, MPI_INT, 0, g_ranks.comm);
-      return;
-    }
-    interface_setup(m);
+    interface_setup(m);  // (on ranks: every rank)
   }
+  // The interface wall and, in the couple stage, its set-up (docs/theory.md 4.9): the ball-facet
+  // contacts found and bonded, the depth scaling, the interface bonds' forces from the block's
+  // weight. On ranks rank 0's whole World gets the wall (every rank learns its index) and the
+  // set-up runs on the ranks (docs/scaling.md, "the coupled set-up on the ranks"): the World is
+  // cut into bricks first (enter_dist), each step on the ranks gives one World's bits, and rank 0's
+  // World is assembled again at the stage's end.
   void interface_setup(const proto::InterfaceMesh& m) {
-    wall_ = world_.add_facet_wall(m.positions, m.triangles);
+    const bool ranked = g_ranks.size > 1;
+    if (!part_only()) wall_ = world_.add_facet_wall(m.positions, m.triangles);
+    if (ranked) MPI_Bcast(&wall_, 1, MPI_INT, 0, g_ranks.comm);
     n_iface_ = m.n_points();
     spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
-    if (coupling_setup_pending_) {
-      coupling_setup_pending_ = false;
-      double d_min = s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
-      world_.prepare();  // detect the ball-facet contacts before bonding them
-      std::size_t nb = world_.bond_ball_facet(1e-3 * d_min);
-      spdlog::info("dem: {} ball-facet bonds installed", nb);
-      scale_with_depth();
-      const auto ib = dem::scene::interface_bonds(s_, block_, weight() / (block_.cell.x * block_.nx * block_.cell.y * block_.ny * block_.height()));
-      spdlog::info("dem: {}", dem::assign_interface_bond_forces(world_, ib).what);
-      world_.prepare();
+    if (!coupling_setup_pending_) return;
+    coupling_setup_pending_ = false;
+    if (ranked) enter_dist();
+    auto prepare = [&] { ranked ? dist_->prepare() : world_.prepare(); };
+    const double gap = 1e-3 * s_.real("dem.specimen.d_min") * s_.real("dem.specimen.scale");
+    prepare();  // detect the ball-facet contacts before bonding them
+    const std::size_t nb = ranked ? dem::bond_ball_facet(*dist_, gap) : world_.bond_ball_facet(gap);
+    spdlog::info("dem: {} ball-facet bonds installed", nb);
+    dem::DepthScaleParams p;
+    if (dem::scene::depth_scaling(s_, block_, p))
+      spdlog::info("dem: {}", (ranked ? dem::depth_scale(*dist_, p) : dem::depth_scale(world_, p)).what);
+    if (ranked) weight_ = dist_->ball_weight();  // (weight(): one World's bits)
+    const auto ib = dem::scene::interface_bonds(s_, block_, weight() / (block_.cell.x * block_.nx * block_.cell.y * block_.ny * block_.height()));
+    spdlog::info("dem: {}", (ranked ? dem::assign_interface_bond_forces(*dist_, ib) : dem::assign_interface_bond_forces(world_, ib)).what);
+    prepare();
+    if (ranked) {
+      synced_ = false;
+      ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
+      safe_dt_key_ = {-1, -1, -1};
     }
   }
   void set_interface_kinematics(const proto::Kinematics& k) override {

@@ -41,6 +41,8 @@
 // converged; on one rank also both phases on one World without DistDem (as the node at
 // dem.ranks = 1), the same steps; then each rank's phase times (motion, which runs the servo's
 // sums, forces, forward, reduce, exchange) [s].
+// mpirun -np P bench_dist --replicate N nx ny nz: the replication on the ranks against the whole
+// block on rank 0 (replicate_bench below).
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
 // cell edge moves by skin/3 in 30 steps), so lists are rebuilt and balls cross the cuts during
 // the run. Ball ids follow a Morton order of the packing (rows in id order are then local in
@@ -58,6 +60,7 @@
 // comm_share); the pairs listed over the ranks at the end (one World's count with newton on); the
 // wall time of the load [ms] (every rank cutting its part, or rank 0 sending them: BENCH_DIST_FROM_ROOT).
 #include <mpi.h>
+#include <unistd.h>
 #include <omp.h>
 
 #include <algorithm>
@@ -541,8 +544,9 @@ int rev_bench(long n, std::uint64_t seed) {
   StageReport gen = generate_rev(d, full, rp);
   const double t_gen = MPI_Wtime() - t0;
   const DistDem::Times tg = d.times();
-  // bonds to the paper's Z on rank 0 (as the node's generate stage)
-  if (rank == 0) bond_specimen(full, gen, 6.82, 1e-3 * rp.psd.d_min * rp.psd.scale);
+  // bonds to the paper's Z on the ranks, the REV assembled on rank 0 (as the node's generate stage)
+  bond_specimen(d, gen, 6.82, 1e-3 * rp.psd.d_min * rp.psd.scale);
+  d.unload(full, true);
   DistDem s(MPI_COMM_WORLD, p, g);
   s.load_from_root(full);
   MPI_Barrier(MPI_COMM_WORLD);
@@ -586,12 +590,98 @@ int rev_bench(long n, std::uint64_t seed) {
   return 0;
 }
 
+// This process's resident set now [MB] (/proc/self/statm).
+double resident_mb() {
+  long pages = 0, resident = 0;
+  if (FILE* f = std::fopen("/proc/self/statm", "r")) {
+    if (std::fscanf(f, "%ld %ld", &pages, &resident) != 2) resident = 0;
+    std::fclose(f);
+  }
+  return static_cast<double>(resident) * static_cast<double>(sysconf(_SC_PAGESIZE)) / 1048576.0;
+}
+
+// `mpirun -np P bench_dist --replicate N nx ny nz`: a REV of N balls (the --rev scene's, generated
+// and bonded to Z = 6.82 on rank 0, not timed) replicated nx x ny x nz into a block cut by RCB:
+// (1) on the ranks, each building its part (dem::replicate on a DistDem, as the node's replicate
+// stage), then (2) as before session 31: the whole block replicated on rank 0 and cut and sent
+// (replicate, load_from_root). One line per way: way, ranks, balls, wall_s, then per rank its
+// part's rows and pairs and its resident set after the way [MB] (rank 0 first).
+int replicate_bench(long n, int nx, int ny, int nz) {
+  int rank = 0, P = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &P);
+  RevParams rp = scene_rev_defaults();
+  rp.n_particles = static_cast<std::size_t>(n);
+  rp.porosity_final = 0.52042;
+  const double L = std::cbrt(static_cast<double>(n) / psd_expected_count(rp.psd, 1.0, rp.porosity_final));
+  WorldParams p;
+  p.periodic.enabled = true;
+  p.periodic.length = {L, L, L};
+  p.ball_ball.model = ContactModel::kSoftBond;
+  p.skin_factor = 0.8;
+  p.dt_fixed = 0.0;
+  p.threads = 1;
+  p.thread_independent = true;
+  std::string rev_bytes;
+  if (rank == 0) {
+    World rev(p);
+    StageReport g = generate_rev(rev, rp);
+    bond_specimen(rev, g, 6.82, 1e-3 * rp.psd.d_min * rp.psd.scale);
+    rev_bytes = state_bytes(rev, CheckpointMeta{});
+  }
+  ReplicateParams q;
+  q.nx = nx, q.ny = ny, q.nz = nz;
+  BrickGrid g;
+  g.lo = {0.0, 0.0, 0.0};
+  g.len = {nx * L, ny * L, nz * L};
+  g.set_rcb(P);
+  auto report = [&](const char* way, const DistDem& d, std::size_t balls, double wall) {
+    const double mine[3] = {static_cast<double>(d.world().num_balls()), static_cast<double>(d.world().pair_contacts().size()),
+                            resident_mb()};
+    std::vector<double> all(rank == 0 ? 3 * static_cast<std::size_t>(P) : 0);
+    MPI_Gather(mine, 3, MPI_DOUBLE, all.data(), 3, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    if (rank != 0) return;
+    std::printf("%s,ranks,%d,balls,%zu,wall_s,%.3f", way, P, balls, wall);
+    for (int r = 0; r < P; ++r)
+      std::printf(",rank%d_rows_pairs_rss_mb,%.0f,%.0f,%.1f", r, all[3 * r], all[3 * r + 1], all[3 * r + 2]);
+    std::printf("\n");
+  };
+  {
+    World rev(p);
+    if (rank == 0) load_state_bytes(rev, rev_bytes, 0, "the REV");
+    DistDem d(MPI_COMM_WORLD, p, g);
+    MPI_Barrier(MPI_COMM_WORLD);
+    const double t0 = MPI_Wtime();
+    const StageReport r = replicate(d, rev, q);
+    MPI_Barrier(MPI_COMM_WORLD);
+    report("replicate_on_ranks", d, r.count, MPI_Wtime() - t0);
+  }
+  {
+    World block(p);
+    if (rank == 0) load_state_bytes(block, rev_bytes, 0, "the REV");
+    DistDem d(MPI_COMM_WORLD, p, g);
+    MPI_Barrier(MPI_COMM_WORLD);
+    const double t0 = MPI_Wtime();
+    StageReport r;
+    if (rank == 0) r = replicate(block, q);
+    d.load_from_root(block);
+    MPI_Barrier(MPI_COMM_WORLD);
+    report("replicate_on_rank0_then_cut", d, r.count, MPI_Wtime() - t0);
+  }
+  return 0;
+}
+
 int main(int argc, char** argv) {
   if (argc == 5 && std::string(argv[1]) == "--state") return model_state(argv[2], argv[3], argv[4]);
   if (argc == 4 && std::string(argv[1]) == "--merge") return merge_bench(std::atoi(argv[2]), std::atol(argv[3]));
   MPI_Init(&argc, &argv);
   if (argc >= 3 && std::string(argv[1]) == "--rev") {
     const int rc = rev_bench(std::atol(argv[2]), argc > 3 ? std::strtoull(argv[3], nullptr, 10) : 1);
+    MPI_Finalize();
+    return rc;
+  }
+  if (argc == 6 && std::string(argv[1]) == "--replicate") {
+    const int rc = replicate_bench(std::atol(argv[2]), std::atoi(argv[3]), std::atoi(argv[4]), std::atoi(argv[5]));
     MPI_Finalize();
     return rc;
   }

@@ -377,7 +377,128 @@ void check_bonding(bool newton) {
   test::share_verdict();
 }
 
+// A quad [p0, p0 + u + v] as two triangles whose normal u x v points into the block.
+void add_quad(std::vector<double>& pos, std::vector<std::int32_t>& tri, const Vec3& p0, const Vec3& u, const Vec3& v) {
+  const auto base = static_cast<std::int32_t>(pos.size() / 3);
+  for (const Vec3& x : {p0, p0 + u, p0 + u + v, p0 + v}) pos.insert(pos.end(), {x.x, x.y, x.z});
+  tri.insert(tri.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+}
+
+// The coupled set-up on the ranks, as the DEM node runs it there (dem_node/main.cpp,
+// interface_setup): the replicated soft-bond block under gravity in a pocket of facets (its floor
+// and four sides, normals inwards), 200 steps settled on one World, cut by RCB from rank 0, the ball-facet contacts found
+// (DistDem::prepare) and bonded, the depth scaling, the block's weight and the interface bonds'
+// forces (traction or the band means), prepared again; against one World: the counts, the weight
+// and every report bit for bit, the block assembled on rank 0 byte for byte, and 30 steps on.
+void check_interface(InterfaceBondForce mode) {
+  ServoScene sc{"soft bond law, RCB", ContactModel::kSoftBond};
+  sc.rcb = true;
+  sc.porosity = 0.45;
+  std::unique_ptr<World> r = rev(sc);
+  install_bonds_to_coordination(*r, 5.0, 1e-9);
+  r->mutable_params().ball_facet.model = ContactModel::kLinearPBond;
+  ReplicateParams rp;
+  rp.nx = 2, rp.ny = 1, rp.nz = 2;
+  World block(r->params());
+  load_state_bytes(block, state_bytes(*r, CheckpointMeta{}), 0, "the REV");
+  replicate(block, rp);
+  block.set_gravity(true, 100.0);
+  const Vec3 lo = block.cell_origin(), L = r->cell_length();
+  const Vec3 hi{lo.x + 2 * L.x, lo.y + L.y, lo.z + 2 * L.z};
+  const double W = hi.x - lo.x, D = hi.y - lo.y, H = hi.z - lo.z;
+  std::vector<double> pos;
+  std::vector<std::int32_t> tri;
+  add_quad(pos, tri, lo, {W, 0, 0}, {0, D, 0});                   // floor, +z
+  add_quad(pos, tri, lo, {0, D, 0}, {0, 0, H});                   // x = lo, +x
+  add_quad(pos, tri, {hi.x, lo.y, lo.z}, {0, 0, H}, {0, D, 0});   // x = hi, -x
+  add_quad(pos, tri, lo, {0, 0, H}, {W, 0, 0});                   // y = lo, +y
+  add_quad(pos, tri, {lo.x, hi.y, lo.z}, {W, 0, 0}, {0, 0, H});   // y = hi, -y
+  block.add_facet_wall(pos, tri);
+  block.prepare();
+  block.step(200);  // (contact forces under gravity: the band means add many, in one World's order)
+  const std::string bytes = state_bytes(block, CheckpointMeta{});
+  BrickGrid g;
+  g.lo = lo;
+  g.len = {W, D, H};
+  g.set_rcb(g_size);
+  DepthScaleParams dp;
+  dp.z_top = hi.z;
+  dp.height = H;
+  InterfaceBondParams ib;
+  ib.mode = mode;
+  ib.band = 2.0 * r->balls().r[0];
+  ib.z_top = hi.z;
+  ib.k0 = 0.5;
+  const double gap = 0.05 * r->balls().r[0];
+  // the set-up, on one World or on the ranks
+  struct Got {
+    std::size_t bonds = 0;
+    StageReport depth, forces;
+    double weight = 0.0;
+  };
+  auto setup = [&](auto& sys, auto bond, auto weight) {
+    Got out;
+    sys.prepare();
+    out.bonds = bond();
+    out.depth = depth_scale(sys.target(), dp);
+    out.weight = weight();
+    ib.unit_weight = out.weight / (W * D * H);
+    out.forces = assign_interface_bond_forces(sys.target(), ib);
+    sys.prepare();
+    return out;
+  };
+  World mine(r->params());  // rank 0: the block; the others: no ball
+  if (g_rank == 0) load_state_bytes(mine, bytes, 0, "the block");
+  DistDem d(MPI_COMM_WORLD, r->params(), g);
+  d.load_from_root(mine);
+  struct OnRanks {
+    DistDem& d;
+    void prepare() { d.prepare(); }
+    DistDem& target() { return d; }
+  } ranks{d};
+  const Got got = setup(ranks, [&] { return bond_ball_facet(d, gap); }, [&] { return d.ball_weight(); });
+  d.unload(mine, true);
+  std::unique_ptr<World> ref;
+  if (g_rank == 0) {
+    ref = std::make_unique<World>(r->params());
+    load_state_bytes(*ref, bytes, 0, "the block");
+    struct One {
+      World& w;
+      void prepare() { w.prepare(); }
+      World& target() { return w; }
+    } one{*ref};
+    const Got want = setup(one, [&] { return ref->bond_ball_facet(gap); }, [&] { return ball_weight(*ref); });
+    std::printf("coupled set-up on %d ranks: %zu ball-facet bonds; %s; %s\n", g_size, got.bonds, got.depth.what.c_str(),
+                got.forces.what.c_str());
+    EXPECT_EQ(got.bonds, want.bonds);
+    EXPECT_GT(want.bonds, 50u) << "the pocket must bond balls";
+    EXPECT_EQ(got.depth.what, want.depth.what);
+    EXPECT_EQ(std::memcmp(&got.weight, &want.weight, sizeof(double)), 0) << got.weight << " vs " << want.weight;
+    EXPECT_EQ(got.forces.what, want.forces.what);
+    EXPECT_EQ(got.forces.count, want.forces.count);
+    EXPECT_EQ(std::memcmp(&got.forces.ratio, &want.forces.ratio, sizeof(double)), 0);
+    World::Counters k = mine.counters();
+    const World::Counters kr = ref->counters();
+    k.e_damp = kr.e_damp, k.e_slip_dead = kr.e_slip_dead, k.e_soft_dead = kr.e_soft_dead;
+    mine.set_counters(k);
+    EXPECT_TRUE(state_bytes(mine, CheckpointMeta{}) == state_bytes(*ref, CheckpointMeta{}))
+        << "the set-up block assembled on rank 0 is not one World's";
+  }
+  d.step(30);
+  const DistDem::Balls balls = d.gather();
+  long long owned = static_cast<long long>(d.owned()), all = 0;
+  MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  if (ref) {
+    ref->step(30);
+    test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
+  }
+  test::share_verdict();
+}
+
 }  // namespace
+
+TEST(DistSpecimen, CoupledSetUpTractionSameBits) { check_interface(InterfaceBondForce::kTraction); }
+TEST(DistSpecimen, CoupledSetUpMeanContactSameBits) { check_interface(InterfaceBondForce::kMeanContact); }
 
 TEST(DistSpecimen, BondingAndDepthScalingSameBits) { check_bonding(false); }
 TEST(DistSpecimen, BondingNewtonSameCounts) { check_bonding(true); }

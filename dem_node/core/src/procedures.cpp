@@ -255,9 +255,9 @@ StageReport generate_specimen(World& w, const RevParams& p, double bond_coordina
 }
 
 double ball_weight(const World& w) {
-  double m = 0;
-  for (double mi : w.balls().m) m += mi;
-  return m * std::abs(w.gravity().z);
+  const auto& m = w.balls().m;
+  // (row order, or the order-free sum under run.order_free_sums: DistDem::ball_weight's bits)
+  return w.ordered_ball_sum([&](std::size_t i) { return m[i]; }) * std::abs(w.gravity().z);
 }
 
 GuardFinding energy_jump_finding(const World& w, const std::string& jump) {

@@ -51,6 +51,8 @@ struct OneWorld {
     return v[static_cast<std::size_t>(k - 1)];
   }
   Coordination coordination() const { return dem::coordination(w); }
+  template <class T>
+  void in_order(std::vector<T>&) const {}  // (one World's records are in its order)
 };
 
 void fill_report(World& w, StageReport& r) {
@@ -408,118 +410,9 @@ StageReport depth_scale(World& w, const DepthScaleParams& p) {
   return detail::depth_scale_on(sys, p);
 }
 
-namespace {
-// kMeanContact (see specimen.hpp): returns the number of bonds assigned.
-std::size_t mean_contact_bond_forces(World& w, double band) {
-  auto& fc = w.facet_contacts();
-  const auto& pc = w.pair_contacts();
-  struct Cf { double z; Vec3 n; double fn; };
-  std::vector<Cf> cs;
-  double gsum = 0.0;
-  for (std::size_t c = 0; c < pc.size(); ++c) {
-    const double fn = pc.h[c].fn + (pc.bond.empty() ? 0.0 : -pc.bond[c].nb);
-    if (!(fn > 0.0)) continue;
-    const Vec3 d = w.branch(c);
-    const Vec3 n = d * (1.0 / norm(d));
-    cs.push_back({w.balls().x[pc.a[c]].z + 0.5 * d.z, n, fn});
-    gsum += fn;
-  }
-  const double gmean = cs.empty() ? 0.0 : gsum / double(cs.size());
-  const double cos30 = std::cos(kPi / 6.0);
-  std::size_t cnt = 0;
-  for (std::size_t c = 0; c < fc.size(); ++c) {
-    if (!bonded(fc.bond[c].state)) continue;
-    const Vec3 nf = w.facet_wall(static_cast<int>(fc.wall[c])).tri_normal[static_cast<std::size_t>(fc.facet[c])];
-    const double z = fc.xc[c].z;
-    double s1 = 0, s2 = 0;
-    std::size_t n1 = 0, n2 = 0;
-    for (const auto& e : cs) {
-      if (std::abs(e.z - z) > band) continue;
-      s2 += e.fn; ++n2;
-      if (std::abs(dot(e.n, nf)) >= cos30) { s1 += e.fn; ++n1; }
-    }
-    const double mean = n1 ? s1 / double(n1) : (n2 ? s2 / double(n2) : gmean);
-    fc.bond[c].nb = -mean;  // compression (tension positive in the bond routine)
-    ++cnt;
-  }
-  return cnt;
-}
-
-// kTraction (see specimen.hpp). Faces are keyed by wall and normal (components rounded to
-// 1e-6). Returns the number of bonds assigned; `faces` and `unloaded` receive the number of
-// plane faces and the force [N] of faces without any bond (not carried by the DEM).
-std::size_t traction_bond_forces(World& w, const InterfaceBondParams& p, std::size_t& faces, double& unloaded) {
-  // n·σ·n of the geostatic stress at height z (compression as a positive number).
-  auto snn = [&](const Vec3& n, double z) {
-    const double sv = p.unit_weight * std::max(0.0, p.z_top - z);
-    return sv * (p.k0 * (n.x * n.x + n.y * n.y) + n.z * n.z);
-  };
-  auto key = [](std::uint32_t wall, const Vec3& n) {
-    auto q = [](double v) { return static_cast<long long>(std::llround(v * 1e6)); };
-    return std::array<long long, 4>{static_cast<long long>(wall), q(n.x), q(n.y), q(n.z)};
-  };
-  struct Face { double force = 0.0, weight = 0.0; std::size_t bonds = 0; };
-  std::map<std::array<long long, 4>, Face> face;
-  for (int wi = 0; wi < w.num_facet_walls(); ++wi) {
-    const FacetWall& fw = w.facet_wall(wi);
-    for (std::size_t t = 0; t < fw.tri.size(); ++t) {
-      const Vec3 a = fw.pos[static_cast<std::size_t>(fw.tri[t][0])], b = fw.pos[static_cast<std::size_t>(fw.tri[t][1])],
-                 c = fw.pos[static_cast<std::size_t>(fw.tri[t][2])];
-      const double area = 0.5 * norm(cross(b - a, c - a));
-      face[key(static_cast<std::uint32_t>(wi), fw.tri_normal[t])].force += area * snn(fw.tri_normal[t], (a.z + b.z + c.z) / 3.0);
-    }
-  }
-  auto& fc = w.facet_contacts();
-  auto normal_of = [&](std::size_t c) {
-    return w.facet_wall(static_cast<int>(fc.wall[c])).tri_normal[static_cast<std::size_t>(fc.facet[c])];
-  };
-  for (std::size_t c = 0; c < fc.size(); ++c) {
-    if (!bonded(fc.bond[c].state)) continue;
-    Face& f = face.at(key(fc.wall[c], normal_of(c)));
-    f.weight += snn(normal_of(c), fc.xc[c].z);
-    ++f.bonds;
-  }
-  std::size_t cnt = 0;
-  for (std::size_t c = 0; c < fc.size(); ++c) {
-    if (!bonded(fc.bond[c].state)) continue;
-    const Face& f = face.at(key(fc.wall[c], normal_of(c)));
-    const double share = f.weight > 0.0 ? snn(normal_of(c), fc.xc[c].z) / f.weight : 0.0;
-    fc.bond[c].nb = -f.force * share;  // compression (tension positive in the bond routine)
-    ++cnt;
-  }
-  faces = face.size();
-  unloaded = 0.0;
-  for (const auto& [k, f] : face)
-    if (f.weight <= 0.0) unloaded += f.force;
-  return cnt;
-}
-}  // namespace
-
 StageReport assign_interface_bond_forces(World& w, const InterfaceBondParams& p) {
-  if (p.mode == InterfaceBondForce::kTraction && (!(p.unit_weight >= 0.0) || !(p.k0 >= 0.0))) {
-    std::ostringstream s;
-    s << "assign_interface_bond_forces: 'unit_weight' and 'k0' must be >= 0, found " << p.unit_weight << " N/m^3 and "
-      << p.k0 << ".";
-    throw std::invalid_argument(s.str());
-  }
-  auto& fc = w.facet_contacts();
-  if (fc.bond.empty())
-    throw std::invalid_argument("assign_interface_bond_forces: family 'ball_facet' has no bonds (model 'linear').");
-  StageReport r;
-  std::ostringstream s;
-  if (p.mode == InterfaceBondForce::kMeanContact) {
-    r.count = mean_contact_bond_forces(w, p.band);
-    s << "assigned the depth-wise mean ball-ball normal force to " << r.count << " interface bonds";
-  } else {
-    std::size_t faces = 0;
-    double unloaded = 0.0;
-    r.count = traction_bond_forces(w, p, faces, unloaded);
-    s << "assigned the geostatic traction (unit weight " << p.unit_weight << " N/m^3, K0 " << p.k0 << ") of " << faces
-      << " interface faces to " << r.count << " interface bonds; faces without bonds: " << unloaded << " N unassigned";
-  }
-  fill_report(w, r);
-  r.what = s.str();
-  return r;
+  OneWorld sys{w};
+  return detail::assign_interface_bond_forces_on(sys, p);
 }
 
 StageReport assign_interface_bond_forces(World& w, double band) {

@@ -2490,6 +2490,21 @@ struct Ranks {
     return value(hi);
   }
   Coordination coordination() { return d.coordination(); }
+  // Every rank's records on every rank (an all-gather), in one World's order: by key (unique).
+  template <class T>
+  void in_order(std::vector<T>& v) const {
+    int P = 1;
+    MPI_Comm_size(d.comm(), &P);
+    const int bytes = static_cast<int>(v.size() * sizeof(T));
+    std::vector<int> counts(static_cast<std::size_t>(P)), displ(static_cast<std::size_t>(P));
+    MPI_Allgather(&bytes, 1, MPI_INT, counts.data(), 1, MPI_INT, d.comm());
+    int total = 0;
+    for (int r = 0; r < P; ++r) displ[static_cast<std::size_t>(r)] = total, total += counts[static_cast<std::size_t>(r)];
+    std::vector<T> all(static_cast<std::size_t>(total) / sizeof(T));
+    MPI_Allgatherv(v.data(), bytes, MPI_BYTE, all.data(), counts.data(), displ.data(), MPI_BYTE, d.comm());
+    std::sort(all.begin(), all.end(), [](const T& a, const T& b) { return a.key() < b.key(); });
+    v.swap(all);
+  }
 };
 }  // namespace
 
@@ -2528,6 +2543,23 @@ void bond_specimen(DistDem& d, StageReport& r, double bond_coordination, double 
 StageReport depth_scale(DistDem& d, const DepthScaleParams& p) {
   Ranks sys{d};
   return detail::depth_scale_on(sys, p);
+}
+
+StageReport assign_interface_bond_forces(DistDem& d, const InterfaceBondParams& p) {
+  Ranks sys{d};
+  return detail::assign_interface_bond_forces_on(sys, p);
+}
+
+std::size_t bond_ball_facet(DistDem& d, double hi) {
+  std::int64_t n = static_cast<std::int64_t>(d.world().bond_ball_facet(hi));  // (a rank's balls' contacts)
+  MPI_Allreduce(MPI_IN_PLACE, &n, 1, MPI_INT64_T, MPI_SUM, d.comm());
+  return static_cast<std::size_t>(n);
+}
+
+double DistDem::ball_weight() const {
+  double m = 0.0;
+  ball_sums<1>([&](std::size_t i, double* out) { out[0] = w_->balls().m[i]; }, &m);
+  return m * std::abs(w_->gravity().z);
 }
 
 StageReport generate_rev(DistDem& d, World& full, const RevParams& p) {

@@ -24,6 +24,8 @@
 //   double kth_smallest(std::vector<double>& v, std::int64_t k)   the k-th smallest (1-based)
 //                              of every rank's v together (v may be reordered)
 //   Coordination coordination()   measure.hpp's coordination of the whole packing
+//   void in_order(std::vector<T>& v)   every rank's records v, on every rank, in one World's
+//                              order (by T::key(); one World: v as it is, already in that order)
 // A count takes only the pairs whose ball A is no ghost (owned_a), so each pair counts once.
 // On the ranks every rank runs the loops: every decision reads values that are the same bits on
 // every rank, so the ranks take the same branches and meet in the same collectives.
@@ -33,11 +35,14 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "demfdm/dem/laws/registry.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/specimen.hpp"
 
@@ -348,6 +353,149 @@ StageReport depth_scale_on(S& sys, const DepthScaleParams& p) {
   fill_report_on(sys, r);
   r.what = std::string("scaled ") + std::to_string(r.count) + " ball-ball contact forces by the " +
            (p.mode == DepthScaling::kDepthRatio ? "depth ratio (z_top - z)/H_D" : "paper-literal ratio z/H_D");
+  return r;
+}
+
+// assign_interface_bond_forces (specimen.hpp), kMeanContact: every bonded ball-facet contact (on
+// the ranks: each rank its balls') gets the mean normal force of the ball-ball contacts in its
+// band, summed in one World's pair order. Returns the bonds assigned here.
+struct PairForceRec {
+  std::uint64_t ia, ib;
+  double z;
+  Vec3 n;
+  double fn;
+  std::pair<std::uint64_t, std::uint64_t> key() const { return {ia, ib}; }
+};
+template <class S>
+std::int64_t mean_contact_bond_forces_on(S& sys, double band) {
+  World& w = sys.part();
+  auto& fc = w.facet_contacts();
+  const auto& pc = w.pair_contacts();
+  const auto& pt = w.balls();
+  std::vector<PairForceRec> cs;
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    if (!owned_a(w, c)) continue;
+    const double fn = pc.h[c].fn + (pc.bond.empty() ? 0.0 : -pc.bond[c].nb);
+    if (!(fn > 0.0)) continue;
+    const Vec3 d = w.branch(c);
+    const Vec3 n = d * (1.0 / norm(d));
+    cs.push_back({pt.id[pc.a[c]], pt.id[pc.b[c]], pt.x[pc.a[c]].z + 0.5 * d.z, n, fn});
+  }
+  sys.in_order(cs);
+  double gsum = 0.0;
+  for (const auto& e : cs) gsum += e.fn;
+  const double gmean = cs.empty() ? 0.0 : gsum / double(cs.size());
+  const double cos30 = std::cos(3.14159265358979323846 / 6.0);
+  std::int64_t cnt = 0;
+  for (std::size_t c = 0; c < fc.size(); ++c) {
+    if (!bonded(fc.bond[c].state)) continue;
+    const Vec3 nf = w.facet_wall(static_cast<int>(fc.wall[c])).tri_normal[static_cast<std::size_t>(fc.facet[c])];
+    const double z = fc.xc[c].z;
+    double s1 = 0, s2 = 0;
+    std::size_t n1 = 0, n2 = 0;
+    for (const auto& e : cs) {
+      if (std::abs(e.z - z) > band) continue;
+      s2 += e.fn; ++n2;
+      if (std::abs(dot(e.n, nf)) >= cos30) { s1 += e.fn; ++n1; }
+    }
+    const double mean = n1 ? s1 / double(n1) : (n2 ? s2 / double(n2) : gmean);
+    fc.bond[c].nb = -mean;  // compression (tension positive in the bond routine)
+    ++cnt;
+  }
+  return cnt;
+}
+
+// kTraction: faces keyed by wall and normal (components rounded to 1e-6); each face's force split
+// over its bonds by n.sigma.n at their contact points, the faces' weights summed in one World's
+// facet-contact order (ball id, wall). Returns the bonds assigned here; `faces` and `unloaded`
+// get the number of plane faces and the force [N] of faces without a bond (not carried by the DEM).
+struct FaceWeightRec {
+  std::uint64_t id;
+  std::uint32_t wall;
+  std::int32_t face;
+  double snn;
+  std::pair<std::uint64_t, std::uint32_t> key() const { return {id, wall}; }
+};
+template <class S>
+std::int64_t traction_bond_forces_on(S& sys, const InterfaceBondParams& p, std::size_t& faces, double& unloaded) {
+  World& w = sys.part();
+  // n.sigma.n of the geostatic stress at height z (compression as a positive number).
+  auto snn = [&](const Vec3& n, double z) {
+    const double sv = p.unit_weight * std::max(0.0, p.z_top - z);
+    return sv * (p.k0 * (n.x * n.x + n.y * n.y) + n.z * n.z);
+  };
+  auto key = [](std::uint32_t wall, const Vec3& n) {
+    auto q = [](double v) { return static_cast<long long>(std::llround(v * 1e6)); };
+    return std::array<long long, 4>{static_cast<long long>(wall), q(n.x), q(n.y), q(n.z)};
+  };
+  struct Face { double force = 0.0, weight = 0.0; std::size_t bonds = 0; int index = 0; };
+  std::map<std::array<long long, 4>, Face> face;
+  for (int wi = 0; wi < w.num_facet_walls(); ++wi) {
+    const FacetWall& fw = w.facet_wall(wi);
+    for (std::size_t t = 0; t < fw.tri.size(); ++t) {
+      const Vec3 a = fw.pos[static_cast<std::size_t>(fw.tri[t][0])], b = fw.pos[static_cast<std::size_t>(fw.tri[t][1])],
+                 c = fw.pos[static_cast<std::size_t>(fw.tri[t][2])];
+      const double area = 0.5 * norm(cross(b - a, c - a));
+      face[key(static_cast<std::uint32_t>(wi), fw.tri_normal[t])].force += area * snn(fw.tri_normal[t], (a.z + b.z + c.z) / 3.0);
+    }
+  }
+  std::vector<Face*> by_index;
+  for (auto& [k, f] : face) f.index = static_cast<int>(by_index.size()), by_index.push_back(&f);
+  auto& fc = w.facet_contacts();
+  auto normal_of = [&](std::size_t c) {
+    return w.facet_wall(static_cast<int>(fc.wall[c])).tri_normal[static_cast<std::size_t>(fc.facet[c])];
+  };
+  std::vector<FaceWeightRec> recs;
+  for (std::size_t c = 0; c < fc.size(); ++c) {
+    if (!bonded(fc.bond[c].state)) continue;
+    recs.push_back({w.balls().id[fc.ball[c]], fc.wall[c], face.at(key(fc.wall[c], normal_of(c))).index,
+                    snn(normal_of(c), fc.xc[c].z)});
+  }
+  sys.in_order(recs);
+  for (const FaceWeightRec& r : recs) {
+    Face& f = *by_index[static_cast<std::size_t>(r.face)];
+    f.weight += r.snn;
+    ++f.bonds;
+  }
+  std::int64_t cnt = 0;
+  for (std::size_t c = 0; c < fc.size(); ++c) {
+    if (!bonded(fc.bond[c].state)) continue;
+    const Face& f = face.at(key(fc.wall[c], normal_of(c)));
+    const double share = f.weight > 0.0 ? snn(normal_of(c), fc.xc[c].z) / f.weight : 0.0;
+    fc.bond[c].nb = -f.force * share;  // compression (tension positive in the bond routine)
+    ++cnt;
+  }
+  faces = face.size();
+  unloaded = 0.0;
+  for (const auto& [k, f] : face)
+    if (f.weight <= 0.0) unloaded += f.force;
+  return cnt;
+}
+
+template <class S>
+StageReport assign_interface_bond_forces_on(S& sys, const InterfaceBondParams& p) {
+  if (p.mode == InterfaceBondForce::kTraction && (!(p.unit_weight >= 0.0) || !(p.k0 >= 0.0))) {
+    std::ostringstream s;
+    s << "assign_interface_bond_forces: 'unit_weight' and 'k0' must be >= 0, found " << p.unit_weight << " N/m^3 and "
+      << p.k0 << ".";
+    throw std::invalid_argument(s.str());
+  }
+  if (!law_has_bond(sys.world().params().ball_facet.model))
+    throw std::invalid_argument("assign_interface_bond_forces: family 'ball_facet' has no bonds (model 'linear').");
+  StageReport r;
+  std::ostringstream s;
+  if (p.mode == InterfaceBondForce::kMeanContact) {
+    r.count = static_cast<std::size_t>(sys.total(mean_contact_bond_forces_on(sys, p.band)));
+    s << "assigned the depth-wise mean ball-ball normal force to " << r.count << " interface bonds";
+  } else {
+    std::size_t faces = 0;
+    double unloaded = 0.0;
+    r.count = static_cast<std::size_t>(sys.total(traction_bond_forces_on(sys, p, faces, unloaded)));
+    s << "assigned the geostatic traction (unit weight " << p.unit_weight << " N/m^3, K0 " << p.k0 << ") of " << faces
+      << " interface faces to " << r.count << " interface bonds; faces without bonds: " << unloaded << " N unassigned";
+  }
+  fill_report_on(sys, r);
+  r.what = s.str();
   return r;
 }
 

@@ -26,9 +26,10 @@
 // (also strained) and free space, gravity, the fixed or the automatic step (the smallest over
 // the ranks), dynamic balancing, the node's measurements, and one World again from the ranks'
 // parts (unload: output, checkpoints, the next stage's set-up), platen servos (every rank runs
-// them on the walls' sums, reduced after every step then). Not yet: the other effects (the
-// periodic servo; load refuses them); specimen procedures (dem_node runs them on the whole
-// World on rank 0, which sends each rank its part: load_from_root).
+// them on the walls' sums, reduced after every step then), and the specimen procedures: the
+// REV's expansion and periodic servo, the bonding, the replication (each rank building its part
+// of the block), the depth scaling and the interface bonds, each with one World's bits (the free
+// functions at the end). Not yet: the other effects (load refuses them).
 #pragma once
 
 #include <mpi.h>
@@ -363,6 +364,8 @@ class DistDem {
   /// whose ball A it owns, and its own balls' active contacts (with newton on, a ghost's counts
   /// go back to its owner).
   Coordination coordination();
+  /// procedures.hpp's ball_weight (Σ m |g|) of one World, the same bits (collective).
+  double ball_weight() const;
   MPI_Comm comm() const { return comm_; }
   /// Bond counts by state (measure.hpp's bond_counts) and World::bond_failures() of one World:
   /// each rank counts the pairs whose ball A it owns; integer sums (collective).
@@ -535,6 +538,14 @@ double gap_for_coordination(DistDem& d, double z_target, double gap_floor);
 StageReport install_bonds_to_coordination(DistDem& d, double z_target, double gap_floor);
 void bond_specimen(DistDem& d, StageReport& r, double bond_coordination, double gap_floor);
 StageReport depth_scale(DistDem& d, const DepthScaleParams& p);
+/// The coupled set-up's interface bonds on the ranks: World::bond_ball_facet on every rank's balls
+/// (the bonds installed over the ranks), and assign_interface_bond_forces (specimen.hpp), whose
+/// sums (the faces' weights, the band means over the ball-ball contacts) add every rank's terms in
+/// one World's order, gathered on every rank: the same forces and report as one World. The
+/// band means need every ball-ball contact's record on every rank (kMeanContact; transient).
+/// Collective.
+std::size_t bond_ball_facet(DistDem& d, double hi);
+StageReport assign_interface_bond_forces(DistDem& d, const InterfaceBondParams& p);
 /// servo_specimen (procedures.hpp) on the ranks, the same way (the REV's servo stage of the DEM
 /// node on ranks).
 StageReport servo_specimen(DistDem& d, const ServoParams& p, double stress_tol, double ratio_tol, double hold,
