@@ -448,13 +448,13 @@ class DemParticipant : public node::Participant {
     if (!part_only() && world_.num_balls() == 0)
       throw std::runtime_error("no particles: the scene's stages generate none before cycling");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
-    if (energy_pending_ && part_only()) {
-      energy_pending_ = false;  // rank 0 keeps the stage's energy balance
-    } else if (energy_pending_) {
+    if (energy_pending_) {
       // Energy balance of the stage (docs/stability.md) from the state before its first step,
-      // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN).
+      // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN;
+      // on ranks on the ranks' parts, assembled on rank 0 for it), kept by rank 0.
       energy_pending_ = false;
-      energy_.begin(world_);
+      sync_full();
+      if (!part_only()) energy_.begin(world_);
     }
     enter_dist();
     dem::World& w = live();
