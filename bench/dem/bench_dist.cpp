@@ -35,12 +35,13 @@
 // bench_dist --merge P N: rank 0's merge of the walls' shares, P runs of N (merge_bench below).
 // mpirun -np P bench_dist --rev N [seed]: the REV's preparation on the ranks (rev_bench below): N
 // balls of the paper's PSD at upscaling 1.5 drawn into a cube at porosity 0.52042, their radius
-// expansion (5 increments), bonds to Z = 6.82 on rank 0, and the soft-bond REV's servo (compaction
+// expansion (5 increments), bonds to Z = 6.82 on the ranks, and the soft-bond REV's servo (compaction
 // at friction 0.1, then the final one, to (6.25, 6.25, 12.5) kPa), as the DEM node runs them with
 // dem.ranks = P. One line per phase: phase, ranks, balls, steps, wall_s, particle_steps_per_s,
 // converged; on one rank also both phases on one World without DistDem (as the node at
 // dem.ranks = 1), the same steps; then each rank's phase times (motion, which runs the servo's
-// sums, forces, forward, reduce, exchange) [s].
+// sums, forces, forward, reduce, exchange) [s]. BENCH_REV_ORDER_FREE=1: with run.order_free_sums
+// (the servo's sums and the cell stress order-free, each rank folding its own contacts).
 // mpirun -np P bench_dist --replicate N nx ny nz: the replication on the ranks against the whole
 // block on rank 0 (replicate_bench below).
 // strong and weak strain the cell in plane strain at the rate of bench_dem's `moving` run (the
@@ -532,6 +533,9 @@ int rev_bench(long n, std::uint64_t seed) {
   p.dt_fixed = 0.0;
   p.threads = 1;
   p.thread_independent = true;
+  // BENCH_REV_ORDER_FREE=1: run.order_free_sums (the servo's sums folded by every rank, not on rank 0)
+  const char* of = std::getenv("BENCH_REV_ORDER_FREE");
+  p.order_free_sums = of && std::string(of) == "1";
   World full(p);
   BrickGrid g;
   g.lo = {0.0, 0.0, 0.0};

@@ -77,7 +77,8 @@ void declare_run(config::Section& root) {
       .min(1).max(256).or_word("auto", false);
   run.boolean("order_free_sums", false,
               "The DEM's per-step measurements (kinetic energy, unbalanced and skeleton ratios, mean contact "
-              "force) as order-free sums: every term split against fixed power-of-two boundaries into parts that add "
+              "force), the walls' sums, the REV servo's sums and the cell stress as order-free sums: every term "
+              "split against fixed power-of-two boundaries into parts that add "
               "exactly in any order (docs/scaling.md), so the ranks of dem.ranks fold their own terms and combine "
               "them in two allreduces instead of gathering every term on rank 0 each step. The same bits at any "
               "thread and rank count; they differ from the default sums in the last bits (about 1e-16 relative), "

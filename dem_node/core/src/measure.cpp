@@ -3,6 +3,10 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <vector>
+
+#include "demfdm/dem/order_free_sum.hpp"
+#include "demfdm/dem/specimen.hpp"
 
 namespace demfdm::dem {
 
@@ -20,6 +24,17 @@ void symmetrise(Mat3& s) {
 Mat3 cell_stress(const World& w) {
   Mat3 s{};
   const auto& pc = w.pair_contacts();
+  if (w.params().order_free_sums) {  // each component's order-free sum (the servo's columns: DistDem's bits)
+    std::vector<double> v(pc.size() * kServoColumns), col(pc.size());
+    for (std::size_t c = 0; c < pc.size(); ++c)
+      servo_columns(ServoTerm{w.pair_force(c), w.branch(c), 0.0, 0.0, false}, ServoStiffness::kApparent,
+                    &v[c * kServoColumns]);
+    for (std::size_t k = 0; k < 9; ++k) {
+      for (std::size_t c = 0; c < pc.size(); ++c) col[c] = v[c * kServoColumns + k];
+      s[k] = order_free_total(col.data(), col.size());
+    }
+    return cell_stress_of(s, w.cell_volume());
+  }
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const Vec3 F = w.pair_force(c);
     if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "demfdm/dem/order_free_sum.hpp"
 #include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/specimen_steps.hpp"
 
@@ -210,24 +211,50 @@ ServoTerm servo_term(const World& w, std::size_t c) {
 }
 
 void ServoSums::add(const ServoTerm& t, ServoStiffness kind) {
-  add_cell_stress_term(s, t.F, t.l);
-  if (!t.stiff) return;
-  const Vec3& l = t.l;
-  const Vec3 n = l * (1.0 / norm(l));
-  for (int a = 0; a < 3; ++a) {
-    if (kind == ServoStiffness::kApparent) {
-      K[a][a] += t.kn * l[a] * l[a];
-      continue;
-    }
-    for (int b = 0; b < 3; ++b) K[a][b] += (t.kn - t.ks) * l[a] * n[a] * n[b] * l[b];
-    K[a][a] += t.ks * l[a] * l[a];
-  }
+  // (s -= F l is s += -(F l), bit for bit)
+  for_each_servo_increment(t, kind, [&](int k, double v) { (k < 9 ? s[k] : K[(k - 9) / 3][(k - 9) % 3]) += v; });
+}
+
+void servo_columns(const ServoTerm& t, ServoStiffness kind, double* out) {
+  std::fill(out, out + kServoColumns, 0.0);
+  for_each_servo_increment(t, kind, [&](int k, double v) { out[k] += v; });
+}
+
+std::vector<int> servo_columns_read(const ServoParams& p) {
+  std::vector<int> c{0, 4, 8, 9, 13, 17};  // the stress's and K's diagonals
+  if (p.coupled)
+    for (int k : {10, 11, 12, 14, 15, 16}) c.push_back(k);
+  return c;
+}
+
+ServoSums servo_sums_of_columns(const double* sums, const int* cols, int m) {
+  double all[kServoColumns] = {};
+  for (int j = 0; j < m; ++j) all[cols ? cols[j] : j] = sums[j];
+  ServoSums r;
+  std::copy(all, all + 9, r.s.begin());
+  std::copy(all + 9, all + 18, &r.K[0][0]);
+  return r;
 }
 
 void PeriodicServo::apply(World& w, Phase) {
   ServoSums sums;
+  if (columns_.empty()) columns_ = servo_columns_read(p_);
   if (reduce_) {
-    sums = reduce_(w, p_.stiffness);
+    sums = reduce_(w, p_.stiffness, columns_);
+  } else if (w.params().order_free_sums) {  // the columns it reads, each one's order-free sum (DistDem's bits)
+    const std::size_t nc = w.pair_contacts().size(), m = columns_.size();
+    std::vector<double> v(nc * m), col(nc);
+    double t[kServoColumns];
+    for (std::size_t c = 0; c < nc; ++c) {
+      servo_columns(servo_term(w, c), p_.stiffness, t);
+      for (std::size_t j = 0; j < m; ++j) v[c * m + j] = t[columns_[j]];
+    }
+    double total[kServoColumns];
+    for (std::size_t j = 0; j < m; ++j) {
+      for (std::size_t c = 0; c < nc; ++c) col[c] = v[c * m + j];
+      total[j] = order_free_total(col.data(), nc);
+    }
+    sums = servo_sums_of_columns(total, columns_.data(), static_cast<int>(m));
   } else {
     const std::size_t nc = w.pair_contacts().size();
     for (std::size_t c = 0; c < nc; ++c) sums.add(servo_term(w, c), p_.stiffness);

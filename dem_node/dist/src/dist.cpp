@@ -2308,24 +2308,41 @@ double DistDem::unbalanced_ratio(double fc) const {
 
 // Every term goes to rank 0 whatever WorldParams::order_free_sums says: one World's servo and its
 // cell measurements add in list order (specimen.cpp, measure.cpp), so the ranks do too.
-ServoSums DistDem::servo_sums(ServoStiffness kind) const {
+ServoSums DistDem::servo_sums(ServoStiffness kind, const std::vector<int>* columns) const {
   const World& w = *w_;
   const auto& pc = w.pair_contacts();
   const auto& g = w.ghost_rows();
   const Particles& pt = w.balls();
   auto mine = [&](std::size_t c) { return g.empty() || !g[pc.a[c]]; };  // (contact_force_keys' rule)
-  constexpr int K = 9;  // a term's doubles: F, l, k_n, k_s, stiff
+  const KeyFill keys = [&](std::vector<World::ContactTerm>& out) {
+    for (std::size_t c = 0; c < pc.size(); ++c)
+      if (mine(c)) out.push_back({0, pt.id[pc.a[c]], pt.id[pc.b[c]], 0.0});
+  };
   std::vector<double>& v = buf_->m_rows;
   v.clear();
+  if (p_.order_free_sums) {  // each column's order-free sum of the contacts' contributions, as one World's
+    std::vector<int> all(kServoColumns);
+    std::iota(all.begin(), all.end(), 0);
+    const std::vector<int>& cols = columns ? *columns : all;
+    const std::size_t m = cols.size();
+    std::size_t n = 0;
+    double t[kServoColumns];
+    for (std::size_t c = 0; c < pc.size(); ++c) {
+      if (!mine(c)) continue;
+      servo_columns(servo_term(w, c), kind, t);
+      for (int k : cols) v.push_back(t[k]);
+      ++n;
+    }
+    double total[kServoColumns];
+    ordered_sums(n, v.data(), static_cast<int>(m), keys, kServoTerms, false, total);  // (its order-free branch)
+    return servo_sums_of_columns(total, cols.data(), static_cast<int>(m));
+  }
+  constexpr int K = 9;  // a term's doubles: F, l, k_n, k_s, stiff
   for (std::size_t c = 0; c < pc.size(); ++c) {
     if (!mine(c)) continue;
     const ServoTerm t = servo_term(w, c);
     v.insert(v.end(), {t.F.x, t.F.y, t.F.z, t.l.x, t.l.y, t.l.z, t.kn, t.ks, t.stiff ? 1.0 : 0.0});
   }
-  const KeyFill keys = [&](std::vector<World::ContactTerm>& out) {
-    for (std::size_t c = 0; c < pc.size(); ++c)
-      if (mine(c)) out.push_back({0, pt.id[pc.a[c]], pt.id[pc.b[c]], 0.0});
-  };
   ServoSums sums;
   ordered_fold(v.size() / K, v.data(), K, keys, kServoTerms, nullptr, 0,
                [&](const double* all, const std::vector<std::uint32_t>& perm) {
@@ -2353,7 +2370,7 @@ PeriodicServo* DistDem::add_periodic_servo(const ServoParams& p, double d_min) {
   if (servo_) throw std::logic_error("DistDem::add_periodic_servo: the ranks run a periodic servo already.");
   if (!w_->periodic()) throw std::invalid_argument("DistDem::add_periodic_servo: the world must have a periodic cell.");
   auto e = std::make_unique<PeriodicServo>(p, d_min);
-  e->set_reduce([this](World&, ServoStiffness kind) { return servo_sums(kind); });
+  e->set_reduce([this](World&, ServoStiffness kind, const std::vector<int>& cols) { return servo_sums(kind, &cols); });
   servo_ = static_cast<PeriodicServo*>(w_->add_effect(std::move(e)));
   return servo_;
 }
@@ -2364,8 +2381,10 @@ void DistDem::remove_periodic_servo() {
 }
 
 Mat3 DistDem::cell_stress() const {
-  // the stress half of the servo's sums (the stiffness half adds nothing to it)
-  return cell_stress_of(servo_sums(ServoStiffness::kApparent).s, w_->cell_volume());
+  // the stress half of the servo's sums (the stiffness half adds nothing to it; under order-free
+  // sums not formed)
+  static const std::vector<int> stress{0, 1, 2, 3, 4, 5, 6, 7, 8};
+  return cell_stress_of(servo_sums(ServoStiffness::kApparent, &stress).s, w_->cell_volume());
 }
 
 double DistDem::cell_porosity() const {

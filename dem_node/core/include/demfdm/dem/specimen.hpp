@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/world.hpp"
@@ -206,13 +207,45 @@ struct ServoSums {
   double K[3][3] = {};
   void add(const ServoTerm& t, ServoStiffness kind);
 };
+/// The increments a contact's term makes to the servo's 18 sums, in add()'s order: f(k, v) for
+/// column k (0-8: the stress's Σ −F ⊗ ℓ, row by row; 9-17: K, row by row); a diagonal of K gets
+/// two with the full stiffness. add() adds them in this order; servo_columns collects them.
+template <class F>
+void for_each_servo_increment(const ServoTerm& t, ServoStiffness kind, F&& f) {
+  if (!(t.F.x == 0.0 && t.F.y == 0.0 && t.F.z == 0.0))  // (add_cell_stress_term's rule)
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) f(3 * i + j, -(t.F[i] * t.l[j]));
+  if (!t.stiff) return;
+  const Vec3& l = t.l;
+  const Vec3 n = l * (1.0 / norm(l));
+  for (int a = 0; a < 3; ++a) {
+    if (kind == ServoStiffness::kApparent) {
+      f(9 + 4 * a, t.kn * l[a] * l[a]);
+      continue;
+    }
+    for (int b = 0; b < 3; ++b) f(9 + 3 * a + b, (t.kn - t.ks) * l[a] * n[a] * n[b] * l[b]);
+    f(9 + 4 * a, t.ks * l[a] * l[a]);
+  }
+}
+/// Under WorldParams::order_free_sums the servo's sums are order-free sums (order_free_sum.hpp)
+/// of each contact's contribution to each column (its increments added from +0): bits that do not
+/// depend on the contacts' order nor on the ranks they lie on (one World and DistDem alike). The
+/// servo forms only the columns it reads (servo_columns_read: the stress's diagonal, K's diagonal
+/// and, when coupled, the rest of K); the others stay 0 in its sums (its last_stress() then holds
+/// the diagonal only). cell_stress forms the stress's nine.
+constexpr int kServoColumns = 18;
+void servo_columns(const ServoTerm& t, ServoStiffness kind, double* out);
+std::vector<int> servo_columns_read(const ServoParams& p);
+/// The sums from `sums[j]`, the sum of column cols[j] (j < m; all 18 in order when cols is null).
+ServoSums servo_sums_of_columns(const double* sums, const int* cols = nullptr, int m = kServoColumns);
 
 /// Effect that sets the cell strain rate each step from the last stress (kPreStep). Its sums
 /// are the World's own contacts', or, with a `Reduce` set (DistDem::add_periodic_servo: every
 /// rank's World runs the servo), what it returns: every rank's contacts' in one World's order.
 class PeriodicServo final : public Effect {
  public:
-  using Reduce = std::function<ServoSums(World&, ServoStiffness)>;
+  /// (the columns to form under order-free sums: servo_columns_read)
+  using Reduce = std::function<ServoSums(World&, ServoStiffness, const std::vector<int>& columns)>;
   explicit PeriodicServo(const ServoParams& p, double d_min) : p_(p), d_min_(d_min) {}
   unsigned phases() const override { return kPreStep; }
   void apply(World& w, Phase) override;
@@ -225,6 +258,7 @@ class PeriodicServo final : public Effect {
   double d_min_;
   Mat3 stress_{};
   Reduce reduce_;
+  std::vector<int> columns_;  // servo_columns_read(p_), formed at the first step
 };
 
 /// Stress servo of a planar wall along its normal (a platen, as in the UCS test's seating):

@@ -339,13 +339,16 @@ class DistDem {
   /// Specimen preparation on the ranks (docs/scaling.md, "the REV's expansion and servo on the
   /// ranks"): the periodic servo (§4.5) runs on every rank's World, its sums (ServoSums: the cell
   /// stress and the affine stiffness) formed from every rank's pair contacts in one World's order
-  /// on rank 0 and broadcast at every step, so every rank sets one World's strain rate. Returns
+  /// on rank 0 and broadcast at every step, so every rank sets one World's strain rate; under
+  /// WorldParams::order_free_sums each rank folds its own contacts into the 18 columns'
+  /// order-free sums (servo_columns), reduced in one allreduce, as one World sums them. Returns
   /// this rank's effect (last_stress). Call it on every rank after a load (the effect's steps are
   /// collective); remove_periodic_servo takes it off again.
   PeriodicServo* add_periodic_servo(const ServoParams& p, double d_min);
   void remove_periodic_servo();
   /// The servo's sums of one World holding every ball, the same bits (collective).
-  ServoSums servo_sums(ServoStiffness kind) const;
+  /// (`columns`: under order-free sums only those columns, servo_columns_read; null: all 18)
+  ServoSums servo_sums(ServoStiffness kind, const std::vector<int>* columns = nullptr) const;
   /// cell_stress, cell_porosity and the smallest ball diameter of one World, the same bits
   /// (collective).
   Mat3 cell_stress() const;
@@ -380,7 +383,7 @@ class DistDem {
   Balls gather() const;
 
   /// Σ of every rank's terms in one World's key order, on every rank, for K value columns at once
-  /// (`sums[0..K)`). `vals`: this rank's n terms, K values each, in the order in which `keys`
+  /// (`sums[0..K)`; K at most kMaxColumns, any K under WorldParams::order_free_sums). `vals`: this rank's n terms, K values each, in the order in which `keys`
   /// appends their keys; `keys` is called only when the merge order is formed again (which:
   /// the kind of terms, whose merge order is kept until their keys can change; ball terms: an
   /// exchange or a load; contact terms: also a rebuild). `positive` (K = 1): only terms > 0 are
