@@ -515,16 +515,12 @@ int merge_bench(int P, long N) {
   return 0;
 }
 
-// `mpirun -np P bench_dist --rev N [seed]` (above).
-int rev_bench(long n, std::uint64_t seed) {
-  int rank = 0, P = 1;
-  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
-  MPI_Comm_size(MPI_COMM_WORLD, &P);
-  RevParams rp = scene_rev_defaults();
-  rp.seed = seed;
+// The --rev and --replicate benches' REV of n balls (`rp`: its count and porosity set here): a
+// periodic cube of edge L at the default scene's porosity, soft bond law, one thread per rank.
+WorldParams rev_bench_world(RevParams& rp, long n, double& L) {
   rp.n_particles = static_cast<std::size_t>(n);
   rp.porosity_final = 0.52042;
-  const double L = std::cbrt(static_cast<double>(n) / psd_expected_count(rp.psd, 1.0, rp.porosity_final));
+  L = std::cbrt(static_cast<double>(n) / psd_expected_count(rp.psd, 1.0, rp.porosity_final));
   WorldParams p;
   p.periodic.enabled = true;
   p.periodic.length = {L, L, L};
@@ -533,6 +529,18 @@ int rev_bench(long n, std::uint64_t seed) {
   p.dt_fixed = 0.0;
   p.threads = 1;
   p.thread_independent = true;
+  return p;
+}
+
+// `mpirun -np P bench_dist --rev N [seed]` (above).
+int rev_bench(long n, std::uint64_t seed) {
+  int rank = 0, P = 1;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &P);
+  RevParams rp = scene_rev_defaults();
+  rp.seed = seed;
+  double L = 0.0;
+  WorldParams p = rev_bench_world(rp, n, L);
   // BENCH_REV_ORDER_FREE=1: run.order_free_sums (the servo's sums folded by every rank, not on rank 0)
   const char* of = std::getenv("BENCH_REV_ORDER_FREE");
   p.order_free_sums = of && std::string(of) == "1";
@@ -615,17 +623,8 @@ int replicate_bench(long n, int nx, int ny, int nz) {
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   MPI_Comm_size(MPI_COMM_WORLD, &P);
   RevParams rp = scene_rev_defaults();
-  rp.n_particles = static_cast<std::size_t>(n);
-  rp.porosity_final = 0.52042;
-  const double L = std::cbrt(static_cast<double>(n) / psd_expected_count(rp.psd, 1.0, rp.porosity_final));
-  WorldParams p;
-  p.periodic.enabled = true;
-  p.periodic.length = {L, L, L};
-  p.ball_ball.model = ContactModel::kSoftBond;
-  p.skin_factor = 0.8;
-  p.dt_fixed = 0.0;
-  p.threads = 1;
-  p.thread_independent = true;
+  double L = 0.0;
+  const WorldParams p = rev_bench_world(rp, n, L);
   std::string rev_bytes;
   if (rank == 0) {
     World rev(p);

@@ -226,6 +226,19 @@ void check(const ServoScene& sc) {
   test::share_verdict();
 }
 
+// n more steps on the ranks and on one World (`ref`, rank 0's; null elsewhere): every ball the
+// same bits (collective).
+void step_both(DistDem& d, World* ref, int n) {
+  d.step(n);
+  const DistDem::Balls balls = d.gather();
+  long long owned = static_cast<long long>(d.owned()), all = 0;
+  MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  if (ref) {
+    ref->step(n);
+    test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
+  }
+}
+
 // replicate on the ranks (DistDem::load_replicated): rank 0's REV (bonded to Z = 5 for the
 // bonded law) copied 2 x 2 x 3 by every rank into its own part only, against one World's
 // replicate: the report, the block assembled on rank 0 byte for byte as a checkpoint holds it
@@ -293,16 +306,9 @@ void check_replicate(const ServoScene& sc, bool keep_periodic) {
     d.world().set_gravity(true, 1000.0);  // (every rank's World: its own rows)
     if (ref) ref->set_gravity(true, 1000.0), block.set_gravity(true, 1000.0);  // (unload keeps block's effects)
   }
-  d.step(40);
-  const DistDem::Balls balls = d.gather();
-  long long owned = static_cast<long long>(d.owned()), all = 0;
-  MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  step_both(d, ref.get(), 40);
   d.unload(block, true);
-  if (ref) {
-    for (int i = 0; i < 40; ++i) ref->step();
-    test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
-    same_state(block, *ref, "after 40 steps");
-  }
+  if (ref) same_state(block, *ref, "after 40 steps");
   test::share_verdict();
 }
 
@@ -372,16 +378,7 @@ void check_bonding(bool newton) {
           << "the bonded, scaled REV assembled on rank 0 is not one World's";
     }
   }
-  if (!newton) {
-    d.step(30);
-    const DistDem::Balls balls = d.gather();
-    long long owned = static_cast<long long>(d.owned()), all = 0;
-    MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
-    if (ref) {
-      ref->step(30);
-      test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
-    }
-  }
+  if (!newton) step_both(d, ref.get(), 30);
   test::share_verdict();
 }
 
@@ -492,14 +489,7 @@ void check_interface(InterfaceBondForce mode) {
     EXPECT_TRUE(state_bytes(mine, CheckpointMeta{}) == state_bytes(*ref, CheckpointMeta{}))
         << "the set-up block assembled on rank 0 is not one World's";
   }
-  d.step(30);
-  const DistDem::Balls balls = d.gather();
-  long long owned = static_cast<long long>(d.owned()), all = 0;
-  MPI_Reduce(&owned, &all, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
-  if (ref) {
-    ref->step(30);
-    test::expect_same_balls(balls, *ref, static_cast<std::size_t>(all));
-  }
+  step_both(d, ref.get(), 30);
   test::share_verdict();
 }
 
