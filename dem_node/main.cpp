@@ -57,10 +57,11 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // The DEM on MPI ranks (dem.ranks > 1, started by launch/run under mpirun; docs/scaling.md).
 // Rank 0 speaks on the bus and tells the other ranks every call it gets (RankedParticipant);
 // each rank runs the same adapter. Rank 0 alone holds the whole World: it sets the stages up
-// (walls, the footing, the interface bonds); the specimen procedures run on the ranks (the REV's
-// expansion, bonding and servo, and the replication, each rank building its part of the block),
-// their result assembled on rank 0; the steps of every other stage run on a dem::DistDem, each rank its brick
-// of the block, which rank 0 cuts and sends (DistDem::load_from_root). At a stage's end, a
+// (gravity, walls, the footing). The specimen procedures run on the ranks (the REV's expansion,
+// bonding and servo, the replication, each rank building its part of the block, and the coupled
+// set-up), their result assembled on rank 0; the steps of every other stage run on a
+// dem::DistDem, each rank its brick of the block, which rank 0 cuts and sends
+// (DistDem::load_from_root). At a stage's end, a
 // checkpoint or a frame the ranks' parts are assembled into the whole World on rank 0
 // (DistDem::unload to rank 0). The other ranks never hold more than their part. Only rank 0
 // writes files.
@@ -600,9 +601,9 @@ class DemParticipant : public node::Participant {
   // The interface wall and, in the couple stage, its set-up (docs/theory.md 4.9): the ball-facet
   // contacts found and bonded, the depth scaling, the interface bonds' forces from the block's
   // weight. On ranks rank 0's whole World gets the wall (every rank learns its index) and the
-  // set-up runs on the ranks (docs/scaling.md, "the coupled set-up on the ranks"): the World is
-  // cut into bricks first (enter_dist), each step on the ranks gives one World's bits, and rank 0's
-  // World is assembled again at the stage's end.
+  // set-up runs on the ranks (docs/scaling.md, "the specimen procedures and the coupled set-up on
+  // the ranks"): the World is cut into bricks first (enter_dist), each step on the ranks gives
+  // one World's bits, and rank 0's World is assembled again at the stage's end.
   void interface_setup(const proto::InterfaceMesh& m) {
     const bool ranked = g_ranks.size > 1;
     if (!part_only()) wall_ = world_.add_facet_wall(m.positions, m.triangles);
@@ -903,11 +904,11 @@ class DemParticipant : public node::Participant {
     p.keep_periodic = false;
     return p;
   }
-  // The replicate stage on the ranks (docs/scaling.md, "replication on the ranks"): rank 0's REV
-  // sent to every rank, each rank building only its part of the block (dem::replicate on a
-  // DistDem, one World's bits), cut as the later stages cut the block; the block is then
-  // assembled on rank 0, which sets the next stages up. Every rank calls it; the report is
-  // rank 0's.
+  // The replicate stage on the ranks (docs/scaling.md, "the specimen procedures and the coupled
+  // set-up on the ranks"): rank 0's REV sent to every rank, each rank building only its part of
+  // the block (dem::replicate on a DistDem, one World's bits), cut as the later stages cut the
+  // block; the block is then assembled on rank 0, which sets the next stages up. Every rank calls
+  // it; the report is rank 0's.
   dem::StageReport replicate_on_ranks() {
     double c[6] = {world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
                    world_.cell_length().x, world_.cell_length().y, world_.cell_length().z};

@@ -871,11 +871,12 @@ void DistDem::load_from_root(const World& full) {
   take(std::move(part), !platens.empty());
 }
 
-// replicate's block without the block (docs/scaling.md, "replication on the ranks"): this rank
-// builds the copies of the REV's balls that its part of the block holds and the copied pairs
-// with one of its balls, in the block's orders (rows by copy then REV row: by id; pairs by copy
-// then REV pair), into `rev` itself, then cuts its part from that as load(block) would: the
-// copies it builds are a superset of the part's rows, and its pairs every pair the part computes.
+// replicate's block without the block (docs/scaling.md, "the specimen procedures and the coupled
+// set-up on the ranks"): this rank builds the copies of the REV's balls that its part of the
+// block holds and the copied pairs with one of its balls, in the block's orders (rows by copy
+// then REV row: by id; pairs by copy then REV pair), into `rev` itself, then cuts its part from
+// that as load(block) would: the copies it builds are a superset of the part's rows, and its
+// pairs every pair the part computes.
 // Only the copies near this brick are visited (their boxes, grown by the halo, meet the brick,
 // and those a pair away), so the work is this brick's share of the block, not the block.
 DistDem::Replicated DistDem::load_replicated(World& rev, const ReplicateParams& p) {
