@@ -510,6 +510,13 @@ TEST(DistSpecimen, ReplicateSoftBondRcbSameBits) {
   sc.porosity = 0.45;
   check_replicate(sc, false);
 }
+// with run.order_free_sums (a state file does not carry it: the ranks' must be the caller's)
+TEST(DistSpecimen, ReplicateOrderFreeSumsSameBits) {
+  ServoScene sc{"soft bond law, RCB, order-free sums", ContactModel::kSoftBond};
+  sc.rcb = sc.order_free = true;
+  sc.porosity = 0.45;
+  check_replicate(sc, false);
+}
 TEST(DistSpecimen, ReplicatePeriodicRcbSameBits) {
   ServoScene sc{"soft bond law, RCB", ContactModel::kSoftBond};
   sc.rcb = true;

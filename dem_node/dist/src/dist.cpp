@@ -2628,7 +2628,9 @@ StageReport replicate(DistDem& d, World& rev, const ReplicateParams& p) {
   constexpr long long kChunk = 1LL << 30;
   for (long long at = 0; at < nb; at += kChunk)
     MPI_Bcast(bytes.data() + at, static_cast<int>(std::min(kChunk, nb - at)), MPI_CHAR, 0, d.comm());
-  World share(WorldParams{});
+  // (a state file does not carry thread_independent and order_free_sums: the target keeps its
+  // own, the caller's on every rank)
+  World share(rev.params());
   load_state_bytes(share, std::move(bytes), 0, "rank 0's REV");
   const std::size_t rev_balls = share.num_balls();
   const ReplicaLayout lay(share, p);
