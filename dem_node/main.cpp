@@ -618,9 +618,7 @@ class DemParticipant : public node::Participant {
     prepare();  // detect the ball-facet contacts before bonding them
     const std::size_t nb = ranked ? dem::bond_ball_facet(*dist_, gap) : world_.bond_ball_facet(gap);
     spdlog::info("dem: {} ball-facet bonds installed", nb);
-    dem::DepthScaleParams p;
-    if (dem::scene::depth_scaling(s_, block_, p))
-      spdlog::info("dem: {}", (ranked ? dem::depth_scale(*dist_, p) : dem::depth_scale(world_, p)).what);
+    scale_with_depth();
     if (ranked) weight_ = dist_->ball_weight();  // (weight(): one World's bits)
     const auto ib = dem::scene::interface_bonds(s_, block_, weight() / (block_.cell.x * block_.nx * block_.cell.y * block_.ny * block_.height()));
     spdlog::info("dem: {}", (ranked ? dem::assign_interface_bond_forces(*dist_, ib) : dem::assign_interface_bond_forces(world_, ib)).what);
@@ -820,11 +818,12 @@ class DemParticipant : public node::Participant {
                  b.x[top].y, b.x[top].z, kick_[0], kick_[1], kick_[2]);
   }
 
-  // Contact and bond forces scaled with depth below the block top (docs/theory.md 4.9).
+  // Contact and bond forces scaled with depth below the block top (docs/theory.md 4.9), on the
+  // ranks' parts while they step (every rank calls it then), else on the whole World.
   void scale_with_depth() {
     dem::DepthScaleParams p;
     if (!dem::scene::depth_scaling(s_, block_, p)) return;
-    spdlog::info("dem: {}", dem::depth_scale(world_, p).what);
+    spdlog::info("dem: {}", (dist_live_ ? dem::depth_scale(*dist_, p) : dem::depth_scale(world_, p)).what);
   }
 
   // DEM-only box (dem.specimen.box = "walls"): planes on the bottom and the four sides of the

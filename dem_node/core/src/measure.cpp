@@ -6,7 +6,6 @@
 #include <vector>
 
 #include "demfdm/dem/order_free_sum.hpp"
-#include "demfdm/dem/specimen.hpp"
 
 namespace demfdm::dem {
 
@@ -25,20 +24,18 @@ Mat3 cell_stress(const World& w) {
   Mat3 s{};
   const auto& pc = w.pair_contacts();
   if (w.params().order_free_sums) {  // each component's order-free sum (the servo's columns: DistDem's bits)
-    std::vector<double> v(pc.size() * kServoColumns), col(pc.size());
-    for (std::size_t c = 0; c < pc.size(); ++c)
-      servo_columns(ServoTerm{w.pair_force(c), w.branch(c), 0.0, 0.0, false}, ServoStiffness::kApparent,
-                    &v[c * kServoColumns]);
-    for (std::size_t k = 0; k < 9; ++k) {
-      for (std::size_t c = 0; c < pc.size(); ++c) col[c] = v[c * kServoColumns + k];
-      s[k] = order_free_total(col.data(), col.size());
-    }
+    const std::size_t n = pc.size();
+    std::vector<double> v(9 * n, 0.0);  // component k of contact c at v[k n + c]
+    for (std::size_t c = 0; c < n; ++c)
+      for_each_stress_increment(w.pair_force(c), w.branch(c),
+                                [&](int k, double x) { v[static_cast<std::size_t>(k) * n + c] += x; });
+    for (std::size_t k = 0; k < 9; ++k) s[k] = order_free_total(&v[k * n], n);
     return cell_stress_of(s, w.cell_volume());
   }
   for (std::size_t c = 0; c < pc.size(); ++c) {
     const Vec3 F = w.pair_force(c);
     if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
-    add_cell_stress_term(s, F, w.branch(c));
+    for_each_stress_increment(F, w.branch(c), [&](int k, double x) { s[k] += x; });  // (s -= F l, bit for bit)
   }
   return cell_stress_of(s, w.cell_volume());
 }

@@ -242,18 +242,15 @@ void PeriodicServo::apply(World& w, Phase) {
   if (reduce_) {
     sums = reduce_(w, p_.stiffness, columns_);
   } else if (w.params().order_free_sums) {  // the columns it reads, each one's order-free sum (DistDem's bits)
-    const std::size_t nc = w.pair_contacts().size(), m = columns_.size();
-    std::vector<double> v(nc * m), col(nc);
+    const std::size_t n = w.pair_contacts().size(), m = columns_.size();
+    std::vector<double> v(m * n);  // column j of contact c at v[j n + c]
     double t[kServoColumns];
-    for (std::size_t c = 0; c < nc; ++c) {
+    for (std::size_t c = 0; c < n; ++c) {
       servo_columns(servo_term(w, c), p_.stiffness, t);
-      for (std::size_t j = 0; j < m; ++j) v[c * m + j] = t[columns_[j]];
+      for (std::size_t j = 0; j < m; ++j) v[j * n + c] = t[columns_[j]];
     }
     double total[kServoColumns];
-    for (std::size_t j = 0; j < m; ++j) {
-      for (std::size_t c = 0; c < nc; ++c) col[c] = v[c * m + j];
-      total[j] = order_free_total(col.data(), nc);
-    }
+    for (std::size_t j = 0; j < m; ++j) total[j] = order_free_total(&v[j * n], n);
     sums = servo_sums_of_columns(total, columns_.data(), static_cast<int>(m));
   } else {
     const std::size_t nc = w.pair_contacts().size();

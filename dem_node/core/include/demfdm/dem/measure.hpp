@@ -15,13 +15,15 @@ using Mat3 = std::array<double, 9>;
 
 /// Love–Weber stress of the periodic cell: σ = −(1/V) Σ F ⊗ ℓ, symmetrised (§4.4).
 Mat3 cell_stress(const World& w);
-/// Its two steps, for sums formed elsewhere (the periodic servo on MPI ranks): one contact's
-/// term (a contact that carries no force adds nothing), added into the running sum `s` in
-/// contact order from +0; and the stress from the finished sum: s / V, symmetrised.
-inline void add_cell_stress_term(Mat3& s, const Vec3& F, const Vec3& l) {
+/// Its two steps, for sums formed elsewhere (the periodic servo's, also on MPI ranks): one
+/// contact's increments to Σ −F ⊗ ℓ, f(3 i + j, −F_i ℓ_j) (none for a contact that carries no
+/// force), added in contact order from +0 or as order-free sums; and the stress from the finished
+/// sum: s / V, symmetrised.
+template <class Fn>
+void for_each_stress_increment(const Vec3& F, const Vec3& l, Fn&& f) {
   if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) return;
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) s[3 * i + j] -= F[i] * l[j];
+    for (int j = 0; j < 3; ++j) f(3 * i + j, -(F[i] * l[j]));
 }
 Mat3 cell_stress_of(Mat3 s, double volume);
 

@@ -200,7 +200,7 @@ struct ServoTerm {
 };
 ServoTerm servo_term(const World& w, std::size_t c);
 /// The servo's two sums over the pair contacts, each added in contact order from +0: the cell
-/// stress's Σ −F ⊗ ℓ (add_cell_stress_term) and the affine stiffness K (times V). One World adds
+/// stress's Σ −F ⊗ ℓ (for_each_stress_increment) and the affine stiffness K (times V). One World adds
 /// its contacts in list order; the ranks add every rank's terms in one World's order (DistDem).
 struct ServoSums {
   Mat3 s{};
@@ -212,9 +212,7 @@ struct ServoSums {
 /// two with the full stiffness. add() adds them in this order; servo_columns collects them.
 template <class F>
 void for_each_servo_increment(const ServoTerm& t, ServoStiffness kind, F&& f) {
-  if (!(t.F.x == 0.0 && t.F.y == 0.0 && t.F.z == 0.0))  // (add_cell_stress_term's rule)
-    for (int i = 0; i < 3; ++i)
-      for (int j = 0; j < 3; ++j) f(3 * i + j, -(t.F[i] * t.l[j]));
+  for_each_stress_increment(t.F, t.l, f);
   if (!t.stiff) return;
   const Vec3& l = t.l;
   const Vec3 n = l * (1.0 / norm(l));
