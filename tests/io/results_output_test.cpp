@@ -133,6 +133,77 @@ TEST(ParticleOutput, IdenticalRunsGiveIdenticalFiles) {
     EXPECT_TRUE(test::slurp(dir / "a" / f) == test::slurp(dir / "b" / f)) << f << " differs between identical runs";
 }
 
+// The frames of write_dem_run written in blocks of `block` rows (the DEM on ranks merging its
+// ranks' rows): the same files, byte for byte.
+void write_dem_run_in_blocks(const std::filesystem::path& dir, std::size_t block) {
+  ParticleOutput out(dir, FileInfo{"dem_node", "test-run", "0f0f", {}});
+  for (int k = 0; k < 3; ++k) {
+    const DemFrame f = dem_frame(k);
+    FrameShape shape;
+    shape.particles = f.r.size();
+    shape.point_arrays = {{"radius", DType::kFloat64, 1}, {"velocity", DType::kFloat64, 3}, {"id", DType::kInt64, 1}};
+    shape.links = {{"bonds", f.state.size(), {{"state", DType::kUInt8, 1}, {"force", DType::kFloat64, 3}}}};
+    EXPECT_EQ(out.begin_blocks(100 * k, 1e-3 * k, shape), static_cast<std::size_t>(k));
+    auto rows = [&](const std::string& name, const auto& v, std::size_t cols) {
+      using T = typename std::decay_t<decltype(v)>::value_type;
+      const std::size_t n = v.size() / cols;
+      for (std::size_t r0 = 0; r0 < n; r0 += block) {
+        const std::size_t m = std::min(block, n - r0);
+        out.write_rows(name, r0, ArrayView(std::span<const T>(v.data() + r0 * cols, m * cols), cols));
+      }
+    };
+    rows("particles/position", f.x, 3);
+    rows("particles/radius", f.r, 1);
+    rows("particles/velocity", f.v, 3);
+    rows("particles/id", f.id, 1);
+    rows("bonds/nodes", f.bonds, 2);
+    rows("bonds/state", f.state, 1);
+    rows("bonds/force", f.bond_force, 3);
+    EXPECT_EQ(out.end_blocks(), static_cast<std::size_t>(k));
+  }
+}
+
+TEST(ParticleOutput, AFrameWrittenInBlocksGivesTheFilesOfTheWholeFrame) {
+  ScratchDir dir;
+  for (const char* d : {"whole", "b1", "b2", "b9"}) std::filesystem::create_directories(dir / d);
+  write_dem_run(dir / "whole");
+  write_dem_run_in_blocks(dir / "b1", 1);
+  write_dem_run_in_blocks(dir / "b2", 2);
+  write_dem_run_in_blocks(dir / "b9", 9);
+  for (const char* d : {"b1", "b2", "b9"})
+    for (const char* f : {"dem.h5", "particles.xmf", "bonds.xmf"})
+      EXPECT_TRUE(test::slurp(dir / "whole" / f) == test::slurp(dir / d / f)) << f << " differs in blocks of " << d;
+}
+
+TEST(ParticleOutput, BlocksOutOfOrderOutOfRangeOrMissingAreRefused) {
+  ScratchDir dir;
+  ParticleOutput out(dir.path(), FileInfo{"dem_node", "test-run", "0f0f", {}});
+  FrameShape shape;
+  shape.particles = 3;
+  shape.point_arrays = {{"radius", DType::kFloat64, 1}};
+  shape.links = {{"bonds", 2, {}}};
+  FrameShape twice = shape;
+  twice.point_arrays.push_back({"radius", DType::kFloat64, 1});
+  EXPECT_THROW(out.begin_blocks(0, 0.0, twice), std::invalid_argument);
+  FrameShape other = shape;
+  other.links[0].name = "contacts";
+  EXPECT_THROW(out.begin_blocks(0, 0.0, other), std::invalid_argument);
+  ASSERT_EQ(out.begin_blocks(0, 0.0, shape), 0u);
+  EXPECT_THROW(out.begin_blocks(1, 1.0, shape), std::logic_error);  // one frame at a time
+  const std::vector<double> x{0, 0, 0, 1, 0, 0, 2, 0, 0}, r{1, 1, 1};
+  EXPECT_THROW(out.write_rows("particles/position", 1, ArrayView(std::span<const double>(x.data(), 3), 3)),
+               std::invalid_argument);  // row 0 first
+  EXPECT_THROW(out.write_rows("particles/velocity", 0, ArrayView(r)), std::invalid_argument);  // no such dataset
+  const std::vector<std::int32_t> bad{0, 3}, good{0, 1, 1, 2};
+  EXPECT_THROW(out.write_rows("bonds/nodes", 0, ArrayView(bad, 2)), std::invalid_argument);  // row 3 of 3 balls
+  const std::vector<double> four{1, 1, 1, 1};
+  EXPECT_THROW(out.write_rows("particles/radius", 0, ArrayView(four)), std::invalid_argument);  // 4 rows of 3
+  out.write_rows("particles/position", 0, ArrayView(x, 3));
+  out.write_rows("particles/radius", 0, ArrayView(r));
+  EXPECT_THROW(out.end_blocks(), std::logic_error);  // bonds/nodes has none of its 2 rows
+  EXPECT_THROW(out.end_blocks(), std::logic_error);  // no frame is open
+}
+
 TEST(ParticleOutput, BadFramesAreRejectedBeforeAnythingIsWritten) {
   ScratchDir dir;
   ParticleOutput out(dir.path(), FileInfo{"dem_node", "", "", {}});

@@ -459,39 +459,67 @@ std::string H5Frames::frame_group(std::size_t index) {
   return buf;
 }
 
-void H5Frames::write_dataset(std::int64_t fid, const std::string& abs_path, const ArrayView& data,
-                             bool allow_compress) {
+void H5Frames::create_dataset(std::int64_t fid, const std::string& abs_path, DType dtype, std::size_t rows,
+                              std::size_t cols, bool allow_compress) {
   const std::string file = file_.string();
-  if (data.size() > 0 && data.data == nullptr)
-    throw std::invalid_argument("dataset '" + abs_path + "': null data pointer for " + std::to_string(data.size()) +
-                                " elements");
-  if (data.cols == 0) throw std::invalid_argument("dataset '" + abs_path + "': cols must be >= 1");
+  if (cols == 0) throw std::invalid_argument("dataset '" + abs_path + "': cols must be >= 1");
   const auto [parent, leaf] = detail::split_abs_path(abs_path);
   H5Handle group = detail::require_group(fid, parent, file);
   const htri_t exists = H5Lexists(group.get(), leaf.c_str(), H5P_DEFAULT);
   if (exists < 0) detail::throw_h5("H5Lexists", file, abs_path);
   if (exists > 0) throw std::logic_error("H5Frames: dataset '" + abs_path + "' in '" + file + "' is already written");
 
-  const int rank = data.cols == 1 ? 1 : 2;
-  const hsize_t dims[2] = {static_cast<hsize_t>(data.rows), static_cast<hsize_t>(data.cols)};
+  const int rank = cols == 1 ? 1 : 2;
+  const hsize_t dims[2] = {static_cast<hsize_t>(rows), static_cast<hsize_t>(cols)};
   H5Handle space = check_id(H5Screate_simple(rank, dims, nullptr), H5Sclose, "H5Screate_simple", file, abs_path);
   H5Handle dcpl = detail::make_dcpl(file);
   // Chunk only when compressing: chunks without a filter store partial edge chunks in full
   // (+25 % in the benchmark, docs/output.md O16). A zero-row dataset stays contiguous (chunk
   // dimensions must be positive and there is nothing to compress).
-  if (allow_compress && storage_.compress && data.rows > 0) {
-    const hsize_t chunk[2] = {std::min<hsize_t>(data.rows, storage_.chunk_rows), dims[1]};
+  if (allow_compress && storage_.compress && rows > 0) {
+    const hsize_t chunk[2] = {std::min<hsize_t>(rows, storage_.chunk_rows), dims[1]};
     check(H5Pset_chunk(dcpl.get(), rank, chunk), "H5Pset_chunk", file, abs_path);
     check(H5Pset_shuffle(dcpl.get()), "H5Pset_shuffle", file, abs_path);
     check(H5Pset_deflate(dcpl.get(), static_cast<unsigned>(storage_.deflate_level)), "H5Pset_deflate", file,
           abs_path);
   }
-  H5Handle dset = check_id(H5Dcreate2(group.get(), leaf.c_str(), detail::file_type(data.dtype), space.get(),
-                                      H5P_DEFAULT, dcpl.get(), H5P_DEFAULT),
+  H5Handle dset = check_id(H5Dcreate2(group.get(), leaf.c_str(), detail::file_type(dtype), space.get(), H5P_DEFAULT,
+                                      dcpl.get(), H5P_DEFAULT),
                            H5Dclose, "H5Dcreate2", file, abs_path);
-  if (data.size() > 0)
-    check(H5Dwrite(dset.get(), detail::mem_type(data.dtype), H5S_ALL, H5S_ALL, H5P_DEFAULT, data.data), "H5Dwrite",
-          file, abs_path);
+}
+
+void H5Frames::write_rows_of(std::int64_t fid, const std::string& abs_path, std::size_t row0, const ArrayView& data) {
+  const std::string file = file_.string();
+  if (data.size() > 0 && data.data == nullptr)
+    throw std::invalid_argument("dataset '" + abs_path + "': null data pointer for " + std::to_string(data.size()) +
+                                " elements");
+  if (data.rows == 0) return;
+  H5Handle dset = check_id(H5Dopen2(fid, abs_path.c_str(), H5P_DEFAULT), H5Dclose, "H5Dopen2", file, abs_path);
+  H5Handle fspace = check_id(H5Dget_space(dset.get()), H5Sclose, "H5Dget_space", file, abs_path);
+  const int rank = H5Sget_simple_extent_ndims(fspace.get());
+  hsize_t dims[2] = {0, 1};
+  if (rank < 1 || rank > 2 || H5Sget_simple_extent_dims(fspace.get(), dims, nullptr) < 0)
+    detail::throw_h5("H5Sget_simple_extent_dims", file, abs_path);
+  if (data.cols != (rank == 1 ? 1 : dims[1]) || row0 + data.rows > dims[0])
+    throw std::invalid_argument("dataset '" + abs_path + "': rows [" + std::to_string(row0) + ", " +
+                                std::to_string(row0 + data.rows) + ") of " + std::to_string(data.cols) +
+                                " columns do not fit its " + std::to_string(dims[0]) + " x " +
+                                std::to_string(rank == 1 ? 1 : dims[1]));
+  const hsize_t start[2] = {static_cast<hsize_t>(row0), 0}, count[2] = {static_cast<hsize_t>(data.rows), dims[1]};
+  check(H5Sselect_hyperslab(fspace.get(), H5S_SELECT_SET, start, nullptr, count, nullptr), "H5Sselect_hyperslab", file,
+        abs_path);
+  H5Handle mspace = check_id(H5Screate_simple(rank, count, nullptr), H5Sclose, "H5Screate_simple", file, abs_path);
+  check(H5Dwrite(dset.get(), detail::mem_type(data.dtype), mspace.get(), fspace.get(), H5P_DEFAULT, data.data),
+        "H5Dwrite", file, abs_path);
+}
+
+void H5Frames::write_dataset(std::int64_t fid, const std::string& abs_path, const ArrayView& data,
+                             bool allow_compress) {
+  if (data.size() > 0 && data.data == nullptr)
+    throw std::invalid_argument("dataset '" + abs_path + "': null data pointer for " + std::to_string(data.size()) +
+                                " elements");
+  create_dataset(fid, abs_path, data.dtype, data.rows, data.cols, allow_compress);
+  write_rows_of(fid, abs_path, 0, data);
 }
 
 void H5Frames::write_static(std::string_view abs_path, const ArrayView& data) {
@@ -685,6 +713,34 @@ void H5Frames::write(std::string_view name, const ArrayView& data) {
   write_dataset(fid_, abs, data, /*allow_compress=*/true);
   frame_refs_[std::string(name)] = DatasetRef{file_, abs, data.dtype, data.rows, data.cols};
   frame_order_.emplace_back(name);
+}
+
+void H5Frames::create(std::string_view name, DType dtype, std::size_t rows, std::size_t cols) {
+  if (!frame_open_)
+    throw std::logic_error("H5Frames::create('" + std::string(name) + "') outside a frame of '" + file_.string() +
+                           "'; call begin_frame() first");
+  require_relative_name(name);
+  const std::string abs = frame_path_ + "/" + std::string(name);
+  QuietErrors quiet;
+  create_dataset(fid_, abs, dtype, rows, cols, /*allow_compress=*/true);
+  frame_refs_[std::string(name)] = DatasetRef{file_, abs, dtype, rows, cols};
+  frame_order_.emplace_back(name);
+}
+
+void H5Frames::write_rows(std::string_view name, std::size_t row0, const ArrayView& block) {
+  if (!frame_open_)
+    throw std::logic_error("H5Frames::write_rows('" + std::string(name) + "') outside a frame of '" + file_.string() +
+                           "'; call begin_frame() first");
+  const auto it = frame_refs_.find(std::string(name));
+  if (it == frame_refs_.end())
+    throw std::logic_error("H5Frames::write_rows: dataset '" + std::string(name) + "' of the open frame of '" +
+                           file_.string() + "' was not created");
+  if (block.dtype != it->second.dtype)
+    throw std::invalid_argument("H5Frames::write_rows: dataset '" + std::string(name) + "' holds " +
+                                std::string(dtype_name(it->second.dtype)) + ", the block is " +
+                                std::string(dtype_name(block.dtype)));
+  QuietErrors quiet;
+  write_rows_of(fid_, it->second.path, row0, block);
 }
 
 void H5Frames::end_frame() {

@@ -294,13 +294,17 @@ void ParticleOutput::rebuild_sidecars() {
   }
 }
 
-std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const ParticleFrame& fr) {
-  // Validate everything before touching the file, so a bad frame leaves no partial group.
-  const std::string where = "ParticleOutput::write_frame (step " + std::to_string(step) + "): ";
+void ParticleOutput::check_time(const std::string& where, double time) const {
   if (!std::isfinite(time)) throw std::invalid_argument(where + "time must be finite");
   if (has_time_ && !(time > last_time_))
     throw std::invalid_argument(where + "frame times must increase strictly; last " + std::to_string(last_time_) +
                                 " s, now " + std::to_string(time) + " s");
+}
+
+std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const ParticleFrame& fr) {
+  // Validate everything before touching the file, so a bad frame leaves no partial group.
+  const std::string where = "ParticleOutput::write_frame (step " + std::to_string(step) + "): ";
+  check_time(where, time);
   const ArrayView& pos = fr.position;
   if (pos.cols != 3 || !(pos.dtype == DType::kFloat64 || pos.dtype == DType::kFloat32))
     throw std::invalid_argument(where + "position must be [Np,3] float64 (or float32), found " +
@@ -324,11 +328,60 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
     check_index_range(where + l.name + "/nodes", static_cast<const std::int32_t*>(l.nodes.data), l.nodes.size(), np);
     check_fields(where + l.name + " cell array", l.cell_arrays, l.nodes.rows, {"nodes"});
   }
-  if (fr.surfaces.size() != surface_sets_.size())
-    throw std::invalid_argument(where + std::to_string(fr.surfaces.size()) + " surfaces given, " +
+  // The whole frame as one block of each dataset.
+  FrameShape shape;
+  shape.particles = np;
+  for (const auto& f : fr.point_arrays) shape.point_arrays.push_back({f.name, f.data.dtype, f.data.cols});
+  for (const auto& l : fr.links) {
+    FrameShape::Links ls{l.name, l.nodes.rows, {}};
+    for (const auto& f : l.cell_arrays) ls.cell_arrays.push_back({f.name, f.data.dtype, f.data.cols});
+    shape.links.push_back(std::move(ls));
+  }
+  shape.surfaces = fr.surfaces;
+  begin_blocks(step, time, shape, pos.dtype);
+  write_rows("particles/position", 0, pos);
+  for (const auto& f : fr.point_arrays) write_rows("particles/" + f.name, 0, f.data);
+  for (const auto& l : fr.links) {
+    write_rows(l.name + "/nodes", 0, l.nodes);
+    for (const auto& f : l.cell_arrays) write_rows(l.name + "/" + f.name, 0, f.data);
+  }
+  return end_blocks();
+}
+
+std::size_t ParticleOutput::begin_blocks(std::int64_t step, double time, const FrameShape& shape) {
+  return begin_blocks(step, time, shape, DType::kFloat64);
+}
+
+std::size_t ParticleOutput::begin_blocks(std::int64_t step, double time, const FrameShape& shape, DType position) {
+  // Validate everything before touching the file, so a bad shape leaves no partial group.
+  const std::string where = "ParticleOutput::begin_blocks (step " + std::to_string(step) + "): ";
+  if (blocks_.open) throw std::logic_error(where + "the frame of step " + std::to_string(blocks_.step) + " is open");
+  check_time(where, time);
+  auto check_arrays = [&](const std::string& what, const std::vector<FrameShape::Array>& arrays, const char* reserved) {
+    std::set<std::string> taken{reserved};
+    for (const auto& a : arrays) {
+      check_name(what, a.name);
+      if (a.cols == 0) throw std::invalid_argument(what + " '" + a.name + "' has 0 columns");
+      if (!taken.insert(a.name).second)
+        throw std::invalid_argument(what + " '" + a.name + "' is given twice or clashes with a reserved name");
+    }
+  };
+  check_arrays(where + "point array", shape.point_arrays, "position");
+  if (shape.links.size() != link_sets_.size())
+    throw std::invalid_argument(where + std::to_string(shape.links.size()) + " link sets given, " +
+                                std::to_string(link_sets_.size()) + " declared at construction");
+  for (std::size_t i = 0; i < shape.links.size(); ++i) {
+    const FrameShape::Links& l = shape.links[i];
+    if (l.name != link_sets_[i])
+      throw std::invalid_argument(where + "link set " + std::to_string(i) + " is '" + l.name + "', expected '" +
+                                  link_sets_[i] + "' (declaration order)");
+    check_arrays(where + l.name + " cell array", l.cell_arrays, "nodes");
+  }
+  if (shape.surfaces.size() != surface_sets_.size())
+    throw std::invalid_argument(where + std::to_string(shape.surfaces.size()) + " surfaces given, " +
                                 std::to_string(surface_sets_.size()) + " declared at construction");
-  for (std::size_t i = 0; i < fr.surfaces.size(); ++i) {
-    const SurfaceFrame& sf = fr.surfaces[i];
+  for (std::size_t i = 0; i < shape.surfaces.size(); ++i) {
+    const SurfaceFrame& sf = shape.surfaces[i];
     if (sf.name != surface_sets_[i])
       throw std::invalid_argument(where + "surface " + std::to_string(i) + " is '" + sf.name + "', expected '" +
                                   surface_sets_[i] + "' (declaration order)");
@@ -342,42 +395,88 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
                       sf.triangles.size(), sf.vertices.rows);
   }
 
-  const std::size_t index = h5_.begin_frame(step, time);
-  const DatasetRef vertex_index = h5_.ensure_index(kVertexIndex, np);
-  h5_.write("particles/position", pos);
-  for (const auto& f : fr.point_arrays) h5_.write("particles/" + f.name, f.data);
-  for (const auto& l : fr.links) {
-    h5_.write(l.name + "/nodes", l.nodes);
-    for (const auto& f : l.cell_arrays) h5_.write(l.name + "/" + f.name, f.data);
+  blocks_ = Blocks{};
+  blocks_.step = step;
+  blocks_.time = time;
+  blocks_.shape = shape;
+  blocks_.index = h5_.begin_frame(step, time);
+  blocks_.open = true;
+  blocks_.vertex_index = h5_.ensure_index(kVertexIndex, shape.particles);
+  auto create = [&](const std::string& name, DType t, std::size_t rows, std::size_t cols) {
+    h5_.create(name, t, rows, cols);
+    blocks_.rows[name] = {0, rows};
+  };
+  const std::size_t np = shape.particles;
+  create("particles/position", position, np, 3);
+  for (const auto& f : shape.point_arrays) create("particles/" + f.name, f.dtype, np, f.cols);
+  for (const auto& l : shape.links) {
+    create(l.name + "/nodes", DType::kInt32, l.rows, 2);
+    for (const auto& f : l.cell_arrays) create(l.name + "/" + f.name, f.dtype, l.rows, f.cols);
   }
-  for (const auto& sf : fr.surfaces) {
+  for (const auto& sf : shape.surfaces) {
     h5_.write(sf.name + "/vertices", sf.vertices);
     h5_.write(sf.name + "/triangles", sf.triangles);
   }
-  h5_.end_frame();
+  return blocks_.index;
+}
 
+void ParticleOutput::write_rows(const std::string& name, std::size_t row0, const ArrayView& block) {
+  const std::string where = "ParticleOutput::write_rows (step " + std::to_string(blocks_.step) + ", '" + name + "'): ";
+  if (!blocks_.open) throw std::logic_error(where + "no frame is open (begin_blocks)");
+  const auto it = blocks_.rows.find(name);
+  if (it == blocks_.rows.end()) throw std::invalid_argument(where + "the frame has no such dataset");
+  auto& [written, total] = it->second;
+  if (row0 != written)
+    throw std::invalid_argument(where + "rows are written in order: the next is " + std::to_string(written) +
+                                ", the block begins at " + std::to_string(row0));
+  if (block.rows > total - written)
+    throw std::invalid_argument(where + std::to_string(block.rows) + " rows from row " + std::to_string(row0) +
+                                " exceed its " + std::to_string(total));
+  check_rows(where + "block", block, block.rows);
+  // docs/output.md O4: link nodes are rows of this frame's particle arrays, not ids.
+  if (name.size() > 6 && name.compare(name.size() - 6, 6, "/nodes") == 0 && name.rfind("particles/", 0) != 0) {
+    if (block.dtype != DType::kInt32) throw std::invalid_argument(where + "link nodes must be int32");
+    check_index_range(where + "block", static_cast<const std::int32_t*>(block.data), block.size(),
+                      blocks_.shape.particles);
+  }
+  h5_.write_rows(name, row0, block);
+  written += block.rows;
+}
+
+std::size_t ParticleOutput::end_blocks() {
+  const std::string where = "ParticleOutput::end_blocks (step " + std::to_string(blocks_.step) + "): ";
+  if (!blocks_.open) throw std::logic_error(where + "no frame is open (begin_blocks)");
+  blocks_.open = false;
+  h5_.end_frame();
+  for (const auto& [name, rows] : blocks_.rows)
+    if (rows.first != rows.second)
+      throw std::logic_error(where + "'" + name + "' got " + std::to_string(rows.first) + " of its " +
+                             std::to_string(rows.second) + " rows");
+  const FrameShape& shape = blocks_.shape;
+  const double time = blocks_.time;
   XdmfGrid g;
   g.time = time;
   g.topology = XdmfTopology::kPolyvertex;
-  g.elements = np;
-  g.connectivity = vertex_index;
+  g.elements = shape.particles;
+  g.connectivity = blocks_.vertex_index;
   g.geometry = h5_.ref("particles/position");
-  for (const auto& f : fr.point_arrays) g.attributes.push_back(XdmfAttribute::node(f.name, h5_.ref("particles/" + f.name)));
+  for (const auto& f : shape.point_arrays)
+    g.attributes.push_back(XdmfAttribute::node(f.name, h5_.ref("particles/" + f.name)));
   particles_xmf_.append(g);
-  for (std::size_t i = 0; i < fr.links.size(); ++i) {
-    const LinkFrame& l = fr.links[i];
+  for (std::size_t i = 0; i < shape.links.size(); ++i) {
+    const FrameShape::Links& l = shape.links[i];
     XdmfGrid lg;
     lg.time = time;
     lg.topology = XdmfTopology::kPolyline;
-    lg.elements = l.nodes.rows;
+    lg.elements = l.rows;
     lg.connectivity = h5_.ref(l.name + "/nodes");
     lg.geometry = g.geometry;  // the same frame's particle positions
     for (const auto& f : l.cell_arrays)
       lg.attributes.push_back(XdmfAttribute::cell(f.name, h5_.ref(l.name + "/" + f.name)));
     links_xmf_[i].append(std::move(lg));
   }
-  for (std::size_t i = 0; i < fr.surfaces.size(); ++i) {
-    const SurfaceFrame& sf = fr.surfaces[i];
+  for (std::size_t i = 0; i < shape.surfaces.size(); ++i) {
+    const SurfaceFrame& sf = shape.surfaces[i];
     XdmfGrid sg;
     sg.time = time;
     sg.topology = XdmfTopology::kTriangle;
@@ -391,7 +490,8 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
   for (const auto& s : surfaces_xmf_) s.write();
   has_time_ = true;
   last_time_ = time;
-  return index;
+  blocks_.shape.surfaces.clear();  // (views of the caller's arrays)
+  return blocks_.index;
 }
 
 // ---------------------------------------------------------------------------------------

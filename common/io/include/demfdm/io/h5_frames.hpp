@@ -150,6 +150,12 @@ class H5Frames {
   void write(std::string_view name, const std::vector<T>& data, std::size_t cols = 1) {
     write(name, ArrayView(data, cols));
   }
+  /// A dataset of the open frame written in blocks of rows (a frame larger than one block of
+  /// memory): create() makes `name` [rows] or [rows, cols] of `dtype`, with the storage write()
+  /// gives a dataset of that shape; write_rows() writes rows [row0, row0 + block.rows) of it.
+  /// The caller writes every row before end_frame(). Each name may be created once per frame.
+  void create(std::string_view name, DType dtype, std::size_t rows, std::size_t cols);
+  void write_rows(std::string_view name, std::size_t row0, const ArrayView& block);
   /// Closes the file. Throws std::logic_error when no frame is open.
   void end_frame();
 
@@ -196,6 +202,9 @@ class H5Frames {
   void close_file();
   void write_dataset(std::int64_t fid, const std::string& abs_path, const ArrayView& data,
                      bool allow_compress);
+  void create_dataset(std::int64_t fid, const std::string& abs_path, DType dtype, std::size_t rows, std::size_t cols,
+                      bool allow_compress);
+  void write_rows_of(std::int64_t fid, const std::string& abs_path, std::size_t row0, const ArrayView& data);
   void flush_history_open(std::int64_t fid);
 
   std::filesystem::path file_;

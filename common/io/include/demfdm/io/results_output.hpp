@@ -36,6 +36,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <span>
 #include <string>
 #include <vector>
@@ -75,6 +76,25 @@ struct ParticleFrame {
   std::vector<SurfaceFrame> surfaces;    // exactly the surface sets declared at construction
 };
 
+/// The shape of a frame written in blocks of rows (ParticleOutput::begin_blocks): a frame too
+/// large for one block of memory, e.g. the DEM on MPI ranks merging its ranks' rows on rank 0.
+struct FrameShape {
+  struct Array {
+    std::string name;
+    DType dtype = DType::kFloat64;
+    std::size_t cols = 1;
+  };
+  struct Links {
+    std::string name;                 // a declared link set
+    std::size_t rows = 0;             // Nb
+    std::vector<Array> cell_arrays;   // after "nodes" ([Nb,2] int32)
+  };
+  std::size_t particles = 0;          // Np; "position" [Np,3] float64 comes first
+  std::vector<Array> point_arrays;
+  std::vector<Links> links;           // exactly the link sets declared at construction
+  std::vector<SurfaceFrame> surfaces; // written whole by begin_blocks (a few vertices)
+};
+
 /// Closed triangulated surface of an upright cylinder (axis along z): `segments` vertices on
 /// each rim, one centre vertex per cap; 4 x segments triangles with outward normals. Vertices:
 /// bottom centre, top centre, bottom rim (angle 2 pi k / segments from +x), top rim.
@@ -109,6 +129,16 @@ class ParticleOutput {
   /// Validates all counts, and that every link node and triangle row is in range, before writing.
   std::size_t write_frame(std::int64_t step, double time, const ParticleFrame& frame);
 
+  /// The same frame written in blocks of rows: begin_blocks() validates the shape and creates
+  /// the frame's datasets; write_rows() writes rows [row0, row0 + block.rows) of one of them
+  /// ("particles/position", "particles/<array>", "<links>/nodes", "<links>/<array>"), each
+  /// dataset's rows in increasing order without gaps (link nodes are checked against Np);
+  /// end_blocks() checks that every row was written, closes the frame and rewrites the
+  /// sidecars. The file holds the same datasets as write_frame() of the whole frame writes.
+  std::size_t begin_blocks(std::int64_t step, double time, const FrameShape& shape);
+  void write_rows(const std::string& name, std::size_t row0, const ArrayView& block);
+  std::size_t end_blocks();
+
   /// Gives frames 0..times.size()-1 new times (attribute time of each frame group) and
   /// rewrites the sidecars; `times` holds one time per frame written so far, finite and
   /// strictly increasing. For a node whose model-time origin became known after it wrote
@@ -125,6 +155,20 @@ class ParticleOutput {
   ParticleOutput(H5Frames h5, const std::filesystem::path& dir, std::vector<std::string> link_sets,
                  std::vector<std::string> surface_sets);
   void rebuild_sidecars();
+  void check_time(const std::string& where, double time) const;
+  std::size_t begin_blocks(std::int64_t step, double time, const FrameShape& shape, DType position);
+
+  // The frame being written in blocks: its shape and the rows written so far per dataset.
+  struct Blocks {
+    bool open = false;
+    std::int64_t step = 0;
+    double time = 0.0;
+    std::size_t index = 0;
+    DatasetRef vertex_index;
+    FrameShape shape;
+    std::map<std::string, std::pair<std::size_t, std::size_t>> rows;  // name: (written, total)
+  };
+  Blocks blocks_;
 
   H5Frames h5_;
   std::filesystem::path dir_;
