@@ -157,6 +157,8 @@ void check(const Scene& sc) {
   d.step(sc.steps);
   const DistDem::Balls got = d.gather();
   const double dt_end = d.world().dt();
+  // a frame's arrays streamed to rank 0 in blocks of 37 rows (merged from every rank)
+  const Snapshot frame = test::streamed_snapshot(d, 37);
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
   const double skel = d.skeleton_ratio(fc).ratio;
@@ -190,6 +192,7 @@ void check(const Scene& sc) {
                 sc.name.c_str(), g_size, ref->dt(), got.id.size(), sum_ghosts, static_cast<long long>(d.exchanges()),
                 sum_migrated, static_cast<long long>(ref->rebuild_count()));
     test::expect_same_balls(got, *ref, static_cast<std::size_t>(sum_owned));
+    test::expect_same_snapshot(frame, snapshot(*ref));
     const double dt_ref = ref->dt();
     test::expect_same_measures(*ref, ke, fc, ratio);
     const double skel_ref = skeleton_ratio(*ref, fc).ratio;
@@ -466,6 +469,11 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
     d.step(sc.steps);
     faults += layout_faults(d);
     got = d.gather();
+    // a frame streamed in blocks of 37 rows against the frame of the World the ranks assemble
+    const Snapshot frame = test::streamed_snapshot(d, 37);
+    World assembled(full->params());
+    d.unload(assembled, true);
+    if (g_rank == 0) test::expect_same_snapshot(frame, snapshot(assembled));
     dt_end = d.world().dt();
     long long mine[3] = {static_cast<long long>(d.world().pair_contacts().size()),
                          static_cast<long long>(d.migrated()), faults};

@@ -35,6 +35,48 @@ inline void expect_same_balls(const DistDem::Balls& got, const World& ref, std::
   EXPECT_TRUE(same_bits(got.t, r.t)) << "torques differ";
 }
 
+/// DistDem::stream_snapshot's blocks of `block` rows joined on rank 0 (empty elsewhere), each
+/// block checked to begin where the last ended and to be at most `block` rows long.
+inline Snapshot streamed_snapshot(const DistDem& d, std::size_t block) {
+  Snapshot all;
+  std::size_t balls = 0, pairs = 0;
+  DistDem::SnapshotSink sink;
+  sink.begin = [&](std::size_t nb, std::size_t np) { balls = nb, pairs = np; };
+  sink.balls = [&](std::size_t row0, const Snapshot& b) {
+    EXPECT_EQ(row0, all.id.size());
+    EXPECT_LE(b.id.size(), block);
+    all.position.insert(all.position.end(), b.position.begin(), b.position.end());
+    all.velocity.insert(all.velocity.end(), b.velocity.begin(), b.velocity.end());
+    all.radius.insert(all.radius.end(), b.radius.begin(), b.radius.end());
+    all.id.insert(all.id.end(), b.id.begin(), b.id.end());
+  };
+  sink.pairs = [&](std::size_t row0, const Snapshot& b) {
+    EXPECT_EQ(row0, all.state.size());
+    EXPECT_LE(b.state.size(), block);
+    all.pair.insert(all.pair.end(), b.pair.begin(), b.pair.end());
+    all.force.insert(all.force.end(), b.force.begin(), b.force.end());
+    all.state.insert(all.state.end(), b.state.begin(), b.state.end());
+  };
+  d.stream_snapshot(sink, block);
+  if (d.rank() == 0) {
+    EXPECT_EQ(balls, all.id.size());
+    EXPECT_EQ(pairs, all.state.size());
+  }
+  return all;
+}
+
+/// Two snapshots (a frame's arrays), bit for bit.
+inline void expect_same_snapshot(const Snapshot& got, const Snapshot& want) {
+  EXPECT_EQ(got.id, want.id);
+  EXPECT_TRUE(same_bits(got.position, want.position)) << "frame positions differ";
+  EXPECT_TRUE(same_bits(got.velocity, want.velocity)) << "frame velocities differ";
+  EXPECT_TRUE(same_bits(got.radius, want.radius)) << "frame radii differ";
+  EXPECT_EQ(got.pair, want.pair);
+  EXPECT_TRUE(same_bits(got.force, want.force)) << "frame pair forces differ";
+  EXPECT_EQ(got.state, want.state);
+  EXPECT_GT(want.state.size(), 0u);
+}
+
 /// The node's measurements on the ranks (DistDem::kinetic_energy, mean_contact_force,
 /// unbalanced_ratio) against one World's, bit for bit (rank 0).
 inline void expect_same_measures(const World& ref, double ke, double fc, double ratio) {

@@ -2668,6 +2668,160 @@ DistDem::Balls DistDem::gather() const {
   return out;
 }
 
+// ------------------------------------------------------------------------------------------
+// stream_snapshot: a frame's rows merged on rank 0 in blocks
+
+namespace {
+
+constexpr int kTagFrameBalls = 7304, kTagFramePairs = 7305;
+
+struct FrameBall {
+  std::uint64_t id;
+  Vec3 x, v;
+  double r;
+};
+struct FramePair {
+  std::uint64_t a, b;  // ball ids
+  Vec3 f;
+  std::uint8_t state;
+};
+
+// Rank 0's side of one rank's records, sorted: they arrive in blocks of at most `block` as the
+// merge reaches them (rank 0's own are there from the start).
+template <class R>
+struct FrameStream {
+  std::vector<R> buf;
+  std::size_t at = 0;
+  std::uint64_t left = 0;  // records still on their rank
+  int rank = 0;
+  const R* head(MPI_Comm comm, int tag, std::size_t block) {
+    if (at == buf.size()) {
+      if (left == 0) return nullptr;
+      const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, left));
+      buf.resize(n);
+      MPI_Recv(buf.data(), static_cast<int>(n * sizeof(R)), MPI_BYTE, rank, tag, comm, MPI_STATUS_IGNORE);
+      left -= n;
+      at = 0;
+    }
+    return &buf[at];
+  }
+};
+
+// Merges the ranks' sorted records on rank 0 (k-way, a heap of the streams' heads), calling
+// `out(record)` in `less` order; the other ranks send theirs in blocks. Collective.
+template <class R, class Less, class Out>
+void merge_on_root(MPI_Comm comm, int rank, int size, int tag, std::size_t block, std::vector<R>& mine,
+                   const std::vector<std::uint64_t>& counts, Less less, Out out) {
+  if (rank != 0) {
+    for (std::size_t r0 = 0; r0 < mine.size(); r0 += block)
+      MPI_Send(mine.data() + r0, static_cast<int>(std::min(block, mine.size() - r0) * sizeof(R)), MPI_BYTE, 0, tag,
+               comm);
+    return;
+  }
+  std::vector<FrameStream<R>> st(static_cast<std::size_t>(size));
+  st[0].buf.swap(mine);
+  for (int r = 1; r < size; ++r) st[static_cast<std::size_t>(r)].rank = r, st[static_cast<std::size_t>(r)].left = counts[static_cast<std::size_t>(r)];
+  std::vector<std::pair<const R*, int>> heap;  // (head, stream); a min-heap by `less`
+  auto later = [&](const std::pair<const R*, int>& x, const std::pair<const R*, int>& y) { return less(*y.first, *x.first); };
+  for (int r = 0; r < size; ++r)
+    if (const R* h = st[static_cast<std::size_t>(r)].head(comm, tag, block)) heap.push_back({h, r});
+  std::make_heap(heap.begin(), heap.end(), later);
+  while (!heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), later);
+    auto [h, r] = heap.back();
+    heap.pop_back();
+    out(*h);
+    FrameStream<R>& s = st[static_cast<std::size_t>(r)];
+    ++s.at;
+    if (const R* next = s.head(comm, tag, block)) {
+      heap.push_back({next, r});
+      std::push_heap(heap.begin(), heap.end(), later);
+    }
+  }
+}
+
+}  // namespace
+
+void DistDem::stream_snapshot(const SnapshotSink& sink, std::size_t block) const {
+  // (a block's bytes must fit an int; 64 MiB messages at most)
+  block = std::max<std::size_t>(1, std::min<std::size_t>(block, (std::size_t{64} << 20) / sizeof(FrameBall)));
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
+  // this rank's rows in one World's orders (unload's): balls by id, pairs by (A, B) id, the pairs
+  // whose ball A it owns, active or ever bonded (snapshot's rows)
+  std::vector<FrameBall> balls;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (owned_row(i)) balls.push_back(FrameBall{pt.id[i], pt.x[i], pt.v[i], pt.r[i]});
+  std::sort(balls.begin(), balls.end(), [](const FrameBall& x, const FrameBall& y) { return x.id < y.id; });
+  std::vector<FramePair> pairs;
+  const PairContacts& pc = w_->pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    if (!owned_row(pc.a[c])) continue;
+    const BondState st = pc.bond.empty() ? BondState::kNeverBonded : pc.bond[c].state;
+    if (!pair_active(*w_, c) && st == BondState::kNeverBonded) continue;
+    pairs.push_back(FramePair{pt.id[pc.a[c]], pt.id[pc.b[c]], w_->pair_force(c), static_cast<std::uint8_t>(st)});
+  }
+  auto pair_less = [](const FramePair& x, const FramePair& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); };
+  std::sort(pairs.begin(), pairs.end(), pair_less);
+  const std::uint64_t mine[2] = {balls.size(), pairs.size()};
+  std::vector<std::uint64_t> counts(2 * static_cast<std::size_t>(size_));
+  MPI_Gather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, 0, comm_);
+  std::vector<std::uint64_t> nb(static_cast<std::size_t>(size_)), np(static_cast<std::size_t>(size_));
+  std::uint64_t total_balls = 0, total_pairs = 0;
+  for (int r = 0; r < size_ && rank_ == 0; ++r) {
+    nb[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r)];
+    np[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r) + 1];
+    total_balls += nb[static_cast<std::size_t>(r)];
+    total_pairs += np[static_cast<std::size_t>(r)];
+  }
+  if (rank_ == 0 && sink.begin) sink.begin(total_balls, total_pairs);
+
+  // the balls, merged by id; rank 0 keeps the ids (8 bytes a ball) to turn a pair's ids into rows
+  std::vector<std::uint64_t> ids;
+  if (rank_ == 0) ids.reserve(total_balls);
+  Snapshot out;
+  std::size_t row0 = 0;
+  auto flush_balls = [&] {
+    if (out.id.empty()) return;
+    if (sink.balls) sink.balls(row0, out);
+    row0 += out.id.size();
+    out.position.clear(), out.velocity.clear(), out.radius.clear(), out.id.clear();
+  };
+  merge_on_root(comm_, rank_, size_, kTagFrameBalls, block, balls, nb,
+                [](const FrameBall& x, const FrameBall& y) { return x.id < y.id; },
+                [&](const FrameBall& b) {
+                  out.position.insert(out.position.end(), {b.x.x, b.x.y, b.x.z});
+                  out.velocity.insert(out.velocity.end(), {b.v.x, b.v.y, b.v.z});
+                  out.radius.push_back(b.r);
+                  out.id.push_back(b.id);
+                  ids.push_back(b.id);
+                  if (out.id.size() == block) flush_balls();
+                });
+  flush_balls();
+  // the pairs, merged by (A, B) id, their ends as rows of the frame
+  auto row_of = [&](std::uint64_t id) {
+    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
+    if (it == ids.end() || *it != id)
+      throw std::logic_error("DistDem::stream_snapshot: a pair's ball " + std::to_string(id) + " is no rank's");
+    return static_cast<std::uint32_t>(it - ids.begin());
+  };
+  row0 = 0;
+  auto flush_pairs = [&] {
+    if (out.state.empty()) return;
+    if (sink.pairs) sink.pairs(row0, out);
+    row0 += out.state.size();
+    out.pair.clear(), out.force.clear(), out.state.clear();
+  };
+  merge_on_root(comm_, rank_, size_, kTagFramePairs, block, pairs, np, pair_less, [&](const FramePair& c) {
+    out.pair.insert(out.pair.end(), {row_of(c.a), row_of(c.b)});
+    out.force.insert(out.force.end(), {c.f.x, c.f.y, c.f.z});
+    out.state.push_back(c.state);
+    if (out.state.size() == block) flush_pairs();
+  });
+  flush_pairs();
+}
+
 
 // ------------------------------------------------------------------------------------------
 // unload: one World from the ranks' parts

@@ -382,6 +382,21 @@ class DistDem {
   };
   Balls gather() const;
 
+  /// measure.hpp's snapshot of one World (a frame's arrays), streamed to rank 0 in blocks of at
+  /// most `block` rows instead of assembled there. Each rank sorts its own balls by id and the
+  /// pairs whose ball A it owns by (A, B) id (unload's orders, one World's); rank 0 merges the
+  /// ranks' sorted rows as they arrive and hands `sink` each block: the balls (position,
+  /// velocity, radius, id), then the pairs (pair as rows of the whole frame, force, state).
+  /// Rank 0 holds a block per rank, the block it hands on, and the frame's ids (8 bytes a ball,
+  /// to turn a pair's ids into rows); no rank holds the World. Collective; `sink` is called on
+  /// rank 0 only, begin first with the frame's counts.
+  struct SnapshotSink {
+    std::function<void(std::size_t balls, std::size_t pairs)> begin;
+    std::function<void(std::size_t row0, const Snapshot& block)> balls;
+    std::function<void(std::size_t row0, const Snapshot& block)> pairs;
+  };
+  void stream_snapshot(const SnapshotSink& sink, std::size_t block = 65536) const;
+
   /// Σ of every rank's terms in one World's key order, on every rank, for K value columns at once
   /// (`sums[0..K)`; K at most kMaxColumns, any K under WorldParams::order_free_sums). `vals`: this rank's n terms, K values each, in the order in which `keys`
   /// appends their keys; `keys` is called only when the merge order is formed again (which:
