@@ -479,10 +479,7 @@ class DemParticipant : public node::Participant {
     // The history row of this step is written by step_values, after the forces have gone out
     // (its ratio needs the contact scan; the continuum steps meanwhile).
     if (outputs_ && s_.has("dem.output") && history_every_ > 0 && step % history_every_ == 0) history_due_ = step;
-    if (outputs_ && s_.has("dem.output") && frame_every_ > 0 && step % frame_every_ == 0) {
-      sync_full();
-      if (out_) write_frame(step);
-    }
+    if (outputs_ && s_.has("dem.output") && frame_every_ > 0 && step % frame_every_ == 0) write_frame(step);
   }
 
   // The history row of the last step, if it is due (advance): the state is still that step's
@@ -545,6 +542,7 @@ class DemParticipant : public node::Participant {
   }
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     write_history_row();
+    if (outputs_) write_frame(last);  // (on ranks: from the ranks' parts)
     leave_dist();  // the whole World again, on rank 0
     // On the ranks: the largest peak memory of the ranks other than 0 (rank 0's is the node's,
     // "peak_rss_mb"), for the summary.
@@ -554,7 +552,6 @@ class DemParticipant : public node::Participant {
       MPI_Reduce(&mine, &others, 1, MPI_DOUBLE, MPI_MAX, 0, g_ranks.comm);
     }
     if (part_only()) return {};
-    if (out_) write_frame(last);
     if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
     const double crit = world_.num_balls() > 0 ? critical_dt() : 0.0;
     auto m = dem::measure(world_);
@@ -1079,38 +1076,74 @@ class DemParticipant : public node::Participant {
     csv.close();
   }
 
+  // A frame of the current state (docs/output.md). While the ranks step every rank calls it: the
+  // ranks' rows are merged on rank 0 in blocks as they arrive (DistDem::stream_snapshot), and no
+  // rank assembles the World for it; else rank 0 writes its whole World. The same datasets either
+  // way (tests/dist/node_footing.py).
   void write_frame(std::int64_t step) {
-    if (world_.num_balls() == 0) return;
-    node::Timed t(effect_s_["output.h5"]);
-    if (has_frame_ && world_.time() <= last_frame_time_) return;  // frame times must increase
-    auto snap = dem::snapshot(world_);
-    std::vector<std::int64_t> ids(snap.id.begin(), snap.id.end());
-    std::vector<std::int32_t> pairs(snap.pair.begin(), snap.pair.end());
-    io::ParticleFrame f;
-    f.position = io::ArrayView(snap.position, 3);
-    f.point_arrays.push_back({"radius", io::ArrayView(snap.radius)});
-    f.point_arrays.push_back({"velocity", io::ArrayView(snap.velocity, 3)});
-    f.point_arrays.push_back({"id", io::ArrayView(ids)});
-    io::LinkFrame bonds;
-    bonds.name = "bonds";
-    bonds.nodes = io::ArrayView(pairs, 2);
-    bonds.cell_arrays.push_back({"state", io::ArrayView(snap.state)});
-    bonds.cell_arrays.push_back({"force", io::ArrayView(snap.force, 3)});
-    f.links.push_back(bonds);
+    const bool streamed = dist_live_;
+    if (!streamed && !out_) return;
+    const double t = live().time();
+    int go = out_ && !(has_frame_ && t <= last_frame_time_) ? 1 : 0;  // frame times must increase
+    if (streamed) {
+      const bool any = dist_->num_balls() > 0;  // (collective: on every rank)
+      go = go && any;
+      MPI_Bcast(&go, 1, MPI_INT, 0, g_ranks.comm);
+    } else {
+      go = go && world_.num_balls() > 0;
+    }
+    if (!go) return;
+    node::Timed timed(effect_s_["output.h5"]);
     // The footing's surface, where it is in this frame (none before a stage places it).
     io::TriangleSurface footing;
-    if (footing_output_) {
-      if (world_.has_footing()) {
-        const auto& p = world_.footing().p;
-        footing = io::cylinder_surface({p.bottom_centre.x, p.bottom_centre.y, p.bottom_centre.z}, p.diameter, p.height);
+    io::FrameShape shape;
+    if (out_) {
+      shape.point_arrays = {{"radius", io::DType::kFloat64, 1}, {"velocity", io::DType::kFloat64, 3}, {"id", io::DType::kInt64, 1}};
+      shape.links = {{"bonds", 0, {{"state", io::DType::kUInt8, 1}, {"force", io::DType::kFloat64, 3}}}};
+      if (footing_output_) {
+        if (live().has_footing()) {
+          const auto& p = live().footing().p;
+          footing = io::cylinder_surface({p.bottom_centre.x, p.bottom_centre.y, p.bottom_centre.z}, p.diameter, p.height);
+        }
+        shape.surfaces.push_back({"footing", io::ArrayView(footing.vertices, 3), io::ArrayView(footing.triangles, 3)});
       }
-      f.surfaces.push_back({"footing", io::ArrayView(footing.vertices, 3), io::ArrayView(footing.triangles, 3)});
     }
     // Model time (docs/output.md "Time"): negative for frames of the specimen preparation,
     // which get their times once the first later stage begins (begin_model_time).
-    out_->write_frame(step, clock_.frame_time(world_.time()), f);
+    auto begin = [&](std::size_t balls, std::size_t pairs) {
+      shape.particles = balls;
+      shape.links[0].rows = pairs;
+      out_->begin_blocks(step, clock_.frame_time(t), shape);
+    };
+    std::vector<std::int64_t> ids;
+    std::vector<std::int32_t> nodes;
+    auto balls = [&](std::size_t row0, const dem::Snapshot& b) {
+      ids.assign(b.id.begin(), b.id.end());
+      out_->write_rows("particles/position", row0, io::ArrayView(b.position, 3));
+      out_->write_rows("particles/radius", row0, io::ArrayView(b.radius));
+      out_->write_rows("particles/velocity", row0, io::ArrayView(b.velocity, 3));
+      out_->write_rows("particles/id", row0, io::ArrayView(ids));
+    };
+    auto pairs = [&](std::size_t row0, const dem::Snapshot& b) {
+      nodes.assign(b.pair.begin(), b.pair.end());
+      out_->write_rows("bonds/nodes", row0, io::ArrayView(nodes, 2));
+      out_->write_rows("bonds/state", row0, io::ArrayView(b.state));
+      out_->write_rows("bonds/force", row0, io::ArrayView(b.force, 3));
+    };
+    if (streamed) {
+      dem::DistDem::SnapshotSink sink;
+      if (out_) sink = {begin, balls, pairs};
+      dist_->stream_snapshot(sink);
+    } else {
+      const dem::Snapshot snap = dem::snapshot(world_);  // one block of each
+      begin(snap.id.size(), snap.state.size());
+      balls(0, snap);
+      pairs(0, snap);
+    }
+    if (!out_) return;
+    out_->end_blocks();
     has_frame_ = true;
-    last_frame_time_ = world_.time();
+    last_frame_time_ = t;
   }
 
   node::Context ctx_;
