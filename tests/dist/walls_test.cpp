@@ -428,3 +428,89 @@ TEST(DistWalls, RankWeightsAddUpToOneWorldsWithTheBalanceCosts) {
   ASSERT_GT(n.apart, 0u);
   EXPECT_EQ(sum, n.total);
 }
+
+// The stage's measurements the DEM node takes from the ranks while they stay live between stages
+// (docs/scaling.md, "the ranks live across stages"): the stress profile with one World's bits,
+// the footing placed at first contact as one World places it, and the stage's energies, whose
+// contacts' and dissipated terms and gravity's work the ranks add in rank order (one World's
+// bits on one rank, round-off apart on more). The block of walls above, stepped 400 steps under
+// gravity with its floor moving; bonded floor contacts, so that the profile has wall terms of
+// two kinds; a shear, so that balls migrate between the begin and the end.
+TEST(DistWalls, StageMeasurementsOnTheRanks) {
+  WallScene sc{"walls, stage measurements", ContactModel::kLinearPBond, 2, 400};
+  const Floor floor;
+  std::unique_ptr<World> full = build(sc, floor, true);
+  DistDem d(MPI_COMM_WORLD, full->params(), grid(sc));
+  d.load(*full);
+  StageEnergy ranked, one;
+  ranked.begin_with(d.energy());
+  const std::vector<DistDem::IdPos> x0 = d.owned_positions();
+  std::vector<Vec3> hist, rh;
+  run(d.world(), floor, sc.steps, hist, [&] { d.step(1); });
+  ProfileBox box;
+  box.x_lo = box.y_lo = -0.5 * kS;
+  box.x_hi = box.y_hi = kL - 0.5 * kS;
+  box.z_top = kL - 0.5 * kS;
+  box.height = kL;
+  const std::vector<ProfileSlab> prof = stress_profile(d, box, 6);
+  const Energy e = d.energy();
+  const double gw = d.gravity_work(x0);
+  long long migrated = static_cast<long long>(d.migrated()), all_migrated = 0;
+  MPI_Reduce(&migrated, &all_migrated, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
+  FootingParams fp;
+  fp.diameter = 0.4 * kL;
+  fp.height = 0.3 * kL;
+  fp.bottom_centre = {0.3 * kL, 0.6 * kL, 5.0 * kL};
+  const double z = place_footing_at_first_contact(d, fp);
+  double zs[2] = {z, d.world().footing().p.bottom_centre.z}, lo[2], hi[2];
+  MPI_Allreduce(zs, lo, 2, MPI_DOUBLE, MPI_MIN, MPI_COMM_WORLD);
+  MPI_Allreduce(zs, hi, 2, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+  if (g_rank == 0) {
+    std::unique_ptr<World> ref = build(sc, floor, true);
+    one.begin(*ref);
+    run(*ref, floor, sc.steps, rh, [&] { ref->step(1); });
+    ASSERT_TRUE(test::same_bits(hist, rh));
+    const std::vector<ProfileSlab> want = stress_profile(*ref, box, 6);
+    ASSERT_EQ(prof.size(), want.size());
+    std::size_t loaded = 0;
+    for (std::size_t k = 0; k < want.size(); ++k) {
+      EXPECT_EQ(prof[k].balls, want[k].balls) << "slab " << k;
+      for (auto m : {&ProfileSlab::szz, &ProfileSlab::sxx, &ProfileSlab::syy, &ProfileSlab::depth, &ProfileSlab::depth_top})
+        EXPECT_EQ(std::memcmp(&(prof[k].*m), &(want[k].*m), sizeof(double)), 0)
+            << "slab " << k << ": " << prof[k].*m << " against one World's " << want[k].*m;
+      loaded += want[k].szz != 0.0 && want[k].sxx != 0.0;
+    }
+    EXPECT_EQ(loaded, want.size()) << "every slab must carry stress";
+    // the energies: the kinetic energy's bits; the rest in rank order
+    const Energy we = ref->energy();
+    const double wgw = gravity_work(*ref, one.x_begin);
+    double scale = 0.0;  // Σ |m g·dx|: the size of gravity's terms
+    for (std::size_t i = 0; i < ref->num_balls(); ++i)
+      scale += std::abs(ref->balls().m[i] * dot(ref->gravity(), ref->balls().x[i] - one.x_begin[i]));
+    std::printf("%s on %d ranks, %lld migrations: strain %.17g / %.17g J, gravity's work %.17g / %.17g J, profile "
+                "szz of the bottom slab %.6g Pa, footing at %.9g L\n",
+                sc.name.c_str(), g_size, all_migrated, e.strain, we.strain, gw, wgw, want.back().szz, z / kL);
+    EXPECT_EQ(std::memcmp(&e.kinetic, &we.kinetic, sizeof(double)), 0);
+    for (auto m : {&Energy::strain, &Energy::damping, &Energy::friction, &Energy::softening}) {
+      EXPECT_NEAR(e.*m, we.*m, 1e-12 * std::abs(we.*m));
+      if (g_size == 1) EXPECT_EQ(std::memcmp(&(e.*m), &(we.*m), sizeof(double)), 0);
+    }
+    EXPECT_GT(we.strain, 0.0);
+    EXPECT_GT(we.damping, 0.0);
+    EXPECT_NEAR(gw, wgw, 1e-12 * scale);
+    if (g_size == 1) EXPECT_EQ(std::memcmp(&gw, &wgw, sizeof(double)), 0);
+    EXPECT_GT(scale, 0.0);
+    const StageEnergy::Balance b = ranked.balance_with(e, gw), bw = one.balance(*ref);
+    EXPECT_NEAR(b.error, bw.error, 1e-9);
+    if (g_size > 1) EXPECT_GT(all_migrated, 0) << "balls must change ranks between the begin and the end";
+    // the footing: one World's height, on every rank
+    const double zw = place_footing_at_first_contact(*ref, fp);
+    EXPECT_EQ(std::memcmp(&z, &zw, sizeof z), 0) << z << " against " << zw;
+    EXPECT_EQ(lo[0], hi[0]);
+    EXPECT_EQ(lo[1], zw);
+    EXPECT_EQ(hi[1], zw);
+    EXPECT_LT(zw, 2.0 * kL);  // (the sheared block has grown to about 1.17 L)
+    EXPECT_GT(zw, 0.5 * kL);
+  }
+  test::share_verdict();
+}

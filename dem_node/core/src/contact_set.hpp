@@ -59,8 +59,9 @@ class ContactSet {
   /// The stiffness of every live contact added to its balls' translational (kt) and rotational
   /// (kr) sums, in contact order (docs/theory.md 1.8).
   virtual void add_stiffness(const SetContext& cx, double* kt, double* kr) const = 0;
-  /// Strain energy, slip and bond dissipation of the live contacts.
-  virtual void add_energy(Energy& e, const WorldParams& p) const = 0;
+  /// Strain energy, slip and bond dissipation of the live contacts; with ghost rows (a rank's
+  /// part), those of the contacts whose ball (a pair's ball A) is not a ghost.
+  virtual void add_energy(Energy& e, const WorldParams& p, const std::vector<std::uint8_t>& ghost) const = 0;
   /// Ball rows renumbered (World::reorder_spatially): new_row[old_row].
   virtual void remap(const std::vector<std::uint32_t>& new_row) = 0;
   /// Recompute the precomputed constants of every contact (World::refresh_contact_constants).
@@ -109,9 +110,11 @@ inline void flip(ContactHist& h, BondHist* b) {
 
 /// Strain energy, slip and bond dissipation of a family's live contacts (World::energy).
 inline void add_contact_energy(Energy& e, const std::vector<ContactHist>& hs, const std::vector<BondHist>& bs,
-                               const ContactFamilyParams& fam) {
+                               const ContactFamilyParams& fam, const std::vector<std::uint32_t>& row,
+                               const std::vector<std::uint8_t>& ghost) {
   visit_law(fam.model, [&](auto law) {
     for (std::size_t c = 0; c < hs.size(); ++c) {
+      if (!ghost.empty() && ghost[row[c]]) continue;
       const ContactHist& h = hs[c];
       const BondHist* b = bs.empty() ? nullptr : &bs[c];
       decltype(law)::add_strain(e.strain, h, b, fam);

@@ -70,12 +70,10 @@ Mat3 region_stress(const World& w, const Region& r) {
     if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
     const std::uint32_t a = pc.a[c], b = pc.b[c];
     if (!in[a] && !in[b]) continue;
-    const Vec3 d = w.branch(c);
-    const double dist = norm(d);
-    const Vec3 n = d * (1.0 / dist);
-    const double gap = dist - pt.r[a] - pt.r[b];
-    if (in[a]) add((pt.r[a] + 0.5 * gap) * n, -F);   // force on A is −F
-    if (in[b]) add(-(pt.r[b] + 0.5 * gap) * n, F);
+    Vec3 arm_a, arm_b;
+    pair_stress_arms(w, c, arm_a, arm_b);
+    if (in[a]) add(arm_a, -F);   // force on A is −F
+    if (in[b]) add(arm_b, F);
   }
   for (const WallContacts* wc : {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()})
     for (std::size_t c = 0; c < wc->size(); ++c) {

@@ -960,8 +960,8 @@ void PairSet::stiffness_loop(double* __restrict__ KT, double* __restrict__ KR) c
   }
 }
 
-void PairSet::add_energy(Energy& e, const WorldParams& p) const {
-  detail::add_contact_energy(e, contacts.h, contacts.bond, p.ball_ball);
+void PairSet::add_energy(Energy& e, const WorldParams& p, const std::vector<std::uint8_t>& ghost) const {
+  detail::add_contact_energy(e, contacts.h, contacts.bond, p.ball_ball, contacts.a, ghost);
 }
 
 // ------------------------------------------------------------------------------------------

@@ -104,11 +104,10 @@ BallRatios ball_ratios(const World& w, double fc) {
   return {World::unbalanced_ratio_of(unb, n, fc), skeleton_ratio_of(skel, rattlers, n, fc)};
 }
 
-std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs) {
+std::vector<std::pair<Region, ProfileSlab>> profile_slabs(const ProfileBox& box, int slabs) {
   if (slabs < 1) throw std::invalid_argument("stress_profile: slabs must be >= 1");
-  std::vector<ProfileSlab> out;
+  std::vector<std::pair<Region, ProfileSlab>> out;
   const double h = box.height, top = box.z_top;
-  const auto& b = w.balls();
   for (int i = 0; i < slabs; ++i) {
     Region r;
     r.kind = Region::Kind::kBox;
@@ -116,11 +115,20 @@ std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, i
     r.lo = {box.x_lo, box.y_lo, z_lo};
     r.hi = {box.x_hi, box.y_hi, z_hi};
     ProfileSlab s;
-    for (std::size_t k = 0; k < b.size(); ++k) s.balls += r.contains(b.x[k]) ? 1 : 0;
-    const auto sig = region_stress(w, r);
     s.depth = top - 0.5 * (z_lo + z_hi);
     s.depth_top = top - z_hi;
     s.depth_bottom = top - z_lo;
+    out.push_back({r, s});
+  }
+  return out;
+}
+
+std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs) {
+  std::vector<ProfileSlab> out;
+  const auto& b = w.balls();
+  for (auto [r, s] : profile_slabs(box, slabs)) {
+    for (std::size_t k = 0; k < b.size(); ++k) s.balls += r.contains(b.x[k]) ? 1 : 0;
+    const auto sig = region_stress(w, r);
     s.szz = sig[8];
     s.sxx = sig[0];
     s.syy = sig[4];
@@ -157,27 +165,38 @@ std::pair<Vec3, Vec3> add_box_walls(World& w) {
   return {lo, hi};
 }
 
-double place_footing_at_first_contact(World& w, FootingParams f) {
+double footing_contact_height(const World& w, const FootingParams& f) {
   const Vec3 axis = f.bottom_centre;
   const auto& b = w.balls();
+  const auto& ghost = w.ghost_rows();
   const double r_f = f.diameter / 2;
   double best = -std::numeric_limits<double>::infinity();
   for (std::size_t i = 0; i < b.size(); ++i) {
+    if (!ghost.empty() && ghost[i]) continue;
     const double dx = b.x[i].x - axis.x, dy = b.x[i].y - axis.y, rho = std::sqrt(dx * dx + dy * dy);
     const double out = rho - r_f, r = b.r[i];
     if (out >= r) continue;
     best = std::max(best, b.x[i].z + (out <= 0 ? r : std::sqrt(r * r - out * out)));
   }
-  if (!std::isfinite(best)) {
+  return best;
+}
+
+void set_footing_at(World& w, FootingParams f, double z) {
+  if (!std::isfinite(z)) {
     std::ostringstream os;
-    os << "penetrate: no ball lies under the footing's footprint (D " << f.diameter << " m centred at (" << axis.x
-       << ", " << axis.y << ")): the footing would never touch the block; place it over the block "
-       << "(dem.footing.centre, dem.footing.diameter)";
+    os << "penetrate: no ball lies under the footing's footprint (D " << f.diameter << " m centred at ("
+       << f.bottom_centre.x << ", " << f.bottom_centre.y << ")): the footing would never touch the block; place it "
+       << "over the block (dem.footing.centre, dem.footing.diameter)";
     throw std::runtime_error(os.str());
   }
-  f.bottom_centre = {axis.x, axis.y, best};
+  f.bottom_centre.z = z;
   f.velocity = {0, 0, 0};
   w.set_footing(f);
+}
+
+double place_footing_at_first_contact(World& w, FootingParams f) {
+  const double best = footing_contact_height(w, f);
+  set_footing_at(w, f, best);
   return best;
 }
 
@@ -220,16 +239,21 @@ double total_energy(const World& w) { return total_energy(w.energy()); }
 
 // One World::energy() (a pass over every contact) per call.
 void StageEnergy::begin(const World& w) {
-  const auto e0 = w.energy();
+  begin_with(w.energy());
+  x_begin = w.balls().x;
+}
+
+void StageEnergy::begin_with(const Energy& e0) {
   total_begin = total_energy(e0);
   mechanical_begin = e0.kinetic + e0.strain;
-  x_begin = w.balls().x;
+  x_begin.clear();
   work = 0;
 }
 
-StageEnergy::Balance StageEnergy::balance(const World& w) const {
-  const auto e = w.energy();
-  const double total = total_energy(e), wk = work + gravity_work(w, x_begin);
+StageEnergy::Balance StageEnergy::balance(const World& w) const { return balance_with(w.energy(), gravity_work(w, x_begin)); }
+
+StageEnergy::Balance StageEnergy::balance_with(const Energy& e, double gravity_work) const {
+  const double total = total_energy(e), wk = work + gravity_work;
   const double dissipated = total - e.kinetic - e.strain - (total_begin - mechanical_begin);
   // Relative to the largest energy flow of the stage.
   const double scale = std::max({std::abs(wk), mechanical_begin, e.kinetic + e.strain, std::abs(dissipated), 1e-300});

@@ -50,7 +50,7 @@ class WallSet final : public ContactSet {
   double travel() const override { return kind.travel(); }
   void add_force_norms(double& sum, std::size_t& count) const override;
   void add_stiffness(const SetContext& cx, double* kt, double* kr) const override;
-  void add_energy(Energy& e, const WorldParams& p) const override;
+  void add_energy(Energy& e, const WorldParams& p, const std::vector<std::uint8_t>& ghost) const override;
   void remap(const std::vector<std::uint32_t>& new_row) override;
   void refresh(const SetContext& cx) override;
   void clear() override { contacts = WallContacts{}; }

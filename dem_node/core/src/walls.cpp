@@ -604,8 +604,8 @@ void WallSet<Kind>::add_stiffness(const SetContext& cx, double* kt, double* kr) 
 }
 
 template <class Kind>
-void WallSet<Kind>::add_energy(Energy& e, const WorldParams& p) const {
-  detail::add_contact_energy(e, contacts.h, contacts.bond, p.*Kind::kFamily);
+void WallSet<Kind>::add_energy(Energy& e, const WorldParams& p, const std::vector<std::uint8_t>& ghost) const {
+  detail::add_contact_energy(e, contacts.h, contacts.bond, p.*Kind::kFamily, contacts.ball, ghost);
 }
 
 template <class Kind>

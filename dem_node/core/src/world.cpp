@@ -676,7 +676,7 @@ Energy World::energy() const {
   e.damping = e_damp_;
   e.friction = e_slip_dead_;
   e.softening = e_soft_dead_;
-  for (const ContactSet* set : sets_) set->add_energy(e, p_);
+  for (const ContactSet* set : sets_) set->add_energy(e, p_, ghost_);
   return e;
 }
 

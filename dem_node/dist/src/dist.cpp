@@ -520,7 +520,7 @@ struct DistDem::Buffers {
   std::vector<double> m_vals, m_rows, m_bound, m_res;
   std::vector<OrderFreeSum> m_folds;
   std::vector<int> m_counts, m_displ;
-  OrderCache order_cache[3];
+  OrderCache order_cache[4];
   // the exchange's per-row and per-destination arrays, kept from one exchange to the next (a
   // fresh allocation of each cost page faults at every rebuild)
   std::vector<int> own, old_owner, holders, dest, near_all;
@@ -2125,7 +2125,7 @@ void DistDem::ordered_fold(std::size_t n, const double* vals, int K, const KeyFi
   const std::int64_t key[2] = {layout_gen_, which != kBallTerms ? w_->rebuild_count() : 0};
   std::vector<double>& mx = buf_->m_bound;
   mx.assign(1 + static_cast<std::size_t>(n_max), 0.0);
-  mx[0] = key[0] != oc.key[0] || key[1] != oc.key[1] || n != oc.local ? 1.0 : 0.0;
+  mx[0] = which == kOnceTerms || key[0] != oc.key[0] || key[1] != oc.key[1] || n != oc.local ? 1.0 : 0.0;
   for (int m = 0; m < n_max; ++m) mx[1 + static_cast<std::size_t>(m)] = also_max[m];
   MPI_Allreduce(MPI_IN_PLACE, mx.data(), static_cast<int>(mx.size()), MPI_DOUBLE, MPI_MAX, comm_);
   for (int m = 0; m < n_max; ++m) also_max[m] = mx[1 + static_cast<std::size_t>(m)];
@@ -2666,6 +2666,172 @@ DistDem::Balls DistDem::gather() const {
     out.t.push_back(r.t);
   }
   return out;
+}
+
+// ------------------------------------------------------------------------------------------
+// the stage's measurements on the ranks: energy, gravity's work, stress profile, footing
+
+namespace {
+
+// Every rank's records to rank dest(record), by one all-to-all of counts and one of bytes.
+template <class T, class Dest>
+std::vector<T> send_to(MPI_Comm comm, int size, const std::vector<T>& recs, Dest dest) {
+  std::vector<std::vector<T>> out(static_cast<std::size_t>(size));
+  for (const T& r : recs) out[static_cast<std::size_t>(dest(r))].push_back(r);
+  std::vector<int> sc(static_cast<std::size_t>(size)), rc(static_cast<std::size_t>(size)),
+      sd(static_cast<std::size_t>(size) + 1, 0), rd(static_cast<std::size_t>(size) + 1, 0);
+  std::vector<T> flat;
+  for (int q = 0; q < size; ++q) {
+    const auto& o = out[static_cast<std::size_t>(q)];
+    sc[static_cast<std::size_t>(q)] = static_cast<int>(o.size() * sizeof(T));
+    sd[static_cast<std::size_t>(q) + 1] = sd[static_cast<std::size_t>(q)] + sc[static_cast<std::size_t>(q)];
+    flat.insert(flat.end(), o.begin(), o.end());
+  }
+  MPI_Alltoall(sc.data(), 1, MPI_INT, rc.data(), 1, MPI_INT, comm);
+  for (int q = 0; q < size; ++q) rd[static_cast<std::size_t>(q) + 1] = rd[static_cast<std::size_t>(q)] + rc[static_cast<std::size_t>(q)];
+  std::vector<T> in(static_cast<std::size_t>(rd.back()) / sizeof(T));
+  MPI_Alltoallv(flat.data(), sc.data(), sd.data(), MPI_BYTE, in.data(), rc.data(), rd.data(), MPI_BYTE, comm);
+  return in;
+}
+
+// Σ of one value per rank, added in rank order on rank 0 and sent to every rank (K values).
+void sum_in_rank_order(MPI_Comm comm, int rank, int size, double* v, int K) {
+  std::vector<double> all(static_cast<std::size_t>(size * K));
+  MPI_Gather(v, K, MPI_DOUBLE, all.data(), K, MPI_DOUBLE, 0, comm);
+  if (rank == 0)
+    for (int k = 0; k < K; ++k) {
+      double s = 0.0;
+      for (int r = 0; r < size; ++r) s += all[static_cast<std::size_t>(r * K + k)];
+      v[k] = s;
+    }
+  MPI_Bcast(v, K, MPI_DOUBLE, 0, comm);
+}
+
+}  // namespace
+
+Energy DistDem::energy() const {
+  Energy e = w_->energy();  // (its contacts' terms; the kinetic energy of every row, replaced below)
+  double s[4] = {e.strain, e.damping, e.friction, e.softening};
+  sum_in_rank_order(comm_, rank_, size_, s, 4);
+  e.strain = s[0], e.damping = s[1], e.friction = s[2], e.softening = s[3];
+  e.kinetic = kinetic_energy();
+  return e;
+}
+
+std::vector<DistDem::IdPos> DistDem::owned_positions() const {
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  std::vector<IdPos> out;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (g.empty() || !g[i]) out.push_back({pt.id[i], pt.x[i]});
+  std::sort(out.begin(), out.end(), [](const IdPos& a, const IdPos& b) { return a.id < b.id; });
+  return out;
+}
+
+double DistDem::gravity_work(const std::vector<IdPos>& begin) const {
+  if (!w_->gravity_on()) return 0.0;
+  struct Now {
+    std::uint64_t id;
+    double m;
+    Vec3 x;
+  };
+  const Particles& pt = w_->balls();
+  const auto& gh = w_->ghost_rows();
+  std::vector<Now> now;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (gh.empty() || !gh[i]) now.push_back({pt.id[i], pt.m[i], pt.x[i]});
+  const auto home = [this](std::uint64_t id) { return static_cast<int>(id % static_cast<std::uint64_t>(size_)); };
+  std::vector<Now> a = send_to(comm_, size_, now, [&](const Now& r) { return home(r.id); });
+  std::vector<IdPos> b = send_to(comm_, size_, begin, [&](const IdPos& r) { return home(r.id); });
+  std::sort(a.begin(), a.end(), [](const Now& x, const Now& y) { return x.id < y.id; });
+  std::sort(b.begin(), b.end(), [](const IdPos& x, const IdPos& y) { return x.id < y.id; });
+  const Vec3 g = w_->gravity();
+  double work = 0.0;
+  std::size_t j = 0;
+  for (const Now& r : a) {  // (procedures.cpp's gravity_work: the same term)
+    while (j < b.size() && b[j].id < r.id) ++j;
+    if (j < b.size() && b[j].id == r.id) work += r.m * dot(g, r.x - b[j].x);
+  }
+  sum_in_rank_order(comm_, rank_, size_, &work, 1);
+  return work;
+}
+
+std::vector<ProfileSlab> stress_profile(const DistDem& d, const ProfileBox& box, int slabs) {
+  const World& w = d.world();
+  // (a ghost across a periodic face is an image outside the slabs: a block's profile only)
+  if (w.periodic()) throw std::invalid_argument("stress_profile on ranks: the world must not be periodic");
+  const auto sl = profile_slabs(box, slabs);
+  const std::uint64_t S = sl.size();
+  const Particles& pt = w.balls();
+  const auto& gh = w.ghost_rows();
+  auto ghost = [&](std::size_t i) { return !gh.empty() && gh[i]; };
+  // The balls in each slab (a centre on the face between two is in both), then the terms: per
+  // contact and slab, ball A's increment before B's, each a key of its own: (set, A id, (B id x 2
+  // + side) x S + slab) for a pair, (1 + kind, ball id, wall x S + slab) for a wall contact.
+  std::vector<std::uint64_t> count(S, 0);
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (!ghost(i))
+      for (std::uint64_t k = 0; k < S; ++k) count[k] += sl[k].first.contains(pt.x[i]) ? 1 : 0;
+  MPI_Allreduce(MPI_IN_PLACE, count.data(), static_cast<int>(S), MPI_UINT64_T, MPI_SUM, d.comm());
+  std::vector<double> vals;
+  std::vector<World::ContactTerm> keys;
+  auto term = [&](std::uint64_t set, std::uint64_t a, std::uint64_t b, std::uint64_t k, const Vec3& arm, const Vec3& F) {
+    keys.push_back({set, a, b * S + k, 0.0});
+    vals.insert(vals.end(), {static_cast<double>(k), arm[0] * F[0], arm[1] * F[1], arm[2] * F[2]});
+  };
+  const PairContacts& pc = w.pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c) {
+    const std::uint32_t a = pc.a[c], b = pc.b[c];
+    if (ghost(a)) continue;
+    const Vec3 F = w.pair_force(c);
+    if (F.x == 0.0 && F.y == 0.0 && F.z == 0.0) continue;
+    Vec3 arm_a, arm_b;
+    bool armed = false;
+    for (int side = 0; side < 2; ++side) {
+      const std::uint32_t i = side == 0 ? a : b;
+      for (std::uint64_t k = 0; k < S; ++k) {
+        if (!sl[k].first.contains(pt.x[i])) continue;
+        if (!armed) pair_stress_arms(w, c, arm_a, arm_b), armed = true;
+        term(0, pt.id[a], 2 * pt.id[b] + static_cast<std::uint64_t>(side), k, side == 0 ? arm_a : arm_b, side == 0 ? -F : F);
+      }
+    }
+  }
+  const WallContacts* wl[3] = {&w.plane_contacts(), &w.facet_contacts(), &w.footing_contacts()};
+  for (std::uint64_t kind = 0; kind < 3; ++kind)
+    for (std::size_t c = 0; c < wl[kind]->size(); ++c) {
+      const std::uint32_t i = wl[kind]->ball[c];
+      if (ghost(i)) continue;
+      for (std::uint64_t k = 0; k < S; ++k)
+        if (sl[k].first.contains(pt.x[i])) term(kind + 1, pt.id[i], wl[kind]->wall[c], k, wl[kind]->xc[c] - pt.x[i], -wl[kind]->F[c]);
+    }
+  // rank 0 adds each slab's terms in one World's order (region_stress's), then divides
+  std::vector<double> sig(3 * S, 0.0);
+  d.ordered_fold(keys.size(), vals.data(), 4, [&](std::vector<World::ContactTerm>& out) { out = keys; },
+                 DistDem::kOnceTerms, nullptr, 0, [&](const double* v, const std::vector<std::uint32_t>& perm) {
+                   for (std::uint32_t j : perm) {
+                     const std::size_t k = static_cast<std::size_t>(v[4 * j]);
+                     for (int q = 0; q < 3; ++q) sig[3 * k + static_cast<std::size_t>(q)] += v[4 * j + 1 + static_cast<std::size_t>(q)];
+                   }
+                 });
+  MPI_Bcast(sig.data(), static_cast<int>(sig.size()), MPI_DOUBLE, 0, d.comm());
+  std::vector<ProfileSlab> out;
+  for (std::uint64_t k = 0; k < S; ++k) {
+    ProfileSlab s = sl[k].second;
+    const double V = sl[k].first.volume();
+    s.balls = static_cast<std::size_t>(count[k]);
+    s.sxx = sig[3 * k] / V;
+    s.syy = sig[3 * k + 1] / V;
+    s.szz = sig[3 * k + 2] / V;
+    out.push_back(s);
+  }
+  return out;
+}
+
+double place_footing_at_first_contact(DistDem& d, FootingParams f) {
+  double z = footing_contact_height(d.world(), f);
+  MPI_Allreduce(MPI_IN_PLACE, &z, 1, MPI_DOUBLE, MPI_MAX, d.comm());
+  set_footing_at(d.world(), f, z);
+  return z;
 }
 
 // ------------------------------------------------------------------------------------------

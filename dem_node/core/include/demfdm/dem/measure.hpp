@@ -41,6 +41,19 @@ struct Region {
 /// (1 − n_V)/Σ V_p = 1/V): σ = (1/V) Σ_p Σ_c (x_c − x_p) ⊗ F^{c→p}, symmetrised.
 /// Includes ball–wall contacts of those balls.
 Mat3 region_stress(const World& w, const Region& r);
+/// Its terms of ball–ball contact c with force F (on B; zero: no term): the force -F on A acts at
+/// `arm_a` from A's centre, F on B at `arm_b` from B's, the contact point halfway across the gap.
+inline void pair_stress_arms(const World& w, std::size_t c, Vec3& arm_a, Vec3& arm_b) {
+  const auto& pt = w.balls();
+  const auto& pc = w.pair_contacts();
+  const std::uint32_t a = pc.a[c], b = pc.b[c];
+  const Vec3 d = w.branch(c);
+  const double dist = norm(d);
+  const Vec3 n = d * (1.0 / dist);
+  const double gap = dist - pt.r[a] - pt.r[b];
+  arm_a = (pt.r[a] + 0.5 * gap) * n;
+  arm_b = -(pt.r[b] + 0.5 * gap) * n;
+}
 
 /// Porosity of a region: 1 − Σ V_p(centre inside)/V (the periodic cell: exact solid volume).
 double porosity(const World& w, const Region& r);

@@ -6,9 +6,11 @@
 #include <cmath>
 #include <cstddef>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "demfdm/dem/guard.hpp"
+#include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/specimen.hpp"
 #include "demfdm/dem/world.hpp"
 #include "demfdm/io/state_file.hpp"
@@ -87,6 +89,9 @@ struct ProfileBox {
   double z_top = 0, height = 0;                   // [m] top of the block, its height
 };
 std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, int slabs);
+/// Its slabs, top first: each one's region and depths (stress and count left 0). Throws
+/// std::invalid_argument when slabs < 1.
+std::vector<std::pair<Region, ProfileSlab>> profile_slabs(const ProfileBox& box, int slabs);
 
 /// DEM-only box (scene dem.specimen.box = "walls"): five planar walls (family ball_wall) on the
 /// bottom and the four sides of the balls' bounding box, each touching the outermost ball surfaces
@@ -101,6 +106,13 @@ std::pair<Vec3, Vec3> add_box_walls(World& w);
 /// z + sqrt(r^2 - (rho - r_f)^2)), at rest. Returns the bottom height [m]. Throws
 /// std::runtime_error when no ball lies under the footprint (the footing would never touch).
 double place_footing_at_first_contact(World& w, FootingParams f);
+/// Its height of first contact over `w`'s balls (on a rank's part, its own: not the ghosts):
+/// -infinity when none lies under the footprint (the maximum of the parts' heights is the
+/// whole's).
+double footing_contact_height(const World& w, const FootingParams& f);
+/// The footing `f` at rest with its bottom at `z` (a height of first contact), set on `w`; the
+/// error of place_footing_at_first_contact when z is not finite.
+void set_footing_at(World& w, FootingParams f, double z);
 
 /// Power of the moving boundaries on the balls [W]: the footing and the facet walls (the force of
 /// a wall on the balls is minus the balls' force on it), from the last force pass.
@@ -132,6 +144,9 @@ struct StageEnergy {
   double work = 0.0;              // [J] boundary work since begin()
   std::vector<Vec3> x_begin;      // [m] ball positions at begin() (gravity's work)
   void begin(const World& w);
+  /// begin() from the energy `e0` of the state (x_begin left to the caller: the DEM on ranks
+  /// keeps the positions on the ranks, DistDem::owned_positions).
+  void begin_with(const Energy& e0);
   void add_work(const World& w, std::int64_t steps) {
     work += boundary_power(w) * w.dt() * static_cast<double>(steps);
   }
@@ -140,6 +155,8 @@ struct StageEnergy {
     double error;  // (change of the total energy - work) / the largest energy flow of the stage
   };
   Balance balance(const World& w) const;
+  /// balance() from the energy `e` of the state and gravity's work since begin().
+  Balance balance_with(const Energy& e, double gravity_work) const;
   /// Checkpoint (docs/checkpoint-format.md, section dem_node): total_begin, mechanical_begin,
   /// work (f64), then x_begin (u64 count, x y z f64 each). load() reads what save() wrote.
   void save(io::StateWriter& w) const;

@@ -457,6 +457,9 @@ class World {
                    const ContactHist& h, const BondHist* bond);
 
   // ---- measurements ----
+  /// Kinetic and strain energy and the energy dissipated so far. With ghost rows (a rank's part)
+  /// the contacts' terms are those of the contacts whose ball (a pair's ball A) it owns; the
+  /// kinetic energy is every row's (DistDem::energy sums the owned balls').
   Energy energy() const;
   /// Translational + rotational kinetic energy [J]: O(balls), no contact loop.
   double kinetic_energy() const;

@@ -374,6 +374,24 @@ class DistDem {
   /// each rank counts the pairs whose ball A it owns; integer sums (collective).
   BondCounts bond_counts() const;
   std::int64_t bond_failures() const;
+  /// World::energy of one World over the ranks: the kinetic energy with one World's bits
+  /// (kinetic_energy); the contacts' terms (each rank's: those of its balls, of the pairs whose
+  /// ball A it owns) and the energies dissipated so far added in rank order, so that their last
+  /// bits depend on the rank count (docs/scaling.md). Collective.
+  Energy energy() const;
+  /// A ball's id and position (the positions at a stage's begin, StageEnergy).
+  struct IdPos {
+    std::uint64_t id;
+    Vec3 x;
+  };
+  /// The owned balls' records, in id order.
+  std::vector<IdPos> owned_positions() const;
+  /// procedures.hpp's gravity_work of one World since the positions `begin` (records on any
+  /// ranks, each ball's once; a ball without one adds nothing): each ball's term m g·(x - x_begin)
+  /// is formed on rank (id mod ranks), where its record and its begin record meet, and added
+  /// there in id order, the ranks' sums in rank order (the last bits depend on the rank count).
+  /// 0 without gravity. Collective.
+  double gravity_work(const std::vector<IdPos>& begin) const;
 
   /// Every ball's state on rank 0 in id order (the other ranks get empty arrays). Collective.
   struct Balls {
@@ -406,7 +424,9 @@ class DistDem {
   /// order-free sum instead (no keys, no gather). `also_max[0..n_max)`: replaced by their maxima
   /// over the ranks, in the same collective (a NaN anywhere: NaN). Collective; contact terms need
   /// a loaded World (its rebuild count keys their merge order).
-  enum { kBallTerms = 0, kContactTerms = 1, kServoTerms = 2 };
+  /// (kOnceTerms: terms whose keys change from call to call, e.g. a stress profile's, whose
+  /// merge order is formed at every call)
+  enum { kBallTerms = 0, kContactTerms = 1, kServoTerms = 2, kOnceTerms = 3 };
   static constexpr int kMaxColumns = 3;
   using KeyFill = std::function<void(std::vector<World::ContactTerm>&)>;
   void ordered_sums(std::size_t n, const double* vals, int K, const KeyFill& keys, int which, bool positive,
@@ -563,6 +583,16 @@ StageReport depth_scale(DistDem& d, const DepthScaleParams& p);
 /// band means need every ball-ball contact's record on every rank (kMeanContact; transient).
 /// Collective.
 std::size_t bond_ball_facet(DistDem& d, double hi);
+
+/// procedures.hpp's stress_profile of one World, the same bits: each slab's terms (region_stress's
+/// per ball in the slab and contact, of the pairs whose ball A a rank owns and of its balls' wall
+/// contacts) folded on rank 0 in one World's contact order (ordered_fold); every rank gets the
+/// profile. Collective.
+std::vector<ProfileSlab> stress_profile(const DistDem& d, const ProfileBox& box, int slabs);
+/// procedures.hpp's place_footing_at_first_contact on the ranks: the largest height of first
+/// contact of the ranks' balls (a maximum: one World's); the footing set on every rank's part.
+/// Collective.
+double place_footing_at_first_contact(DistDem& d, FootingParams f);
 StageReport assign_interface_bond_forces(DistDem& d, const InterfaceBondParams& p);
 /// servo_specimen (procedures.hpp) on the ranks, the same way (the REV's servo stage of the DEM
 /// node on ranks).
