@@ -163,7 +163,7 @@ class DemParticipant : public node::Participant {
   void begin_model_time(const schema::Stage& st) {
     const auto at = std::find(stage_prefixes_.begin(), stage_prefixes_.end(), st.view.prefix());
     const auto index = static_cast<std::size_t>(at - stage_prefixes_.begin());
-    if (!clock_.stage_begins(index, world_.time())) return;
+    if (!clock_.stage_begins(index, live().time())) return;
     const auto times = clock_.take_pending_times();
     spdlog::info("dem: model time 0 at stage '{}' (DEM time {} s); {} earlier frames get their model times (<= 0)", st.name,
                  clock_.origin(), times.size());
@@ -187,23 +187,29 @@ class DemParticipant : public node::Participant {
     write_history_row();  // (none is due between grants; the checkpoint counts the rows written)
     sync_full();
     if (g_ranks.rank == 0) dem::save_state_file(world_, dir / "dem.world.state", meta);
+    // A balance begun on the ranks: its positions in the checkpoint's form (rank 0's World's rows,
+    // in id order as the assembled World's)
+    if (ranked_energy_) energy_.x_begin = positions_on_root();
     w.begin("dem_node");
     for (double v : {block_.origin.x, block_.origin.y, block_.origin.z, block_.cell.x, block_.cell.y, block_.cell.z}) w.f64(v);
     for (int n : {block_.nx, block_.ny, block_.nz}) w.i32(n);
     adapter_fields([&](auto&... v) { io::save_fields(w, v...); });
     energy_.save(w);
     energy_jump_.save(w);
+    if (ranked_energy_) energy_.x_begin.clear();
     // specimen_stages.csv bytes, then the result writers and the frames' model time.
     w.u64(stages_ ? stages_->bytes() : 0);
     node::OutputCheckpoint{outputs_open_, out_ ? out_->h5().frame_count() : 0, history_ ? history_->bytes() : 0,
                            history_ ? history_->rows() : 0}
         .save(w, clock_.state());
     w.end();
+    if (dist_live_) drop_world();  // (the ranks hold the state again)
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
     history_due_ = -1;
     // A ranked run loads the whole World on rank 0; its next step cuts it into bricks again.
     dist_live_ = false;
+    dist_.reset();
     if (!part_only()) dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
     // The thread count is the scene's (a branch may change it; a resume has the same).
     world_.mutable_params().threads = dem_threads(s_);
@@ -225,6 +231,15 @@ class DemParticipant : public node::Participant {
     adapter_fields([&](auto&... v) { io::load_fields(sec, v...); });
     energy_.load(sec);
     energy_jump_.load(sec);
+    // On ranks the balance goes on from the parts (they are cut at the next step): its positions
+    // as records of rank 0's balls, which the ranks' gravity_work finds wherever they are.
+    ranked_energy_ = g_ranks.size > 1 && !energy_pending_;
+    x_begin_.clear();
+    if (ranked_energy_ && !part_only()) {
+      const auto& ids = world_.balls().id;
+      for (std::size_t i = 0; i < ids.size() && i < energy_.x_begin.size(); ++i) x_begin_.push_back({ids[i], energy_.x_begin[i]});
+      energy_.x_begin.clear();
+    }
     const auto stages_bytes = sec.u64();
     io::ModelClock::State c;
     const auto o = node::OutputCheckpoint::load(sec, c);
@@ -272,7 +287,9 @@ class DemParticipant : public node::Participant {
     return safe_dt_;
   }
   std::array<std::int64_t, 3> safe_dt_key() const {
-    return {live().step_count(), live().rebuild_count(), static_cast<std::int64_t>(world_.num_balls())};
+    // (the same on every rank while the ranks step, where the step is a collective: not rank 0's
+    // World's count, which a checkpoint fills and empties again)
+    return {live().step_count(), live().rebuild_count(), dist_live_ ? -1 : static_cast<std::int64_t>(world_.num_balls())};
   }
   // Upper bound of the critical step of 1.8 [s] for a packing of the scene's PSD (upscaled) that
   // holds a ball of the smallest size (dem::largest_critical_step).
@@ -286,7 +303,10 @@ class DemParticipant : public node::Participant {
   double time() const override { return live().time(); }
 
   proto::Values stage_begin(const schema::Stage& st, std::int64_t) override {
-    leave_dist();  // the set-up acts on the whole World
+    // On ranks the parts carry the state into the stage when its set-up runs on them (they stay
+    // live from the replicate stage to the run's end); else the set-up acts on the whole World.
+    const bool carry = ranks_carry(st);
+    if (!carry) leave_dist();
     // The stage's flags: the scene's, on every rank.
     stage_ratio_ = st.view.real("ratio");
     coupled_stage_ = st.coupled;
@@ -296,7 +316,8 @@ class DemParticipant : public node::Participant {
     penetrating_ = st.kind == schema::Action::kPenetrate;
     if (penetrating_) target_disp_ = st.view.real("depth_ratio") * s_.real("dem.footing.diameter");
     energy_pending_ = true;  // the stage's energy balance starts at its first step
-    if (part_only()) {
+    stage_params(world_, st);
+    if (part_only() && !carry) {
       // Rank 0 sets the stage up on the whole World and sends this rank its part at the first
       // step of a stage on the ranks (enter_dist); the REV's expansion and servo step on every
       // rank, the block is replicated on every rank, and the coupled set-up runs on the ranks
@@ -306,32 +327,34 @@ class DemParticipant : public node::Participant {
       if (st.kind == schema::Action::kGenerate) generate();
       if (st.kind == schema::Action::kServo) servo_on_ranks();
       if (st.kind == schema::Action::kReplicate) replicate_on_ranks();
+      if (dist_live_) dist_->prepare();  // (the replicated block, as rank 0 below)
       return {};
     }
-    open_outputs();
-    begin_model_time(st);
+    if (!part_only()) {
+      open_outputs();
+      begin_model_time(st);
+    }
     effect_s_.clear();
     world_.reset_phase_times();
-    // The node measures the mean contact force after every step (step_values): the pass keeps
-    // the contacts' force norms for it (the same bits as reading the histories again); not in
-    // specimen preparation, whose procedures measure seldom.
-    world_.keep_force_norms(!preparing_);
-    {  // Step factor and local damping of this stage (docs/theory.md 1.3, 4.11). Specimen
-       // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
-       // dem.damping and dem.dt_fixed change nothing before the first later stage.
-      auto& wp = world_.mutable_params();
-      const auto alpha = st.view.real_or_word("damping");
-      wp.dt_safety = s_.real(preparing_ ? "dem.specimen.dt_safety" : "dem.dt_safety");
-      wp.local_damping = alpha ? *alpha : s_.real(preparing_ ? "dem.specimen.damping" : "dem.damping");
-      if (preparing_) wp.dt_fixed = 0.0;
-      safe_dt_key_ = {-1, -1, -1};  // the cached critical step holds the previous factor
+    if (carry) {  // the stage's phases and communication from here on
+      dist_->world().reset_phase_times();
+      dist_->reset_times();
+      stage_params(dist_->world(), st);
     }
     if (!preparing_) check_dt_fixed(st);
-    if (!preparing_ && gravity_level_ > 0 && !world_.gravity_on()) {
-      auto r = dem::set_gravity(world_, true, gravity_level_ * s_.real("gravity.g0") / world_.params().g0);
-      spdlog::info("dem: {}", r.what);
+    if (!preparing_ && gravity_level_ > 0 && !live().gravity_on()) {
+      const double level = gravity_level_ * s_.real("gravity.g0") / world_.params().g0;
+      if (carry) {
+        world_.set_gravity(true, level);  // (rank 0's World, assembled from the parts at a checkpoint)
+        dist_->world().set_gravity(true, level);
+        spdlog::info("dem: gravity on at {} g, on the ranks' parts", level);
+      } else {
+        auto r = dem::set_gravity(world_, true, level);
+        spdlog::info("dem: {}", r.what);
+      }
     }
-    if (!preparing_ && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
+    // (rank 0's: ranks_carry waits for them)
+    if (!carry && !preparing_ && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
     proto::Values v;
     switch (st.kind) {
       case schema::Action::kGenerate: v = report(generate()); break;
@@ -353,12 +376,49 @@ class DemParticipant : public node::Participant {
       case schema::Action::kGeostatic:  // the table says the DEM does not act in it (refused at --check)
         throw std::invalid_argument("dem_node does not act in stage action '" + st.action + "'");
     }
-    if (!preparing_ && !kick_.empty() && !kicked_) kick();
-    world_.prepare();
-    if (user_dt_ > 0 && !preparing_ && world_.num_balls() > 0)
-      check_dt_fixed("end of the set-up of stage '" + st.name + "'");
-    return v;
+    if (!carry && !preparing_ && !kick_.empty() && !kicked_) kick();
+    if (dist_live_) {
+      dist_->prepare();
+    } else {
+      world_.prepare();
+    }
+    if (user_dt_ > 0 && !preparing_ && num_balls() > 0) check_dt_fixed("end of the set-up of stage '" + st.name + "'");
+    return part_only() ? proto::Values{} : v;
   }
+  // Whether the ranks' parts, live since an earlier stage, carry the state into stage `st`: its
+  // set-up runs on them (gravity, the footing, the interface; not a specimen procedure of rank
+  // 0's World, the DEM-only box or the kick). Rank 0 decides (it knows what its World still
+  // needs); every rank calls it.
+  bool ranks_carry(const schema::Stage& st) {
+    if (!dist_live_) return false;
+    int carry = 0;
+    if (!part_only()) {
+      const bool kind = st.kind == schema::Action::kCouple || st.kind == schema::Action::kPenetrate ||
+                        st.kind == schema::Action::kCycle || st.kind == schema::Action::kEquilibrium;
+      const bool box = !box_done_ && s_.string("dem.specimen.box") == "walls";
+      const bool kick = !kick_.empty() && !kicked_;
+      carry = kind && !box && !kick ? 1 : 0;
+    }
+    MPI_Bcast(&carry, 1, MPI_INT, 0, g_ranks.comm);
+    return carry != 0;
+  }
+  // The stage's step factor and local damping (docs/theory.md 1.3, 4.11) on `w`. Specimen
+  // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
+  // dem.damping and dem.dt_fixed change nothing before the first later stage. The node measures
+  // the mean contact force after every step (step_values): the pass keeps the contacts' force
+  // norms for it (the same bits as reading the histories again); not in specimen preparation,
+  // whose procedures measure seldom.
+  void stage_params(dem::World& w, const schema::Stage& st) {
+    auto& wp = w.mutable_params();
+    const auto alpha = st.view.real_or_word("damping");
+    wp.dt_safety = s_.real(preparing_ ? "dem.specimen.dt_safety" : "dem.dt_safety");
+    wp.local_damping = alpha ? *alpha : s_.real(preparing_ ? "dem.specimen.damping" : "dem.damping");
+    if (preparing_) wp.dt_fixed = 0.0;
+    w.keep_force_norms(!preparing_);
+    safe_dt_key_ = {-1, -1, -1};  // the cached critical step holds the previous factor
+  }
+  // The balls of the current state (on ranks while they step: a sum over the ranks, collective).
+  std::size_t num_balls() const { return dist_live_ ? dist_->num_balls() : world_.num_balls(); }
 
   // Blow-up guard (docs/stability.md): non-finite ball state, a ball out of the domain, a
   // kinetic-energy jump.
@@ -432,7 +492,7 @@ class DemParticipant : public node::Participant {
       return;
     }
     early_step_ = -1;
-    if (part_only() && is_generation(st)) return;  // rank 0 steps the whole World
+    if (part_only() && is_generation(st) && !dist_live_) return;  // rank 0 steps the whole World
     begin_step(st, values, dt);
     dem::World& w = live();
     const double node_before = w.time();
@@ -446,16 +506,22 @@ class DemParticipant : public node::Participant {
 
   // What a coupling step does before its DEM steps.
   void begin_step(const schema::Stage& st, const std::vector<double>& values, double dt) {
-    if (!part_only() && world_.num_balls() == 0)
+    if (!dist_live_ && !part_only() && world_.num_balls() == 0)
       throw std::runtime_error("no particles: the scene's stages generate none before cycling");
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     if (energy_pending_) {
       // Energy balance of the stage (docs/stability.md) from the state before its first step,
-      // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN;
-      // on ranks on the ranks' parts, assembled on rank 0 for it), kept by rank 0.
+      // after every set-up (interface bonds and depth scaling are installed after STAGE_BEGIN),
+      // kept by rank 0. While the ranks step, from their parts: each keeps its balls' positions
+      // (DistDem::owned_positions, for gravity's work).
       energy_pending_ = false;
-      sync_full();
-      if (!part_only()) energy_.begin(world_);
+      ranked_energy_ = dist_live_;
+      if (ranked_energy_) {
+        energy_.begin_with(dist_->energy());
+        x_begin_ = dist_->owned_positions();
+      } else if (!part_only()) {
+        energy_.begin(world_);
+      }
     }
     enter_dist();
     dem::World& w = live();
@@ -543,7 +609,14 @@ class DemParticipant : public node::Participant {
   proto::Values stage_end(const schema::Stage& st, std::int64_t last) override {
     write_history_row();
     if (outputs_) write_frame(last);  // (on ranks: from the ranks' parts)
-    leave_dist();  // the whole World again, on rank 0
+    // On ranks that stay live the report comes from the parts (every rank takes part in its
+    // collectives); else from the whole World, on rank 0.
+    const bool ranked = dist_live_;
+    if (ranked) {
+      account_ranks();
+    } else {
+      leave_dist();  // (nothing steps on the ranks)
+    }
     // On the ranks: the largest peak memory of the ranks other than 0 (rank 0's is the node's,
     // "peak_rss_mb"), for the summary.
     double others = 0.0;
@@ -551,35 +624,58 @@ class DemParticipant : public node::Participant {
       const double mine = part_only() ? node::process_peak_rss_mb() : 0.0;
       MPI_Reduce(&mine, &others, 1, MPI_DOUBLE, MPI_MAX, 0, g_ranks.comm);
     }
+    if (part_only() && !ranked) return {};
+    const dem::World& w = live();
+    if (outputs_ && s_.has("dem.output") && w.gravity_on() && !is_generation(st)) write_profile(st);
+    const std::size_t balls = num_balls();
+    const double crit = balls > 0 ? critical_dt() : 0.0;
+    double ratio = 0.0;
+    dem::Coordination coord;
+    dem::BondCounts bonds;
+    if (ranked) {  // measure()'s values, one World's bits (tests/dist)
+      ratio = balls > 0 ? dist_->unbalanced_ratio(dist_->mean_contact_force()) : 0.0;
+      coord = dist_->coordination();
+      bonds = dist_->bond_counts();
+    } else {
+      const auto m = dem::measure(world_);
+      ratio = m.ratio, coord = m.coord, bonds = m.bonds;
+    }
+    std::optional<dem::StageEnergy::Balance> b;
+    if (!is_generation(st) && !energy_pending_) b = energy_balance();
     if (part_only()) return {};
-    if (out_ && world_.gravity_on() && !is_generation(st)) write_profile(st);
-    const double crit = world_.num_balls() > 0 ? critical_dt() : 0.0;
-    auto m = dem::measure(world_);
-    proto::Values v{{"balls", static_cast<double>(world_.num_balls())},
-                    {"ratio", m.ratio},
-                    {"coordination", m.coord.z},
-                    {"bonds_intact", static_cast<double>(m.bonds.intact)},
-                    {"bonds_softening", static_cast<double>(m.bonds.softening)},
-                    {"bonds_broken_tension", static_cast<double>(m.bonds.broken_tension)},
-                    {"bonds_broken_shear", static_cast<double>(m.bonds.broken_shear)}};
-    if (world_.num_facet_walls() > 0) v.push_back({"facet_fz_N", world_.facet_walls_total_force().z});
-    v.push_back({"dt_s", world_.dt()});
+    proto::Values v{{"balls", static_cast<double>(balls)},
+                    {"ratio", ratio},
+                    {"coordination", coord.z},
+                    {"bonds_intact", static_cast<double>(bonds.intact)},
+                    {"bonds_softening", static_cast<double>(bonds.softening)},
+                    {"bonds_broken_tension", static_cast<double>(bonds.broken_tension)},
+                    {"bonds_broken_shear", static_cast<double>(bonds.broken_shear)}};
+    if (w.num_facet_walls() > 0) v.push_back({"facet_fz_N", w.facet_walls_total_force().z});
+    v.push_back({"dt_s", w.dt()});
     v.push_back({"dt_critical_s", crit});
-    if (!is_generation(st) && !energy_pending_) {
-      const auto b = energy_.balance(world_);
-      v.push_back({"energy_kinetic_J", b.kinetic});
-      v.push_back({"energy_strain_J", b.strain});
-      v.push_back({"energy_dissipated_J", b.dissipated});
-      v.push_back({"energy_work_J", b.work});
-      v.push_back({"energy_balance_error", b.error});
+    if (b) {
+      v.push_back({"energy_kinetic_J", b->kinetic});
+      v.push_back({"energy_strain_J", b->strain});
+      v.push_back({"energy_dissipated_J", b->dissipated});
+      v.push_back({"energy_work_J", b->work});
+      v.push_back({"energy_balance_error", b->error});
     }
     add_phase_times();
     for (auto& [name, sec] : effect_s_) v.push_back({"effect_s." + name, sec});
     if (g_ranks.size > 1) v.push_back({"peak_rss_mb_other_ranks", others});
-    spdlog::info("dem: stage '{}' ends: {} balls, ratio {:.3e}, Z {:.3f}, bonds intact {} softening {} broken T {} S {}",
-                 st.name, world_.num_balls(), m.ratio, m.coord.z, m.bonds.intact, m.bonds.softening,
-                 m.bonds.broken_tension, m.bonds.broken_shear);
+    spdlog::info("dem: stage '{}' ends: {} balls, ratio {:.3e}, Z {:.3f}, bonds intact {} softening {} broken T {} S {}{}",
+                 st.name, balls, ratio, coord.z, bonds.intact, bonds.softening, bonds.broken_tension,
+                 bonds.broken_shear, ranked ? " (the ranks stay live)" : "");
     return v;
+  }
+  // The stage's energy balance (docs/stability.md) now: from the ranks' parts when it began there,
+  // else from the whole World (assembled on rank 0 for it while the ranks step). Every rank calls
+  // it while they step; rank 0's value counts.
+  dem::StageEnergy::Balance energy_balance() {
+    if (ranked_energy_ && dist_live_) return energy_.balance_with(dist_->energy(), dist_->gravity_work(x_begin_));
+    sync_full();
+    if (part_only()) return {};
+    return energy_.balance(world_);
   }
   void finish() override {
     // A row still due (a run stopped between the step and its report, e.g. by the guard); not
@@ -591,7 +687,6 @@ class DemParticipant : public node::Participant {
 
   // Coupling (DEM role).
   void set_interface_mesh(const proto::InterfaceMesh& m) override {
-    leave_dist();
     ratio_valid_ = skeleton_valid_ = fc_valid_ = ke_valid_ = false;
     interface_setup(m);  // (on ranks: every rank)
   }
@@ -603,8 +698,12 @@ class DemParticipant : public node::Participant {
   // one World's bits, and rank 0's World is assembled again at the stage's end.
   void interface_setup(const proto::InterfaceMesh& m) {
     const bool ranked = g_ranks.size > 1;
+    // (rank 0's World gets the wall too while the ranks step: it is assembled from the parts at a
+    // checkpoint, and the parts' walls are copied into it)
     if (!part_only()) wall_ = world_.add_facet_wall(m.positions, m.triangles);
     if (ranked) MPI_Bcast(&wall_, 1, MPI_INT, 0, g_ranks.comm);
+    if (dist_live_ && dist_->world().add_facet_wall(m.positions, m.triangles) != wall_)
+      throw std::logic_error("dem: the interface wall's index differs between rank 0's World and the ranks' parts");
     n_iface_ = m.n_points();
     spdlog::info("dem: interface wall of {} points, {} triangles", m.n_points(), m.triangles.size() / 3);
     if (!coupling_setup_pending_) return;
@@ -674,28 +773,70 @@ class DemParticipant : public node::Participant {
     const dem::BrickGrid g = c[0] != 0.0 ? block_grid({c[1], c[2], c[3]}, {c[4], c[5], c[6]}, true)
                                          : block_grid(block_.origin, {block_.width_x(), block_.width_y(), block_.height()}, false);
     dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
-    dist_->set_newton(s_.boolean("dem.newton"));
-    // (auto: measured time, but contacts with newton on, whose results follow the cuts)
-    const std::string weight = s_.string("dem.balance_weight");
-    const bool by_time = weight == "time" || (weight == "auto" && !s_.boolean("dem.newton"));
-    const std::vector<std::int64_t> k = s_.integers("dem.balance_costs");  // (six, checked by the schema)
-    dist_->set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
-                        by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts,
-                        dem::ContactCost{k[0], k[1], k[2], k[3], k[4], k[5]}});
+    configure_dist(*dist_);
     {
       node::Timed t(effect_s_["ranks.load"]);
       dist_->load_from_root(world_);  // the other ranks hold only their part
     }
+    went_live("cut into");
+  }
+  // The scene's options of the ranks' steps (dem.newton, dem.balance_every), before a load.
+  void configure_dist(dem::DistDem& d) const {
+    d.set_newton(s_.boolean("dem.newton"));
+    // (auto: measured time, but contacts with newton on, whose results follow the cuts)
+    const std::string weight = s_.string("dem.balance_weight");
+    const bool by_time = weight == "time" || (weight == "auto" && !s_.boolean("dem.newton"));
+    const std::vector<std::int64_t> k = s_.integers("dem.balance_costs");  // (six, checked by the schema)
+    d.set_balance({static_cast<int>(s_.integer("dem.balance_every")), 2048,
+                   by_time ? dem::DistDem::Weight::kTime : dem::DistDem::Weight::kContacts,
+                   dem::ContactCost{k[0], k[1], k[2], k[3], k[4], k[5]}});
+  }
+  // The ranks' DistDem `dist_` holds the state from here on, and rank 0 drops its World's balls
+  // (the state is the ranks'; a checkpoint or a stage that needs the whole World assembles it
+  // again, sync_full).
+  void went_live(const char* how) {
+    drop_world();
+    const dem::BrickGrid& g = dist_->grid();
     // The pass keeps its force norms for the measurements' mean contact force, as world_ does
     // (the same bits as the scan's, tests/dem/contact_scan_test.cpp).
-    dist_->world().keep_force_norms(true);
+    dist_->world().keep_force_norms(!preparing_);
     // (the cuts as the load left them: balanced by contacts when dem.balance_every > 0)
-    spdlog::info("dem: the block cut into {} bricks ({}){}{}", g_ranks.size,
+    spdlog::info("dem: the block {} {} bricks ({}){}{}", how, g_ranks.size,
                  g.parts > 0 ? "recursive coordinate bisection" : "slabs", describe_cuts(dist_->grid()),
                  s_.boolean("dem.newton") ? "; newton on: each pair across two bricks computed once" : "");
     dist_live_ = true;
     synced_ = false;
     safe_dt_key_ = {-1, -1, -1};
+  }
+  // The stage's begin positions of the balls of rank 0's assembled World (after sync_full), in its
+  // row order, from the ranks' records; empty on the other ranks. Collective.
+  std::vector<dem::Vec3> positions_on_root() {
+    std::vector<dem::DistDem::IdPos> all = dem::gather_on_root(g_ranks.comm, x_begin_);
+    std::vector<dem::Vec3> out;
+    if (part_only()) return out;
+    std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
+    const auto& ids = world_.balls().id;
+    out.assign(ids.size(), dem::Vec3{0.0, 0.0, 0.0});
+    for (std::size_t i = 0; i < ids.size(); ++i) {
+      const auto it = std::lower_bound(all.begin(), all.end(), ids[i], [](const auto& a, std::uint64_t id) { return a.id < id; });
+      if (it == all.end() || it->id != ids[i]) throw std::logic_error("dem: a ball's position at the stage's begin is missing");
+      out[i] = it->x;
+    }
+    return out;
+  }
+  // Rank 0's World without its balls and contacts (its walls, effects and counters kept): the
+  // memory of the whole block is the ranks', not rank 0's, while they step.
+  void drop_world() {
+    synced_ = false;  // (on every rank: sync_full is a collective)
+    if (part_only() || world_.num_balls() == 0) return;
+    dem::Particles none;
+    dem::PairContacts no_pairs;
+    std::array<dem::WallContacts, 3> no_walls;
+    for (auto& wc : no_walls) wc.cand_off.push_back(0);
+    std::vector<std::uint8_t> no_ghosts;
+    const auto counters = world_.counters();
+    world_.swap_balls(none, no_pairs, no_walls, no_ghosts);
+    world_.set_counters(counters);
   }
   // The bricks of a block [lo, lo + len) on the ranks (dem.decomposition: RCB, or slabs across
   // its longest axis).
@@ -733,6 +874,14 @@ class DemParticipant : public node::Participant {
   void leave_dist() {
     if (!dist_live_) return;
     sync_full();
+    account_ranks();
+    dist_live_ = false;
+    dist_.reset();
+    safe_dt_key_ = {-1, -1, -1};
+  }
+  // The stage's rebalances, the ranks' communication as effects and the phases of this rank's
+  // part (at a stage's end, whether the ranks stay live or not).
+  void account_ranks() {
     if (dist_->rebalances() > 0)
       spdlog::info("dem: {} rebalances of the ranks' cuts in the stage ({} exchanges){}", dist_->rebalances(),
                    dist_->exchanges(), describe_cuts(dist_->grid()));
@@ -744,9 +893,6 @@ class DemParticipant : public node::Participant {
     if (dist_->newton()) effect_s_["ranks.reverse"] += t.reverse;
     ranked_phases_ = dist_->world().phase_times();
     has_ranked_phases_ = true;
-    dist_live_ = false;
-    dist_.reset();
-    safe_dt_key_ = {-1, -1, -1};
   }
 
   dem::WorldParams world_params() {
@@ -759,8 +905,12 @@ class DemParticipant : public node::Participant {
   // dem.dt_fixed above the critical step (1.8, without dt_safety): refused, or reduced to
   // dt_safety x critical when dem.dt_above_critical = "reduce".
   void check_dt_fixed(const schema::Stage& st) {
-    if (user_dt_ <= 0 || world_.num_balls() == 0) return;
-    world_.prepare();  // contacts of the current state
+    if (user_dt_ <= 0 || num_balls() == 0) return;
+    if (dist_live_) {  // contacts of the current state
+      dist_->prepare();
+    } else {
+      world_.prepare();
+    }
     check_dt_fixed("begin of stage '" + st.name + "'");
   }
   void check_dt_fixed(const std::string& when) {
@@ -792,9 +942,9 @@ class DemParticipant : public node::Participant {
     effect_s_[std::string("contacts.ball_ball.") + t.pair_model] = t.pair;
     effect_s_["motion_damping"] = t.motion;
     effect_s_["gather"] = t.gather;
-    if (world_.num_planes() > 0) effect_s_["walls"] = t.plane;
-    if (world_.num_facet_walls() > 0) effect_s_["facets"] = t.facet;
-    if (world_.has_footing() || t.footing > 0) effect_s_["footing"] = t.footing;
+    if (live().num_planes() > 0) effect_s_["walls"] = t.plane;
+    if (live().num_facet_walls() > 0) effect_s_["facets"] = t.facet;
+    if (live().has_footing() || t.footing > 0) effect_s_["footing"] = t.footing;
     for (auto& [name, sec] : t.effect) effect_s_[name] = sec;
   }
 
@@ -905,23 +1055,33 @@ class DemParticipant : public node::Participant {
   // the block (dem::replicate on a DistDem, one World's bits), cut as the later stages cut the
   // block; the block is then assembled on rank 0, which sets the next stages up. Every rank calls
   // it; the report is rank 0's.
+  // The ranks' DistDem of the block stays live from here on (dist_): its steps, the later stages'
+  // set-ups and their reports run on the parts (ranks_carry); rank 0 keeps no ball.
   dem::StageReport replicate_on_ranks() {
     double c[6] = {world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
                    world_.cell_length().x, world_.cell_length().y, world_.cell_length().z};
     MPI_Bcast(c, 6, MPI_DOUBLE, 0, g_ranks.comm);
     const dem::ReplicateParams p = replication();
-    dem::DistDem d(g_ranks.comm, world_.params(),
-                   block_grid({c[0], c[1], c[2]}, {p.nx * c[3], p.ny * c[4], p.nz * c[5]}, false));
+    auto d = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(),
+                                            block_grid({c[0], c[1], c[2]}, {p.nx * c[3], p.ny * c[4], p.nz * c[5]}, false));
+    // (dem.newton: the replication lists its pairs as newton off does; the block is assembled on
+    // rank 0 and cut again at the first later step, enter_dist)
+    const bool newton = s_.boolean("dem.newton");
+    if (!newton) configure_dist(*d);
     dem::StageReport r;
     {
       node::Timed t(effect_s_["ranks.load"]);
-      r = dem::replicate(d, world_, p);
+      r = dem::replicate(*d, world_, p);
     }
-    {
+    if (newton) {
       node::Timed t(effect_s_["ranks.unload"]);
-      d.unload(world_, true);
+      d->unload(world_, true);
+      return r;
     }
-    spdlog::info("dem: the block replicated on {} ranks, each its part", g_ranks.size);
+    dist_ = std::move(d);
+    rep_coord_ = dist_->coordination();  // (specimen_stages.csv's, rank 0's report)
+    rep_balls_ = dist_->num_balls();
+    went_live("replicated on");
     return r;
   }
 
@@ -930,8 +1090,8 @@ class DemParticipant : public node::Participant {
                  r.porosity, r.count, r.converged);
     if (!dir_.empty()) {
       if (!stages_) stages_.emplace(io::CsvSeries::create(dir_ / "specimen_stages.csv", stage_columns(), stage_format()));
-      const auto c = dem::coordination(world_);
-      stages_->append_cells({world_.num_balls(), r.steps, r.ratio, r.porosity, c.z, c.z_no_rattlers, r.stress[0],
+      const auto c = dist_live_ ? rep_coord_ : dem::coordination(world_);
+      stages_->append_cells({dist_live_ ? rep_balls_ : world_.num_balls(), r.steps, r.ratio, r.porosity, c.z, c.z_no_rattlers, r.stress[0],
                              r.stress[4], r.stress[8], r.converged ? 1 : 0, r.what});
     }
     // A preparation procedure that misses its criterion stops the run (docs/theory.md 4.11): the
@@ -946,7 +1106,13 @@ class DemParticipant : public node::Participant {
   proto::Values place_footing() {
     dem::FootingParams f = dem::scene::footing(s_, block_);
     const dem::Vec3 axis = f.bottom_centre;
-    const double best = dem::place_footing_at_first_contact(world_, f);
+    double best = 0.0;
+    if (dist_live_) {  // on the ranks' parts (a maximum over the ranks), and on rank 0's World
+      best = dem::place_footing_at_first_contact(*dist_, f);
+      dem::set_footing_at(world_, f, best);
+    } else {
+      best = dem::place_footing_at_first_contact(world_, f);
+    }
     footing_z0_ = best;
     spdlog::info("dem: footing D {} m at ({}, {}), bottom z {} m", f.diameter, axis.x, axis.y, best);
     return {{"footing_z0_m", best}};
@@ -1045,7 +1211,7 @@ class DemParticipant : public node::Participant {
 
   // Weight of the balls [N] under the current gravity (constant while no ball is added).
   double weight() {
-    if (weight_ < 0) weight_ = dem::ball_weight(world_);
+    if (weight_ < 0) weight_ = dist_live_ ? dist_->ball_weight() : dem::ball_weight(world_);  // (the same bits)
     return weight_;
   }
 
@@ -1058,11 +1224,8 @@ class DemParticipant : public node::Participant {
     const double d_max = s_.real("dem.specimen.d_max") * s_.real("dem.specimen.scale");
     const int n = std::max(4, static_cast<int>(std::lround(h / (1.5 * d_max))));
     const double lx = block_.width_x(), ly = block_.width_y();
-    const double g = std::abs(world_.gravity().z);
+    const double g = std::abs(live().gravity().z);
     const double rho_b = g > 0 ? weight() / g / (lx * ly * h) : 0.0;
-    auto csv = io::CsvSeries::create(dir_ / ("dem_profile_" + st.name + ".csv"),
-                                     {"depth_m", "depth_top_m", "depth_bottom_m", "szz_Pa", "sxx_Pa", "syy_Pa",
-                                      "balls_1", "selfweight_szz_Pa", "rho_b_kg_m3", "d_max_m"});
     dem::ProfileBox box;
     box.x_lo = block_.origin.x;
     box.y_lo = block_.origin.y;
@@ -1070,7 +1233,13 @@ class DemParticipant : public node::Participant {
     box.y_hi = block_.origin.y + ly;
     box.z_top = block_.z_top();
     box.height = h;
-    for (const auto& sl : dem::stress_profile(world_, box, n))
+    // (while the ranks step, from their parts, one World's bits: every rank calls this)
+    const auto profile = dist_live_ ? dem::stress_profile(*dist_, box, n) : dem::stress_profile(world_, box, n);
+    if (!out_) return;
+    auto csv = io::CsvSeries::create(dir_ / ("dem_profile_" + st.name + ".csv"),
+                                     {"depth_m", "depth_top_m", "depth_bottom_m", "szz_Pa", "sxx_Pa", "syy_Pa",
+                                      "balls_1", "selfweight_szz_Pa", "rho_b_kg_m3", "d_max_m"});
+    for (const auto& sl : profile)
       csv.append({sl.depth, sl.depth_top, sl.depth_bottom, sl.szz, sl.sxx, sl.syy, static_cast<double>(sl.balls),
                   -rho_b * g * sl.depth, rho_b, d_max});
     csv.close();
@@ -1193,6 +1362,12 @@ class DemParticipant : public node::Participant {
   // they step now, and whether world_ holds their current state.
   std::unique_ptr<dem::DistDem> dist_;
   bool dist_live_ = false, synced_ = false;
+  dem::Coordination rep_coord_;  // the replicated block's coordination and balls (its specimen_stages.csv row)
+  std::size_t rep_balls_ = 0;
+  // The stage's energy balance began on the ranks' parts: each rank keeps its balls' positions
+  // at the stage's begin (gravity's work), rank 0's StageEnergy the rest.
+  bool ranked_energy_ = false;
+  std::vector<dem::DistDem::IdPos> x_begin_;
   bool outputs_ = false;  // rank 0 writes results
   dem::PhaseTimes ranked_phases_;  // the phases of this rank's slab in the stage
   bool has_ranked_phases_ = false;

@@ -119,8 +119,13 @@ for name, ranks, threads, more in runs[1:]:
     m = re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.exchange=([0-9.e+-]+)", log)
     if not m:
         failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
-    if not re.search(r"stage 5 'penetrate' ends.*effect_s\.ranks\.load=([0-9.e+-]+)", log):
-        failures.append("%s: the node's log names no load of the parts from rank 0 in the penetration" % name)
+    # The ranks stay live from the replicate stage to the run's end (docs/scaling.md): no stage after
+    # it loads parts from rank 0 (a checkpoint alone assembles the World there).
+    for stage in ("4 'gravity'", "5 'penetrate'"):
+        if re.search(r"stage %s ends.*effect_s\.ranks\.load=" % stage, log):
+            failures.append("%s: stage %s loaded parts from rank 0" % (name, stage))
+    if "the block replicated on" not in log or "(the ranks stay live)" not in log:
+        failures.append("%s: the node's log does not say that the ranks stay live from the replication" % name)
     summary = open(os.path.join(d, "summary.txt")).read()
     pm = re.search(r"Peak memory \(resident set\):.* dem ([0-9]+) MB \(rank 0; its other ranks at most ([0-9]+) MB each\)",
                    summary)

@@ -880,6 +880,8 @@ void DistDem::load_from_root(const World& full) {
 // Only the copies near this brick are visited (their boxes, grown by the halo, meet the brick,
 // and those a pair away), so the work is this brick's share of the block, not the block.
 DistDem::Replicated DistDem::load_replicated(World& rev, const ReplicateParams& p) {
+  // (its pairs are listed as newton off lists them: on both ranks of a pair across a cut)
+  if (newton_) throw std::logic_error("DistDem::load_replicated: newton on is not supported; replicate, unload and load");
   const ReplicaLayout lay(rev, p);
   const std::vector<PlatenServoParams> platens = loadable(rev);
   const Particles& rp = rev.balls();
