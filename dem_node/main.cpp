@@ -56,15 +56,15 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 
 // The DEM on MPI ranks (dem.ranks > 1, started by launch/run under mpirun; docs/scaling.md).
 // Rank 0 speaks on the bus and tells the other ranks every call it gets (RankedParticipant);
-// each rank runs the same adapter. Rank 0 alone holds the whole World: it sets the stages up
-// (gravity, walls, the footing). The specimen procedures run on the ranks (the REV's expansion,
-// bonding and servo, the replication, each rank building its part of the block, and the coupled
-// set-up), their result assembled on rank 0; the steps of every other stage run on a
-// dem::DistDem, each rank its brick of the block, which rank 0 cuts and sends
-// (DistDem::load_from_root). At a stage's end, a
-// checkpoint or a frame the ranks' parts are assembled into the whole World on rank 0
-// (DistDem::unload to rank 0). The other ranks never hold more than their part. Only rank 0
-// writes files.
+// each rank runs the same adapter. The specimen procedures run on the ranks (the REV's expansion,
+// bonding and servo, their REV assembled on rank 0 between them); the replicate stage leaves each
+// rank its part of the block (dem::DistDem), and the ranks stay live from there to the run's end:
+// the later stages' set-ups (gravity, the footing, the interface), their steps, reports and frames
+// run on the parts (ranks_carry), and rank 0 keeps no ball meanwhile (drop_world). Rank 0
+// assembles the whole World (DistDem::unload, sync_full) only for a checkpoint, a guard's finding
+// or a stage that needs it (the DEM-only box, the kick, a specimen procedure); such a stage is set
+// up on it and cut into bricks again at its first step (enter_dist, DistDem::load_from_root). The
+// other ranks never hold more than their part. Only rank 0 writes files.
 struct Ranks {
   MPI_Comm comm = MPI_COMM_NULL;
   int rank = 0, size = 1;
