@@ -692,10 +692,10 @@ class DemParticipant : public node::Participant {
   }
   // The interface wall and, in the couple stage, its set-up (docs/theory.md 4.9): the ball-facet
   // contacts found and bonded, the depth scaling, the interface bonds' forces from the block's
-  // weight. On ranks rank 0's whole World gets the wall (every rank learns its index) and the
-  // set-up runs on the ranks (docs/scaling.md, "the specimen procedures and the coupled set-up on
-  // the ranks"): the World is cut into bricks first (enter_dist), each step on the ranks gives
-  // one World's bits, and rank 0's World is assembled again at the stage's end.
+  // weight. On ranks rank 0's World gets the wall (every rank learns its index), and so does every
+  // part when the ranks already step; the set-up runs on the ranks (docs/scaling.md, "the
+  // specimen procedures and the coupled set-up on the ranks"), the World cut into bricks first
+  // unless they step (enter_dist), each step on the ranks giving one World's bits.
   void interface_setup(const proto::InterfaceMesh& m) {
     const bool ranked = g_ranks.size > 1;
     // (rank 0's World gets the wall too while the ranks step: it is assembled from the parts at a
