@@ -62,7 +62,7 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // the later stages' set-ups (gravity, the footing, the interface), their steps, reports and frames
 // run on the parts (ranks_carry), and rank 0 keeps no ball meanwhile (drop_world). Rank 0
 // assembles the whole World (DistDem::unload, sync_full) only for a checkpoint, a guard's finding
-// or a stage that needs it (the DEM-only box, the kick, a specimen procedure); such a stage is set
+// or a stage that needs it (the kick, a specimen procedure); such a stage is set
 // up on it and cut into bricks again at its first step (enter_dist, DistDem::load_from_root). The
 // other ranks never hold more than their part. Only rank 0 writes files.
 struct Ranks {
@@ -353,8 +353,7 @@ class DemParticipant : public node::Participant {
         spdlog::info("dem: {}", r.what);
       }
     }
-    // (rank 0's: ranks_carry waits for them)
-    if (!carry && !preparing_ && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
+    if (!preparing_ && !box_done_ && s_.string("dem.specimen.box") == "walls") box_walls();
     proto::Values v;
     switch (st.kind) {
       case schema::Action::kGenerate: v = report(generate()); break;
@@ -386,21 +385,22 @@ class DemParticipant : public node::Participant {
     return part_only() ? proto::Values{} : v;
   }
   // Whether the ranks' parts, live since an earlier stage, carry the state into stage `st`: its
-  // set-up runs on them (gravity, the footing, the interface; not a specimen procedure of rank
-  // 0's World, the DEM-only box or the kick). Rank 0 decides (it knows what its World still
-  // needs); every rank calls it.
+  // set-up runs on them (gravity, the DEM-only box, the footing, the interface; not a specimen
+  // procedure of rank 0's World, nor the kick). Rank 0 decides (it knows what its World still
+  // needs) and sends its set-up flags with it (the stages it set up alone set them there); every
+  // rank calls it.
   bool ranks_carry(const schema::Stage& st) {
     if (!dist_live_) return false;
-    int carry = 0;
+    int f[3] = {0, box_done_ ? 1 : 0, kicked_ ? 1 : 0};
     if (!part_only()) {
       const bool kind = st.kind == schema::Action::kCouple || st.kind == schema::Action::kPenetrate ||
                         st.kind == schema::Action::kCycle || st.kind == schema::Action::kEquilibrium;
-      const bool box = !box_done_ && s_.string("dem.specimen.box") == "walls";
       const bool kick = !kick_.empty() && !kicked_;
-      carry = kind && !box && !kick ? 1 : 0;
+      f[0] = kind && !kick ? 1 : 0;
     }
-    MPI_Bcast(&carry, 1, MPI_INT, 0, g_ranks.comm);
-    return carry != 0;
+    MPI_Bcast(f, 3, MPI_INT, 0, g_ranks.comm);
+    box_done_ = f[1] != 0, kicked_ = f[2] != 0;
+    return f[0] != 0;
   }
   // The stage's step factor and local damping (docs/theory.md 1.3, 4.11) on `w`. Specimen
   // preparation has its own, on the automatic step, so that the run's dem.dt_safety,
@@ -975,9 +975,22 @@ class DemParticipant : public node::Participant {
 
   // DEM-only box (dem.specimen.box = "walls"): planes on the bottom and the four sides of the
   // replicated block, normals pointing inwards, then the depth scaling of the coupled set-up.
+  // While the ranks step, on their parts (the box from every rank's balls, one World's planes)
+  // and on rank 0's World, whose walls a checkpoint's assembly takes from the parts; every rank
+  // calls it then.
   void box_walls() {
-    const auto [lo, hi] = dem::add_box_walls(world_);
     box_done_ = true;
+    if (dist_live_) {
+      const auto [lo, hi] = dem::add_box_walls(*dist_);
+      if (!part_only()) dem::add_box_planes(world_, lo, hi);
+      spdlog::info("dem: DEM-only box: 5 walls around the {} x {} m block (bottom at z = {} m), on the ranks' parts",
+                   hi.x - lo.x, hi.y - lo.y, lo.z);
+      dist_->prepare();
+      scale_with_depth();
+      dist_->prepare();
+      return;
+    }
+    const auto [lo, hi] = dem::add_box_walls(world_);
     spdlog::info("dem: DEM-only box: 5 walls around the {} x {} m block (bottom at z = {} m)", hi.x - lo.x, hi.y - lo.y,
                  lo.z);
     world_.prepare();
@@ -1079,6 +1092,8 @@ class DemParticipant : public node::Participant {
       return r;
     }
     dist_ = std::move(d);
+    // (rank 0's World, the REV's, takes the block's open faces, as an assembly would give it)
+    world_.mutable_params().periodic = dist_->world().params().periodic;
     rep_coord_ = dist_->coordination();  // (specimen_stages.csv's, rank 0's report)
     rep_balls_ = dist_->num_balls();
     went_live("replicated on");

@@ -462,6 +462,12 @@ TEST(DistWalls, StageMeasurementsOnTheRanks) {
   fp.height = 0.3 * kL;
   fp.bottom_centre = {0.3 * kL, 0.6 * kL, 5.0 * kL};
   const double z = place_footing_at_first_contact(d, fp);
+  // the DEM-only box's planes from every rank's balls (the block already has four side planes)
+  const int planes_before = d.world().num_planes();
+  const auto [box_lo, box_hi] = add_box_walls(d);
+  const Vec3 bottom = d.world().plane(planes_before).p.point;
+  int nplanes = d.world().num_planes(), fewest = 0;
+  MPI_Allreduce(&nplanes, &fewest, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
   double zs[2] = {z, d.world().footing().p.bottom_centre.z}, lo[2], hi[2];
   MPI_Allreduce(zs, lo, 2, MPI_DOUBLE, MPI_MIN, MPI_COMM_WORLD);
   MPI_Allreduce(zs, hi, 2, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
@@ -510,6 +516,11 @@ TEST(DistWalls, StageMeasurementsOnTheRanks) {
     EXPECT_EQ(lo[1], zw);
     EXPECT_EQ(hi[1], zw);
     EXPECT_LT(zw, 2.0 * kL);  // (the sheared block has grown to about 1.17 L)
+    const auto [wlo, whi] = add_box_walls(*ref);
+    EXPECT_TRUE(test::same_bits(std::vector<Vec3>{box_lo, box_hi}, std::vector<Vec3>{wlo, whi})) << "the box's bounds";
+    EXPECT_TRUE(test::same_bits(std::vector<Vec3>{bottom}, std::vector<Vec3>{ref->plane(planes_before).p.point}));
+    EXPECT_EQ(fewest, ref->num_planes()) << "every rank's part gets the five planes";
+    EXPECT_LT(wlo.z, 0.0);
     EXPECT_GT(zw, 0.5 * kL);
   }
   test::share_verdict();

@@ -138,16 +138,29 @@ std::vector<ProfileSlab> stress_profile(const World& w, const ProfileBox& box, i
 }
 
 std::pair<Vec3, Vec3> add_box_walls(World& w) {
-  if (w.periodic())
-    throw std::invalid_argument("dem.specimen.box = \"walls\": the block is still periodic (no replicate stage before)");
+  const auto [lo, hi] = ball_bounds(w);
+  add_box_planes(w, lo, hi);
+  return {lo, hi};
+}
+
+std::pair<Vec3, Vec3> ball_bounds(const World& w) {
   const auto& b = w.balls();
-  if (b.size() == 0) throw std::invalid_argument("dem.specimen.box = \"walls\": no balls to enclose");
+  const auto& ghost = w.ghost_rows();
   Vec3 lo{1e300, 1e300, 1e300}, hi{-1e300, -1e300, -1e300};
-  for (std::size_t i = 0; i < b.size(); ++i)
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (!ghost.empty() && ghost[i]) continue;
     for (int k = 0; k < 3; ++k) {
       lo[k] = std::min(lo[k], b.x[i][k] - b.r[i]);
       hi[k] = std::max(hi[k], b.x[i][k] + b.r[i]);
     }
+  }
+  return {lo, hi};
+}
+
+void add_box_planes(World& w, const Vec3& lo, const Vec3& hi) {
+  if (w.periodic())
+    throw std::invalid_argument("dem.specimen.box = \"walls\": the block is still periodic (no replicate stage before)");
+  if (!(lo.x <= hi.x)) throw std::invalid_argument("dem.specimen.box = \"walls\": no balls to enclose");
   const double lx = hi.x - lo.x, ly = hi.y - lo.y;
   const Vec3 o = lo, c{0.5 * (lo.x + hi.x), 0.5 * (lo.y + hi.y), 0.5 * (lo.z + hi.z)};
   auto plane = [&](Vec3 point, Vec3 normal, Vec3 axis1) {
@@ -162,7 +175,6 @@ std::pair<Vec3, Vec3> add_box_walls(World& w) {
   plane({o.x + lx, c.y, c.z}, {-1, 0, 0}, {0, 1, 0});
   plane({c.x, o.y, c.z}, {0, 1, 0}, {1, 0, 0});
   plane({c.x, o.y + ly, c.z}, {0, -1, 0}, {1, 0, 0});
-  return {lo, hi};
 }
 
 double footing_contact_height(const World& w, const FootingParams& f) {

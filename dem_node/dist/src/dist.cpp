@@ -2829,6 +2829,16 @@ std::vector<ProfileSlab> stress_profile(const DistDem& d, const ProfileBox& box,
   return out;
 }
 
+std::pair<Vec3, Vec3> add_box_walls(DistDem& d) {
+  auto [lo, hi] = ball_bounds(d.world());
+  double v[6] = {-lo.x, -lo.y, -lo.z, hi.x, hi.y, hi.z};  // (the minima as maxima of the negatives)
+  MPI_Allreduce(MPI_IN_PLACE, v, 6, MPI_DOUBLE, MPI_MAX, d.comm());
+  lo = {-v[0], -v[1], -v[2]};
+  hi = {v[3], v[4], v[5]};
+  add_box_planes(d.world(), lo, hi);
+  return {lo, hi};
+}
+
 double place_footing_at_first_contact(DistDem& d, FootingParams f) {
   double z = footing_contact_height(d.world(), f);
   MPI_Allreduce(MPI_IN_PLACE, &z, 1, MPI_DOUBLE, MPI_MAX, d.comm());

@@ -99,6 +99,11 @@ std::vector<std::pair<Region, ProfileSlab>> profile_slabs(const ProfileBox& box,
 /// once), normals pointing inwards. Throws std::invalid_argument while the world is periodic or
 /// has no ball. Returns the bounding box of the ball surfaces [lo, hi].
 std::pair<Vec3, Vec3> add_box_walls(World& w);
+/// Its halves: the bounding box [lo, hi] of `w`'s ball surfaces (on a rank's part, of its own
+/// balls; empty: lo = +1e300, hi = -1e300, the identities of the minimum and maximum over the
+/// ranks), and the five planes on a given box added to `w` (the same refusals).
+std::pair<Vec3, Vec3> ball_bounds(const World& w);
+void add_box_planes(World& w, const Vec3& lo, const Vec3& hi);
 
 /// Places the footing `f` (its bottom_centre x and y give the axis; z is ignored) at first
 /// contact: the highest point where a ball touches its flat bottom (a ball within the footprint,

@@ -593,6 +593,10 @@ std::vector<ProfileSlab> stress_profile(const DistDem& d, const ProfileBox& box,
 /// contact of the ranks' balls (a maximum: one World's); the footing set on every rank's part.
 /// Collective.
 double place_footing_at_first_contact(DistDem& d, FootingParams f);
+/// procedures.hpp's add_box_walls on the ranks: the bounding box of every rank's balls (a minimum
+/// and a maximum over the ranks: one World's), its five planes added to every rank's part.
+/// Collective.
+std::pair<Vec3, Vec3> add_box_walls(DistDem& d);
 StageReport assign_interface_bond_forces(DistDem& d, const InterfaceBondParams& p);
 /// servo_specimen (procedures.hpp) on the ranks, the same way (the REV's servo stage of the DEM
 /// node on ranks).
