@@ -302,9 +302,9 @@ void ParticleOutput::check_time(const std::string& where, double time) const {
 }
 
 std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const ParticleFrame& fr) {
-  // Validate everything before touching the file, so a bad frame leaves no partial group.
+  // Validate the arrays before touching the file, so a bad frame leaves no partial group (the
+  // time, the link sets' names and the surfaces: begin_blocks, also before touching it).
   const std::string where = "ParticleOutput::write_frame (step " + std::to_string(step) + "): ";
-  check_time(where, time);
   const ArrayView& pos = fr.position;
   if (pos.cols != 3 || !(pos.dtype == DType::kFloat64 || pos.dtype == DType::kFloat32))
     throw std::invalid_argument(where + "position must be [Np,3] float64 (or float32), found " +
@@ -313,14 +313,7 @@ std::size_t ParticleOutput::write_frame(std::int64_t step, double time, const Pa
   const std::size_t np = pos.rows;
   check_rows(where + "position", pos, np);
   check_fields(where + "point array", fr.point_arrays, np, {"position"});
-  if (fr.links.size() != link_sets_.size())
-    throw std::invalid_argument(where + std::to_string(fr.links.size()) + " link sets given, " +
-                                std::to_string(link_sets_.size()) + " declared at construction");
-  for (std::size_t i = 0; i < fr.links.size(); ++i) {
-    const LinkFrame& l = fr.links[i];
-    if (l.name != link_sets_[i])
-      throw std::invalid_argument(where + "link set " + std::to_string(i) + " is '" + l.name + "', expected '" +
-                                  link_sets_[i] + "' (declaration order)");
+  for (const LinkFrame& l : fr.links) {
     if (l.nodes.cols != 2 || l.nodes.dtype != DType::kInt32)
       throw std::invalid_argument(where + l.name + "/nodes must be [Nb,2] int32");
     check_rows(where + l.name + "/nodes", l.nodes, l.nodes.rows);
