@@ -325,5 +325,67 @@ TEST(StateFile, WriterMisuseIsALogicError) {
   EXPECT_NO_THROW((void)w.bytes());
 }
 
+// A file written in pieces (StateFileWriter: sections whole or reserved and filled in any
+// order) has the bytes of the same sections written in memory, and reads back.
+TEST(StateFile, FileWrittenInPiecesHasTheBytesOfOneWriter) {
+  Scratch dir;
+  StateWriter w("dem", "v1", kHash);
+  w.begin("head");
+  w.f64(-0.0);
+  w.str("text");
+  w.end();
+  w.begin("rows");
+  for (std::uint64_t k = 0; k < 1000; ++k) w.u64(k * k);
+  w.end();
+  w.begin("empty");
+  w.end();
+  w.begin("tail");
+  w.u32(7);
+  w.end();
+  const std::string want = w.bytes();
+
+  const auto file = dir / "pieces.state";
+  {
+    StateFileWriter f(file, "dem", "v1", kHash, 4);
+    std::string head;
+    head.append(8, '\0');  // -0.0 is the sign bit alone
+    head[7] = static_cast<char>(0x80);
+    head += std::string("\x04\0\0\0text", 8);
+    f.section("head", head);
+    const std::uint64_t at = f.reserve("rows", 8000);
+    f.section("empty", "");
+    // the rows in blocks, last block first
+    for (std::uint64_t b = 1000; b > 0; b -= 100) {
+      std::string block;
+      for (std::uint64_t k = b - 100; k < b; ++k)
+        for (int i = 0; i < 8; ++i) block.push_back(static_cast<char>(((k * k) >> (8 * i)) & 0xffu));
+      f.write_at(at + 8 * (b - 100), block);
+    }
+    EXPECT_FALSE(std::filesystem::exists(file)) << "nothing under the final name before commit()";
+    EXPECT_THROW(f.commit(), std::logic_error) << "a declared section is missing";
+    f.section("tail", std::string("\x07\0\0\0", 4));
+    EXPECT_THROW(f.section("more", ""), std::logic_error);
+    EXPECT_THROW(f.write_at(at + 7996, "12345678"), std::logic_error) << "past the reserved bytes";
+    f.commit();
+  }
+  EXPECT_EQ(read_whole_file(file), want);
+  StateReader r(read_whole_file(file), file.string(), "dem", kHash);
+  EXPECT_EQ(r.names(), (std::vector<std::string>{"head", "rows", "empty", "tail"}));
+  EXPECT_EQ(r.section_bytes("tail"), std::string_view("\x07\0\0\0", 4));
+  EXPECT_THROW((void)r.section_bytes("tail"), StateFileError) << "read twice";
+
+  // a reserved section not filled: no commit; an abandoned writer leaves no file
+  {
+    StateFileWriter f(dir / "unfilled.state", "dem", "v1", kHash, 1);
+    const std::uint64_t at = f.reserve("rows", 16);
+    f.write_at(at, "12345678");
+    EXPECT_THROW(f.commit(), std::logic_error);
+  }
+  std::size_t entries = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.path())) entries += e.is_regular_file();
+  EXPECT_EQ(entries, 1u) << "only the committed file, no temporary one";
+  EXPECT_THROW(StateFileWriter(dir / "no/such/folder/x.state", "dem", "v", 0, 1), StateFileError);
+}
+
 }  // namespace
 }  // namespace demfdm::io

@@ -280,6 +280,17 @@ SectionReader StateReader::section(std::string_view name) {
        header_.code_version + "')");
 }
 
+std::vector<std::string> StateReader::names() const {
+  std::vector<std::string> out;
+  for (const Entry& e : sections_) out.push_back(e.name);
+  return out;
+}
+
+std::string_view StateReader::section_bytes(std::string_view name) {
+  SectionReader r = section(name);
+  return {r.p_, r.end_};
+}
+
 void StateReader::finish() const {
   std::string unknown;
   for (const Entry& e : sections_)
@@ -289,14 +300,46 @@ void StateReader::finish() const {
 
 // ---- files -----------------------------------------------------------------------------------
 
-void write_atomically(const std::filesystem::path& path, std::string_view bytes) {
-  const std::filesystem::path tmp = path.string() + ".tmp-" + std::to_string(::getpid());
-  auto error = [&](const char* call, const std::filesystem::path& f) {
+namespace {
+
+[[noreturn]] void file_error(const char* call, const std::filesystem::path& f) {
+  const int e = errno;
+  throw StateFileError(f.string() + ": " + call + " failed: " + std::strerror(e));
+}
+
+// fsync and close `fd` (the file `tmp`), rename it over `path` and make the rename durable; on a
+// failure the temporary file is removed and the error names the call.
+void publish(int fd, const std::filesystem::path& tmp, const std::filesystem::path& path) {
+  auto undo = [&](const char* call, const std::filesystem::path& f, bool close_fd) {
     const int e = errno;
-    throw StateFileError(f.string() + ": " + call + " failed: " + std::strerror(e));
+    if (close_fd) ::close(fd);
+    ::unlink(tmp.c_str());
+    errno = e;
+    file_error(call, f);
   };
+  if (::fsync(fd) != 0) undo("fsync", tmp, true);
+  if (::close(fd) != 0) undo("close", tmp, false);
+  if (::rename(tmp.c_str(), path.c_str()) != 0) undo("rename", path, false);
+  // Make the rename itself durable.
+  std::filesystem::path dir = path.parent_path();
+  if (dir.empty()) dir = ".";
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
+}
+
+std::filesystem::path temporary_of(const std::filesystem::path& path) {
+  return path.string() + ".tmp-" + std::to_string(::getpid());
+}
+
+}  // namespace
+
+void write_atomically(const std::filesystem::path& path, std::string_view bytes) {
+  const std::filesystem::path tmp = temporary_of(path);
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) error("open", tmp);
+  if (fd < 0) file_error("open", tmp);
   std::size_t off = 0;
   while (off < bytes.size()) {
     const ssize_t w = ::write(fd, bytes.data() + off, bytes.size() - off);
@@ -306,37 +349,124 @@ void write_atomically(const std::filesystem::path& path, std::string_view bytes)
       ::close(fd);
       ::unlink(tmp.c_str());
       errno = e;
-      error("write", tmp);
+      file_error("write", tmp);
     }
     off += static_cast<std::size_t>(w);
   }
-  if (::fsync(fd) != 0) {
-    const int e = errno;
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    errno = e;
-    error("fsync", tmp);
+  publish(fd, tmp, path);
+}
+
+// ---- a state file written in pieces ----------------------------------------------------------
+
+StateFileWriter::StateFileWriter(const std::filesystem::path& path, std::string_view kind, std::string_view code_version,
+                                 std::uint64_t scene_hash, std::uint32_t sections)
+    : path_(path), tmp_(temporary_of(path)), declared_(sections) {
+  fd_ = ::open(tmp_.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) file_error("open", tmp_);
+  std::string h(kStateMagic, 8);
+  le_append<std::uint32_t>(h, kStateFormatVersion);
+  le_append<std::uint64_t>(h, 0);  // the total length, written by commit()
+  str_append(h, kind);
+  str_append(h, code_version);
+  le_append<std::uint64_t>(h, scene_hash);
+  le_append<std::uint32_t>(h, sections);
+  try {
+    put(0, h);
+  } catch (...) {
+    ::close(fd_);
+    ::unlink(tmp_.c_str());
+    throw;
   }
-  if (::close(fd) != 0) {
-    const int e = errno;
-    ::unlink(tmp.c_str());
-    errno = e;
-    error("close", tmp);
+  end_ = h.size();
+}
+
+StateFileWriter::~StateFileWriter() {
+  if (fd_ < 0) return;
+  ::close(fd_);
+  ::unlink(tmp_.c_str());
+}
+
+void StateFileWriter::fail(const char* call) const { file_error(call, tmp_); }
+
+void StateFileWriter::put(std::uint64_t offset, std::string_view bytes) {
+  if (fd_ < 0) throw std::logic_error("StateFileWriter: the file is committed");
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t w = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, static_cast<off_t>(offset + done));
+    if (w < 0) {
+      if (errno == EINTR) continue;
+      fail("pwrite");
+    }
+    done += static_cast<std::size_t>(w);
   }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const int e = errno;
-    ::unlink(tmp.c_str());
-    errno = e;
-    error("rename", path);
+}
+
+void StateFileWriter::head(std::string_view name, std::uint64_t length) {
+  if (count_ == declared_) throw std::logic_error("StateFileWriter: more sections than the " + std::to_string(declared_) + " declared");
+  std::string h;
+  str_append(h, name);
+  le_append<std::uint64_t>(h, length);
+  put(end_, h);
+  end_ += h.size();
+  ++count_;
+}
+
+void StateFileWriter::section(std::string_view name, std::string_view content) {
+  head(name, content.size());
+  put(end_, content);
+  end_ += content.size();
+}
+
+std::uint64_t StateFileWriter::reserve(std::string_view name, std::uint64_t length) {
+  head(name, length);
+  const std::uint64_t at = end_;
+  reserved_.push_back(Region{at, length});
+  end_ += length;
+  return at;
+}
+
+void StateFileWriter::write_at(std::uint64_t offset, std::string_view bytes) {
+  for (Region& r : reserved_)
+    if (offset >= r.off && offset + bytes.size() <= r.off + r.len) {
+      put(offset, bytes);
+      r.filled += bytes.size();
+      return;
+    }
+  throw std::logic_error("StateFileWriter::write_at: " + std::to_string(bytes.size()) + " bytes at offset " +
+                         std::to_string(offset) + " are outside every reserved section");
+}
+
+void StateFileWriter::commit() {
+  if (count_ != declared_)
+    throw std::logic_error("StateFileWriter::commit: " + std::to_string(count_) + " of " + std::to_string(declared_) + " sections written");
+  for (const Region& r : reserved_)
+    if (r.filled != r.len)
+      throw std::logic_error("StateFileWriter::commit: a reserved section at offset " + std::to_string(r.off) + " has " +
+                             std::to_string(r.filled) + " of its " + std::to_string(r.len) + " bytes");
+  const std::uint64_t total = end_ + 8;
+  std::string len;
+  le_append<std::uint64_t>(len, total);
+  put(12, len);
+  // the checksum of every byte before it, read back in order
+  std::uint64_t h = fnv1a64(nullptr, 0);
+  std::vector<char> buf(std::size_t{4} << 20);
+  for (std::uint64_t at = 0; at < end_;) {
+    const ssize_t n = ::pread(fd_, buf.data(), static_cast<std::size_t>(std::min<std::uint64_t>(buf.size(), end_ - at)),
+                              static_cast<off_t>(at));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      fail("pread");
+    }
+    if (n == 0) throw StateFileError(tmp_.string() + ": read back " + std::to_string(at) + " of " + std::to_string(end_) + " bytes");
+    h = fnv1a64(buf.data(), static_cast<std::size_t>(n), h);
+    at += static_cast<std::uint64_t>(n);
   }
-  // Make the rename itself durable.
-  std::filesystem::path dir = path.parent_path();
-  if (dir.empty()) dir = ".";
-  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dfd >= 0) {
-    ::fsync(dfd);
-    ::close(dfd);
-  }
+  std::string sum;
+  le_append<std::uint64_t>(sum, h);
+  put(end_, sum);
+  const int fd = fd_;
+  fd_ = -1;
+  publish(fd, tmp_, path_);
 }
 
 void write_stream(std::ostream& out, std::string_view bytes) {

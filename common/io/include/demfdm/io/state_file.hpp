@@ -102,6 +102,45 @@ class StateWriter {
   std::size_t open_ = std::string::npos;  // offset of the open section's length field
 };
 
+/// Writes a state file to disk in pieces: the bytes StateWriter::bytes() gives for the same
+/// sections, for a state too large to hold in memory at once (the DEM ranks' checkpoint: every
+/// rank's part merged on rank 0 block by block, dem::DistDem::save_state_file). Sections come
+/// in file order, `sections` of them; a section's content is either given whole (section()) or
+/// its length is reserved (reserve()) and its bytes are written into it later, in any order
+/// (write_at(), each byte once). commit() writes the header's length and the checksum (reading
+/// the file back once for it), then fsyncs and renames the temporary file `<path>.tmp-<pid>`
+/// over `path` as write_atomically() does. A writer destroyed before commit() removes its
+/// temporary file. Throws StateFileError naming the file when a call to the system fails, and
+/// std::logic_error on misuse (a write outside the reserved bytes, a commit before every
+/// section and reserved byte is there).
+class StateFileWriter {
+ public:
+  StateFileWriter(const std::filesystem::path& path, std::string_view kind, std::string_view code_version,
+                  std::uint64_t scene_hash, std::uint32_t sections);
+  ~StateFileWriter();
+  StateFileWriter(const StateFileWriter&) = delete;
+  StateFileWriter& operator=(const StateFileWriter&) = delete;
+
+  void section(std::string_view name, std::string_view content);
+  /// A section of `length` bytes, written later by write_at(); returns its content's offset in the file.
+  std::uint64_t reserve(std::string_view name, std::uint64_t length);
+  void write_at(std::uint64_t offset, std::string_view bytes);
+  void commit();
+
+ private:
+  void put(std::uint64_t offset, std::string_view bytes);  // pwrite, whole
+  void head(std::string_view name, std::uint64_t length);  // a section's name and length, appended
+  [[noreturn]] void fail(const char* call) const;
+  std::filesystem::path path_, tmp_;
+  int fd_ = -1;
+  std::uint64_t end_ = 0;  // bytes appended so far
+  std::uint32_t declared_ = 0, count_ = 0;
+  struct Region {
+    std::uint64_t off, len, filled = 0;
+  };
+  std::vector<Region> reserved_;
+};
+
 class StateReader;
 
 /// Reads one section; every get checks the remaining length (a short section throws, naming
@@ -166,6 +205,10 @@ class StateReader {
   bool has(std::string_view section) const;
   /// The named section (each may be read once). Throws if the file has none of that name.
   SectionReader section(std::string_view name);
+  /// The sections' names in file order.
+  std::vector<std::string> names() const;
+  /// The named section's content as it is in the file (read once, as section()).
+  std::string_view section_bytes(std::string_view name);
   /// Throws if a section of the file was never asked for (unknown to this code).
   void finish() const;
   [[noreturn]] void fail(const std::string& what) const;
