@@ -12,6 +12,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <algorithm>
+#include <array>
 #include <filesystem>
 #include <memory>
 #include <random>
@@ -518,6 +520,85 @@ TEST(DemCheckpoint, FileAndStreamRoundTrip) {
   run(c, 40);
   EXPECT_EQ(first_difference(*a, b), "");
   EXPECT_EQ(first_difference(*a, c), "");
+  std::filesystem::remove_all(dir);
+}
+
+// A state file written in pieces (StateStream: the balls and pairs in blocks of rows, the wall
+// contacts at the end, the rest from a World without balls) has the bytes of state_bytes() of
+// the whole World: the bonded periodic lattice (image shifts, pair bonds) and the free block
+// (planes with a servo, bonded facet contacts, the footing), blocks of 1, 7 and all rows.
+TEST(DemCheckpoint, StateWrittenInPiecesHasTheWholeWorldsBytes) {
+  const auto dir = std::filesystem::temp_directory_path() / ("demfdm_dem_stream_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const CheckpointMeta meta{kSceneHash, "v-test"};
+  for (int scene = 0; scene < 2; ++scene) {
+    auto w = scene == 0 ? periodic_lattice(6, 1, 13) : free_block({});
+    run(*w, 70);
+    const std::string want = state_bytes(*w, meta);
+    // the frame: a copy without its balls and contacts (as rank 0's World while the ranks step)
+    World frame{WorldParams{}};
+    load_state_bytes(frame, want, kSceneHash, "copy");
+    const auto k = frame.counters();
+    Particles none;
+    PairContacts no_pairs;
+    std::array<WallContacts, 3> no_walls;
+    for (auto& wc : no_walls) wc.cand_off.push_back(0);
+    std::vector<std::uint8_t> no_ghosts;
+    frame.swap_balls(none, no_pairs, no_walls, no_ghosts);
+    frame.set_counters(k);
+    ASSERT_EQ(frame.num_balls(), 0u);
+    const Particles& pt = w->balls();
+    const PairContacts& pc = w->pair_contacts();
+    ASSERT_GT(pc.size(), 100u);
+    ASSERT_EQ(pc.bond.size(), pc.size()) << "the pairs carry bonds";
+    for (std::size_t block : {std::size_t{1}, std::size_t{7}, pt.size() + pc.size()}) {
+      SCOPED_TRACE("scene " + std::to_string(scene) + ", blocks of " + std::to_string(block));
+      const auto file = dir / ("pieces-" + std::to_string(scene) + "-" + std::to_string(block) + ".state");
+      StateStream out(file, frame, pt.size(), pc.size(), meta);
+      for (std::size_t r0 = 0; r0 < pt.size(); r0 += block) {
+        Particles rows;
+        for (std::size_t i = r0; i < std::min(pt.size(), r0 + block); ++i) {
+          rows.x.push_back(pt.x[i]), rows.v.push_back(pt.v[i]), rows.w.push_back(pt.w[i]), rows.f.push_back(pt.f[i]);
+          rows.t.push_back(pt.t[i]), rows.fa.push_back(pt.fa[i]), rows.ta.push_back(pt.ta[i]);
+          rows.x_ref.push_back(pt.x_ref[i]), rows.r.push_back(pt.r[i]), rows.m.push_back(pt.m[i]);
+          rows.inertia.push_back(pt.inertia[i]), rows.id.push_back(pt.id[i]), rows.fix.push_back(pt.fix[i]);
+        }
+        out.balls(rows);
+      }
+      if (block == 7) {
+        EXPECT_THROW(out.commit(w->plane_contacts(), w->facet_contacts(), w->footing_contacts()), std::logic_error)
+            << "a commit before the pairs came";
+      }
+      for (std::size_t c0 = 0; c0 < pc.size(); c0 += block) {
+        PairContacts rows;
+        for (std::size_t c = c0; c < std::min(pc.size(), c0 + block); ++c) {
+          rows.a.push_back(pc.a[c]), rows.b.push_back(pc.b[c]), rows.shift.push_back(pc.shift[c]);
+          rows.h.push_back(pc.h[c]), rows.bond.push_back(pc.bond[c]);
+        }
+        out.pairs(rows);
+      }
+      out.commit(w->plane_contacts(), w->facet_contacts(), w->footing_contacts());
+      EXPECT_EQ(demfdm::io::read_whole_file(file) == want, true) << "the file differs from state_bytes";
+    }
+    if (scene == 1) {
+      EXPECT_GT(w->plane_contacts().size(), 0u);
+      EXPECT_GT(w->facet_contacts().size(), 0u);
+    } else {
+      bool shifted = false;
+      for (const auto& s : pc.shift) shifted = shifted || s[0] != 0 || s[1] != 0 || s[2] != 0;
+      EXPECT_TRUE(shifted) << "pairs across the periodic cell";
+    }
+  }
+  // A stream given up before its commit leaves no file.
+  {
+    auto w = free_block({});
+    StateStream out(dir / "abandoned.state", *w, 3, 0, meta);
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir / "abandoned.state"));
+  std::size_t temporaries = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    temporaries += e.path().string().find(".tmp-") != std::string::npos;
+  EXPECT_EQ(temporaries, 0u);
   std::filesystem::remove_all(dir);
 }
 

@@ -12,6 +12,11 @@
 #include <sstream>
 #include <stdexcept>
 #include <utility>
+#include <limits>
+#include <bit>
+#include <span>
+#include <array>
+#include "demfdm/dem/laws/registry.hpp"
 
 namespace demfdm::dem {
 
@@ -48,12 +53,43 @@ constexpr const char* kKind = "dem";
 
 // ---- writing -------------------------------------------------------------------------------
 
-void put(io::StateWriter& o, const Vec3& v) {
+// Bytes encoded as io::StateWriter encodes them, without a section around them: the rows of a
+// file written in pieces (StateStream). The row encoders below take either.
+class ByteOut {
+ public:
+  void u8(std::uint8_t v) { s_.push_back(static_cast<char>(v)); }
+  void b(bool v) { u8(v ? 1 : 0); }
+  void i8(std::int8_t v) { u8(static_cast<std::uint8_t>(v)); }
+  void u32(std::uint32_t v) { le(v); }
+  void i32(std::int32_t v) { le(static_cast<std::uint32_t>(v)); }
+  void u64(std::uint64_t v) { le(v); }
+  void f64(double v) { le(std::bit_cast<std::uint64_t>(v)); }
+  void u32s(std::span<const std::uint32_t> v) {
+    u64(v.size());
+    for (auto x : v) u32(x);
+  }
+  void i32s(std::span<const std::int32_t> v) {
+    u64(v.size());
+    for (auto x : v) i32(x);
+  }
+  std::string& bytes() { return s_; }
+
+ private:
+  template <class U>
+  void le(U v) {
+    for (std::size_t i = 0; i < sizeof(U); ++i) s_.push_back(static_cast<char>((v >> (8 * i)) & 0xffu));
+  }
+  std::string s_;
+};
+
+template <class O>
+void put(O& o, const Vec3& v) {
   o.f64(v.x);
   o.f64(v.y);
   o.f64(v.z);
 }
-void put_vecs(io::StateWriter& o, const std::vector<Vec3>& v) {
+template <class O>
+void put_vecs(O& o, const std::vector<Vec3>& v) {
   o.u64(v.size());
   for (const Vec3& x : v) put(o, x);
 }
@@ -120,7 +156,8 @@ void put(io::StateWriter& o, const WorldParams& p) {
   put(o, p.ball_footing);
 }
 
-void put(io::StateWriter& o, const ContactHist& h) {
+template <class O>
+void put(O& o, const ContactHist& h) {
   put(o, h.fs);
   o.f64(h.fn);
   put(o, h.n_old);
@@ -132,7 +169,8 @@ void put(io::StateWriter& o, const ContactHist& h) {
 }
 constexpr std::size_t kHistBytes = 11 * 8 + 1;
 
-void put(io::StateWriter& o, const BondHist& b) {
+template <class O>
+void put(O& o, const BondHist& b) {
   put(o, b.fsb);
   o.f64(b.nb);
   put(o, b.mb);
@@ -147,14 +185,16 @@ void put(io::StateWriter& o, const BondHist& b) {
 }
 constexpr std::size_t kBondBytes = 12 * 8 + 3;
 
-void put_hists(io::StateWriter& o, const std::vector<ContactHist>& h, const std::vector<BondHist>& b) {
+template <class O>
+void put_hists(O& o, const std::vector<ContactHist>& h, const std::vector<BondHist>& b) {
   o.u64(h.size());
   for (const ContactHist& x : h) put(o, x);
   o.u64(b.size());
   for (const BondHist& x : b) put(o, x);
 }
 
-void put(io::StateWriter& o, const WallContacts& wc) {
+template <class O>
+void put(O& o, const WallContacts& wc) {
   o.u32s(wc.ball);
   o.u32s(wc.wall);
   put_hists(o, wc.h, wc.bond);
@@ -707,8 +747,8 @@ std::string state_bytes(const World& w, const CheckpointMeta& meta) {
   // A rank's world (ghost rows, dem_node/dist) holds only its sub-domain: the format has no
   // place for the decomposition yet.
   if (!w.ghost_rows().empty())
-    throw std::invalid_argument("save_state: this world is one rank's sub-domain (it has ghost rows); saving a "
-                                "DEM that runs on MPI ranks is not supported yet.");
+    throw std::invalid_argument("save_state: this world is one rank's sub-domain (it has ghost rows); the ranks' "
+                                "state is saved by DistDem::save_state_file, as one World's.");
   return Front::bytes(w, kKind, meta);
 }
 
@@ -730,6 +770,143 @@ io::StateHeader load_state(World& w, std::istream& in, std::uint64_t scene_hash,
 
 io::StateHeader load_state_file(World& w, const std::filesystem::path& path, std::uint64_t scene_hash) {
   return load_state_bytes(w, io::read_whole_file(path), scene_hash, path.string());
+}
+
+// ---- a World's state file written in pieces --------------------------------------------------
+
+// The bulk sections' columns, in file order: each is a u64 count and `count` elements of `bytes`.
+struct StateStream::Impl {
+  struct Column {
+    std::uint64_t at = 0;    // the count's offset in the file
+    std::size_t bytes = 0;   // per element
+  };
+  io::StateReader frame;                // the frame World's file (its other sections)
+  io::StateFileWriter file;             // (the frame's sections, the bulk ones streamed)
+  std::vector<std::string> after;       // the sections after "pairs", in order
+  std::vector<Column> ball_cols, pair_cols;
+  std::uint64_t nballs, npairs, balls_done = 0, pairs_done = 0;
+  bool bonds;
+
+  Impl(const std::filesystem::path& path, std::string frame_bytes, std::uint64_t nb, std::uint64_t np,
+       const CheckpointMeta& meta)
+      : frame(std::move(frame_bytes), "the frame of " + path.string(), kKind, meta.scene_hash),
+        file(path, kKind, meta.code_version, meta.scene_hash, static_cast<std::uint32_t>(frame.names().size())),
+        nballs(nb),
+        npairs(np),
+        bonds(false) {}
+
+  // Reserves a section of columns of `n` elements each (`bytes` per element) and writes their counts.
+  std::vector<Column> reserve(std::string_view name, const std::vector<std::pair<std::uint64_t, std::size_t>>& cols) {
+    std::uint64_t len = 0;
+    for (const auto& [n, b] : cols) len += 8 + n * b;
+    std::uint64_t at = file.reserve(name, len);
+    std::vector<Column> out;
+    for (const auto& [n, b] : cols) {
+      ByteOut c;
+      c.u64(n);
+      file.write_at(at, c.bytes());
+      out.push_back(Column{at, b});
+      at += 8 + n * b;
+    }
+    return out;
+  }
+  // One column's elements from row `row0` on.
+  void put(const Column& c, std::uint64_t row0, ByteOut& o) {
+    file.write_at(c.at + 8 + row0 * c.bytes, o.bytes());
+    o.bytes().clear();
+  }
+};
+
+StateStream::StateStream(const std::filesystem::path& path, const World& frame, std::uint64_t balls,
+                         std::uint64_t pairs, const CheckpointMeta& meta) {
+  if (balls > std::numeric_limits<std::uint32_t>::max())
+    throw std::invalid_argument("StateStream: " + std::to_string(balls) + " balls: contact rows are 32-bit");
+  // the frame World's file: its sections in order, the bulk ones replaced by the streamed rows
+  p_ = std::make_unique<Impl>(path, state_bytes(frame, meta), balls, pairs, meta);
+  Impl& q = *p_;
+  q.bonds = law_has_bond(frame.params().ball_ball.model);
+  const auto names = q.frame.names();
+  std::size_t k = 0;
+  for (; k < names.size() && names[k] != "balls"; ++k) q.file.section(names[k], q.frame.section_bytes(names[k]));
+  if (k + 1 >= names.size() || names[k + 1] != "pairs")
+    throw std::logic_error("StateStream: the state file's sections are not params..., balls, pairs, ...");
+  (void)q.frame.section_bytes("balls");  // (replaced)
+  (void)q.frame.section_bytes("pairs");
+  const std::uint64_t n = balls, m = pairs;
+  q.ball_cols = q.reserve("balls", {{n, 24}, {n, 24}, {n, 24}, {n, 24}, {n, 24}, {n, 24}, {n, 24}, {n, 24},
+                                    {n, 8}, {n, 8}, {n, 8}, {n, 8}, {n, 1}});
+  q.pair_cols = q.reserve("pairs", {{m, 4}, {m, 4}, {m, 4}, {m, kHistBytes}, {q.bonds ? m : 0, kBondBytes}});
+  q.after.assign(names.begin() + static_cast<std::ptrdiff_t>(k + 2), names.end());
+}
+
+StateStream::~StateStream() = default;
+
+void StateStream::balls(const Particles& rows) {
+  Impl& q = *p_;
+  const std::size_t n = rows.size();
+  if (q.balls_done + n > q.nballs)
+    throw std::logic_error("StateStream::balls: more than the " + std::to_string(q.nballs) + " balls announced");
+  ByteOut o;
+  const std::vector<Vec3>* vecs[8] = {&rows.x, &rows.v, &rows.w, &rows.f, &rows.t, &rows.fa, &rows.ta, &rows.x_ref};
+  for (int c = 0; c < 8; ++c) {
+    for (std::size_t i = 0; i < n; ++i) put(o, (*vecs[c])[i]);
+    q.put(q.ball_cols[static_cast<std::size_t>(c)], q.balls_done, o);
+  }
+  const std::vector<double>* dbl[3] = {&rows.r, &rows.m, &rows.inertia};
+  for (int c = 0; c < 3; ++c) {
+    for (std::size_t i = 0; i < n; ++i) o.f64((*dbl[c])[i]);
+    q.put(q.ball_cols[8 + static_cast<std::size_t>(c)], q.balls_done, o);
+  }
+  for (std::size_t i = 0; i < n; ++i) o.u64(rows.id[i]);
+  q.put(q.ball_cols[11], q.balls_done, o);
+  for (std::size_t i = 0; i < n; ++i) o.u8(rows.fix[i]);
+  q.put(q.ball_cols[12], q.balls_done, o);
+  q.balls_done += n;
+}
+
+void StateStream::pairs(const PairContacts& rows) {
+  Impl& q = *p_;
+  const std::size_t n = rows.size();
+  if (q.pairs_done + n > q.npairs)
+    throw std::logic_error("StateStream::pairs: more than the " + std::to_string(q.npairs) + " contacts announced");
+  if (rows.bond.size() != (q.bonds ? n : 0))
+    throw std::logic_error("StateStream::pairs: bond histories do not match the ball-ball law");
+  ByteOut o;
+  for (std::size_t c = 0; c < n; ++c) o.u32(rows.a[c]);
+  q.put(q.pair_cols[0], q.pairs_done, o);
+  for (std::size_t c = 0; c < n; ++c) o.u32(rows.b[c]);
+  q.put(q.pair_cols[1], q.pairs_done, o);
+  for (std::size_t c = 0; c < n; ++c)
+    for (std::int8_t v : rows.shift[c]) o.i8(v);
+  q.put(q.pair_cols[2], q.pairs_done, o);
+  for (std::size_t c = 0; c < n; ++c) put(o, rows.h[c]);
+  q.put(q.pair_cols[3], q.pairs_done, o);
+  if (q.bonds) {
+    for (std::size_t c = 0; c < n; ++c) put(o, rows.bond[c]);
+    q.put(q.pair_cols[4], q.pairs_done, o);
+  }
+  q.pairs_done += n;
+}
+
+void StateStream::commit(const WallContacts& planes, const WallContacts& facets, const WallContacts& footing) {
+  Impl& q = *p_;
+  if (q.balls_done != q.nballs || q.pairs_done != q.npairs)
+    throw std::logic_error("StateStream::commit: " + std::to_string(q.balls_done) + " of " + std::to_string(q.nballs) +
+                           " balls and " + std::to_string(q.pairs_done) + " of " + std::to_string(q.npairs) +
+                           " contacts given");
+  for (const std::string& name : q.after) {
+    const WallContacts* wc = name == "plane_contacts" ? &planes : name == "facet_contacts" ? &facets
+                             : name == "footing_contacts" ? &footing : nullptr;
+    if (!wc) {
+      q.file.section(name, q.frame.section_bytes(name));
+      continue;
+    }
+    (void)q.frame.section_bytes(name);  // (replaced)
+    ByteOut o;
+    put(o, *wc);
+    q.file.section(name, o.bytes());
+  }
+  q.file.commit();
 }
 
 }  // namespace demfdm::dem

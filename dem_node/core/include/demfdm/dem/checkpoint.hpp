@@ -43,6 +43,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <iosfwd>
+#include <memory>
 #include <string>
 #include <string_view>
 
@@ -69,5 +70,33 @@ void save_state_file(const World& w, const std::filesystem::path& path, const Ch
 io::StateHeader load_state(World& w, std::istream& in, std::uint64_t scene_hash, std::string_view source = "<stream>");
 io::StateHeader load_state_bytes(World& w, std::string bytes, std::uint64_t scene_hash, std::string_view source);
 io::StateHeader load_state_file(World& w, const std::filesystem::path& path, std::uint64_t scene_hash);
+
+/// A World's state file written in pieces (io::StateFileWriter): the bytes state_bytes() gives
+/// of a World whose balls and ball-ball contacts arrive in blocks of rows, in its row order, so
+/// that this World is never held whole in memory (DistDem::save_state_file: the ranks' parts
+/// merged on rank 0, which keeps a block at a time). The balls and pairs sections are reserved
+/// at their final size and each block is written into its columns in place; the sections after
+/// them are written at commit().
+class StateStream {
+ public:
+  /// `frame`: the World's other state (parameters, counters, effects, walls; its own balls and
+  /// contacts are not written). The streamed World holds `balls` balls and `pairs` ball-ball
+  /// contacts, with bond histories when the frame's ball-ball law bonds (law_has_bond).
+  StateStream(const std::filesystem::path& path, const World& frame, std::uint64_t balls, std::uint64_t pairs,
+              const CheckpointMeta& meta);
+  ~StateStream();
+  /// The next rows of the balls (every column of Particles).
+  void balls(const Particles& rows);
+  /// The next ball-ball contacts; a and b are rows of the streamed balls.
+  void pairs(const PairContacts& rows);
+  /// The plane, facet and footing contact lists (their balls: rows of the streamed balls); then
+  /// the file is complete and takes its name. Throws std::logic_error unless every row came. A
+  /// stream destroyed before commit() leaves no file.
+  void commit(const WallContacts& planes, const WallContacts& facets, const WallContacts& footing);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> p_;
+};
 
 }  // namespace demfdm::dem
