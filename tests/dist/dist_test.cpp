@@ -159,6 +159,8 @@ void check(const Scene& sc) {
   const double dt_end = d.world().dt();
   // a frame's arrays streamed to rank 0 in blocks of 37 rows (merged from every rank)
   const Snapshot frame = test::streamed_snapshot(d, 37);
+  // the checkpoint written from the parts (blocks of 37 rows) against the assembled World's
+  test::expect_same_state_file(d, [&] { return build(sc, true); }, 37);
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
   const double skel = d.skeleton_ratio(fc).ratio;
@@ -474,6 +476,7 @@ void check_newton(const Scene& sc, double pos_tol, double force_tol) {
     World assembled(full->params());
     d.unload(assembled, true);
     if (g_rank == 0) test::expect_same_snapshot(frame, snapshot(assembled));
+    test::expect_same_state_file(d, [&] { return build(sc, true); }, 37);
     dt_end = d.world().dt();
     long long mine[3] = {static_cast<long long>(d.world().pair_contacts().size()),
                          static_cast<long long>(d.migrated()), faults};

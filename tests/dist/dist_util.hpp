@@ -6,10 +6,18 @@
 #include <gtest/gtest.h>
 #include <mpi.h>
 
+#include <unistd.h>
+
+#include <array>
 #include <cstring>
+#include <filesystem>
+#include <memory>
+#include <string>
 #include <vector>
 
+#include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/dist.hpp"
+#include "demfdm/io/state_file.hpp"
 #include "demfdm/dem/vec3.hpp"
 #include "demfdm/dem/world.hpp"
 
@@ -63,6 +71,51 @@ inline Snapshot streamed_snapshot(const DistDem& d, std::size_t block) {
     EXPECT_EQ(pairs, all.state.size());
   }
   return all;
+}
+
+/// `w` without its balls and contacts, its walls, effects and counters kept (rank 0's World in
+/// the node while the ranks step).
+inline void drop_balls(World& w) {
+  const World::Counters k = w.counters();
+  Particles none;
+  PairContacts no_pairs;
+  std::array<WallContacts, 3> no_walls;
+  for (auto& wc : no_walls) wc.cand_off.push_back(0);
+  std::vector<std::uint8_t> no_ghosts;
+  w.swap_balls(none, no_pairs, no_walls, no_ghosts);
+  w.set_counters(k);
+}
+
+/// DistDem::save_state_file (blocks of `block` rows, from a frame World without balls) against
+/// the state file of the World that unload assembles on rank 0, byte for byte; `make()` builds
+/// the World the ranks were loaded from. Then a folder that does not exist: every rank throws,
+/// rank 0 naming the file, and nothing is left. Collective.
+template <class Make>
+inline void expect_same_state_file(const DistDem& d, Make make, std::size_t block) {
+  int pid = static_cast<int>(::getpid());
+  MPI_Bcast(&pid, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  const auto file = std::filesystem::temp_directory_path() / ("demfdm_dist_state_" + std::to_string(pid) + ".state");
+  const CheckpointMeta meta{0x5eedULL, "v-dist"};
+  std::unique_ptr<World> frame = make();
+  drop_balls(*frame);
+  d.save_state_file(*frame, file, meta, block);
+  std::unique_ptr<World> assembled = make();
+  d.unload(*assembled, true);
+  if (d.rank() == 0) {
+    const std::string want = state_bytes(*assembled, meta);
+    EXPECT_TRUE(io::read_whole_file(file) == want) << "the state file written from the parts differs from the assembled World's ("
+                                                   << want.size() << " bytes)";
+    std::filesystem::remove(file);
+  }
+  const auto bad = std::filesystem::temp_directory_path() / ("demfdm_no_such_folder_" + std::to_string(pid)) / "x.state";
+  std::string what;
+  try {
+    d.save_state_file(*frame, bad, meta, block);
+  } catch (const std::exception& e) {
+    what = e.what();
+  }
+  EXPECT_NE(what.find(d.rank() == 0 ? "x.state" : "rank 0 could not write"), std::string::npos) << what;
+  EXPECT_FALSE(std::filesystem::exists(bad.parent_path()));
 }
 
 /// Two snapshots (a frame's arrays), bit for bit.

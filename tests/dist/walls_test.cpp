@@ -186,6 +186,9 @@ void check(const WallScene& sc) {
   const Sums got_sums = sums(d.world(), hist);
   // the node's measurements, collective
   const double ke = d.kinetic_energy(), fc = d.mean_contact_force(), ratio = d.unbalanced_ratio(fc);
+  // the checkpoint written from the parts (blocks of 37 rows) against the assembled World's: the
+  // wall contacts (planes, facets with their candidates, the footing) and the walls too
+  test::expect_same_state_file(d, [&] { return build(sc, floor, true); }, 37);
   // One World again from the ranks' parts (DistDem::unload), on every rank (from_root: on rank 0).
   d.unload(*full, sc.from_root);
   if (sc.from_root && g_rank != 0) {
@@ -499,16 +502,22 @@ TEST(DistWalls, StageMeasurementsOnTheRanks) {
     EXPECT_EQ(std::memcmp(&e.kinetic, &we.kinetic, sizeof(double)), 0);
     for (auto m : {&Energy::strain, &Energy::damping, &Energy::friction, &Energy::softening}) {
       EXPECT_NEAR(e.*m, we.*m, 1e-12 * std::abs(we.*m));
-      if (g_size == 1) EXPECT_EQ(std::memcmp(&(e.*m), &(we.*m), sizeof(double)), 0);
+      if (g_size == 1) {
+        EXPECT_EQ(std::memcmp(&(e.*m), &(we.*m), sizeof(double)), 0);
+      }
     }
     EXPECT_GT(we.strain, 0.0);
     EXPECT_GT(we.damping, 0.0);
     EXPECT_NEAR(gw, wgw, 1e-12 * scale);
-    if (g_size == 1) EXPECT_EQ(std::memcmp(&gw, &wgw, sizeof(double)), 0);
+    if (g_size == 1) {
+      EXPECT_EQ(std::memcmp(&gw, &wgw, sizeof(double)), 0);
+    }
     EXPECT_GT(scale, 0.0);
     const StageEnergy::Balance b = ranked.balance_with(e, gw), bw = one.balance(*ref);
     EXPECT_NEAR(b.error, bw.error, 1e-9);
-    if (g_size > 1) EXPECT_GT(all_migrated, 0) << "balls must change ranks between the begin and the end";
+    if (g_size > 1) {
+      EXPECT_GT(all_migrated, 0) << "balls must change ranks between the begin and the end";
+    }
     // the footing: one World's height, on every rank
     const double zw = place_footing_at_first_contact(*ref, fp);
     EXPECT_EQ(std::memcmp(&z, &zw, sizeof z), 0) << z << " against " << zw;

@@ -1,6 +1,7 @@
 // The DEM on MPI ranks (dist.hpp, docs/scaling.md).
 #include "demfdm/dem/dist.hpp"
 #include "demfdm/dem/checkpoint.hpp"
+#include <exception>
 #include "demfdm/dem/guard.hpp"
 
 #include "demfdm/dem/laws/registry.hpp"
@@ -3020,19 +3021,11 @@ struct WallFullRec {
 
 }  // namespace
 
-void DistDem::unload(World& full, bool root_only) const {
+// This rank's wall contacts (with their candidate facets), its energies of damping and dropped
+// contacts, and its bond failures: the part of unload's and save_state_file's records that
+// rank 0 reads whole (wall contacts scale with the walls, not with the block).
+void DistDem::put_part_tail(std::vector<char>& out) const {
   const Particles& pt = w_->balls();
-  const auto& g = w_->ghost_rows();
-  auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
-  // this rank's part: its balls, the pairs whose ball A it owns, its balls' wall contacts
-  std::vector<BallRec> balls;
-  for (std::size_t i = 0; i < pt.size(); ++i)
-    if (owned_row(i)) balls.push_back(ball_rec(pt, i));
-  std::vector<PairRec> pairs;
-  const PairContacts& pc = w_->pair_contacts();
-  for (std::size_t c = 0; c < pc.size(); ++c)
-    if (owned_row(pc.a[c]))
-      pairs.push_back(PairRec{pt.id[pc.a[c]], pt.id[pc.b[c]], pc.shift[c], pc.h[c], pc.bond.empty() ? BondHist{} : pc.bond[c]});
   std::vector<WallFullRec> walls;
   std::vector<std::uint32_t> cands;
   const auto lists = wall_lists(*w_);
@@ -3047,14 +3040,103 @@ void DistDem::unload(World& full, bool root_only) const {
     }
   }
   const World::Counters mine = w_->counters();
-  const std::vector<double> sums{mine.e_damp, mine.e_slip_dead, mine.e_soft_dead};
+  put_recs(out, walls);
+  put_recs(out, cands);
+  put_recs(out, std::vector<double>{mine.e_damp, mine.e_slip_dead, mine.e_soft_dead});
+  put_recs(out, std::vector<std::int64_t>{mine.bond_failures});
+}
+
+// Every rank's tails, read in rank order (rank 0).
+struct DistDem::Tails {
+  std::vector<WallFullRec> walls;
+  std::vector<std::uint32_t> cands;
+  std::vector<std::size_t> cand_at;  // per wall record: where its candidates start in cands
+  World::Counters k;                 // rank 0's, with the ranks' energies and bond failures summed
+  explicit Tails(const World::Counters& mine) : k(mine) {
+    k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
+  }
+  const char* read(const char* q) {
+    const std::size_t w0 = walls.size();
+    q = get_recs(q, walls);
+    const std::size_t c0 = cands.size();
+    q = get_recs(q, cands);
+    std::size_t at = c0;
+    for (std::size_t j = w0; j < walls.size(); ++j) cand_at.push_back(at), at += walls[j].ncand;
+    std::vector<double> e;
+    q = get_recs(q, e);
+    std::vector<std::int64_t> f;
+    q = get_recs(q, f);
+    // the ranks' energies in rank order (not one World's order: docs/scaling.md)
+    k.e_damp += e[0], k.e_slip_dead += e[1], k.e_soft_dead += e[2];
+    k.bond_failures += f[0];
+    return q;
+  }
+  // One World's wall-contact lists: by (kind, ball id, wall), their balls as rows (`row_of`).
+  template <class RowOf>
+  std::array<WallContacts, 3> lists(const WorldParams& p, RowOf row_of) const {
+    std::vector<std::uint32_t> wo(walls.size());
+    std::iota(wo.begin(), wo.end(), 0u);
+    std::sort(wo.begin(), wo.end(), [&](std::uint32_t x, std::uint32_t y) {
+      return std::tie(walls[x].kind, walls[x].id, walls[x].wall) < std::tie(walls[y].kind, walls[y].id, walls[y].wall);
+    });
+    std::array<WallContacts, 3> nwc;
+    for (std::uint32_t j : wo) {
+      const WallFullRec& c = walls[j];
+      WallContacts& wc = nwc[c.kind];
+      if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+      wc.ball.push_back(row_of(c.id));
+      wc.wall.push_back(c.wall);
+      wc.facet.push_back(c.facet);
+      wc.cand.insert(wc.cand.end(), cands.begin() + static_cast<std::ptrdiff_t>(cand_at[j]),
+                     cands.begin() + static_cast<std::ptrdiff_t>(cand_at[j] + c.ncand));
+      wc.cand_off.push_back(static_cast<std::uint32_t>(wc.cand.size()));
+      wc.h.push_back(c.h);
+      if (kind_bonds(p, c.kind)) wc.bond.push_back(c.b);
+      wc.F.push_back(c.F), wc.M.push_back(c.M), wc.TA.push_back(c.TA), wc.xc.push_back(c.xc), wc.bary.push_back(c.bary);
+    }
+    // A list without contacts has its one offset, as a World's has.
+    for (WallContacts& wc : nwc)
+      if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+    return nwc;
+  }
+};
+
+// What unload gives `full` besides its balls and contacts: the walls, the stepped World's
+// parameters (with `full`'s own thread settings and skin) and the counters `k`.
+void DistDem::finish_full(World& full, World::Counters k, double max_disp2) const {
+  const World::Counters mine = w_->counters();
+  full.copy_walls(*w_);
+  // The full world's own parameters, but the step and the cell of the stepped one.
+  const WorldParams own = full.params();
+  full.mutable_params() = w_->params();
+  full.mutable_params().threads = own.threads;
+  full.mutable_params().thread_independent = own.thread_independent;
+  full.mutable_params().order_free_sums = own.order_free_sums;
+  full.mutable_params().skin = own.skin;
+  const World::Counters before = full.counters();
+  // (the ranks add no ball, but a replicated block's next id is past its copies: load_replicated)
+  k.next_id = std::max(before.next_id, mine.next_id), k.next_wall_id = before.next_wall_id;
+  k.max_disp2 = max_disp2;
+  full.set_counters(k);
+}
+
+void DistDem::unload(World& full, bool root_only) const {
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
+  // this rank's part: its balls, the pairs whose ball A it owns, its balls' wall contacts
+  std::vector<BallRec> balls;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (owned_row(i)) balls.push_back(ball_rec(pt, i));
+  std::vector<PairRec> pairs;
+  const PairContacts& pc = w_->pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (owned_row(pc.a[c]))
+      pairs.push_back(PairRec{pt.id[pc.a[c]], pt.id[pc.b[c]], pc.shift[c], pc.h[c], pc.bond.empty() ? BondHist{} : pc.bond[c]});
   std::vector<char> out;
   put_recs(out, balls);
   put_recs(out, pairs);
-  put_recs(out, walls);
-  put_recs(out, cands);
-  put_recs(out, sums);
-  put_recs(out, std::vector<std::int64_t>{mine.bond_failures});
+  put_part_tail(out);
   // every rank gets every part (root_only: rank 0 alone, each part in messages of at most 1 GiB,
   // so that a whole World beyond 2 GiB, which an int cannot count, is assembled)
   std::vector<long long> displ(static_cast<std::size_t>(size_) + 1, 0);
@@ -3095,37 +3177,16 @@ void DistDem::unload(World& full, bool root_only) const {
 
   std::vector<BallRec> ab;
   std::vector<PairRec> ap;
-  std::vector<WallFullRec> aw;
-  std::vector<std::uint32_t> ac;
-  World::Counters k = mine;
-  k.bond_failures = 0, k.e_damp = k.e_slip_dead = k.e_soft_dead = 0.0;
-  std::vector<std::size_t> cand_at;  // per wall record: where its candidates start in ac
+  Tails tails(w_->counters());
   for (int r = 0; r < size_; ++r) {
     const char* q = in.data() + displ[static_cast<std::size_t>(r)];
     q = get_recs(q, ab);
     q = get_recs(q, ap);
-    const std::size_t w0 = aw.size();
-    q = get_recs(q, aw);
-    const std::size_t c0 = ac.size();
-    q = get_recs(q, ac);
-    std::size_t at = c0;
-    for (std::size_t j = w0; j < aw.size(); ++j) cand_at.push_back(at), at += aw[j].ncand;
-    std::vector<double> e;
-    q = get_recs(q, e);
-    std::vector<std::int64_t> f;
-    get_recs(q, f);
-    // the ranks' energies in rank order (not one World's order: docs/scaling.md)
-    k.e_damp += e[0], k.e_slip_dead += e[1], k.e_soft_dead += e[2];
-    k.bond_failures += f[0];
+    tails.read(q);
   }
   // One World's orders: balls by id, pairs by (A, B) id, wall contacts by (kind, ball id, wall).
   std::sort(ab.begin(), ab.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
   std::sort(ap.begin(), ap.end(), [](const PairRec& x, const PairRec& y) { return std::tie(x.ia, x.ib) < std::tie(y.ia, y.ib); });
-  std::vector<std::uint32_t> wo(aw.size());
-  std::iota(wo.begin(), wo.end(), 0u);
-  std::sort(wo.begin(), wo.end(), [&](std::uint32_t x, std::uint32_t y) {
-    return std::tie(aw[x].kind, aw[x].id, aw[x].wall) < std::tie(aw[y].kind, aw[y].id, aw[y].wall);
-  });
   Particles np;
   std::vector<std::uint64_t> ids;
   for (const BallRec& b : ab) push_ball(np, b), ids.push_back(b.id);
@@ -3141,39 +3202,128 @@ void DistDem::unload(World& full, bool root_only) const {
     npc.h.push_back(c.h);
     if (pair_bonds) npc.bond.push_back(c.b);
   }
-  std::array<WallContacts, 3> nwc;
-  for (std::uint32_t j : wo) {
-    const WallFullRec& c = aw[j];
-    WallContacts& wc = nwc[c.kind];
-    if (wc.cand_off.empty()) wc.cand_off.push_back(0);
-    wc.ball.push_back(row_of(c.id));
-    wc.wall.push_back(c.wall);
-    wc.facet.push_back(c.facet);
-    wc.cand.insert(wc.cand.end(), ac.begin() + static_cast<std::ptrdiff_t>(cand_at[j]),
-                   ac.begin() + static_cast<std::ptrdiff_t>(cand_at[j] + c.ncand));
-    wc.cand_off.push_back(static_cast<std::uint32_t>(wc.cand.size()));
-    wc.h.push_back(c.h);
-    if (kind_bonds(w_->params(), c.kind)) wc.bond.push_back(c.b);
-    wc.F.push_back(c.F), wc.M.push_back(c.M), wc.TA.push_back(c.TA), wc.xc.push_back(c.xc), wc.bary.push_back(c.bary);
-  }
-  // A list without contacts has its one offset, as a World's has.
-  for (WallContacts& wc : nwc)
-    if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+  std::array<WallContacts, 3> nwc = tails.lists(w_->params(), row_of);
   std::vector<std::uint8_t> ghost;
   full.swap_balls(np, npc, nwc, ghost);
-  full.copy_walls(*w_);
-  // The full world's own parameters, but the step and the cell of the stepped one.
-  const WorldParams own = full.params();
-  full.mutable_params() = w_->params();
-  full.mutable_params().threads = own.threads;
-  full.mutable_params().thread_independent = own.thread_independent;
-  full.mutable_params().order_free_sums = own.order_free_sums;
-  full.mutable_params().skin = own.skin;
-  const World::Counters before = full.counters();
-  // (the ranks add no ball, but a replicated block's next id is past its copies: load_replicated)
-  k.next_id = std::max(before.next_id, mine.next_id), k.next_wall_id = before.next_wall_id;
-  k.max_disp2 = max_disp2;
-  full.set_counters(k);
+  finish_full(full, tails.k, max_disp2);
+}
+
+// ------------------------------------------------------------------------------------------
+// save_state_file: one World's state file from the ranks' parts, merged on rank 0 in blocks
+
+namespace {
+constexpr int kTagStateBalls = 7306, kTagStatePairs = 7307;
+}  // namespace
+
+void DistDem::save_state_file(World& full, const std::filesystem::path& path, const CheckpointMeta& meta,
+                              std::size_t block) const {
+  // (a block's bytes must fit an int; 64 MiB messages at most)
+  block = std::max<std::size_t>(1, std::min<std::size_t>(block, (std::size_t{64} << 20) / sizeof(PairRec)));
+  const Particles& pt = w_->balls();
+  const auto& g = w_->ghost_rows();
+  auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
+  // this rank's rows in one World's orders (unload's): its balls by id, the pairs whose ball A it
+  // owns by (A, B) id
+  std::vector<BallRec> balls;
+  for (std::size_t i = 0; i < pt.size(); ++i)
+    if (owned_row(i)) balls.push_back(ball_rec(pt, i));
+  std::sort(balls.begin(), balls.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
+  std::vector<PairRec> pairs;
+  const PairContacts& pc = w_->pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    if (owned_row(pc.a[c]))
+      pairs.push_back(PairRec{pt.id[pc.a[c]], pt.id[pc.b[c]], pc.shift[c], pc.h[c], pc.bond.empty() ? BondHist{} : pc.bond[c]});
+  auto pair_less = [](const PairRec& x, const PairRec& y) { return std::tie(x.ia, x.ib) < std::tie(y.ia, y.ib); };
+  std::sort(pairs.begin(), pairs.end(), pair_less);
+  // counts, the tails (wall contacts, energies, failures) and the largest displacement on rank 0
+  const std::uint64_t mine[2] = {balls.size(), pairs.size()};
+  std::vector<std::uint64_t> counts(2 * static_cast<std::size_t>(size_));
+  MPI_Gather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, 0, comm_);
+  std::vector<char> tail, tails_in;
+  put_part_tail(tail);
+  std::vector<std::size_t> starts;
+  gather_on_root(comm_, tail, tails_in, &starts);
+  double run = run_disp2_, max_disp2 = 0.0;
+  MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
+  std::vector<std::uint64_t> nb(static_cast<std::size_t>(size_)), np(static_cast<std::size_t>(size_));
+  std::uint64_t total_balls = 0, total_pairs = 0;
+  for (int r = 0; r < size_ && rank_ == 0; ++r) {
+    nb[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r)];
+    np[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r) + 1];
+    total_balls += nb[static_cast<std::size_t>(r)];
+    total_pairs += np[static_cast<std::size_t>(r)];
+  }
+  // Rank 0 writes; after its first error it only drains the merges, and every rank then throws
+  // (the others name rank 0's error, which rank 0 throws).
+  std::unique_ptr<StateStream> st;
+  std::exception_ptr failed;
+  auto guarded = [&](auto&& f) {
+    if (failed) return;
+    try {
+      f();
+    } catch (...) {
+      failed = std::current_exception();
+    }
+  };
+  Tails tails(w_->counters());
+  if (rank_ == 0)
+    guarded([&] {
+      for (int r = 0; r < size_; ++r) tails.read(tails_in.data() + starts[static_cast<std::size_t>(r)]);
+      finish_full(full, tails.k, max_disp2);
+      st = std::make_unique<StateStream>(path, full, total_balls, total_pairs, meta);
+    });
+  // the balls, merged by id; rank 0 keeps the ids (8 bytes a ball) to turn ids into rows
+  std::vector<std::uint64_t> ids;
+  if (rank_ == 0) ids.reserve(total_balls);
+  Particles rows;
+  auto flush_balls = [&] {
+    if (rows.size() == 0) return;
+    guarded([&] { st->balls(rows); });
+    rows = Particles{};
+  };
+  merge_on_root(comm_, rank_, size_, kTagStateBalls, block, balls, nb,
+                [](const BallRec& x, const BallRec& y) { return x.id < y.id; },
+                [&](const BallRec& b) {
+                  ids.push_back(b.id);
+                  if (failed) return;
+                  push_ball(rows, b);
+                  if (rows.size() == block) flush_balls();
+                });
+  flush_balls();
+  auto row_of = [&](std::uint64_t id) {
+    const auto it = std::lower_bound(ids.begin(), ids.end(), id);
+    if (it == ids.end() || *it != id)
+      throw std::logic_error("DistDem::save_state_file: a contact's ball " + std::to_string(id) + " is no rank's");
+    return static_cast<std::uint32_t>(it - ids.begin());
+  };
+  const bool pair_bonds = law_has_bond(w_->params().ball_ball.model);
+  PairContacts prow;
+  auto flush_pairs = [&] {
+    if (prow.size() == 0) return;
+    guarded([&] { st->pairs(prow); });
+    prow = PairContacts{};
+  };
+  merge_on_root(comm_, rank_, size_, kTagStatePairs, block, pairs, np, pair_less, [&](const PairRec& c) {
+    if (failed) return;
+    guarded([&] {
+      prow.a.push_back(row_of(c.ia));
+      prow.b.push_back(row_of(c.ib));
+    });
+    prow.shift.push_back(c.s);
+    prow.h.push_back(c.h);
+    if (pair_bonds) prow.bond.push_back(c.b);
+    if (prow.size() == block) flush_pairs();
+  });
+  flush_pairs();
+  if (rank_ == 0)
+    guarded([&] {
+      const std::array<WallContacts, 3> nwc = tails.lists(w_->params(), row_of);
+      st->commit(nwc[0], nwc[1], nwc[2]);
+    });
+  int ok = failed ? 0 : 1;
+  MPI_Bcast(&ok, 1, MPI_INT, 0, comm_);
+  if (failed) std::rethrow_exception(failed);
+  if (!ok) throw std::runtime_error("DistDem::save_state_file: rank 0 could not write " + path.string() + " (see rank 0's error).");
 }
 
 }  // namespace demfdm::dem

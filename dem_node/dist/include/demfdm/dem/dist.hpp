@@ -37,11 +37,13 @@
 #include <algorithm>
 #include <array>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <vector>
 
 #include "demfdm/dem/balance_cost.hpp"
+#include "demfdm/dem/checkpoint.hpp"
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/world.hpp"
@@ -224,6 +226,19 @@ class DistDem {
   /// With `root_only`, `full` is assembled on rank 0 only (a gather, not an all-gather); the
   /// other ranks' `full` is left as it was.
   void unload(World& full, bool root_only = false) const;
+  /// The state file (dem/checkpoint.hpp) of the World that unload(full, true) would assemble on
+  /// rank 0, written by rank 0 to `path`, byte for byte save_state_file of that World, without
+  /// assembling it: every rank sorts its balls by id and the pairs whose ball A it owns by
+  /// (A, B) id; rank 0 merges the ranks' rows as they arrive, in blocks of `block` rows, and
+  /// writes each block into the file's columns in place (StateStream); it keeps the balls' ids
+  /// (8 bytes a ball) to turn a contact's ids into rows, and reads the wall contacts whole
+  /// (they grow with the walls, not with the block). Rank 0's `full` gets what unload gives it
+  /// besides the balls and contacts (the walls, the parameters, the counters); its own balls and
+  /// contacts are not written (rank 0's World holds none while the ranks step). Collective; when
+  /// rank 0 cannot write, every rank throws (rank 0 its error, the others naming it), and no
+  /// file is left under `path`'s name.
+  void save_state_file(World& full, const std::filesystem::path& path, const CheckpointMeta& meta,
+                       std::size_t block = 16384) const;
   /// n steps; the walls' sums are those of the last (reduced after every step where a platen
   /// servo reads them at the next one, else once at the end: within the call nothing reads them).
   void step(std::int64_t n = 1);
@@ -485,6 +500,11 @@ class DistDem {
   void rebalance();      // new cuts from the weights of every rank's balls (before an exchange)
   void balance_cuts(const std::vector<Vec3>& x, const std::vector<std::int64_t>& wt, const std::vector<std::uint8_t>& skip);
   void balance_at_load(const World* full);  // load, load_from_root: a balanced first cut
+  // unload's and save_state_file's shared parts: this rank's wall contacts, energies and bond
+  // failures as records; every rank's read on rank 0; what `full` gets besides balls and contacts
+  struct Tails;
+  void put_part_tail(std::vector<char>& out) const;
+  void finish_full(World& full, World::Counters k, double max_disp2) const;
   double owned_max_disp2() const;
   /// The folds of the S sums (the same boundaries on every rank) added over the ranks, in place,
   /// and `extra`, if given, with them: one sum-allreduce (collective).
