@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -60,9 +61,10 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // bonding and servo, their REV assembled on rank 0 between them); the replicate stage leaves each
 // rank its part of the block (dem::DistDem), and the ranks stay live from there to the run's end:
 // the later stages' set-ups (gravity, the footing, the interface), their steps, reports and frames
-// run on the parts (ranks_carry), and rank 0 keeps no ball meanwhile (drop_world). Rank 0
-// assembles the whole World (DistDem::unload, sync_full) only for a checkpoint, a guard's finding
-// or a stage that needs it (the kick, a specimen procedure); such a stage is set
+// run on the parts (ranks_carry), and rank 0 keeps no ball meanwhile (drop_world). A checkpoint
+// merges the parts' rows into the state file on rank 0 block by block (DistDem::save_state_file).
+// Rank 0 assembles the whole World (DistDem::unload, sync_full) only for a guard's finding or a
+// stage that needs it (the kick, a specimen procedure); such a stage is set
 // up on it and cut into bricks again at its first step (enter_dist, DistDem::load_from_root). The
 // other ranks never hold more than their part. Only rank 0 writes files.
 struct Ranks {
@@ -185,10 +187,17 @@ class DemParticipant : public node::Participant {
   }
   void save(const fs::path& dir, io::StateWriter& w, const io::StateMeta& meta) override {
     write_history_row();  // (none is due between grants; the checkpoint counts the rows written)
-    sync_full();
-    if (g_ranks.rank == 0) dem::save_state_file(world_, dir / "dem.world.state", meta);
-    // A balance begun on the ranks: its positions in the checkpoint's form (rank 0's World's rows,
-    // in id order as the assembled World's)
+    if (dist_live_ && !synced_) {  // the ranks' parts merged into the file by rank 0, which never holds the block
+      const auto t0 = std::chrono::steady_clock::now();
+      dist_->save_state_file(world_, dir / "dem.world.state", meta);
+      const std::size_t n = num_balls();  // (collective)
+      spdlog::info("dem: checkpoint {}: {} balls written from the {} ranks' parts, merged on rank 0 ({:.3f} s)",
+                   dir.filename().string(), n, g_ranks.size,
+                   std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    } else if (g_ranks.rank == 0)
+      dem::save_state_file(world_, dir / "dem.world.state", meta);
+    // A balance begun on the ranks: its positions in the checkpoint's form (the saved World's rows,
+    // in id order)
     if (ranked_energy_) energy_.x_begin = positions_on_root();
     w.begin("dem_node");
     for (double v : {block_.origin.x, block_.origin.y, block_.origin.z, block_.cell.x, block_.cell.y, block_.cell.z}) w.f64(v);
@@ -345,7 +354,7 @@ class DemParticipant : public node::Participant {
     if (!preparing_ && gravity_level_ > 0 && !live().gravity_on()) {
       const double level = gravity_level_ * s_.real("gravity.g0") / world_.params().g0;
       if (carry) {
-        world_.set_gravity(true, level);  // (rank 0's World, assembled from the parts at a checkpoint)
+        world_.set_gravity(true, level);  // (rank 0's World: a checkpoint's frame, DistDem::save_state_file)
         dist_->world().set_gravity(true, level);
         spdlog::info("dem: gravity on at {} g, on the ranks' parts", level);
       } else {
@@ -698,8 +707,8 @@ class DemParticipant : public node::Participant {
   // unless they step (enter_dist), each step on the ranks giving one World's bits.
   void interface_setup(const proto::InterfaceMesh& m) {
     const bool ranked = g_ranks.size > 1;
-    // (rank 0's World gets the wall too while the ranks step: it is assembled from the parts at a
-    // checkpoint, and the parts' walls are copied into it)
+    // (rank 0's World gets the wall too while the ranks step: it is a checkpoint's frame, and the
+    // parts' walls are copied into it)
     if (!part_only()) wall_ = world_.add_facet_wall(m.positions, m.triangles);
     if (ranked) MPI_Bcast(&wall_, 1, MPI_INT, 0, g_ranks.comm);
     if (dist_live_ && dist_->world().add_facet_wall(m.positions, m.triangles) != wall_)
@@ -792,8 +801,8 @@ class DemParticipant : public node::Participant {
                    dem::ContactCost{k[0], k[1], k[2], k[3], k[4], k[5]}});
   }
   // The ranks' DistDem `dist_` holds the state from here on, and rank 0 drops its World's balls
-  // (the state is the ranks'; a checkpoint or a stage that needs the whole World assembles it
-  // again, sync_full).
+  // (the state is the ranks'; a stage that needs the whole World assembles it again, sync_full;
+  // a checkpoint merges the parts' rows into its file, DistDem::save_state_file).
   void went_live(const char* how) {
     drop_world();
     const dem::BrickGrid& g = dist_->grid();
@@ -808,20 +817,14 @@ class DemParticipant : public node::Participant {
     synced_ = false;
     safe_dt_key_ = {-1, -1, -1};
   }
-  // The stage's begin positions of the balls of rank 0's assembled World (after sync_full), in its
-  // row order, from the ranks' records; empty on the other ranks. Collective.
+  // The stage's begin positions in the saved World's row order (ball id), from the ranks'
+  // records; empty on the other ranks. Collective.
   std::vector<dem::Vec3> positions_on_root() {
     std::vector<dem::DistDem::IdPos> all = dem::gather_on_root(g_ranks.comm, x_begin_);
     std::vector<dem::Vec3> out;
     if (part_only()) return out;
     std::sort(all.begin(), all.end(), [](const auto& a, const auto& b) { return a.id < b.id; });
-    const auto& ids = world_.balls().id;
-    out.assign(ids.size(), dem::Vec3{0.0, 0.0, 0.0});
-    for (std::size_t i = 0; i < ids.size(); ++i) {
-      const auto it = std::lower_bound(all.begin(), all.end(), ids[i], [](const auto& a, std::uint64_t id) { return a.id < id; });
-      if (it == all.end() || it->id != ids[i]) throw std::logic_error("dem: a ball's position at the stage's begin is missing");
-      out[i] = it->x;
-    }
+    for (const auto& b : all) out.push_back(b.x);
     return out;
   }
   // Rank 0's World without its balls and contacts (its walls, effects and counters kept): the
@@ -855,11 +858,12 @@ class DemParticipant : public node::Participant {
     }
     return g;
   }
-  // The ranks' state into world_ on every rank (a checkpoint, a frame, a guard finding).
+  // The ranks' state into world_ on rank 0 (a guard finding, a stage that needs the whole World).
   void sync_full() {
     if (!dist_live_ || synced_) return;
     node::Timed t(effect_s_["ranks.unload"]);
     dist_->unload(world_, true);  // on rank 0, which writes and sets the next stage up
+    spdlog::info("dem: the ranks' parts assembled into rank 0's World ({} balls)", world_.num_balls());
     synced_ = true;
   }
   // The cuts of an RCB tree, each as its axis and its place along the block (a fraction), for a
@@ -976,7 +980,7 @@ class DemParticipant : public node::Participant {
   // DEM-only box (dem.specimen.box = "walls"): planes on the bottom and the four sides of the
   // replicated block, normals pointing inwards, then the depth scaling of the coupled set-up.
   // While the ranks step, on their parts (the box from every rank's balls, one World's planes)
-  // and on rank 0's World, whose walls a checkpoint's assembly takes from the parts; every rank
+  // and on rank 0's World, whose walls a checkpoint takes from the parts; every rank
   // calls it then.
   void box_walls() {
     box_done_ = true;

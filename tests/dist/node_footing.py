@@ -120,10 +120,16 @@ for name, ranks, threads, more in runs[1:]:
     if not m:
         failures.append("%s: the node's log names no ranks' exchange in the penetration: it did not step on ranks" % name)
     # The ranks stay live from the replicate stage to the run's end (docs/scaling.md): no stage after
-    # it loads parts from rank 0 (a checkpoint alone assembles the World there).
+    # it loads parts from rank 0, and none assembles the World there: the stage-end checkpoints
+    # (replicate, gravity) merge the parts' rows into their files (DistDem::save_state_file).
     for stage in ("4 'gravity'", "5 'penetrate'"):
         if re.search(r"stage %s ends.*effect_s\.ranks\.load=" % stage, log):
             failures.append("%s: stage %s loaded parts from rank 0" % (name, stage))
+    saved = re.findall(r"dem: checkpoint (\S+): [0-9]+ balls written from the [0-9]+ ranks' parts", log)
+    if "replicate-" not in " ".join(saved) or "gravity-" not in " ".join(saved):
+        failures.append("%s: the replicate and gravity checkpoints were not written from the ranks' parts (%s)" % (name, saved))
+    if "assembled into rank 0's World" in log:
+        failures.append("%s: the World was assembled on rank 0 after the replication" % name)
     if "the block replicated on" not in log or "(the ranks stay live)" not in log:
         failures.append("%s: the node's log does not say that the ranks stay live from the replication" % name)
     summary = open(os.path.join(d, "summary.txt")).read()
@@ -136,8 +142,8 @@ for name, ranks, threads, more in runs[1:]:
     print("%s: %d CSV files and %d + %d datasets compared with one process's" %
           (name, len(csvs), len(ref_h5["dem.h5"]), len(ref_h5["fdm.h5"])))
 
-# A branch from the 3-rank run's checkpoint at the end of the gravity stage (saved from the ranks'
-# parts assembled into one World), run on 3 ranks: its penetration is the one-process run's.
+# A branch from the 3-rank run's checkpoint at the end of the gravity stage (one World's state file
+# written from the ranks' parts), run on 3 ranks: its penetration is the one-process run's.
 branch = os.path.join(work, "branch_ranks3")
 p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"),
                     "--no-build", "--from", os.path.join(work, "ranks3", "checkpoints", "gravity-460-end"), "--run-dir",
