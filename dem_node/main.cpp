@@ -64,7 +64,7 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // run on the parts (ranks_carry), and rank 0 keeps no ball meanwhile (drop_world). A checkpoint
 // merges the parts' rows into the state file on rank 0 block by block (DistDem::save_state_file).
 // Rank 0 assembles the whole World (DistDem::unload, sync_full) only for a guard's finding or a
-// stage that needs it (the kick, a specimen procedure); such a stage is set
+// stage that needs it (a specimen procedure); such a stage is set
 // up on it and cut into bricks again at its first step (enter_dist, DistDem::load_from_root). The
 // other ranks never hold more than their part. Only rank 0 writes files.
 struct Ranks {
@@ -384,7 +384,7 @@ class DemParticipant : public node::Participant {
       case schema::Action::kGeostatic:  // the table says the DEM does not act in it (refused at --check)
         throw std::invalid_argument("dem_node does not act in stage action '" + st.action + "'");
     }
-    if (!carry && !preparing_ && !kick_.empty() && !kicked_) kick();
+    if (!preparing_ && !kick_.empty() && !kicked_) kick(carry);
     if (dist_live_) {
       dist_->prepare();
     } else {
@@ -394,8 +394,8 @@ class DemParticipant : public node::Participant {
     return part_only() ? proto::Values{} : v;
   }
   // Whether the ranks' parts, live since an earlier stage, carry the state into stage `st`: its
-  // set-up runs on them (gravity, the DEM-only box, the footing, the interface; not a specimen
-  // procedure of rank 0's World, nor the kick). Rank 0 decides (it knows what its World still
+  // set-up runs on them (gravity, the DEM-only box, the footing, the interface, the kick; not a
+  // specimen procedure of rank 0's World). Rank 0 decides (it knows what its World still
   // needs) and sends its set-up flags with it (the stages it set up alone set them there); every
   // rank calls it.
   bool ranks_carry(const schema::Stage& st) {
@@ -404,8 +404,7 @@ class DemParticipant : public node::Participant {
     if (!part_only()) {
       const bool kind = st.kind == schema::Action::kCouple || st.kind == schema::Action::kPenetrate ||
                         st.kind == schema::Action::kCycle || st.kind == schema::Action::kEquilibrium;
-      const bool kick = !kick_.empty() && !kicked_;
-      f[0] = kind && !kick ? 1 : 0;
+      f[0] = kind ? 1 : 0;
     }
     MPI_Bcast(f, 3, MPI_INT, 0, g_ranks.comm);
     box_done_ = f[1] != 0, kicked_ = f[2] != 0;
@@ -959,9 +958,16 @@ class DemParticipant : public node::Participant {
     return {lo, hi};
   }
 
-  // dem.kick: the highest ball gets the given velocity (stability studies).
-  void kick() {
+  // dem.kick: the highest ball gets the given velocity (stability studies); on the ranks' parts
+  // when they carry the stage (every rank calls it then), else on the whole World.
+  void kick(bool carry) {
     kicked_ = true;
+    if (carry) {
+      const dem::Kicked k = dem::kick_highest_ball(*dist_, {kick_[0], kick_[1], kick_[2]});
+      spdlog::info("dem: kick: ball id {} at ({}, {}, {}) gets velocity ({}, {}, {}) m/s, on the ranks' parts", k.id, k.x.x,
+                   k.x.y, k.x.z, kick_[0], kick_[1], kick_[2]);
+      return;
+    }
     if (world_.num_balls() == 0) return;
     const std::size_t top = dem::kick_highest_ball(world_, {kick_[0], kick_[1], kick_[2]});
     const auto& b = world_.balls();

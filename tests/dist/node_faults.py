@@ -2,9 +2,9 @@
 """Faults with the DEM on MPI ranks, through launch/run (issue 17 item 3): on
 scenes/footing_small.toml with dem.ranks = 2,
 
-1. the blow-up guard: the top ball kicked out of the block at the gravity stage (dem.kick) stops
-   the run with exit code 3 and the same report (blowup_dem.txt, byte for byte) as on one
-   process: the ranks find it and the whole World reports it; the same with the escape test off
+1. the blow-up guard: the top ball kicked out of the block at the gravity stage (dem.kick, on the
+   ranks' parts) stops the run with exit code 3 and the same report (blowup_dem.txt, byte for
+   byte) as on one process: the ranks find it and the whole World reports it; the same with the escape test off
    and the kinetic-energy jump test finding it (rank 0's test, its verdict broadcast);
 2. a dead rank: rank 1 of the DEM killed with SIGKILL in the penetration ends the run with exit
    code 3 within 5 s, launch/run naming the DEM and the coordinator naming node 'dem';
@@ -51,6 +51,10 @@ for case, sets, words in (("kick", [], b"left the DEM domain"),
         if not os.path.exists(path):
             failures.append("%s: no blowup_dem.txt" % name)
             continue
+        if ranks == 2:  # the kick on the ranks' parts (DistDem's kick_highest_ball), not on an assembled World
+            log = open(os.path.join(work, name, "dem.log")).read()
+            if "on the ranks' parts" not in log[log.find("dem: kick:"):][:300]:
+                failures.append("%s: the kick was not given on the ranks' parts" % name)
         reports[ranks] = open(path, "rb").read()
         if words not in reports[ranks]:
             failures.append("%s: the report does not say '%s'" % (name, words.decode()))

@@ -474,6 +474,13 @@ TEST(DistWalls, StageMeasurementsOnTheRanks) {
   double zs[2] = {z, d.world().footing().p.bottom_centre.z}, lo[2], hi[2];
   MPI_Allreduce(zs, lo, 2, MPI_DOUBLE, MPI_MIN, MPI_COMM_WORLD);
   MPI_Allreduce(zs, hi, 2, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+  // the kick (dem.kick) on the parts: one World's top ball, the same steps after it
+  const Vec3 kick_v{0.01, -0.02, 0.5};
+  const Kicked kicked = kick_highest_ball(d, kick_v);
+  d.step(30);
+  const DistDem::Balls after_kick = d.gather();
+  long long owned = static_cast<long long>(d.owned()), all_owned = 0;
+  MPI_Reduce(&owned, &all_owned, 1, MPI_LONG_LONG, MPI_SUM, 0, MPI_COMM_WORLD);
   if (g_rank == 0) {
     std::unique_ptr<World> ref = build(sc, floor, true);
     one.begin(*ref);
@@ -531,6 +538,12 @@ TEST(DistWalls, StageMeasurementsOnTheRanks) {
     EXPECT_EQ(fewest, ref->num_planes()) << "every rank's part gets the five planes";
     EXPECT_LT(wlo.z, 0.0);
     EXPECT_GT(zw, 0.5 * kL);
+    const std::size_t top = kick_highest_ball(*ref, kick_v);
+    EXPECT_EQ(kicked.id, ref->balls().id[top]);
+    EXPECT_TRUE(test::same_bits(std::vector<Vec3>{kicked.x}, std::vector<Vec3>{ref->balls().x[top]}));
+    ref->step(30);
+    test::expect_same_balls(after_kick, *ref, static_cast<std::size_t>(all_owned));
+    std::printf("  kicked ball %llu at z = %.6f L\n", static_cast<unsigned long long>(kicked.id), kicked.x.z / kL);
   }
   test::share_verdict();
 }

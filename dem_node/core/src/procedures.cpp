@@ -318,8 +318,10 @@ std::size_t kick_highest_ball(World& w, const Vec3& v) {
   const auto& b = w.balls();
   if (b.size() == 0) throw std::invalid_argument("kick: the world has no balls");
   std::size_t top = 0;
-  for (std::size_t i = 1; i < b.size(); ++i)
-    if (b.x[i].z + b.r[i] > b.x[top].z + b.r[top]) top = i;
+  for (std::size_t i = 1; i < b.size(); ++i) {
+    const double h = b.x[i].z + b.r[i], best = b.x[top].z + b.r[top];
+    if (h > best || (h == best && b.id[i] < b.id[top])) top = i;
+  }
   w.balls().v[top] = v;
   return top;
 }

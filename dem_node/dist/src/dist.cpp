@@ -2840,6 +2840,35 @@ std::pair<Vec3, Vec3> add_box_walls(DistDem& d) {
   return {lo, hi};
 }
 
+Kicked kick_highest_ball(DistDem& d, const Vec3& v) {
+  struct Top {
+    double h;
+    std::uint64_t id;
+    Vec3 x;
+  };
+  const Particles& b = d.world().balls();
+  const auto& g = d.world().ghost_rows();
+  Top mine{-std::numeric_limits<double>::infinity(), std::numeric_limits<std::uint64_t>::max(), {0.0, 0.0, 0.0}};
+  bool any = false;
+  auto higher = [](const Top& a, const Top& t) { return a.h > t.h || (a.h == t.h && a.id < t.id); };
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    if (!g.empty() && g[i]) continue;
+    const Top t{b.x[i].z + b.r[i], b.id[i], b.x[i]};
+    if (!any || higher(t, mine)) mine = t;
+    any = true;
+  }
+  std::vector<Top> all(static_cast<std::size_t>(d.grid().count()));
+  MPI_Allgather(&mine, sizeof(Top), MPI_BYTE, all.data(), sizeof(Top), MPI_BYTE, d.comm());
+  Top top = all[0];
+  for (const Top& t : all)
+    if (higher(t, top)) top = t;
+  if (top.id == std::numeric_limits<std::uint64_t>::max()) throw std::invalid_argument("kick: the world has no balls");
+  Particles& p = d.world().balls();
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (p.id[i] == top.id) p.v[i] = v;
+  return {top.id, top.x};
+}
+
 double place_footing_at_first_contact(DistDem& d, FootingParams f) {
   double z = footing_contact_height(d.world(), f);
   MPI_Allreduce(MPI_IN_PLACE, &z, 1, MPI_DOUBLE, MPI_MAX, d.comm());

@@ -168,8 +168,8 @@ struct StageEnergy {
   void load(io::SectionReader& r);
 };
 
-/// The ball whose top (z + r) is highest gets velocity `v` (stability studies); returns its row.
-/// Throws std::invalid_argument without balls.
+/// The ball whose top (z + r) is highest gets velocity `v` (stability studies), of equal tops
+/// the lowest id; returns its row. Throws std::invalid_argument without balls.
 std::size_t kick_highest_ball(World& w, const Vec3& v);
 
 /// The generate stage (docs/theory.md 4.3, 4.6): the REV (generate_rev), then, when

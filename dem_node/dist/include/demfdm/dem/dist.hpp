@@ -613,6 +613,15 @@ std::vector<ProfileSlab> stress_profile(const DistDem& d, const ProfileBox& box,
 /// contact of the ranks' balls (a maximum: one World's); the footing set on every rank's part.
 /// Collective.
 double place_footing_at_first_contact(DistDem& d, FootingParams f);
+/// procedures.hpp's kick_highest_ball on the ranks: the highest top (z + r) over every rank's own
+/// balls, of equal tops the lowest id (one World's ball); every rank that holds the ball, as its
+/// own or as a ghost, gives it velocity `v`. Returns its id and position on every rank.
+/// Collective; refused (on every rank) without balls.
+struct Kicked {
+  std::uint64_t id = 0;
+  Vec3 x{0.0, 0.0, 0.0};
+};
+Kicked kick_highest_ball(DistDem& d, const Vec3& v);
 /// procedures.hpp's add_box_walls on the ranks: the bounding box of every rank's balls (a minimum
 /// and a maximum over the ranks: one World's), its five planes added to every rank's part.
 /// Collective.
