@@ -2894,20 +2894,41 @@ struct FramePair {
   std::uint8_t state;
 };
 
+// A rank's sorted records, a block at a time: `next(buf, n)` replaces buf's content by the next
+// at most n records (none: the end).
+template <class R>
+using RecordSource = std::function<void(std::vector<R>&, std::size_t)>;
+
+// The records of a sorted vector, a block at a time.
+template <class R>
+RecordSource<R> source_of(const std::vector<R>& v) {
+  return [&v, at = std::size_t{0}](std::vector<R>& buf, std::size_t n) mutable {
+    const std::size_t k = std::min(n, v.size() - at);
+    buf.assign(v.begin() + static_cast<std::ptrdiff_t>(at), v.begin() + static_cast<std::ptrdiff_t>(at + k));
+    at += k;
+  };
+}
+
 // Rank 0's side of one rank's records, sorted: they arrive in blocks of at most `block` as the
-// merge reaches them (rank 0's own are there from the start).
+// merge reaches them (rank 0's own from its source).
 template <class R>
 struct FrameStream {
   std::vector<R> buf;
   std::size_t at = 0;
-  std::uint64_t left = 0;  // records still on their rank
+  std::uint64_t left = 0;  // records still on their rank (or in rank 0's source)
   int rank = 0;
+  RecordSource<R>* local = nullptr;  // rank 0's own records
   const R* head(MPI_Comm comm, int tag, std::size_t block) {
     if (at == buf.size()) {
       if (left == 0) return nullptr;
       const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, left));
-      buf.resize(n);
-      MPI_Recv(buf.data(), static_cast<int>(n * sizeof(R)), MPI_BYTE, rank, tag, comm, MPI_STATUS_IGNORE);
+      if (local) {
+        (*local)(buf, n);
+        if (buf.size() != n) throw std::logic_error("merge_on_root: rank 0's records ran out before their count");
+      } else {
+        buf.resize(n);
+        MPI_Recv(buf.data(), static_cast<int>(n * sizeof(R)), MPI_BYTE, rank, tag, comm, MPI_STATUS_IGNORE);
+      }
       left -= n;
       at = 0;
     }
@@ -2916,19 +2937,25 @@ struct FrameStream {
 };
 
 // Merges the ranks' sorted records on rank 0 (k-way, a heap of the streams' heads), calling
-// `out(record)` in `less` order; the other ranks send theirs in blocks. Collective.
+// `out(record)` in `less` order; the other ranks send theirs in blocks of `block`. `counts`:
+// every rank's number of records (rank 0). A rank holds a block of its own records at a time,
+// rank 0 one of every rank's. Collective.
 template <class R, class Less, class Out>
-void merge_on_root(MPI_Comm comm, int rank, int size, int tag, std::size_t block, std::vector<R>& mine,
-                   const std::vector<std::uint64_t>& counts, Less less, Out out) {
+void merge_on_root(MPI_Comm comm, int rank, int size, int tag, std::size_t block, RecordSource<R> mine,
+                   std::uint64_t my_count, const std::vector<std::uint64_t>& counts, Less less, Out out) {
   if (rank != 0) {
-    for (std::size_t r0 = 0; r0 < mine.size(); r0 += block)
-      MPI_Send(mine.data() + r0, static_cast<int>(std::min(block, mine.size() - r0) * sizeof(R)), MPI_BYTE, 0, tag,
-               comm);
+    std::vector<R> buf;
+    for (std::uint64_t r0 = 0; r0 < my_count; r0 += block) {
+      const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(block, my_count - r0));
+      mine(buf, n);
+      if (buf.size() != n) throw std::logic_error("merge_on_root: a rank's records ran out before their count");
+      MPI_Send(buf.data(), static_cast<int>(n * sizeof(R)), MPI_BYTE, 0, tag, comm);
+    }
     return;
   }
   std::vector<FrameStream<R>> st(static_cast<std::size_t>(size));
-  st[0].buf.swap(mine);
-  for (int r = 1; r < size; ++r) st[static_cast<std::size_t>(r)].rank = r, st[static_cast<std::size_t>(r)].left = counts[static_cast<std::size_t>(r)];
+  for (int r = 0; r < size; ++r) st[static_cast<std::size_t>(r)].rank = r, st[static_cast<std::size_t>(r)].left = counts[static_cast<std::size_t>(r)];
+  st[0].local = &mine;
   std::vector<std::pair<const R*, int>> heap;  // (head, stream); a min-heap by `less`
   auto later = [&](const std::pair<const R*, int>& x, const std::pair<const R*, int>& y) { return less(*y.first, *x.first); };
   for (int r = 0; r < size; ++r)
@@ -2946,6 +2973,12 @@ void merge_on_root(MPI_Comm comm, int rank, int size, int tag, std::size_t block
       std::push_heap(heap.begin(), heap.end(), later);
     }
   }
+}
+// The same with a rank's records in a sorted vector.
+template <class R, class Less, class Out>
+void merge_on_root(MPI_Comm comm, int rank, int size, int tag, std::size_t block, const std::vector<R>& mine,
+                   const std::vector<std::uint64_t>& counts, Less less, Out out) {
+  merge_on_root<R>(comm, rank, size, tag, block, source_of(mine), mine.size(), counts, less, out);
 }
 
 }  // namespace
@@ -3252,20 +3285,58 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
   const auto& g = w_->ghost_rows();
   auto owned_row = [&](std::size_t i) { return g.empty() || !g[i]; };
   // this rank's rows in one World's orders (unload's): its balls by id, the pairs whose ball A it
-  // owns by (A, B) id
-  std::vector<BallRec> balls;
-  for (std::size_t i = 0; i < pt.size(); ++i)
-    if (owned_row(i)) balls.push_back(ball_rec(pt, i));
-  std::sort(balls.begin(), balls.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
-  std::vector<PairRec> pairs;
+  // owns by (A, B) id. They are already in these orders where the rows are in id order (newton
+  // off) and the pair list follows its rows: then they are made a block at a time from the part's
+  // rows, not copied whole; else they are copied and sorted.
   const PairContacts& pc = w_->pair_contacts();
-  for (std::size_t c = 0; c < pc.size(); ++c)
-    if (owned_row(pc.a[c]))
-      pairs.push_back(PairRec{pt.id[pc.a[c]], pt.id[pc.b[c]], pc.shift[c], pc.h[c], pc.bond.empty() ? BondHist{} : pc.bond[c]});
+  auto pair_rec = [&](std::size_t c) {
+    return PairRec{pt.id[pc.a[c]], pt.id[pc.b[c]], pc.shift[c], pc.h[c], pc.bond.empty() ? BondHist{} : pc.bond[c]};
+  };
   auto pair_less = [](const PairRec& x, const PairRec& y) { return std::tie(x.ia, x.ib) < std::tie(y.ia, y.ib); };
-  std::sort(pairs.begin(), pairs.end(), pair_less);
+  std::uint64_t nballs = 0, npairs = 0;
+  bool in_order = true;
+  {
+    std::uint64_t last = 0;
+    for (std::size_t i = 0; i < pt.size(); ++i)
+      if (owned_row(i)) {
+        in_order = in_order && (nballs == 0 || pt.id[i] > last);
+        last = pt.id[i], ++nballs;
+      }
+    std::pair<std::uint64_t, std::uint64_t> lastp{0, 0};
+    for (std::size_t c = 0; c < pc.size(); ++c)
+      if (owned_row(pc.a[c])) {
+        const std::pair<std::uint64_t, std::uint64_t> k{pt.id[pc.a[c]], pt.id[pc.b[c]]};
+        in_order = in_order && (npairs == 0 || k > lastp);
+        lastp = k, ++npairs;
+      }
+  }
+  std::vector<BallRec> balls;
+  std::vector<PairRec> pairs;
+  RecordSource<BallRec> ball_src;
+  RecordSource<PairRec> pair_src;
+  if (in_order) {
+    ball_src = [&, i = std::size_t{0}](std::vector<BallRec>& buf, std::size_t n) mutable {
+      buf.clear();
+      for (; i < pt.size() && buf.size() < n; ++i)
+        if (owned_row(i)) buf.push_back(ball_rec(pt, i));
+    };
+    pair_src = [&, c = std::size_t{0}](std::vector<PairRec>& buf, std::size_t n) mutable {
+      buf.clear();
+      for (; c < pc.size() && buf.size() < n; ++c)
+        if (owned_row(pc.a[c])) buf.push_back(pair_rec(c));
+    };
+  } else {
+    for (std::size_t i = 0; i < pt.size(); ++i)
+      if (owned_row(i)) balls.push_back(ball_rec(pt, i));
+    std::sort(balls.begin(), balls.end(), [](const BallRec& x, const BallRec& y) { return x.id < y.id; });
+    for (std::size_t c = 0; c < pc.size(); ++c)
+      if (owned_row(pc.a[c])) pairs.push_back(pair_rec(c));
+    std::sort(pairs.begin(), pairs.end(), pair_less);
+    ball_src = source_of(balls);
+    pair_src = source_of(pairs);
+  }
   // counts, the tails (wall contacts, energies, failures) and the largest displacement on rank 0
-  const std::uint64_t mine[2] = {balls.size(), pairs.size()};
+  const std::uint64_t mine[2] = {nballs, npairs};
   std::vector<std::uint64_t> counts(2 * static_cast<std::size_t>(size_));
   MPI_Gather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, 0, comm_);
   std::vector<char> tail, tails_in;
@@ -3310,7 +3381,7 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
     guarded([&] { st->balls(rows); });
     rows = Particles{};
   };
-  merge_on_root(comm_, rank_, size_, kTagStateBalls, block, balls, nb,
+  merge_on_root<BallRec>(comm_, rank_, size_, kTagStateBalls, block, std::move(ball_src), nballs, nb,
                 [](const BallRec& x, const BallRec& y) { return x.id < y.id; },
                 [&](const BallRec& b) {
                   ids.push_back(b.id);
@@ -3332,7 +3403,7 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
     guarded([&] { st->pairs(prow); });
     prow = PairContacts{};
   };
-  merge_on_root(comm_, rank_, size_, kTagStatePairs, block, pairs, np, pair_less, [&](const PairRec& c) {
+  merge_on_root<PairRec>(comm_, rank_, size_, kTagStatePairs, block, std::move(pair_src), npairs, np, pair_less, [&](const PairRec& c) {
     if (failed) return;
     guarded([&] {
       prow.a.push_back(row_of(c.ia));
