@@ -80,16 +80,26 @@ void write_file(const std::filesystem::path& p, const std::string& b) {
 // containing `expect`; returns the message.
 std::string refusal(const std::string& bytes, const std::string& name, const std::string& expect,
                     std::string_view kind = "dem", std::uint64_t hash = kHash) {
+  std::string m;
   try {
     StateReader r(bytes, name, kind, hash);
     ADD_FAILURE() << "expected a refusal containing '" << expect << "'";
   } catch (const StateFileError& e) {
-    const std::string m = e.what();
+    m = e.what();
     EXPECT_EQ(m.rfind(name + ": ", 0), 0u) << m;
     EXPECT_NE(m.find(expect), std::string::npos) << m;
-    return m;
   }
-  return {};
+  // The reader in pieces (StateFileReader) refuses the same file with the same message.
+  const auto file = std::filesystem::temp_directory_path() / ("demfdm_refusal_" + std::to_string(::getpid()) + ".state");
+  write_file(file, bytes);
+  try {
+    StateFileReader r(file, kind, hash);
+    ADD_FAILURE() << "StateFileReader: expected a refusal containing '" << expect << "'";
+  } catch (const StateFileError& e) {
+    if (!m.empty()) EXPECT_EQ(std::string(e.what()), file.string() + m.substr(name.size()));
+  }
+  std::filesystem::remove(file);
+  return m;
 }
 
 // Recompute the trailing checksum after editing bytes (to reach the checks behind it).
@@ -369,6 +379,19 @@ TEST(StateFile, FileWrittenInPiecesHasTheBytesOfOneWriter) {
     f.commit();
   }
   EXPECT_EQ(read_whole_file(file), want);
+  {  // read back in pieces
+    StateFileReader q(file, "dem", kHash);
+    EXPECT_EQ(q.names(), (std::vector<std::string>{"head", "rows", "empty", "tail"}));
+    EXPECT_EQ(q.header().code_version, "v1");
+    EXPECT_EQ(q.length("rows"), 8000u);
+    EXPECT_EQ(q.section_bytes("empty"), "");
+    const std::string r = q.read("rows", 8 * 999, 8);
+    std::uint64_t v = 0;
+    for (int i = 0; i < 8; ++i) v |= static_cast<std::uint64_t>(static_cast<unsigned char>(r[static_cast<std::size_t>(i)])) << (8 * i);
+    EXPECT_EQ(v, 999u * 999u);
+    EXPECT_THROW((void)q.read("rows", 7996, 8), StateFileError);
+    EXPECT_THROW((void)q.section_bytes("nope"), StateFileError);
+  }
   StateReader r(read_whole_file(file), file.string(), "dem", kHash);
   EXPECT_EQ(r.names(), (std::vector<std::string>{"head", "rows", "empty", "tail"}));
   EXPECT_EQ(r.section_bytes("tail"), std::string_view("\x07\0\0\0", 4));

@@ -2,11 +2,13 @@
 #include "demfdm/io/state_file.hpp"
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <istream>
 #include <iterator>
 #include <ostream>
@@ -48,6 +50,11 @@ void str_append(std::string& s, std::string_view v) {
 
 // magic + version + total length: what must be there before anything else can be judged.
 constexpr std::size_t kFixedHead = 8 + 4 + 8;
+
+[[noreturn]] void file_error(const char* call, const std::filesystem::path& f) {
+  const int e = errno;
+  throw StateFileError(f.string() + ": " + call + " failed: " + std::strerror(e));
+}
 
 }  // namespace
 
@@ -202,65 +209,206 @@ void SectionReader::fail(const std::string& what) const { r_->fail("section '" +
 
 void StateReader::fail(const std::string& what) const { throw StateFileError(source_ + ": " + what); }
 
+namespace {
+
+// A state file's container as its readers check it (docs/checkpoint-format.md "Refusals"), from
+// `size` bytes read through `at(offset, n)` and the FNV-1a 64 of the bytes before the checksum
+// (`checksum()`, asked for once the length is known to be right). `fail` throws.
+struct Container {
+  StateHeader header;
+  struct Section {
+    std::string name;
+    std::uint64_t off, len;
+  };
+  std::vector<Section> sections;
+};
+
+Container parse_container(std::uint64_t size, const std::function<std::string(std::uint64_t, std::size_t)>& at,
+                          const std::function<std::uint64_t()>& checksum, std::string_view expected_kind,
+                          std::uint64_t expected_scene_hash, const std::function<void(const std::string&)>& fail) {
+  Container c;
+  if (size >= 8 && at(0, 8) != std::string_view(kStateMagic, 8))
+    fail("bad magic: not a demfdm state file (expected the first 8 bytes to be \"DEMFDMST\")");
+  if (size < kFixedHead + 8) {
+    std::ostringstream s;
+    s << "truncated: " << size << " bytes, shorter than the fixed header and checksum (" << kFixedHead + 8 << " bytes)";
+    fail(s.str());
+  }
+  const std::string head = at(0, kFixedHead);
+  c.header.format_version = le_at<std::uint32_t>(head, 8);
+  if (c.header.format_version != kStateFormatVersion) {
+    std::ostringstream s;
+    s << "format version " << c.header.format_version << ", this code reads version " << kStateFormatVersion;
+    fail(s.str());
+  }
+  const std::uint64_t total = le_at<std::uint64_t>(head, 12);
+  if (size < total) {
+    std::ostringstream s;
+    s << "truncated: " << size << " bytes, the header announces " << total;
+    fail(s.str());
+  }
+  if (size > total) {
+    std::ostringstream s;
+    s << size << " bytes, the header announces " << total << " (trailing bytes)";
+    fail(s.str());
+  }
+  const std::uint64_t stored = le_at<std::uint64_t>(at(size - 8, 8), 0);
+  const std::uint64_t computed = checksum();
+  if (stored != computed)
+    fail("checksum mismatch: stored " + hex(stored) + ", computed " + hex(computed) + " (file damaged)");
+  // From here the bytes are what the writer produced; the structure is still checked (as a
+  // section named "header" that ends before the checksum).
+  std::uint64_t pos = kFixedHead;
+  const std::uint64_t end = size - 8;
+  auto take = [&](std::uint64_t n) {
+    if (n > end - pos) {
+      std::ostringstream s;
+      s << "section 'header': needs " << n << " more bytes at offset " << pos - kFixedHead << " of " << end - kFixedHead
+        << " (section too short)";
+      fail(s.str());
+    }
+    const std::uint64_t p = pos;
+    pos += n;
+    return p;
+  };
+  auto u32 = [&] { return le_at<std::uint32_t>(at(take(4), 4), 0); };
+  auto u64 = [&] { return le_at<std::uint64_t>(at(take(8), 8), 0); };
+  auto str = [&] {
+    const std::uint32_t n = u32();
+    return at(take(n), n);
+  };
+  c.header.kind = str();
+  c.header.code_version = str();
+  c.header.scene_hash = u64();
+  if (c.header.kind != expected_kind)
+    fail("kind '" + c.header.kind + "', expected '" + std::string(expected_kind) + "'");
+  if (c.header.scene_hash != expected_scene_hash)
+    fail("scene hash " + hex(c.header.scene_hash) + " in the file, expected " + hex(expected_scene_hash) +
+         " (a checkpoint of another scene)");
+  const std::uint32_t n = u32();
+  for (std::uint32_t k = 0; k < n; ++k) {
+    Container::Section e;
+    e.name = str();
+    const std::uint64_t len = u64();
+    if (len > end - pos) {
+      std::ostringstream s;
+      s << "section '" << e.name << "' announces " << len << " bytes, " << end - pos << " are left";
+      fail(s.str());
+    }
+    e.off = take(len);
+    e.len = len;
+    for (const Container::Section& o : c.sections)
+      if (o.name == e.name) fail("section '" + e.name + "' appears twice");
+    c.sections.push_back(std::move(e));
+  }
+  if (end - pos != 0) fail(std::to_string(end - pos) + " bytes after the last section");
+  return c;
+}
+
+}  // namespace
+
 StateReader::StateReader(std::string bytes, std::string source, std::string_view expected_kind,
                          std::uint64_t expected_scene_hash)
     : bytes_(std::move(bytes)), source_(std::move(source)) {
   const std::string& b = bytes_;
-  if (b.size() >= 8 && std::memcmp(b.data(), kStateMagic, 8) != 0)
-    fail("bad magic: not a demfdm state file (expected the first 8 bytes to be \"DEMFDMST\")");
-  if (b.size() < kFixedHead + 8) {
-    std::ostringstream s;
-    s << "truncated: " << b.size() << " bytes, shorter than the fixed header and checksum (" << kFixedHead + 8 << " bytes)";
-    fail(s.str());
+  const Container c = parse_container(
+      b.size(), [&](std::uint64_t off, std::size_t n) { return b.substr(static_cast<std::size_t>(off), n); },
+      [&] { return fnv1a64(b.data(), b.size() - 8); }, expected_kind, expected_scene_hash,
+      [&](const std::string& what) { fail(what); });
+  header_ = c.header;
+  for (const Container::Section& e : c.sections)
+    sections_.push_back(Entry{e.name, static_cast<std::size_t>(e.off), static_cast<std::size_t>(e.len)});
+}
+
+// ---- a state file read in pieces ------------------------------------------------------------
+
+StateFileReader::StateFileReader(const std::filesystem::path& path, std::string_view expected_kind,
+                                 std::uint64_t expected_scene_hash)
+    : source_(path.string()) {
+  fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd_ < 0) file_error("open", path);
+  struct stat st {};
+  if (::fstat(fd_, &st) != 0) {
+    const int e = errno;
+    ::close(fd_);
+    errno = e;
+    file_error("fstat", path);
   }
-  header_.format_version = le_at<std::uint32_t>(b, 8);
-  if (header_.format_version != kStateFormatVersion) {
-    std::ostringstream s;
-    s << "format version " << header_.format_version << ", this code reads version " << kStateFormatVersion;
-    fail(s.str());
+  size_ = static_cast<std::uint64_t>(st.st_size);
+  try {
+    const Container c = parse_container(
+        size_, [&](std::uint64_t off, std::size_t n) { return pread_all(off, n); },
+        [&] {
+          std::uint64_t h = fnv1a64(nullptr, 0);
+          const std::uint64_t end = size_ - 8;
+          for (std::uint64_t at = 0; at < end;) {
+            const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(std::uint64_t{4} << 20, end - at));
+            const std::string b = pread_all(at, n);
+            h = fnv1a64(b.data(), b.size(), h);
+            at += n;
+          }
+          return h;
+        },
+        expected_kind, expected_scene_hash, [&](const std::string& what) { throw StateFileError(source_ + ": " + what); });
+    header_ = c.header;
+    for (const auto& e : c.sections) sections_.push_back(Section{e.name, e.off, e.len});
+  } catch (...) {
+    ::close(fd_);
+    fd_ = -1;
+    throw;
   }
-  const std::uint64_t total = le_at<std::uint64_t>(b, 12);
-  if (b.size() < total) {
-    std::ostringstream s;
-    s << "truncated: " << b.size() << " bytes, the header announces " << total;
-    fail(s.str());
-  }
-  if (b.size() > total) {
-    std::ostringstream s;
-    s << b.size() << " bytes, the header announces " << total << " (trailing bytes)";
-    fail(s.str());
-  }
-  const std::uint64_t stored = le_at<std::uint64_t>(b, b.size() - 8);
-  const std::uint64_t computed = fnv1a64(b.data(), b.size() - 8);
-  if (stored != computed)
-    fail("checksum mismatch: stored " + hex(stored) + ", computed " + hex(computed) + " (file damaged)");
-  // From here the bytes are what the writer produced; the structure is still checked.
-  SectionReader h(this, "header", b.data() + kFixedHead, b.size() - 8 - kFixedHead);
-  header_.kind = h.str();
-  header_.code_version = h.str();
-  header_.scene_hash = h.u64();
-  if (header_.kind != expected_kind)
-    fail("kind '" + header_.kind + "', expected '" + std::string(expected_kind) + "'");
-  if (header_.scene_hash != expected_scene_hash)
-    fail("scene hash " + hex(header_.scene_hash) + " in the file, expected " + hex(expected_scene_hash) +
-         " (a checkpoint of another scene)");
-  const std::uint32_t n = h.u32();
-  for (std::uint32_t k = 0; k < n; ++k) {
-    Entry e;
-    e.name = h.str();
-    const std::uint64_t len = h.u64();
-    if (len > h.remaining()) {
-      std::ostringstream s;
-      s << "section '" << e.name << "' announces " << len << " bytes, " << h.remaining() << " are left";
-      fail(s.str());
+}
+
+StateFileReader::~StateFileReader() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+std::string StateFileReader::pread_all(std::uint64_t off, std::size_t n) const {
+  std::string b(n, '\0');
+  std::size_t done = 0;
+  while (done < n) {
+    const ssize_t r = ::pread(fd_, b.data() + done, n - done, static_cast<off_t>(off + done));
+    if (r < 0) {
+      if (errno == EINTR) continue;
+      file_error("pread", source_);
     }
-    e.off = static_cast<std::size_t>(h.take(len) - b.data());
-    e.len = len;
-    for (const Entry& o : sections_)
-      if (o.name == e.name) fail("section '" + e.name + "' appears twice");
-    sections_.push_back(std::move(e));
+    if (r == 0)
+      throw StateFileError(source_ + ": truncated while reading: " + std::to_string(off + done) + " of " +
+                           std::to_string(size_) + " bytes (changed since it was opened?)");
+    done += static_cast<std::size_t>(r);
   }
-  if (h.remaining() != 0) fail(std::to_string(h.remaining()) + " bytes after the last section");
+  return b;
+}
+
+const StateFileReader::Section& StateFileReader::find(std::string_view name) const {
+  for (const Section& e : sections_)
+    if (e.name == name) return e;
+  throw StateFileError(source_ + ": missing section '" + std::string(name) + "' (kind '" + header_.kind +
+                       "', code version '" + header_.code_version + "')");
+}
+
+std::vector<std::string> StateFileReader::names() const {
+  std::vector<std::string> out;
+  for (const Section& e : sections_) out.push_back(e.name);
+  return out;
+}
+
+std::uint64_t StateFileReader::length(std::string_view name) const { return find(name).len; }
+
+std::string StateFileReader::section_bytes(std::string_view name) const {
+  const Section& e = find(name);
+  return pread_all(e.off, static_cast<std::size_t>(e.len));
+}
+
+std::string StateFileReader::read(std::string_view name, std::uint64_t offset, std::size_t n) const {
+  const Section& e = find(name);
+  if (offset > e.len || n > e.len - offset) {
+    std::ostringstream s;
+    s << source_ << ": section '" << e.name << "': needs " << n << " bytes at offset " << offset << " of " << e.len
+      << " (section too short)";
+    throw StateFileError(s.str());
+  }
+  return pread_all(e.off + offset, n);
 }
 
 bool StateReader::has(std::string_view name) const {
@@ -301,11 +449,6 @@ void StateReader::finish() const {
 // ---- files -----------------------------------------------------------------------------------
 
 namespace {
-
-[[noreturn]] void file_error(const char* call, const std::filesystem::path& f) {
-  const int e = errno;
-  throw StateFileError(f.string() + ": " + call + " failed: " + std::strerror(e));
-}
 
 // fsync and close `fd` (the file `tmp`), rename it over `path` and make the rename durable; on a
 // failure the temporary file is removed and the error names the call.

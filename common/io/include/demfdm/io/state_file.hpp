@@ -225,6 +225,41 @@ class StateReader {
   std::vector<Entry> sections_;
 };
 
+/// Reads a state file from disk in pieces, for a state too large to hold in memory at once (the
+/// DEM ranks' resume: rank 0 reads the World's sections a block of rows at a time and sends
+/// each rank its share, dem::DistDem::load_state_file). On construction the file's container is
+/// checked as StateReader checks it, with the same refusals and messages (the checksum in one
+/// pass of 4 MiB reads); sections are then read whole or in ranges of their content.
+class StateFileReader {
+ public:
+  StateFileReader(const std::filesystem::path& path, std::string_view expected_kind, std::uint64_t expected_scene_hash);
+  ~StateFileReader();
+  StateFileReader(const StateFileReader&) = delete;
+  StateFileReader& operator=(const StateFileReader&) = delete;
+
+  const StateHeader& header() const { return header_; }
+  const std::string& source() const { return source_; }
+  std::vector<std::string> names() const;
+  /// A section's content length; its content whole; `n` bytes of it from `offset`. Throw
+  /// StateFileError for a missing section or a range beyond it.
+  std::uint64_t length(std::string_view name) const;
+  std::string section_bytes(std::string_view name) const;
+  std::string read(std::string_view name, std::uint64_t offset, std::size_t n) const;
+
+ private:
+  struct Section {
+    std::string name;
+    std::uint64_t off, len;
+  };
+  const Section& find(std::string_view name) const;
+  std::string pread_all(std::uint64_t off, std::size_t n) const;
+  std::string source_;
+  int fd_ = -1;
+  std::uint64_t size_ = 0;
+  StateHeader header_;
+  std::vector<Section> sections_;
+};
+
 /// Write `bytes` to `path` atomically: `<path>.tmp-<pid>` is written and fsync'ed, then renamed
 /// over `path` (and the folder fsync'ed). Throws StateFileError naming the file and the call.
 void write_atomically(const std::filesystem::path& path, std::string_view bytes);
