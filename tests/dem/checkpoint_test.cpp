@@ -602,6 +602,88 @@ TEST(DemCheckpoint, StateWrittenInPiecesHasTheWholeWorldsBytes) {
   std::filesystem::remove_all(dir);
 }
 
+// A state file read in pieces (StateSource: the frame, the balls and pairs in blocks of rows,
+// the wall contacts whole) gives back the World: reassembled, its state file has the file's
+// bytes. A contact naming a ball beyond the file's balls is refused by file and section.
+TEST(DemCheckpoint, StateReadInPiecesGivesTheWorldBack) {
+  const auto dir = std::filesystem::temp_directory_path() / ("demfdm_dem_source_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const CheckpointMeta meta{kSceneHash, "v-test"};
+  for (int scene = 0; scene < 2; ++scene) {
+    SCOPED_TRACE("scene " + std::to_string(scene));
+    auto w = scene == 0 ? periodic_lattice(6, 1, 13) : free_block({});
+    run(*w, 70);
+    const auto file = dir / ("whole-" + std::to_string(scene) + ".state");
+    save_state_file(*w, file, meta);
+    const std::string want = demfdm::io::read_whole_file(file);
+    const StateSource src(file, kSceneHash);
+    ASSERT_EQ(src.balls(), w->num_balls());
+    ASSERT_EQ(src.pairs(), w->pair_contacts().size());
+    World g{WorldParams{}};
+    src.load_frame(g);
+    EXPECT_EQ(g.num_balls(), 0u);
+    const auto k = g.counters();
+    Particles pt;
+    for (std::uint64_t r0 = 0; r0 < src.balls(); r0 += 7) {
+      Particles b;
+      src.read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(7, src.balls() - r0)), b);
+      std::vector<Vec3> x;
+      std::vector<double> r;
+      src.read_positions(r0, b.size(), x, r);
+      EXPECT_TRUE(std::memcmp(x.data(), b.x.data(), x.size() * sizeof(Vec3)) == 0 && r == b.r);
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        pt.x.push_back(b.x[i]), pt.v.push_back(b.v[i]), pt.w.push_back(b.w[i]), pt.f.push_back(b.f[i]);
+        pt.t.push_back(b.t[i]), pt.fa.push_back(b.fa[i]), pt.ta.push_back(b.ta[i]), pt.x_ref.push_back(b.x_ref[i]);
+        pt.r.push_back(b.r[i]), pt.m.push_back(b.m[i]), pt.inertia.push_back(b.inertia[i]), pt.id.push_back(b.id[i]);
+        pt.fix.push_back(b.fix[i]);
+      }
+    }
+    PairContacts pc;
+    for (std::uint64_t c0 = 0; c0 < src.pairs(); c0 += 7) {
+      PairContacts b;
+      src.read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(7, src.pairs() - c0)), b);
+      for (std::size_t c = 0; c < b.size(); ++c) {
+        pc.a.push_back(b.a[c]), pc.b.push_back(b.b[c]), pc.shift.push_back(b.shift[c]), pc.h.push_back(b.h[c]);
+        pc.bond.push_back(b.bond[c]);
+      }
+    }
+    std::array<WallContacts, 3> wc = src.read_wall_contacts();
+    std::vector<std::uint8_t> no_ghosts;
+    g.swap_balls(pt, pc, wc, no_ghosts);
+    g.set_counters(k);
+    EXPECT_TRUE(state_bytes(g, meta) == want) << "the World read in pieces differs from the saved one";
+    if (scene == 1) EXPECT_GT(g.facet_contacts().size(), 0u);
+  }
+  // a contact's ball A beyond the balls, the checksum made right again
+  {
+    auto w = periodic_lattice(4, 1, 13);
+    run(*w, 5);
+    std::string b = state_bytes(*w, meta);
+    const std::size_t name = b.find(std::string("\x05\0\0\0pairs", 9));  // the section's name, then its length
+    ASSERT_NE(name, std::string::npos);
+    const std::size_t at = name + 9 + 8;  // its content: the count of A rows, then the first
+    ASSERT_GT(w->pair_contacts().size(), 0u);
+    const std::uint32_t rows = static_cast<std::uint32_t>(w->num_balls());
+    for (int i = 0; i < 4; ++i) b[at + 8 + static_cast<std::size_t>(i)] = static_cast<char>((rows >> (8 * i)) & 0xffu);
+    const std::uint64_t h = demfdm::io::fnv1a64(b.data(), b.size() - 8);
+    for (int i = 0; i < 8; ++i) b[b.size() - 8 + static_cast<std::size_t>(i)] = static_cast<char>((h >> (8 * i)) & 0xff);
+    const auto file = dir / "bad.state";
+    demfdm::io::write_atomically(file, b);
+    const StateSource src(file, kSceneHash);
+    PairContacts out;
+    try {
+      src.read_pairs(0, 3, out);
+      ADD_FAILURE() << "a row out of range must be refused";
+    } catch (const demfdm::io::StateFileError& e) {
+      EXPECT_NE(std::string(e.what()).find(file.string() + ": section 'pairs': contact 0 names a ball row out of range"),
+                std::string::npos) << e.what();
+    }
+    EXPECT_THROW(StateSource(dir / "missing.state", kSceneHash), demfdm::io::StateFileError);
+    EXPECT_THROW(StateSource(file, kSceneHash + 1), demfdm::io::StateFileError);
+  }
+  std::filesystem::remove_all(dir);
+}
+
 // Gravity is restored from the file: a world built with gravity loses it when the state has
 // none, and gains it when the state has it.
 TEST(DemCheckpoint, GravityFollowsTheFile) {

@@ -82,6 +82,68 @@ class ByteOut {
   std::string s_;
 };
 
+// Bytes decoded as io::SectionReader decodes them, from a range of a section's content read on
+// its own (the rows of a file read in pieces, StateSource); a short range or bad content throws
+// io::StateFileError naming the file and the section. The row decoders below take either.
+class ByteIn {
+ public:
+  ByteIn(std::string bytes, std::string source, std::string section)
+      : b_(std::move(bytes)), source_(std::move(source)), section_(std::move(section)) {}
+  std::uint8_t u8() { return static_cast<std::uint8_t>(*take(1)); }
+  bool b() {
+    const std::uint8_t v = u8();
+    if (v > 1) fail("bool byte " + std::to_string(v));
+    return v != 0;
+  }
+  std::int8_t i8() { return static_cast<std::int8_t>(u8()); }
+  std::uint32_t u32() { return le<std::uint32_t>(); }
+  std::int32_t i32() { return static_cast<std::int32_t>(le<std::uint32_t>()); }
+  std::uint64_t u64() { return le<std::uint64_t>(); }
+  double f64() { return std::bit_cast<double>(le<std::uint64_t>()); }
+  std::uint64_t count(std::size_t min_bytes_each) {
+    const std::uint64_t n = u64();
+    if (min_bytes_each > 0 && n > remaining() / min_bytes_each)
+      fail("count " + std::to_string(n) + " cannot fit in the " + std::to_string(remaining()) + " bytes left");
+    return n;
+  }
+  std::vector<std::uint32_t> u32s() {
+    std::vector<std::uint32_t> v(count(4));
+    for (auto& x : v) x = u32();
+    return v;
+  }
+  std::vector<std::int32_t> i32s() {
+    std::vector<std::int32_t> v(count(4));
+    for (auto& x : v) x = i32();
+    return v;
+  }
+  std::size_t remaining() const { return b_.size() - pos_; }
+  void done() {
+    if (remaining() != 0) fail(std::to_string(remaining()) + " bytes left unread");
+  }
+  [[noreturn]] void fail(const std::string& what) const {
+    throw io::StateFileError(source_ + ": section '" + section_ + "': " + what);
+  }
+
+ private:
+  const char* take(std::size_t n) {
+    if (n > remaining())
+      fail("needs " + std::to_string(n) + " more bytes at offset " + std::to_string(pos_) + " of " +
+           std::to_string(b_.size()) + " (section too short)");
+    const char* p = b_.data() + pos_;
+    pos_ += n;
+    return p;
+  }
+  template <class U>
+  U le() {
+    const char* p = take(sizeof(U));
+    U v = 0;
+    for (std::size_t i = 0; i < sizeof(U); ++i) v |= static_cast<U>(static_cast<U>(static_cast<unsigned char>(p[i])) << (8 * i));
+    return v;
+  }
+  std::string b_, source_, section_;
+  std::size_t pos_ = 0;
+};
+
 template <class O>
 void put(O& o, const Vec3& v) {
   o.f64(v.x);
@@ -251,22 +313,24 @@ void put(io::StateWriter& o, const Footing& f) {
 
 // ---- reading -------------------------------------------------------------------------------
 
-Vec3 get_vec(io::SectionReader& in) {
+template <class In>
+Vec3 get_vec(In& in) {
   Vec3 v;
   v.x = in.f64();
   v.y = in.f64();
   v.z = in.f64();
   return v;
 }
-std::vector<Vec3> get_vecs(io::SectionReader& in) {
+template <class In>
+std::vector<Vec3> get_vecs(In& in) {
   std::vector<Vec3> v(in.count(24));
   for (Vec3& x : v) x = get_vec(in);
   return v;
 }
 
 // An enum stored as u8 with values 0..last.
-template <class E>
-E get_enum(io::SectionReader& in, std::uint8_t last, const char* what) {
+template <class E, class In>
+E get_enum(In& in, std::uint8_t last, const char* what) {
   const std::uint8_t v = in.u8();
   if (v > last) in.fail(std::string(what) + " = " + std::to_string(v) + ", expected 0.." + std::to_string(last));
   return static_cast<E>(v);
@@ -338,7 +402,8 @@ WorldParams get_params(io::SectionReader& in) {
   return p;
 }
 
-ContactHist get_hist(io::SectionReader& in) {
+template <class In>
+ContactHist get_hist(In& in) {
   ContactHist h;
   h.fs = get_vec(in);
   h.fn = in.f64();
@@ -351,7 +416,8 @@ ContactHist get_hist(io::SectionReader& in) {
   return h;
 }
 
-BondHist get_bond(io::SectionReader& in) {
+template <class In>
+BondHist get_bond(In& in) {
   BondHist b;
   b.fsb = get_vec(in);
   b.nb = in.f64();
@@ -367,14 +433,16 @@ BondHist get_bond(io::SectionReader& in) {
   return b;
 }
 
-void get_hists(io::SectionReader& in, std::vector<ContactHist>& h, std::vector<BondHist>& b) {
+template <class In>
+void get_hists(In& in, std::vector<ContactHist>& h, std::vector<BondHist>& b) {
   h.resize(in.count(kHistBytes));
   for (ContactHist& x : h) x = get_hist(in);
   b.resize(in.count(kBondBytes));
   for (BondHist& x : b) x = get_bond(in);
 }
 
-WallContacts get_wall_contacts(io::SectionReader& in) {
+template <class In>
+WallContacts get_wall_contacts(In& in) {
   WallContacts wc;
   wc.ball = in.u32s();
   wc.wall = in.u32s();
@@ -446,7 +514,8 @@ Footing get_footing(io::SectionReader& in) {
 
 // Consistency of a wall-contact list with the balls and walls it names (the file passed its
 // checksum, so this only guards against a writer of another build).
-void check_wall_contacts(io::SectionReader& in, const WallContacts& wc, std::size_t nballs, std::size_t nwalls,
+template <class In>
+void check_wall_contacts(In& in, const WallContacts& wc, std::size_t nballs, std::size_t nwalls,
                          bool can_bond, const std::vector<FacetWall>* fwalls) {
   const std::size_t m = wc.ball.size();
   if (wc.wall.size() != m || wc.h.size() != m || wc.facet.size() != m || wc.cand_off.size() != m + 1 ||
@@ -907,6 +976,176 @@ void StateStream::commit(const WallContacts& planes, const WallContacts& facets,
     q.file.section(name, o.bytes());
   }
   q.file.commit();
+}
+
+}  // namespace demfdm::dem
+
+namespace demfdm::dem {
+
+// ---- a World's state file read in pieces ------------------------------------------------------
+
+struct StateSource::Impl {
+  io::StateFileReader file;
+  std::uint64_t scene_hash;
+  std::string frame;
+  std::uint64_t n = 0, m = 0;
+  WorldParams params;
+  std::size_t nplanes = 0;
+  std::vector<FacetWall> fwalls;  // (for the facet contacts' checks)
+  std::array<std::uint64_t, 13> ball_at{};  // each column's first element, within the section
+  std::array<std::size_t, 13> ball_bytes{24, 24, 24, 24, 24, 24, 24, 24, 8, 8, 8, 8, 1};
+  std::array<std::uint64_t, 5> pair_at{};
+  std::array<std::size_t, 5> pair_bytes{4, 4, 4, kHistBytes, kBondBytes};
+  bool pair_bonds = false;
+
+  Impl(const std::filesystem::path& path, std::uint64_t hash) : file(path, kKind, hash), scene_hash(hash) {}
+  [[noreturn]] void fail(const std::string& section, const std::string& what) const {
+    throw io::StateFileError(file.source() + ": section '" + section + "': " + what);
+  }
+  std::uint64_t u64_at(const std::string& section, std::uint64_t off) const {
+    ByteIn in(file.read(section, off, 8), file.source(), section);
+    return in.u64();
+  }
+  // A section of columns, each a u64 count and count elements of bytes[k]: the columns' first
+  // elements, every count checked against `want` (each its own: the bond column's may be 0).
+  template <std::size_t K>
+  void columns(const std::string& section, const std::array<std::uint64_t, K>& want, const std::array<std::size_t, K>& bytes,
+               std::array<std::uint64_t, K>& at, const char* what) const {
+    const std::uint64_t len = file.length(section);
+    std::uint64_t off = 0;
+    for (std::size_t k = 0; k < K; ++k) {
+      if (off + 8 > len) fail(section, std::string(what) + ": the section ends at " + std::to_string(len) + " bytes");
+      if (u64_at(section, off) != want[k]) fail(section, std::string(what) + " of different lengths");
+      at[k] = off + 8;
+      if (want[k] > (len - off - 8) / std::max<std::size_t>(bytes[k], 1))
+        fail(section, std::string(what) + ": " + std::to_string(want[k]) + " elements cannot fit");
+      off += 8 + want[k] * bytes[k];
+    }
+    if (off != len) fail(section, std::to_string(len - off) + " bytes left unread");
+  }
+  ByteIn column(const std::string& section, std::uint64_t at, std::size_t bytes, std::uint64_t first, std::size_t count) const {
+    return ByteIn(file.read(section, at + first * bytes, count * bytes), file.source(), section);
+  }
+};
+
+StateSource::StateSource(const std::filesystem::path& path, std::uint64_t scene_hash)
+    : p_(std::make_unique<Impl>(path, scene_hash)) {
+  Impl& q = *p_;
+  // the frame: every section as the file has it, the balls, contacts and wall contacts empty
+  io::StateWriter w(kKind, q.file.header().code_version, scene_hash);
+  for (const std::string& name : q.file.names()) {
+    w.begin(name);
+    if (name == "balls") {
+      for (int k = 0; k < 13; ++k) w.u64(0);
+    } else if (name == "pairs") {
+      for (int k = 0; k < 5; ++k) w.u64(0);
+    } else if (name == "plane_contacts" || name == "facet_contacts" || name == "footing_contacts") {
+      WallContacts none;
+      none.cand_off.push_back(0);
+      put(w, none);
+    } else {
+      w.raw(q.file.section_bytes(name));
+    }
+    w.end();
+  }
+  q.frame = w.bytes();
+  World f{WorldParams{}};
+  load_frame(f);  // (load_state's checks of every other section, and of the section list)
+  q.params = f.params();
+  q.nplanes = static_cast<std::size_t>(f.num_planes());
+  for (int i = 0; i < f.num_facet_walls(); ++i) q.fwalls.push_back(f.facet_wall(i));
+  q.pair_bonds = law_has_bond(q.params.ball_ball.model);
+  q.n = q.file.length("balls") >= 8 ? q.u64_at("balls", 0) : 0;
+  std::array<std::uint64_t, 13> nb;
+  nb.fill(q.n);
+  q.columns("balls", nb, q.ball_bytes, q.ball_at, "ball arrays");
+  q.m = q.file.length("pairs") >= 8 ? q.u64_at("pairs", 0) : 0;
+  if (q.file.length("pairs") >= q.pair_bytes.size() * 8 &&
+      q.u64_at("pairs", 4 * 8 + q.m * (4 + 4 + 4 + kHistBytes)) != (q.pair_bonds ? q.m : 0))
+    q.fail("pairs", "bond histories do not match the ball_ball contact model");
+  q.columns("pairs", std::array<std::uint64_t, 5>{q.m, q.m, q.m, q.m, q.pair_bonds ? q.m : 0}, q.pair_bytes, q.pair_at,
+            "contact arrays");
+}
+
+StateSource::~StateSource() = default;
+
+const std::string& StateSource::frame_bytes() const { return p_->frame; }
+
+void StateSource::load_frame(World& frame) const {
+  load_state_bytes(frame, p_->frame, p_->scene_hash, p_->file.source());
+}
+
+std::uint64_t StateSource::balls() const { return p_->n; }
+std::uint64_t StateSource::pairs() const { return p_->m; }
+
+void StateSource::read_balls(std::uint64_t r0, std::size_t n, Particles& out) const {
+  const Impl& q = *p_;
+  if (r0 > q.n || n > q.n - r0) q.fail("balls", "rows " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(q.n));
+  out = Particles{};
+  std::vector<Vec3>* vecs[8] = {&out.x, &out.v, &out.w, &out.f, &out.t, &out.fa, &out.ta, &out.x_ref};
+  for (std::size_t c = 0; c < 8; ++c) {
+    ByteIn in = q.column("balls", q.ball_at[c], 24, r0, n);
+    vecs[c]->resize(n);
+    for (Vec3& x : *vecs[c]) x = get_vec(in);
+  }
+  std::vector<double>* dbl[3] = {&out.r, &out.m, &out.inertia};
+  for (std::size_t c = 0; c < 3; ++c) {
+    ByteIn in = q.column("balls", q.ball_at[8 + c], 8, r0, n);
+    dbl[c]->resize(n);
+    for (double& x : *dbl[c]) x = in.f64();
+  }
+  {
+    ByteIn in = q.column("balls", q.ball_at[11], 8, r0, n);
+    out.id.resize(n);
+    for (auto& x : out.id) x = in.u64();
+  }
+  ByteIn in = q.column("balls", q.ball_at[12], 1, r0, n);
+  out.fix.resize(n);
+  for (auto& x : out.fix) x = in.u8();
+}
+
+void StateSource::read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r) const {
+  const Impl& q = *p_;
+  if (r0 > q.n || n > q.n - r0) q.fail("balls", "rows " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(q.n));
+  ByteIn ix = q.column("balls", q.ball_at[0], 24, r0, n), ir = q.column("balls", q.ball_at[8], 8, r0, n);
+  x.resize(n);
+  r.resize(n);
+  for (std::size_t i = 0; i < n; ++i) x[i] = get_vec(ix), r[i] = ir.f64();
+}
+
+void StateSource::read_pairs(std::uint64_t c0, std::size_t n, PairContacts& out) const {
+  const Impl& q = *p_;
+  if (c0 > q.m || n > q.m - c0) q.fail("pairs", "contacts " + std::to_string(c0) + " + " + std::to_string(n) + " of " + std::to_string(q.m));
+  out = PairContacts{};
+  ByteIn ia = q.column("pairs", q.pair_at[0], 4, c0, n), ib = q.column("pairs", q.pair_at[1], 4, c0, n);
+  ByteIn is = q.column("pairs", q.pair_at[2], 4, c0, n), ih = q.column("pairs", q.pair_at[3], kHistBytes, c0, n);
+  out.a.resize(n), out.b.resize(n), out.shift.resize(n), out.h.resize(n);
+  for (std::size_t c = 0; c < n; ++c) {
+    out.a[c] = ia.u32(), out.b[c] = ib.u32();
+    if (out.a[c] >= q.n || out.b[c] >= q.n) q.fail("pairs", "contact " + std::to_string(c0 + c) + " names a ball row out of range");
+    for (std::int8_t& v : out.shift[c]) v = is.i8();
+    out.h[c] = get_hist(ih);
+  }
+  if (q.pair_bonds) {
+    ByteIn ibd = q.column("pairs", q.pair_at[4], kBondBytes, c0, n);
+    out.bond.resize(n);
+    for (BondHist& b : out.bond) b = get_bond(ibd);
+  }
+}
+
+std::array<WallContacts, 3> StateSource::read_wall_contacts() const {
+  const Impl& q = *p_;
+  std::array<WallContacts, 3> out;
+  const char* names[3] = {"plane_contacts", "facet_contacts", "footing_contacts"};
+  const ContactFamilyParams* fam[3] = {&q.params.ball_wall, &q.params.ball_facet, &q.params.ball_footing};
+  const std::size_t walls[3] = {q.nplanes, q.fwalls.size(), 1};
+  for (std::size_t k = 0; k < 3; ++k) {
+    ByteIn in(q.file.section_bytes(names[k]), q.file.source(), names[k]);
+    out[k] = get_wall_contacts(in);
+    in.done();
+    check_wall_contacts(in, out[k], q.n, walls[k], law_has_bond(fam[k]->model), k == 1 ? &q.fwalls : nullptr);
+  }
+  return out;
 }
 
 }  // namespace demfdm::dem

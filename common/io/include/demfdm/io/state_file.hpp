@@ -72,6 +72,8 @@ class StateWriter {
   void i64(std::int64_t v) { put_le(static_cast<std::uint64_t>(v)); }
   void f64(double v) { put_le(std::bit_cast<std::uint64_t>(v)); }
   void str(std::string_view s);
+  /// Bytes as they are (a section's content copied from another file).
+  void raw(std::string_view b) { buf_.append(b); }
   /// Array helpers: u64 count, then the elements.
   void f64s(std::span<const double> v);
   void u8s(std::span<const std::uint8_t> v);

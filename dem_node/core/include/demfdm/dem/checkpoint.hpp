@@ -42,10 +42,12 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <array>
 #include <iosfwd>
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "demfdm/dem/world.hpp"
 #include "demfdm/io/state_file.hpp"
@@ -93,6 +95,38 @@ class StateStream {
   /// the file is complete and takes its name. Throws std::logic_error unless every row came. A
   /// stream destroyed before commit() leaves no file.
   void commit(const WallContacts& planes, const WallContacts& facets, const WallContacts& footing);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> p_;
+};
+
+/// A World's state file read in pieces (io::StateFileReader), the reverse of StateStream: its
+/// container checked on opening (load_state's refusals), the World's other state (parameters,
+/// counters, effects, walls) as a World without balls (frame_bytes, load_frame), its balls and
+/// ball-ball contacts a block of rows at a time, its wall contacts whole (they grow with the
+/// walls, not with the block). The contents are checked as load_state checks them (counts,
+/// enums, rows in range), a block at a time. DistDem::load_state_file: rank 0 reads the World
+/// this way and sends each rank its share.
+class StateSource {
+ public:
+  StateSource(const std::filesystem::path& path, std::uint64_t scene_hash);
+  ~StateSource();
+  /// A state file in memory of the World without its balls and contacts: every other section as
+  /// the file holds it. load_frame() loads it into `frame` (load_state_bytes: its checks).
+  const std::string& frame_bytes() const;
+  void load_frame(World& frame) const;
+  std::uint64_t balls() const;
+  std::uint64_t pairs() const;
+  /// Rows [r0, r0 + n) of the balls (every column), into `out` (replaced).
+  void read_balls(std::uint64_t r0, std::size_t n, Particles& out) const;
+  /// Only the positions and radii of rows [r0, r0 + n).
+  void read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r) const;
+  /// Contacts [c0, c0 + n) of the ball-ball list into `out` (replaced), their rows checked
+  /// against balls().
+  void read_pairs(std::uint64_t c0, std::size_t n, PairContacts& out) const;
+  /// The plane, facet and footing contact lists, checked against balls() and the frame's walls.
+  std::array<WallContacts, 3> read_wall_contacts() const;
 
  private:
   struct Impl;
