@@ -88,7 +88,9 @@ inline void drop_balls(World& w) {
 
 /// DistDem::save_state_file (blocks of `block` rows, from a frame World without balls) against
 /// the state file of the World that unload assembles on rank 0, byte for byte; `make()` builds
-/// the World the ranks were loaded from. Then a folder that does not exist: every rank throws,
+/// the World the ranks were loaded from. The file loaded on the ranks (load_state_file, blocks
+/// of `block` rows) gives every rank the part that load_from_root cuts from the assembled World,
+/// and both step on with the same bits. Then a folder that does not exist: every rank throws,
 /// rank 0 naming the file, and nothing is left. Collective.
 template <class Make>
 inline void expect_same_state_file(const DistDem& d, Make make, std::size_t block) {
@@ -105,8 +107,42 @@ inline void expect_same_state_file(const DistDem& d, Make make, std::size_t bloc
     const std::string want = state_bytes(*assembled, meta);
     EXPECT_TRUE(io::read_whole_file(file) == want) << "the state file written from the parts differs from the assembled World's ("
                                                    << want.size() << " bytes)";
-    std::filesystem::remove(file);
   }
+  // The file loaded on the ranks without a whole World (DistDem::load_state_file) and the
+  // assembled World loaded from rank 0 (load_from_root), on the same bricks, step on with the
+  // same bits: their assembled states after 25 steps have one state file.
+  {
+    World frame(d.world().params());
+    DistDem e1(MPI_COMM_WORLD, d.world().params(), d.grid()), e2(MPI_COMM_WORLD, d.world().params(), d.grid());
+    e1.set_newton(d.newton());
+    e2.set_newton(d.newton());
+    std::vector<std::uint64_t> ids;
+    e1.load_state_file(frame, file, meta.scene_hash, &ids, block);
+    e2.load_from_root(*assembled);
+    EXPECT_EQ(frame.num_balls(), 0u);
+    // every rank's part the same: its rows (ghosts marked), pairs and wall contacts
+    const World &p1 = e1.world(), &p2 = e2.world();
+    int differ = !(p1.balls().id == p2.balls().id && p1.ghost_rows() == p2.ghost_rows() &&
+                   p1.pair_contacts().a == p2.pair_contacts().a && p1.pair_contacts().b == p2.pair_contacts().b &&
+                   p1.plane_contacts().ball == p2.plane_contacts().ball && p1.facet_contacts().ball == p2.facet_contacts().ball &&
+                   p1.footing_contacts().ball == p2.footing_contacts().ball);
+    MPI_Allreduce(MPI_IN_PLACE, &differ, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+    EXPECT_EQ(differ, 0) << "a rank's part loaded from the file differs from the part cut from the whole World";
+    if (d.rank() == 0) {
+      EXPECT_EQ(ids, assembled->balls().id);
+      EXPECT_EQ(frame.step_count(), assembled->step_count());
+    }
+    e1.step(25);
+    e2.step(25);
+    std::unique_ptr<World> a1 = make(), a2 = make();
+    e1.unload(*a1, true);
+    e2.unload(*a2, true);
+    if (d.rank() == 0) {
+      EXPECT_TRUE(state_bytes(*a1, meta) == state_bytes(*a2, meta)) << "the ranks loaded from the file step on with other bits";
+      EXPECT_EQ(a1->step_count(), assembled->step_count() + 25);
+    }
+  }
+  if (d.rank() == 0) std::filesystem::remove(file);
   const auto bad = std::filesystem::temp_directory_path() / ("demfdm_no_such_folder_" + std::to_string(pid)) / "x.state";
   std::string what;
   try {

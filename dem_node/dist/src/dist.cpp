@@ -3426,4 +3426,272 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
   if (!ok) throw std::runtime_error("DistDem::save_state_file: rank 0 could not write " + path.string() + " (see rank 0's error).");
 }
 
+// ------------------------------------------------------------------------------------------
+// load_state_file: the ranks' parts from one World's state file, read by rank 0 in blocks
+
+namespace {
+constexpr int kTagLoadBalls = 7308, kTagLoadPairs = 7309, kTagLoadWalls = 7310;
+
+struct BallLoadRec {
+  std::uint64_t row;  // the ball's row in the file
+  BallRec b;
+};
+
+// Rank 0's error, if any, on every rank: rank 0 rethrows its own, the others throw its message.
+void share_failure(MPI_Comm comm, int rank, const std::exception_ptr& failed) {
+  std::string what;
+  if (rank == 0 && failed) {
+    try {
+      std::rethrow_exception(failed);
+    } catch (const std::exception& e) {
+      what = e.what();
+    } catch (...) {
+      what = "an unknown error";
+    }
+    if (what.empty()) what = "an error";
+  }
+  int len = static_cast<int>(what.size());
+  MPI_Bcast(&len, 1, MPI_INT, 0, comm);
+  if (len == 0) return;
+  if (rank == 0) std::rethrow_exception(failed);
+  what.resize(static_cast<std::size_t>(len));
+  MPI_Bcast(what.data(), len, MPI_CHAR, 0, comm);
+  throw std::runtime_error("rank 0 could not load the state: " + what);
+}
+
+// Rank 0 sends `recs` (rank r's records of one phase) to rank r; an empty vector is the phase's end.
+template <class R>
+void send_recs(MPI_Comm comm, int r, int tag, const std::vector<R>& recs) {
+  MPI_Send(recs.data(), static_cast<int>(recs.size() * sizeof(R)), MPI_BYTE, r, tag, comm);
+}
+// A rank's records of one phase, appended to `out` until the phase's end.
+template <class R>
+void recv_recs(MPI_Comm comm, int tag, std::vector<R>& out) {
+  for (;;) {
+    MPI_Status st;
+    MPI_Probe(0, tag, comm, &st);
+    int bytes = 0;
+    MPI_Get_count(&st, MPI_BYTE, &bytes);
+    const std::size_t n = static_cast<std::size_t>(bytes) / sizeof(R), at = out.size();
+    out.resize(at + n);
+    MPI_Recv(out.data() + at, bytes, MPI_BYTE, 0, tag, comm, MPI_STATUS_IGNORE);
+    if (n == 0) return;
+  }
+}
+}  // namespace
+
+void DistDem::load_state_file(World& frame, const std::filesystem::path& path, std::uint64_t scene_hash,
+                              std::vector<std::uint64_t>* ids, std::size_t block) {
+  block = std::max<std::size_t>(1, std::min<std::size_t>(block, (std::size_t{64} << 20) / sizeof(BallLoadRec)));
+  const std::size_t P = static_cast<std::size_t>(size_);
+  std::exception_ptr failed;
+  auto guarded = [&](auto&& f) {
+    if (failed) return;
+    try {
+      f();
+    } catch (...) {
+      failed = std::current_exception();
+    }
+  };
+  // Rank 0: the frame, the largest radius (the halo), each ball's owner and the rows of the
+  // balls its pairs need on another rank (a pair's partner: cut's rule).
+  std::unique_ptr<StateSource> src;
+  std::string frame_bytes;
+  double rmax = 0.0;
+  std::vector<std::int32_t> owner;                          // per file row (4 bytes a ball)
+  std::vector<std::pair<std::uint64_t, std::int32_t>> extra;  // (row, rank): a partner on another rank
+  if (rank_ == 0)
+    guarded([&] {
+      src = std::make_unique<StateSource>(path, scene_hash);
+      frame_bytes = src->frame_bytes();
+      const std::uint64_t n = src->balls(), m = src->pairs();
+      owner.reserve(static_cast<std::size_t>(n));
+      if (ids) ids->clear(), ids->reserve(static_cast<std::size_t>(n));
+      Particles b;
+      std::uint64_t last = 0;
+      for (std::uint64_t r0 = 0; r0 < n; r0 += block) {
+        src->read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(block, n - r0)), b);
+        for (std::size_t i = 0; i < b.size(); ++i) {
+          if (r0 + i > 0 && !(b.id[i] > last))
+            throw std::invalid_argument(path.string() + ": the balls' rows are not in id order (DistDem::load_state_file)");
+          last = b.id[i];
+          rmax = std::max(rmax, b.r[i]);
+          owner.push_back(grid_.owner(b.x[i]));
+          if (ids) ids->push_back(b.id[i]);
+        }
+      }
+      PairContacts pcb;
+      for (std::uint64_t c0 = 0; c0 < m; c0 += block) {
+        src->read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(block, m - c0)), pcb);
+        for (std::size_t c = 0; c < pcb.size(); ++c) {
+          const std::int32_t oa = owner[pcb.a[c]], ob = owner[pcb.b[c]];
+          if (ob == oa) continue;
+          extra.push_back({pcb.b[c], oa});
+          if (!newton_) extra.push_back({pcb.a[c], ob});
+        }
+      }
+      std::sort(extra.begin(), extra.end());
+      extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
+    });
+  share_failure(comm_, rank_, failed);
+  // Every rank: the frame (parameters, counters, effects, walls) and the halo.
+  long long fb = static_cast<long long>(frame_bytes.size());
+  MPI_Bcast(&fb, 1, MPI_LONG_LONG, 0, comm_);
+  frame_bytes.resize(static_cast<std::size_t>(fb));
+  for (long long at = 0; at < fb; at += chunk_)
+    MPI_Bcast(frame_bytes.data() + at, static_cast<int>(std::min(chunk_, fb - at)), MPI_CHAR, 0, comm_);
+  double hk[2] = {rmax, static_cast<double>(static_cast<int>(frame.pair_kernel()))};
+  MPI_Bcast(hk, 2, MPI_DOUBLE, 0, comm_);
+  rmax = hk[0];
+  load_state_bytes(frame, frame_bytes, scene_hash, path.string());
+  auto share = std::make_unique<World>(frame.params());
+  load_state_bytes(*share, std::move(frame_bytes), scene_hash, path.string());
+  share->set_pair_kernel(static_cast<PairKernel>(static_cast<int>(hk[1])));
+  params_from(*share, rmax);
+  // The balls: each to every rank whose part holds it (cut's rule: within the halo of the
+  // rank's brick, its owner, a partner of the rank's pairs), with its file row.
+  std::vector<BallLoadRec> mine;
+  if (rank_ == 0) {
+    std::vector<std::vector<BallLoadRec>> out(P);
+    guarded([&] {
+      const std::uint64_t n = src->balls();
+      Particles b;
+      std::vector<int> nb;
+      std::size_t e = 0;
+      for (std::uint64_t r0 = 0; r0 < n; r0 += block) {
+        src->read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(block, n - r0)), b);
+        for (std::size_t i = 0; i < b.size(); ++i) {
+          const std::uint64_t row = r0 + i;
+          const int o = owner[row];
+          grid_.near(b.x[i], halo_, nb);
+          if (std::find(nb.begin(), nb.end(), o) == nb.end()) nb.push_back(o);
+          for (; e < extra.size() && extra[e].first == row; ++e)
+            if (std::find(nb.begin(), nb.end(), extra[e].second) == nb.end()) nb.push_back(extra[e].second);
+          for (int r : nb) out[static_cast<std::size_t>(r)].push_back(BallLoadRec{row, ball_rec(b, i)});
+        }
+        for (std::size_t r = 1; r < P; ++r)
+          if (!out[r].empty()) send_recs(comm_, static_cast<int>(r), kTagLoadBalls, out[r]), out[r].clear();
+        mine.insert(mine.end(), out[0].begin(), out[0].end());
+        out[0].clear();
+      }
+    });
+    for (std::size_t r = 1; r < P; ++r) send_recs(comm_, static_cast<int>(r), kTagLoadBalls, std::vector<BallLoadRec>{});
+  } else {
+    recv_recs(comm_, kTagLoadBalls, mine);
+  }
+  share_failure(comm_, rank_, failed);
+  // The pairs: to the owner of ball A, and with newton off to the owner of ball B too; their
+  // ends as file rows (PairRec's ia, ib).
+  std::vector<PairRec> pairs;
+  if (rank_ == 0) {
+    std::vector<std::vector<PairRec>> out(P);
+    guarded([&] {
+      const std::uint64_t m = src->pairs();
+      PairContacts b;
+      for (std::uint64_t c0 = 0; c0 < m; c0 += block) {
+        src->read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(block, m - c0)), b);
+        for (std::size_t c = 0; c < b.size(); ++c) {
+          const int oa = owner[b.a[c]], ob = owner[b.b[c]];
+          const PairRec rec{b.a[c], b.b[c], b.shift[c], b.h[c], b.bond.empty() ? BondHist{} : b.bond[c]};
+          out[static_cast<std::size_t>(oa)].push_back(rec);
+          if (!newton_ && ob != oa) out[static_cast<std::size_t>(ob)].push_back(rec);
+        }
+        for (std::size_t r = 1; r < P; ++r)
+          if (!out[r].empty()) send_recs(comm_, static_cast<int>(r), kTagLoadPairs, out[r]), out[r].clear();
+        pairs.insert(pairs.end(), out[0].begin(), out[0].end());
+        out[0].clear();
+      }
+    });
+    for (std::size_t r = 1; r < P; ++r) send_recs(comm_, static_cast<int>(r), kTagLoadPairs, std::vector<PairRec>{});
+  } else {
+    recv_recs(comm_, kTagLoadPairs, pairs);
+  }
+  share_failure(comm_, rank_, failed);
+  // The wall contacts (whole on rank 0): each to its ball's owner, with its candidate facets.
+  std::vector<char> walls_in;
+  if (rank_ == 0) {
+    std::vector<std::vector<WallFullRec>> recs(P);
+    std::vector<std::vector<std::uint32_t>> cands(P);
+    guarded([&] {
+      const std::array<WallContacts, 3> wl = src->read_wall_contacts();
+      for (int kind = 0; kind < 3; ++kind) {
+        const WallContacts& wc = wl[static_cast<std::size_t>(kind)];
+        for (std::size_t c = 0; c < wc.size(); ++c) {
+          const std::size_t r = static_cast<std::size_t>(owner[wc.ball[c]]);
+          const std::uint32_t c0 = wc.cand_off[c], c1 = wc.cand_off[c + 1];
+          recs[r].push_back(WallFullRec{wc.ball[c], wc.wall[c], c1 - c0, wc.facet[c], static_cast<std::uint8_t>(kind), wc.h[c],
+                                        wc.bond.empty() ? BondHist{} : wc.bond[c], wc.F[c], wc.M[c], wc.TA[c], wc.xc[c],
+                                        wc.bary[c]});
+          cands[r].insert(cands[r].end(), wc.cand.begin() + c0, wc.cand.begin() + c1);
+        }
+      }
+    });
+    for (std::size_t r = 0; r < P; ++r) {
+      std::vector<char> bytes;
+      put_recs(bytes, recs[r]);
+      put_recs(bytes, cands[r]);
+      if (r == 0) walls_in = std::move(bytes);
+      else send_recs(comm_, static_cast<int>(r), kTagLoadWalls, bytes);
+    }
+  } else {
+    MPI_Status st;
+    MPI_Probe(0, kTagLoadWalls, comm_, &st);
+    int bytes = 0;
+    MPI_Get_count(&st, MPI_BYTE, &bytes);
+    walls_in.resize(static_cast<std::size_t>(bytes));
+    MPI_Recv(walls_in.data(), bytes, MPI_BYTE, 0, kTagLoadWalls, comm_, MPI_STATUS_IGNORE);
+  }
+  share_failure(comm_, rank_, failed);
+  src.reset();
+  owner = {};
+  extra = {};
+  // This rank's share of the World: its balls in file order, its pairs and wall contacts with
+  // their ends as rows of the share. Cut as load cuts the whole World, it gives the same part.
+  std::vector<std::uint64_t> rows;
+  Particles pt;
+  for (const BallLoadRec& b : mine) rows.push_back(b.row), push_ball(pt, b.b);
+  mine = {};
+  auto row_of = [&](std::uint64_t row) {
+    const auto it = std::lower_bound(rows.begin(), rows.end(), row);
+    if (it == rows.end() || *it != row) throw std::logic_error("DistDem::load_state_file: a contact's ball is not in the rank's share");
+    return static_cast<std::uint32_t>(it - rows.begin());
+  };
+  PairContacts pc;
+  const bool pair_bonds = law_has_bond(share->params().ball_ball.model);
+  for (const PairRec& c : pairs) {
+    pc.a.push_back(row_of(c.ia));
+    pc.b.push_back(row_of(c.ib));
+    pc.shift.push_back(c.s);
+    pc.h.push_back(c.h);
+    if (pair_bonds) pc.bond.push_back(c.b);
+  }
+  pairs = {};
+  std::vector<WallFullRec> wr;
+  std::vector<std::uint32_t> wcand;
+  get_recs(get_recs(walls_in.data(), wr), wcand);
+  std::array<WallContacts, 3> wc;
+  std::size_t at = 0;
+  for (const WallFullRec& c : wr) {  // (in the file's order, kind by kind)
+    WallContacts& d = wc[c.kind];
+    if (d.cand_off.empty()) d.cand_off.push_back(0);
+    d.ball.push_back(row_of(c.id));
+    d.wall.push_back(c.wall);
+    d.facet.push_back(c.facet);
+    d.cand.insert(d.cand.end(), wcand.begin() + static_cast<std::ptrdiff_t>(at), wcand.begin() + static_cast<std::ptrdiff_t>(at + c.ncand));
+    at += c.ncand;
+    d.cand_off.push_back(static_cast<std::uint32_t>(d.cand.size()));
+    d.h.push_back(c.h);
+    if (kind_bonds(share->params(), c.kind)) d.bond.push_back(c.b);
+    d.F.push_back(c.F), d.M.push_back(c.M), d.TA.push_back(c.TA), d.xc.push_back(c.xc), d.bary.push_back(c.bary);
+  }
+  for (WallContacts& d : wc)
+    if (d.cand_off.empty()) d.cand_off.push_back(0);
+  const World::Counters k = share->counters();
+  std::vector<std::uint8_t> no_ghosts;
+  share->swap_balls(pt, pc, wc, no_ghosts);
+  share->set_counters(k);
+  const std::vector<PlatenServoParams> platens = loadable(*share);
+  take(part_of(*share, cut(*share, false), rank_, platens), !platens.empty());
+}
+
 }  // namespace demfdm::dem

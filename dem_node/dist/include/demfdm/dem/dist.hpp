@@ -239,6 +239,19 @@ class DistDem {
   /// file is left under `path`'s name.
   void save_state_file(World& full, const std::filesystem::path& path, const CheckpointMeta& meta,
                        std::size_t block = 16384) const;
+  /// The parts of the World saved in the state file `path` (checkpoint.hpp), as load(that World)
+  /// would make them, without the World on any rank: rank 0 reads the file in blocks of `block`
+  /// rows (StateSource), finds each ball's owner, and sends every rank the balls its part holds
+  /// (cut's rule: within the halo of its brick, its own, the partners of its pairs), the pairs it
+  /// computes and its balls' wall contacts; each rank cuts its part from that share. Rank 0 keeps
+  /// 4 bytes a ball (the owners) and the pairs across bricks. Every rank's `frame` gets the
+  /// World's other state (parameters, counters, effects, walls; no ball), as the node's World
+  /// while the ranks step; with `ids`, rank 0 gets the balls' ids in row order. The first cut is
+  /// the grid's as constructed (a balanced one at the next rebalancing: the results are the
+  /// same). The file's rows must be in id order (as a checkpoint of the ranks writes them).
+  /// Collective; a refused file is refused on every rank (rank 0 its error, the others naming it).
+  void load_state_file(World& frame, const std::filesystem::path& path, std::uint64_t scene_hash,
+                       std::vector<std::uint64_t>* ids = nullptr, std::size_t block = 16384);
   /// n steps; the walls' sums are those of the last (reduced after every step where a platen
   /// servo reads them at the next one, else once at the end: within the call nothing reads them).
   void step(std::int64_t n = 1);
