@@ -216,16 +216,9 @@ class DemParticipant : public node::Participant {
   }
   void restore(io::StateReader& r, const node::Restore& how) override {
     history_due_ = -1;
-    // A ranked run loads the whole World on rank 0; its next step cuts it into bricks again.
     dist_live_ = false;
     dist_.reset();
-    if (!part_only()) dem::load_state_file(world_, how.dir / "dem.world.state", how.saved_scene_hash);
-    // The thread count is the scene's (a branch may change it; a resume has the same).
-    world_.mutable_params().threads = dem_threads(s_);
-    world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
-    world_.mutable_params().order_free_sums = s_.boolean("run.order_free_sums");
-    world_.keep_force_norms(!preparing_);
-    omp_set_num_threads(world_.params().threads);
+    const bool was_preparing = preparing_;
     auto sec = r.section("dem_node");
     Block saved;
     saved.origin = {sec.f64(), sec.f64(), sec.f64()};
@@ -240,13 +233,52 @@ class DemParticipant : public node::Participant {
     adapter_fields([&](auto&... v) { io::load_fields(sec, v...); });
     energy_.load(sec);
     energy_jump_.load(sec);
-    // On ranks the balance goes on from the parts (they are cut at the next step): its positions
-    // as records of rank 0's balls, which the ranks' gravity_work finds wherever they are.
+    // The World. On ranks, the block (not a periodic REV being prepared) is loaded into the ranks'
+    // parts without a whole World on any rank (DistDem::load_state_file), and the ranks are live
+    // from here on as after the replication; else rank 0 loads the whole World, which the next
+    // stage cuts into bricks at its first step (enter_dist). With dem.newton, whose results
+    // follow the cuts, the whole World as before.
+    const fs::path world_file = how.dir / "dem.world.state";
+    bool on_ranks = g_ranks.size > 1 && !s_.boolean("dem.newton");
+    if (on_ranks && !part_only()) {
+      dem::StateSource(world_file, how.saved_scene_hash).load_frame(world_);  // (rank 0: is it the block?)
+      on_ranks = !preparing_ || !world_.periodic();
+    }
+    if (g_ranks.size > 1) {
+      int f = on_ranks ? 1 : 0;
+      MPI_Bcast(&f, 1, MPI_INT, 0, g_ranks.comm);
+      on_ranks = f != 0;
+    }
+    std::vector<std::uint64_t> ids;  // (rank 0, on ranks: the balls' ids in row order)
+    if (!on_ranks && !part_only()) dem::load_state_file(world_, world_file, how.saved_scene_hash);
+    // The thread count is the scene's (a branch may change it; a resume has the same).
+    auto scene_threads = [&] {
+      world_.mutable_params().threads = dem_threads(s_);
+      world_.mutable_params().thread_independent = s_.boolean("run.thread_independent");
+      world_.mutable_params().order_free_sums = s_.boolean("run.order_free_sums");
+    };
+    scene_threads();
+    if (on_ranks) {
+      dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), ranks_grid());
+      configure_dist(*dist_);
+      {
+        node::Timed t(effect_s_["ranks.load"]);
+        dist_->load_state_file(world_, world_file, how.saved_scene_hash, part_only() ? nullptr : &ids);
+      }
+      scene_threads();
+      went_live("loaded from the checkpoint into");
+    } else {
+      world_.keep_force_norms(!was_preparing);
+    }
+    omp_set_num_threads(world_.params().threads);
+    // On ranks the balance goes on from the parts: its positions as records of the saved balls
+    // (by id, in row order), which the ranks' gravity_work finds wherever they are.
     ranked_energy_ = g_ranks.size > 1 && !energy_pending_;
     x_begin_.clear();
     if (ranked_energy_ && !part_only()) {
-      const auto& ids = world_.balls().id;
-      for (std::size_t i = 0; i < ids.size() && i < energy_.x_begin.size(); ++i) x_begin_.push_back({ids[i], energy_.x_begin[i]});
+      const auto& row_ids = on_ranks ? ids : world_.balls().id;
+      for (std::size_t i = 0; i < row_ids.size() && i < energy_.x_begin.size(); ++i)
+        x_begin_.push_back({row_ids[i], energy_.x_begin[i]});
       energy_.x_begin.clear();
     }
     const auto stages_bytes = sec.u64();
@@ -773,20 +805,23 @@ class DemParticipant : public node::Participant {
   // longest axis).
   void enter_dist() {
     if (g_ranks.size <= 1 || dist_live_ || preparing_) return;
-    // Rank 0's cell and step (the other ranks did not set the stages up).
-    double c[8] = {world_.periodic() ? 1.0 : 0.0, world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
-                   world_.cell_length().x, world_.cell_length().y, world_.cell_length().z, user_dt_};
-    MPI_Bcast(c, 8, MPI_DOUBLE, 0, g_ranks.comm);
-    user_dt_ = c[7];
-    const dem::BrickGrid g = c[0] != 0.0 ? block_grid({c[1], c[2], c[3]}, {c[4], c[5], c[6]}, true)
-                                         : block_grid(block_.origin, {block_.width_x(), block_.width_y(), block_.height()}, false);
-    dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), g);
+    dist_ = std::make_unique<dem::DistDem>(g_ranks.comm, world_.params(), ranks_grid());
     configure_dist(*dist_);
     {
       node::Timed t(effect_s_["ranks.load"]);
       dist_->load_from_root(world_);  // the other ranks hold only their part
     }
     went_live("cut into");
+  }
+  // The bricks of rank 0's World: its periodic cell, or the block; with rank 0's step (the other
+  // ranks did not set the stages up). Collective.
+  dem::BrickGrid ranks_grid() {
+    double c[8] = {world_.periodic() ? 1.0 : 0.0, world_.cell_origin().x, world_.cell_origin().y, world_.cell_origin().z,
+                   world_.cell_length().x, world_.cell_length().y, world_.cell_length().z, user_dt_};
+    MPI_Bcast(c, 8, MPI_DOUBLE, 0, g_ranks.comm);
+    user_dt_ = c[7];
+    return c[0] != 0.0 ? block_grid({c[1], c[2], c[3]}, {c[4], c[5], c[6]}, true)
+                       : block_grid(block_.origin, {block_.width_x(), block_.width_y(), block_.height()}, false);
   }
   // The scene's options of the ranks' steps (dem.newton, dem.balance_every), before a load.
   void configure_dist(dem::DistDem& d) const {

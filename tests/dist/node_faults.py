@@ -9,7 +9,8 @@ scenes/footing_small.toml with dem.ranks = 2,
 2. a dead rank: rank 1 of the DEM killed with SIGKILL in the penetration ends the run with exit
    code 3 within 5 s, launch/run naming the DEM and the coordinator naming node 'dem';
 3. never losing a ranked run: checkpoints inside the penetration, rank 1 killed, `launch/run
-   --resume`: every CSV file the bytes of the one-process run.
+   --resume` (the ranks load their parts from the checkpoint, no whole World on rank 0): every
+   CSV file the bytes of the one-process run.
 
 Usage: node_faults.py SOURCE_DIR BUILD_DIR WORK_DIR
 """
@@ -171,6 +172,11 @@ else:
                len(csvs)))
         if differ or missing:
             failures.append("resume: %s differ, %s missing" % (differ, missing))
+        # the resumed ranks loaded their parts from the checkpoint, no whole World on rank 0
+        # (DistDem::load_state_file)
+        dlog = open(os.path.join(run_dir, "dem.log")).read()
+        if "the block loaded from the checkpoint into 2 bricks" not in dlog:
+            failures.append("resume: the ranks did not load their parts from the checkpoint")
 
 for f in failures:
     print("FAIL:", f)

@@ -143,7 +143,8 @@ for name, ranks, threads, more in runs[1:]:
           (name, len(csvs), len(ref_h5["dem.h5"]), len(ref_h5["fdm.h5"])))
 
 # A branch from the 3-rank run's checkpoint at the end of the gravity stage (one World's state file
-# written from the ranks' parts), run on 3 ranks: its penetration is the one-process run's.
+# written from the ranks' parts), run on 3 ranks, which load their parts from it: its
+# penetration is the one-process run's.
 branch = os.path.join(work, "branch_ranks3")
 p = subprocess.run(["/bin/bash", os.path.join(src, "launch/run"), os.path.join(src, "scenes/footing_small.toml"),
                     "--no-build", "--from", os.path.join(work, "ranks3", "checkpoints", "gravity-460-end"), "--run-dir",
@@ -159,6 +160,9 @@ else:
         else:
             same += 1
     print("branch on 3 ranks from the 3-rank gravity checkpoint: %d of 3 penetration files the same bytes" % same)
+    blog = open(os.path.join(branch, "dem.log")).read()
+    if "the block loaded from the checkpoint into 3 bricks" not in blog or "assembled into rank 0's World" in blog:
+        failures.append("branch_ranks3: the ranks did not load their parts from the checkpoint, or rank 0 assembled the World")
 
 # DEM only, in a box of five planes (scenes/accuracy_footing_box.toml reduced to 1,904 balls):
 # 2 ranks give one process's bytes in every CSV file, with the default sums and with
