@@ -866,14 +866,7 @@ class DemParticipant : public node::Participant {
   void drop_world() {
     synced_ = false;  // (on every rank: sync_full is a collective)
     if (part_only() || world_.num_balls() == 0) return;
-    dem::Particles none;
-    dem::PairContacts no_pairs;
-    std::array<dem::WallContacts, 3> no_walls;
-    for (auto& wc : no_walls) wc.cand_off.push_back(0);
-    std::vector<std::uint8_t> no_ghosts;
-    const auto counters = world_.counters();
-    world_.swap_balls(none, no_pairs, no_walls, no_ghosts);
-    world_.set_counters(counters);
+    world_.drop_balls();
   }
   // The bricks of a block [lo, lo + len) on the ranks (dem.decomposition: RCB, or slabs across
   // its longest axis).

@@ -538,14 +538,7 @@ TEST(DemCheckpoint, StateWrittenInPiecesHasTheWholeWorldsBytes) {
     // the frame: a copy without its balls and contacts (as rank 0's World while the ranks step)
     World frame{WorldParams{}};
     load_state_bytes(frame, want, kSceneHash, "copy");
-    const auto k = frame.counters();
-    Particles none;
-    PairContacts no_pairs;
-    std::array<WallContacts, 3> no_walls;
-    for (auto& wc : no_walls) wc.cand_off.push_back(0);
-    std::vector<std::uint8_t> no_ghosts;
-    frame.swap_balls(none, no_pairs, no_walls, no_ghosts);
-    frame.set_counters(k);
+    frame.drop_balls();
     ASSERT_EQ(frame.num_balls(), 0u);
     const Particles& pt = w->balls();
     const PairContacts& pc = w->pair_contacts();

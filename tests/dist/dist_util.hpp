@@ -73,19 +73,6 @@ inline Snapshot streamed_snapshot(const DistDem& d, std::size_t block) {
   return all;
 }
 
-/// `w` without its balls and contacts, its walls, effects and counters kept (rank 0's World in
-/// the node while the ranks step).
-inline void drop_balls(World& w) {
-  const World::Counters k = w.counters();
-  Particles none;
-  PairContacts no_pairs;
-  std::array<WallContacts, 3> no_walls;
-  for (auto& wc : no_walls) wc.cand_off.push_back(0);
-  std::vector<std::uint8_t> no_ghosts;
-  w.swap_balls(none, no_pairs, no_walls, no_ghosts);
-  w.set_counters(k);
-}
-
 /// DistDem::save_state_file (blocks of `block` rows, from a frame World without balls) against
 /// the state file of the World that unload assembles on rank 0, byte for byte; `make()` builds
 /// the World the ranks were loaded from. The file loaded on the ranks (load_state_file, blocks
@@ -99,7 +86,7 @@ inline void expect_same_state_file(const DistDem& d, Make make, std::size_t bloc
   const auto file = std::filesystem::temp_directory_path() / ("demfdm_dist_state_" + std::to_string(pid) + ".state");
   const CheckpointMeta meta{0x5eedULL, "v-dist"};
   std::unique_ptr<World> frame = make();
-  drop_balls(*frame);
+  frame->drop_balls();  // (rank 0's World in the node while the ranks step)
   d.save_state_file(*frame, file, meta, block);
   std::unique_ptr<World> assembled = make();
   d.unload(*assembled, true);

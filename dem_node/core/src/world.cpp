@@ -574,6 +574,17 @@ void World::step_forces(bool rebuild_now) {
   ++times_.steps;
 }
 
+void World::drop_balls() {
+  const Counters k = counters();
+  Particles none;
+  PairContacts no_pairs;
+  std::array<WallContacts, 3> no_walls;
+  for (auto& wc : no_walls) wc.cand_off.push_back(0);
+  std::vector<std::uint8_t> no_ghosts;
+  swap_balls(none, no_pairs, no_walls, no_ghosts);
+  set_counters(k);
+}
+
 void World::swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts, 3>& wall,
                        std::vector<std::uint8_t>& ghost) {
   std::swap(pt_, pt);

@@ -3478,6 +3478,27 @@ void recv_recs(MPI_Comm comm, int tag, std::vector<R>& out) {
     if (n == 0) return;
   }
 }
+// One phase of records from rank 0 to the ranks: rank 0 runs `produce(out, flush)` under
+// `guarded`, which fills out[r] with rank r's records and calls flush() after each block (rank
+// r's are sent, rank 0's kept in `mine`), then ends the phase on every rank, also after an
+// error; the other ranks receive theirs into `mine`. Collective.
+template <class R, class Guarded, class Produce>
+void scatter_from_root(MPI_Comm comm, int rank, int size, int tag, Guarded& guarded, Produce produce, std::vector<R>& mine) {
+  if (rank != 0) {
+    recv_recs(comm, tag, mine);
+    return;
+  }
+  std::vector<std::vector<R>> out(static_cast<std::size_t>(size));
+  auto flush = [&] {
+    for (int r = 1; r < size; ++r)
+      if (!out[static_cast<std::size_t>(r)].empty())
+        send_recs(comm, r, tag, out[static_cast<std::size_t>(r)]), out[static_cast<std::size_t>(r)].clear();
+    mine.insert(mine.end(), out[0].begin(), out[0].end());
+    out[0].clear();
+  };
+  guarded([&] { produce(out, flush); });
+  for (int r = 1; r < size; ++r) send_recs(comm, r, tag, std::vector<R>{});
+}
 }  // namespace
 
 void DistDem::load_state_file(World& frame, const std::filesystem::path& path, std::uint64_t scene_hash,
@@ -3551,61 +3572,43 @@ void DistDem::load_state_file(World& frame, const std::filesystem::path& path, s
   // The balls: each to every rank whose part holds it (cut's rule: within the halo of the
   // rank's brick, its owner, a partner of the rank's pairs), with its file row.
   std::vector<BallLoadRec> mine;
-  if (rank_ == 0) {
-    std::vector<std::vector<BallLoadRec>> out(P);
-    guarded([&] {
-      const std::uint64_t n = src->balls();
-      Particles b;
-      std::vector<int> nb;
-      std::size_t e = 0;
-      for (std::uint64_t r0 = 0; r0 < n; r0 += block) {
-        src->read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(block, n - r0)), b);
-        for (std::size_t i = 0; i < b.size(); ++i) {
-          const std::uint64_t row = r0 + i;
-          const int o = owner[row];
-          grid_.near(b.x[i], halo_, nb);
-          if (std::find(nb.begin(), nb.end(), o) == nb.end()) nb.push_back(o);
-          for (; e < extra.size() && extra[e].first == row; ++e)
-            if (std::find(nb.begin(), nb.end(), extra[e].second) == nb.end()) nb.push_back(extra[e].second);
-          for (int r : nb) out[static_cast<std::size_t>(r)].push_back(BallLoadRec{row, ball_rec(b, i)});
-        }
-        for (std::size_t r = 1; r < P; ++r)
-          if (!out[r].empty()) send_recs(comm_, static_cast<int>(r), kTagLoadBalls, out[r]), out[r].clear();
-        mine.insert(mine.end(), out[0].begin(), out[0].end());
-        out[0].clear();
+  scatter_from_root<BallLoadRec>(comm_, rank_, size_, kTagLoadBalls, guarded, [&](auto& out, auto flush) {
+    const std::uint64_t n = src->balls();
+    Particles b;
+    std::vector<int> nb;
+    std::size_t e = 0;
+    for (std::uint64_t r0 = 0; r0 < n; r0 += block) {
+      src->read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(block, n - r0)), b);
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        const std::uint64_t row = r0 + i;
+        const int o = owner[row];
+        grid_.near(b.x[i], halo_, nb);
+        if (std::find(nb.begin(), nb.end(), o) == nb.end()) nb.push_back(o);
+        for (; e < extra.size() && extra[e].first == row; ++e)
+          if (std::find(nb.begin(), nb.end(), extra[e].second) == nb.end()) nb.push_back(extra[e].second);
+        for (int r : nb) out[static_cast<std::size_t>(r)].push_back(BallLoadRec{row, ball_rec(b, i)});
       }
-    });
-    for (std::size_t r = 1; r < P; ++r) send_recs(comm_, static_cast<int>(r), kTagLoadBalls, std::vector<BallLoadRec>{});
-  } else {
-    recv_recs(comm_, kTagLoadBalls, mine);
-  }
+      flush();
+    }
+  }, mine);
   share_failure(comm_, rank_, failed);
   // The pairs: to the owner of ball A, and with newton off to the owner of ball B too; their
   // ends as file rows (PairRec's ia, ib).
   std::vector<PairRec> pairs;
-  if (rank_ == 0) {
-    std::vector<std::vector<PairRec>> out(P);
-    guarded([&] {
-      const std::uint64_t m = src->pairs();
-      PairContacts b;
-      for (std::uint64_t c0 = 0; c0 < m; c0 += block) {
-        src->read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(block, m - c0)), b);
-        for (std::size_t c = 0; c < b.size(); ++c) {
-          const int oa = owner[b.a[c]], ob = owner[b.b[c]];
-          const PairRec rec{b.a[c], b.b[c], b.shift[c], b.h[c], b.bond.empty() ? BondHist{} : b.bond[c]};
-          out[static_cast<std::size_t>(oa)].push_back(rec);
-          if (!newton_ && ob != oa) out[static_cast<std::size_t>(ob)].push_back(rec);
-        }
-        for (std::size_t r = 1; r < P; ++r)
-          if (!out[r].empty()) send_recs(comm_, static_cast<int>(r), kTagLoadPairs, out[r]), out[r].clear();
-        pairs.insert(pairs.end(), out[0].begin(), out[0].end());
-        out[0].clear();
+  scatter_from_root<PairRec>(comm_, rank_, size_, kTagLoadPairs, guarded, [&](auto& out, auto flush) {
+    const std::uint64_t m = src->pairs();
+    PairContacts b;
+    for (std::uint64_t c0 = 0; c0 < m; c0 += block) {
+      src->read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(block, m - c0)), b);
+      for (std::size_t c = 0; c < b.size(); ++c) {
+        const int oa = owner[b.a[c]], ob = owner[b.b[c]];
+        const PairRec rec{b.a[c], b.b[c], b.shift[c], b.h[c], b.bond.empty() ? BondHist{} : b.bond[c]};
+        out[static_cast<std::size_t>(oa)].push_back(rec);
+        if (!newton_ && ob != oa) out[static_cast<std::size_t>(ob)].push_back(rec);
       }
-    });
-    for (std::size_t r = 1; r < P; ++r) send_recs(comm_, static_cast<int>(r), kTagLoadPairs, std::vector<PairRec>{});
-  } else {
-    recv_recs(comm_, kTagLoadPairs, pairs);
-  }
+      flush();
+    }
+  }, pairs);
   share_failure(comm_, rank_, failed);
   // The wall contacts (whole on rank 0): each to its ball's owner, with its candidate facets.
   std::vector<char> walls_in;

@@ -325,6 +325,10 @@ class World {
   /// carries these histories across by ball and wall id. A ghost row has no wall contacts.
   void swap_balls(Particles& pt, PairContacts& pc, std::array<WallContacts, 3>& wall,
                   std::vector<std::uint8_t>& ghost);
+  /// No ball and no contact left; the walls, effects, parameters and counters kept (a World that
+  /// holds the rest of a state whose balls live elsewhere: the ranks' parts, a state file read or
+  /// written in pieces).
+  void drop_balls();
   /// Every plane and footing contact's share of its wall's sums (reactions, servo gains),
   /// appended to `out` kind by kind (planes, footing) in contact order. (The facets' shares:
   /// facet_sum_shares.)
