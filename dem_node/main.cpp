@@ -62,7 +62,8 @@ bool is_generation(const schema::Stage& st) { return schema::action_info(st.kind
 // rank its part of the block (dem::DistDem), and the ranks stay live from there to the run's end:
 // the later stages' set-ups (gravity, the footing, the interface), their steps, reports and frames
 // run on the parts (ranks_carry), and rank 0 keeps no ball meanwhile (drop_world). A checkpoint
-// merges the parts' rows into the state file on rank 0 block by block (DistDem::save_state_file).
+// merges the parts' rows into the state file on rank 0 block by block (DistDem::save_state_file),
+// and a resume or branch of the block loads the parts from it (DistDem::load_state_file).
 // Rank 0 assembles the whole World (DistDem::unload, sync_full) only for a guard's finding or a
 // stage that needs it (a specimen procedure); such a stage is set
 // up on it and cut into bricks again at its first step (enter_dist, DistDem::load_from_root). The

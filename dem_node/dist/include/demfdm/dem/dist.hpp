@@ -228,8 +228,10 @@ class DistDem {
   void unload(World& full, bool root_only = false) const;
   /// The state file (dem/checkpoint.hpp) of the World that unload(full, true) would assemble on
   /// rank 0, written by rank 0 to `path`, byte for byte save_state_file of that World, without
-  /// assembling it: every rank sorts its balls by id and the pairs whose ball A it owns by
-  /// (A, B) id; rank 0 merges the ranks' rows as they arrive, in blocks of `block` rows, and
+  /// assembling it: every rank gives its balls by id and the pairs whose ball A it owns by
+  /// (A, B) id (made a block at a time from its rows when these are in those orders, as with
+  /// newton off; else from a sorted copy); rank 0 merges the ranks' rows as they arrive, in
+  /// blocks of `block` rows, and
   /// writes each block into the file's columns in place (StateStream); it keeps the balls' ids
   /// (8 bytes a ball) to turn a contact's ids into rows, and reads the wall contacts whole
   /// (they grow with the walls, not with the block). Rank 0's `full` gets what unload gives it
