@@ -3080,6 +3080,21 @@ struct WallFullRec {
   Vec3 F, M, TA, xc, bary;
 };
 
+// A ball-ball list from pair records in their order, their ends turned into rows by `row_of`
+// (ids or file rows, as the records hold them); bond histories when the law bonds.
+template <class RowOf>
+PairContacts pair_list(const std::vector<PairRec>& recs, bool bonds, RowOf row_of) {
+  PairContacts pc;
+  for (const PairRec& c : recs) {
+    pc.a.push_back(row_of(c.ia));
+    pc.b.push_back(row_of(c.ib));
+    pc.shift.push_back(c.s);
+    pc.h.push_back(c.h);
+    if (bonds) pc.bond.push_back(c.b);
+  }
+  return pc;
+}
+
 
 }  // namespace
 
@@ -3255,15 +3270,7 @@ void DistDem::unload(World& full, bool root_only) const {
   auto row_of = [&](std::uint64_t id) {
     return static_cast<std::uint32_t>(std::lower_bound(ids.begin(), ids.end(), id) - ids.begin());
   };
-  PairContacts npc;
-  const bool pair_bonds = law_has_bond(w_->params().ball_ball.model);
-  for (const PairRec& c : ap) {
-    npc.a.push_back(row_of(c.ia));
-    npc.b.push_back(row_of(c.ib));
-    npc.shift.push_back(c.s);
-    npc.h.push_back(c.h);
-    if (pair_bonds) npc.bond.push_back(c.b);
-  }
+  PairContacts npc = pair_list(ap, law_has_bond(w_->params().ball_ball.model), row_of);
   std::array<WallContacts, 3> nwc = tails.lists(w_->params(), row_of);
   std::vector<std::uint8_t> ghost;
   full.swap_balls(np, npc, nwc, ghost);
@@ -3659,15 +3666,7 @@ void DistDem::load_state_file(World& frame, const std::filesystem::path& path, s
     if (it == rows.end() || *it != row) throw std::logic_error("DistDem::load_state_file: a contact's ball is not in the rank's share");
     return static_cast<std::uint32_t>(it - rows.begin());
   };
-  PairContacts pc;
-  const bool pair_bonds = law_has_bond(share->params().ball_ball.model);
-  for (const PairRec& c : pairs) {
-    pc.a.push_back(row_of(c.ia));
-    pc.b.push_back(row_of(c.ib));
-    pc.shift.push_back(c.s);
-    pc.h.push_back(c.h);
-    if (pair_bonds) pc.bond.push_back(c.b);
-  }
+  PairContacts pc = pair_list(pairs, law_has_bond(share->params().ball_ball.model), row_of);
   pairs = {};
   std::vector<WallFullRec> wr;
   std::vector<std::uint32_t> wcand;
