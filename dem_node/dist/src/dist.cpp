@@ -2936,6 +2936,24 @@ struct FrameStream {
   }
 };
 
+// Every rank's numbers of balls and pairs on rank 0, with their totals (empty elsewhere).
+struct RowCounts {
+  std::vector<std::uint64_t> balls, pairs;
+  std::uint64_t total_balls = 0, total_pairs = 0;
+};
+RowCounts row_counts(MPI_Comm comm, int rank, int size, std::uint64_t balls, std::uint64_t pairs) {
+  const std::uint64_t mine[2] = {balls, pairs};
+  std::vector<std::uint64_t> counts(2 * static_cast<std::size_t>(size));
+  MPI_Gather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, 0, comm);
+  RowCounts n;
+  n.balls.resize(static_cast<std::size_t>(size)), n.pairs.resize(static_cast<std::size_t>(size));
+  for (std::size_t r = 0; r < static_cast<std::size_t>(size) && rank == 0; ++r) {
+    n.balls[r] = counts[2 * r], n.pairs[r] = counts[2 * r + 1];
+    n.total_balls += n.balls[r], n.total_pairs += n.pairs[r];
+  }
+  return n;
+}
+
 // Merges the ranks' sorted records on rank 0 (k-way, a heap of the streams' heads), calling
 // `out(record)` in `less` order; the other ranks send theirs in blocks of `block`. `counts`:
 // every rank's number of records (rank 0). A rank holds a block of its own records at a time,
@@ -3005,22 +3023,13 @@ void DistDem::stream_snapshot(const SnapshotSink& sink, std::size_t block) const
   }
   auto pair_less = [](const FramePair& x, const FramePair& y) { return std::tie(x.a, x.b) < std::tie(y.a, y.b); };
   std::sort(pairs.begin(), pairs.end(), pair_less);
-  const std::uint64_t mine[2] = {balls.size(), pairs.size()};
-  std::vector<std::uint64_t> counts(2 * static_cast<std::size_t>(size_));
-  MPI_Gather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, 0, comm_);
-  std::vector<std::uint64_t> nb(static_cast<std::size_t>(size_)), np(static_cast<std::size_t>(size_));
-  std::uint64_t total_balls = 0, total_pairs = 0;
-  for (int r = 0; r < size_ && rank_ == 0; ++r) {
-    nb[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r)];
-    np[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r) + 1];
-    total_balls += nb[static_cast<std::size_t>(r)];
-    total_pairs += np[static_cast<std::size_t>(r)];
-  }
-  if (rank_ == 0 && sink.begin) sink.begin(total_balls, total_pairs);
+  const RowCounts n = row_counts(comm_, rank_, size_, balls.size(), pairs.size());
+  const std::vector<std::uint64_t>&nb = n.balls, &np = n.pairs;
+  if (rank_ == 0 && sink.begin) sink.begin(n.total_balls, n.total_pairs);
 
   // the balls, merged by id; rank 0 keeps the ids (8 bytes a ball) to turn a pair's ids into rows
   std::vector<std::uint64_t> ids;
-  if (rank_ == 0) ids.reserve(total_balls);
+  if (rank_ == 0) ids.reserve(n.total_balls);
   Snapshot out;
   std::size_t row0 = 0;
   auto flush_balls = [&] {
@@ -3343,23 +3352,15 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
     pair_src = source_of(pairs);
   }
   // counts, the tails (wall contacts, energies, failures) and the largest displacement on rank 0
-  const std::uint64_t mine[2] = {nballs, npairs};
-  std::vector<std::uint64_t> counts(2 * static_cast<std::size_t>(size_));
-  MPI_Gather(mine, 2, MPI_UINT64_T, counts.data(), 2, MPI_UINT64_T, 0, comm_);
+  const RowCounts counted = row_counts(comm_, rank_, size_, nballs, npairs);
+  const std::vector<std::uint64_t>&nb = counted.balls, &np = counted.pairs;
+  const std::uint64_t total_balls = counted.total_balls, total_pairs = counted.total_pairs;
   std::vector<char> tail, tails_in;
   put_part_tail(tail);
   std::vector<std::size_t> starts;
   gather_on_root(comm_, tail, tails_in, &starts);
   double run = run_disp2_, max_disp2 = 0.0;
   MPI_Reduce(&run, &max_disp2, 1, MPI_DOUBLE, MPI_MAX, 0, comm_);
-  std::vector<std::uint64_t> nb(static_cast<std::size_t>(size_)), np(static_cast<std::size_t>(size_));
-  std::uint64_t total_balls = 0, total_pairs = 0;
-  for (int r = 0; r < size_ && rank_ == 0; ++r) {
-    nb[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r)];
-    np[static_cast<std::size_t>(r)] = counts[2 * static_cast<std::size_t>(r) + 1];
-    total_balls += nb[static_cast<std::size_t>(r)];
-    total_pairs += np[static_cast<std::size_t>(r)];
-  }
   // Rank 0 writes; after its first error it only drains the merges, and every rank then throws
   // (the others name rank 0's error, which rank 0 throws).
   std::unique_ptr<StateStream> st;
