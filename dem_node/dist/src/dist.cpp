@@ -2936,6 +2936,21 @@ struct FrameStream {
   }
 };
 
+// Runs calls until the first throws, keeping that exception (rank 0's part of a collective
+// that must go on to its end on every rank before anyone throws).
+struct FirstError {
+  std::exception_ptr failed;
+  template <class F>
+  void operator()(F&& f) {
+    if (failed) return;
+    try {
+      f();
+    } catch (...) {
+      failed = std::current_exception();
+    }
+  }
+};
+
 // Every rank's numbers of balls and pairs on rank 0, with their totals (empty elsewhere).
 struct RowCounts {
   std::vector<std::uint64_t> balls, pairs;
@@ -3364,15 +3379,8 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
   // Rank 0 writes; after its first error it only drains the merges, and every rank then throws
   // (the others name rank 0's error, which rank 0 throws).
   std::unique_ptr<StateStream> st;
-  std::exception_ptr failed;
-  auto guarded = [&](auto&& f) {
-    if (failed) return;
-    try {
-      f();
-    } catch (...) {
-      failed = std::current_exception();
-    }
-  };
+  FirstError guarded;  // (rank 0's first error; the calls after it are skipped)
+  std::exception_ptr& failed = guarded.failed;
   Tails tails(w_->counters());
   if (rank_ == 0)
     guarded([&] {
@@ -3513,15 +3521,8 @@ void DistDem::load_state_file(World& frame, const std::filesystem::path& path, s
                               std::vector<std::uint64_t>* ids, std::size_t block) {
   block = std::max<std::size_t>(1, std::min<std::size_t>(block, (std::size_t{64} << 20) / sizeof(BallLoadRec)));
   const std::size_t P = static_cast<std::size_t>(size_);
-  std::exception_ptr failed;
-  auto guarded = [&](auto&& f) {
-    if (failed) return;
-    try {
-      f();
-    } catch (...) {
-      failed = std::current_exception();
-    }
-  };
+  FirstError guarded;  // (rank 0's first error; the calls after it are skipped)
+  std::exception_ptr& failed = guarded.failed;
   // Rank 0: the frame, the largest radius (the halo), each ball's owner and the rows of the
   // balls its pairs need on another rank (a pair's partner: cut's rule).
   std::unique_ptr<StateSource> src;
