@@ -241,8 +241,10 @@ class DemParticipant : public node::Participant {
     // follow the cuts, the whole World as before.
     const fs::path world_file = how.dir / "dem.world.state";
     bool on_ranks = g_ranks.size > 1 && !s_.boolean("dem.newton");
+    std::unique_ptr<dem::StateSource> src;  // (rank 0: the World's file, opened and checked once)
     if (on_ranks && !part_only()) {
-      dem::StateSource(world_file, how.saved_scene_hash).load_frame(world_);  // (rank 0: is it the block?)
+      src = std::make_unique<dem::StateSource>(world_file, how.saved_scene_hash);
+      src->load_frame(world_);  // (is it the block?)
       on_ranks = !preparing_ || !world_.periodic();
     }
     if (g_ranks.size > 1) {
@@ -264,7 +266,7 @@ class DemParticipant : public node::Participant {
       configure_dist(*dist_);
       {
         node::Timed t(effect_s_["ranks.load"]);
-        dist_->load_state_file(world_, world_file, how.saved_scene_hash, part_only() ? nullptr : &ids);
+        dist_->load_state(world_, src.get(), world_file.string(), how.saved_scene_hash, part_only() ? nullptr : &ids);
       }
       scene_threads();
       went_live("loaded from the checkpoint into");

@@ -622,8 +622,9 @@ TEST(DemCheckpoint, StateReadInPiecesGivesTheWorldBack) {
       src.read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(7, src.balls() - r0)), b);
       std::vector<Vec3> x;
       std::vector<double> r;
-      src.read_positions(r0, b.size(), x, r);
-      EXPECT_TRUE(std::memcmp(x.data(), b.x.data(), x.size() * sizeof(Vec3)) == 0 && r == b.r);
+      std::vector<std::uint64_t> id;
+      src.read_positions(r0, b.size(), x, r, id);
+      EXPECT_TRUE(std::memcmp(x.data(), b.x.data(), x.size() * sizeof(Vec3)) == 0 && r == b.r && id == b.id);
       for (std::size_t i = 0; i < b.size(); ++i) {
         pt.x.push_back(b.x[i]), pt.v.push_back(b.v[i]), pt.w.push_back(b.w[i]), pt.f.push_back(b.f[i]);
         pt.t.push_back(b.t[i]), pt.fa.push_back(b.fa[i]), pt.ta.push_back(b.ta[i]), pt.x_ref.push_back(b.x_ref[i]);
@@ -635,6 +636,9 @@ TEST(DemCheckpoint, StateReadInPiecesGivesTheWorldBack) {
     for (std::uint64_t c0 = 0; c0 < src.pairs(); c0 += 7) {
       PairContacts b;
       src.read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(7, src.pairs() - c0)), b);
+      std::vector<std::uint32_t> ra, rb;
+      src.read_pair_rows(c0, b.size(), ra, rb);
+      EXPECT_TRUE(ra == b.a && rb == b.b);
       for (std::size_t c = 0; c < b.size(); ++c) {
         pc.a.push_back(b.a[c]), pc.b.push_back(b.b[c]), pc.shift.push_back(b.shift[c]), pc.h.push_back(b.h[c]);
         pc.bond.push_back(b.bond[c]);
@@ -645,7 +649,9 @@ TEST(DemCheckpoint, StateReadInPiecesGivesTheWorldBack) {
     g.swap_balls(pt, pc, wc, no_ghosts);
     g.set_counters(k);
     EXPECT_TRUE(state_bytes(g, meta) == want) << "the World read in pieces differs from the saved one";
-    if (scene == 1) EXPECT_GT(g.facet_contacts().size(), 0u);
+    if (scene == 1) {
+      EXPECT_GT(g.facet_contacts().size(), 0u);
+    }
   }
   // a contact's ball A beyond the balls, the checksum made right again
   {

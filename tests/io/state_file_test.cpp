@@ -96,7 +96,9 @@ std::string refusal(const std::string& bytes, const std::string& name, const std
     StateFileReader r(file, kind, hash);
     ADD_FAILURE() << "StateFileReader: expected a refusal containing '" << expect << "'";
   } catch (const StateFileError& e) {
-    if (!m.empty()) EXPECT_EQ(std::string(e.what()), file.string() + m.substr(name.size()));
+    if (!m.empty()) {
+      EXPECT_EQ(std::string(e.what()), file.string() + m.substr(name.size()));
+    }
   }
   std::filesystem::remove(file);
   return m;

@@ -92,28 +92,28 @@ void StateWriter::end() {
   ++count_;
 }
 
-void StateWriter::str(std::string_view s) {
+void ByteWriter::str(std::string_view s) {
   u32(static_cast<std::uint32_t>(s.size()));
   buf_.append(s);
 }
 
-void StateWriter::f64s(std::span<const double> v) {
+void ByteWriter::f64s(std::span<const double> v) {
   u64(v.size());
   for (double x : v) f64(x);
 }
-void StateWriter::u8s(std::span<const std::uint8_t> v) {
+void ByteWriter::u8s(std::span<const std::uint8_t> v) {
   u64(v.size());
   buf_.append(reinterpret_cast<const char*>(v.data()), v.size());
 }
-void StateWriter::i32s(std::span<const std::int32_t> v) {
+void ByteWriter::i32s(std::span<const std::int32_t> v) {
   u64(v.size());
   for (auto x : v) i32(x);
 }
-void StateWriter::u32s(std::span<const std::uint32_t> v) {
+void ByteWriter::u32s(std::span<const std::uint32_t> v) {
   u64(v.size());
   for (auto x : v) u32(x);
 }
-void StateWriter::u64s(std::span<const std::uint64_t> v) {
+void ByteWriter::u64s(std::span<const std::uint64_t> v) {
   u64(v.size());
   for (auto x : v) u64(x);
 }

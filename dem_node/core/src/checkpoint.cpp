@@ -53,35 +53,6 @@ constexpr const char* kKind = "dem";
 
 // ---- writing -------------------------------------------------------------------------------
 
-// Bytes encoded as io::StateWriter encodes them, without a section around them: the rows of a
-// file written in pieces (StateStream). The row encoders below take either.
-class ByteOut {
- public:
-  void u8(std::uint8_t v) { s_.push_back(static_cast<char>(v)); }
-  void b(bool v) { u8(v ? 1 : 0); }
-  void i8(std::int8_t v) { u8(static_cast<std::uint8_t>(v)); }
-  void u32(std::uint32_t v) { le(v); }
-  void i32(std::int32_t v) { le(static_cast<std::uint32_t>(v)); }
-  void u64(std::uint64_t v) { le(v); }
-  void f64(double v) { le(std::bit_cast<std::uint64_t>(v)); }
-  void u32s(std::span<const std::uint32_t> v) {
-    u64(v.size());
-    for (auto x : v) u32(x);
-  }
-  void i32s(std::span<const std::int32_t> v) {
-    u64(v.size());
-    for (auto x : v) i32(x);
-  }
-  std::string& bytes() { return s_; }
-
- private:
-  template <class U>
-  void le(U v) {
-    for (std::size_t i = 0; i < sizeof(U); ++i) s_.push_back(static_cast<char>((v >> (8 * i)) & 0xffu));
-  }
-  std::string s_;
-};
-
 // Bytes decoded as io::SectionReader decodes them, from a range of a section's content read on
 // its own (the rows of a file read in pieces, StateSource); a short range or bad content throws
 // io::StateFileError naming the file and the section. The row decoders below take either.
@@ -144,14 +115,12 @@ class ByteIn {
   std::size_t pos_ = 0;
 };
 
-template <class O>
-void put(O& o, const Vec3& v) {
+void put(io::ByteWriter& o, const Vec3& v) {
   o.f64(v.x);
   o.f64(v.y);
   o.f64(v.z);
 }
-template <class O>
-void put_vecs(O& o, const std::vector<Vec3>& v) {
+void put_vecs(io::ByteWriter& o, const std::vector<Vec3>& v) {
   o.u64(v.size());
   for (const Vec3& x : v) put(o, x);
 }
@@ -218,8 +187,7 @@ void put(io::StateWriter& o, const WorldParams& p) {
   put(o, p.ball_footing);
 }
 
-template <class O>
-void put(O& o, const ContactHist& h) {
+void put(io::ByteWriter& o, const ContactHist& h) {
   put(o, h.fs);
   o.f64(h.fn);
   put(o, h.n_old);
@@ -231,8 +199,7 @@ void put(O& o, const ContactHist& h) {
 }
 constexpr std::size_t kHistBytes = 11 * 8 + 1;
 
-template <class O>
-void put(O& o, const BondHist& b) {
+void put(io::ByteWriter& o, const BondHist& b) {
   put(o, b.fsb);
   o.f64(b.nb);
   put(o, b.mb);
@@ -247,16 +214,14 @@ void put(O& o, const BondHist& b) {
 }
 constexpr std::size_t kBondBytes = 12 * 8 + 3;
 
-template <class O>
-void put_hists(O& o, const std::vector<ContactHist>& h, const std::vector<BondHist>& b) {
+void put_hists(io::ByteWriter& o, const std::vector<ContactHist>& h, const std::vector<BondHist>& b) {
   o.u64(h.size());
   for (const ContactHist& x : h) put(o, x);
   o.u64(b.size());
   for (const BondHist& x : b) put(o, x);
 }
 
-template <class O>
-void put(O& o, const WallContacts& wc) {
+void put(io::ByteWriter& o, const WallContacts& wc) {
   o.u32s(wc.ball);
   o.u32s(wc.wall);
   put_hists(o, wc.h, wc.bond);
@@ -871,18 +836,18 @@ struct StateStream::Impl {
     std::uint64_t at = file.reserve(name, len);
     std::vector<Column> out;
     for (const auto& [n, b] : cols) {
-      ByteOut c;
+      io::ByteWriter c;
       c.u64(n);
-      file.write_at(at, c.bytes());
+      file.write_at(at, c.buffer());
       out.push_back(Column{at, b});
       at += 8 + n * b;
     }
     return out;
   }
   // One column's elements from row `row0` on.
-  void put(const Column& c, std::uint64_t row0, ByteOut& o) {
-    file.write_at(c.at + 8 + row0 * c.bytes, o.bytes());
-    o.bytes().clear();
+  void put(const Column& c, std::uint64_t row0, io::ByteWriter& o) {
+    file.write_at(c.at + 8 + row0 * c.bytes, o.buffer());
+    o.buffer().clear();
   }
 };
 
@@ -915,7 +880,7 @@ void StateStream::balls(const Particles& rows) {
   const std::size_t n = rows.size();
   if (q.balls_done + n > q.nballs)
     throw std::logic_error("StateStream::balls: more than the " + std::to_string(q.nballs) + " balls announced");
-  ByteOut o;
+  io::ByteWriter o;
   const std::vector<Vec3>* vecs[8] = {&rows.x, &rows.v, &rows.w, &rows.f, &rows.t, &rows.fa, &rows.ta, &rows.x_ref};
   for (int c = 0; c < 8; ++c) {
     for (std::size_t i = 0; i < n; ++i) put(o, (*vecs[c])[i]);
@@ -940,7 +905,7 @@ void StateStream::pairs(const PairContacts& rows) {
     throw std::logic_error("StateStream::pairs: more than the " + std::to_string(q.npairs) + " contacts announced");
   if (rows.bond.size() != (q.bonds ? n : 0))
     throw std::logic_error("StateStream::pairs: bond histories do not match the ball-ball law");
-  ByteOut o;
+  io::ByteWriter o;
   for (std::size_t c = 0; c < n; ++c) o.u32(rows.a[c]);
   q.put(q.pair_cols[0], q.pairs_done, o);
   for (std::size_t c = 0; c < n; ++c) o.u32(rows.b[c]);
@@ -971,9 +936,9 @@ void StateStream::commit(const WallContacts& planes, const WallContacts& facets,
       continue;
     }
     (void)q.frame.section_bytes(name);  // (replaced)
-    ByteOut o;
+    io::ByteWriter o;
     put(o, *wc);
-    q.file.section(name, o.bytes());
+    q.file.section(name, o.buffer());
   }
   q.file.commit();
 }
@@ -1104,25 +1069,35 @@ void StateSource::read_balls(std::uint64_t r0, std::size_t n, Particles& out) co
   for (auto& x : out.fix) x = in.u8();
 }
 
-void StateSource::read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r) const {
+void StateSource::read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r,
+                                 std::vector<std::uint64_t>& id) const {
   const Impl& q = *p_;
   if (r0 > q.n || n > q.n - r0) q.fail("balls", "rows " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(q.n));
   ByteIn ix = q.column("balls", q.ball_at[0], 24, r0, n), ir = q.column("balls", q.ball_at[8], 8, r0, n);
-  x.resize(n);
-  r.resize(n);
-  for (std::size_t i = 0; i < n; ++i) x[i] = get_vec(ix), r[i] = ir.f64();
+  ByteIn iid = q.column("balls", q.ball_at[11], 8, r0, n);
+  x.resize(n), r.resize(n), id.resize(n);
+  for (std::size_t i = 0; i < n; ++i) x[i] = get_vec(ix), r[i] = ir.f64(), id[i] = iid.u64();
+}
+
+void StateSource::read_pair_rows(std::uint64_t c0, std::size_t n, std::vector<std::uint32_t>& a,
+                                 std::vector<std::uint32_t>& b) const {
+  const Impl& q = *p_;
+  if (c0 > q.m || n > q.m - c0) q.fail("pairs", "contacts " + std::to_string(c0) + " + " + std::to_string(n) + " of " + std::to_string(q.m));
+  ByteIn ia = q.column("pairs", q.pair_at[0], 4, c0, n), ib = q.column("pairs", q.pair_at[1], 4, c0, n);
+  a.resize(n), b.resize(n);
+  for (std::size_t c = 0; c < n; ++c) {
+    a[c] = ia.u32(), b[c] = ib.u32();
+    if (a[c] >= q.n || b[c] >= q.n) q.fail("pairs", "contact " + std::to_string(c0 + c) + " names a ball row out of range");
+  }
 }
 
 void StateSource::read_pairs(std::uint64_t c0, std::size_t n, PairContacts& out) const {
   const Impl& q = *p_;
-  if (c0 > q.m || n > q.m - c0) q.fail("pairs", "contacts " + std::to_string(c0) + " + " + std::to_string(n) + " of " + std::to_string(q.m));
   out = PairContacts{};
-  ByteIn ia = q.column("pairs", q.pair_at[0], 4, c0, n), ib = q.column("pairs", q.pair_at[1], 4, c0, n);
+  read_pair_rows(c0, n, out.a, out.b);
   ByteIn is = q.column("pairs", q.pair_at[2], 4, c0, n), ih = q.column("pairs", q.pair_at[3], kHistBytes, c0, n);
-  out.a.resize(n), out.b.resize(n), out.shift.resize(n), out.h.resize(n);
+  out.shift.resize(n), out.h.resize(n);
   for (std::size_t c = 0; c < n; ++c) {
-    out.a[c] = ia.u32(), out.b[c] = ib.u32();
-    if (out.a[c] >= q.n || out.b[c] >= q.n) q.fail("pairs", "contact " + std::to_string(c0 + c) + " names a ball row out of range");
     for (std::int8_t& v : out.shift[c]) v = is.i8();
     out.h[c] = get_hist(ih);
   }

@@ -3519,45 +3519,56 @@ void scatter_from_root(MPI_Comm comm, int rank, int size, int tag, Guarded& guar
 
 void DistDem::load_state_file(World& frame, const std::filesystem::path& path, std::uint64_t scene_hash,
                               std::vector<std::uint64_t>* ids, std::size_t block) {
+  std::unique_ptr<StateSource> src;
+  FirstError opened;
+  if (rank_ == 0) opened([&] { src = std::make_unique<StateSource>(path, scene_hash); });
+  share_failure(comm_, rank_, opened.failed);
+  load_state(frame, src.get(), path.string(), scene_hash, ids, block);
+}
+
+void DistDem::load_state(World& frame, const StateSource* src, const std::string& source, std::uint64_t scene_hash,
+                         std::vector<std::uint64_t>* ids, std::size_t block) {
   block = std::max<std::size_t>(1, std::min<std::size_t>(block, (std::size_t{64} << 20) / sizeof(BallLoadRec)));
   const std::size_t P = static_cast<std::size_t>(size_);
   FirstError guarded;  // (rank 0's first error; the calls after it are skipped)
   std::exception_ptr& failed = guarded.failed;
   // Rank 0: the frame, the largest radius (the halo), each ball's owner and the rows of the
-  // balls its pairs need on another rank (a pair's partner: cut's rule).
-  std::unique_ptr<StateSource> src;
+  // balls its pairs need on another rank (a pair's partner: cut's rule), from the positions,
+  // radii, ids and the pairs' rows alone.
   std::string frame_bytes;
   double rmax = 0.0;
   std::vector<std::int32_t> owner;                          // per file row (4 bytes a ball)
   std::vector<std::pair<std::uint64_t, std::int32_t>> extra;  // (row, rank): a partner on another rank
   if (rank_ == 0)
     guarded([&] {
-      src = std::make_unique<StateSource>(path, scene_hash);
+      if (!src) throw std::logic_error("DistDem::load_state: rank 0 has no state to read");
       frame_bytes = src->frame_bytes();
       const std::uint64_t n = src->balls(), m = src->pairs();
       owner.reserve(static_cast<std::size_t>(n));
       if (ids) ids->clear(), ids->reserve(static_cast<std::size_t>(n));
-      Particles b;
+      std::vector<Vec3> x;
+      std::vector<double> r;
+      std::vector<std::uint64_t> id;
       std::uint64_t last = 0;
       for (std::uint64_t r0 = 0; r0 < n; r0 += block) {
-        src->read_balls(r0, static_cast<std::size_t>(std::min<std::uint64_t>(block, n - r0)), b);
-        for (std::size_t i = 0; i < b.size(); ++i) {
-          if (r0 + i > 0 && !(b.id[i] > last))
-            throw std::invalid_argument(path.string() + ": the balls' rows are not in id order (DistDem::load_state_file)");
-          last = b.id[i];
-          rmax = std::max(rmax, b.r[i]);
-          owner.push_back(grid_.owner(b.x[i]));
-          if (ids) ids->push_back(b.id[i]);
+        src->read_positions(r0, static_cast<std::size_t>(std::min<std::uint64_t>(block, n - r0)), x, r, id);
+        for (std::size_t i = 0; i < x.size(); ++i) {
+          if (r0 + i > 0 && !(id[i] > last))
+            throw std::invalid_argument(source + ": the balls' rows are not in id order (DistDem::load_state)");
+          last = id[i];
+          rmax = std::max(rmax, r[i]);
+          owner.push_back(grid_.owner(x[i]));
+          if (ids) ids->push_back(id[i]);
         }
       }
-      PairContacts pcb;
+      std::vector<std::uint32_t> a, b;
       for (std::uint64_t c0 = 0; c0 < m; c0 += block) {
-        src->read_pairs(c0, static_cast<std::size_t>(std::min<std::uint64_t>(block, m - c0)), pcb);
-        for (std::size_t c = 0; c < pcb.size(); ++c) {
-          const std::int32_t oa = owner[pcb.a[c]], ob = owner[pcb.b[c]];
+        src->read_pair_rows(c0, static_cast<std::size_t>(std::min<std::uint64_t>(block, m - c0)), a, b);
+        for (std::size_t c = 0; c < a.size(); ++c) {
+          const std::int32_t oa = owner[a[c]], ob = owner[b[c]];
           if (ob == oa) continue;
-          extra.push_back({pcb.b[c], oa});
-          if (!newton_) extra.push_back({pcb.a[c], ob});
+          extra.push_back({b[c], oa});
+          if (!newton_) extra.push_back({a[c], ob});
         }
       }
       std::sort(extra.begin(), extra.end());
@@ -3573,9 +3584,9 @@ void DistDem::load_state_file(World& frame, const std::filesystem::path& path, s
   double hk[2] = {rmax, static_cast<double>(static_cast<int>(frame.pair_kernel()))};
   MPI_Bcast(hk, 2, MPI_DOUBLE, 0, comm_);
   rmax = hk[0];
-  load_state_bytes(frame, frame_bytes, scene_hash, path.string());
+  load_state_bytes(frame, frame_bytes, scene_hash, source);
   auto share = std::make_unique<World>(frame.params());
-  load_state_bytes(*share, std::move(frame_bytes), scene_hash, path.string());
+  load_state_bytes(*share, std::move(frame_bytes), scene_hash, source);
   share->set_pair_kernel(static_cast<PairKernel>(static_cast<int>(hk[1])));
   params_from(*share, rmax);
   // The balls: each to every rank whose part holds it (cut's rule: within the halo of the
@@ -3654,7 +3665,6 @@ void DistDem::load_state_file(World& frame, const std::filesystem::path& path, s
     MPI_Recv(walls_in.data(), bytes, MPI_BYTE, 0, kTagLoadWalls, comm_, MPI_STATUS_IGNORE);
   }
   share_failure(comm_, rank_, failed);
-  src.reset();
   owner = {};
   extra = {};
   // This rank's share of the World: its balls in file order, its pairs and wall contacts with

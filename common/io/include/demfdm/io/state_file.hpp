@@ -54,15 +54,11 @@ struct StateHeader {
   std::uint64_t scene_hash = 0;
 };
 
-/// Builds a state file in memory. Sections are written one at a time: begin(name), put...,
-/// end(). bytes() closes the file (checksum) and returns it.
-class StateWriter {
+/// Values encoded as a state file holds them (little-endian, doubles as their bit patterns,
+/// arrays as a u64 count and the elements), appended to a buffer: StateWriter's sections, and a
+/// section's rows written on their own (dem::StateStream's blocks).
+class ByteWriter {
  public:
-  StateWriter(std::string_view kind, std::string_view code_version, std::uint64_t scene_hash);
-
-  void begin(std::string_view section);
-  void end();
-
   void u8(std::uint8_t v) { buf_.push_back(static_cast<char>(v)); }
   void b(bool v) { u8(v ? 1 : 0); }
   void i8(std::int8_t v) { u8(static_cast<std::uint8_t>(v)); }
@@ -80,9 +76,11 @@ class StateWriter {
   void i32s(std::span<const std::int32_t> v);
   void u32s(std::span<const std::uint32_t> v);
   void u64s(std::span<const std::uint64_t> v);
+  /// What was appended so far (a caller may take it and clear it).
+  std::string& buffer() { return buf_; }
 
-  /// The complete file (header, sections, checksum). Throws std::logic_error inside a section.
-  std::string bytes() const;
+ protected:
+  std::string buf_;
 
  private:
   template <class U>
@@ -98,8 +96,23 @@ class StateWriter {
     for (std::size_t i = 0; i < sizeof(U); ++i) r = static_cast<U>((r << 8) | ((v >> (8 * i)) & 0xffu));
     return r;
   }
+};
+
+/// Builds a state file in memory. Sections are written one at a time: begin(name), put...,
+/// end(). bytes() closes the file (checksum) and returns it.
+class StateWriter : public ByteWriter {
+ public:
+  StateWriter(std::string_view kind, std::string_view code_version, std::uint64_t scene_hash);
+
+  void begin(std::string_view section);
+  void end();
+
+  /// The complete file (header, sections, checksum). Throws std::logic_error inside a section.
+  std::string bytes() const;
+
+ private:
   std::string head_;  // header up to (not including) the section count
-  std::string buf_;   // sections written so far (and the open one)
+  // (buf_: the sections written so far, and the open one)
   std::uint32_t count_ = 0;
   std::size_t open_ = std::string::npos;  // offset of the open section's length field
 };

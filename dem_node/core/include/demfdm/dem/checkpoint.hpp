@@ -120,11 +120,14 @@ class StateSource {
   std::uint64_t pairs() const;
   /// Rows [r0, r0 + n) of the balls (every column), into `out` (replaced).
   void read_balls(std::uint64_t r0, std::size_t n, Particles& out) const;
-  /// Only the positions and radii of rows [r0, r0 + n).
-  void read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r) const;
+  /// Only the positions, radii and ids of rows [r0, r0 + n).
+  void read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r,
+                      std::vector<std::uint64_t>& id) const;
   /// Contacts [c0, c0 + n) of the ball-ball list into `out` (replaced), their rows checked
   /// against balls().
   void read_pairs(std::uint64_t c0, std::size_t n, PairContacts& out) const;
+  /// Only their ball rows (a and b), checked the same way.
+  void read_pair_rows(std::uint64_t c0, std::size_t n, std::vector<std::uint32_t>& a, std::vector<std::uint32_t>& b) const;
   /// The plane, facet and footing contact lists, checked against balls() and the frame's walls.
   std::array<WallContacts, 3> read_wall_contacts() const;
 

@@ -254,6 +254,10 @@ class DistDem {
   /// Collective; a refused file is refused on every rank (rank 0 its error, the others naming it).
   void load_state_file(World& frame, const std::filesystem::path& path, std::uint64_t scene_hash,
                        std::vector<std::uint64_t>* ids = nullptr, std::size_t block = 16384);
+  /// The same from a file rank 0 has opened already (`src`: rank 0's, null elsewhere; `source`
+  /// names it in errors).
+  void load_state(World& frame, const StateSource* src, const std::string& source, std::uint64_t scene_hash,
+                  std::vector<std::uint64_t>* ids = nullptr, std::size_t block = 16384);
   /// n steps; the walls' sums are those of the last (reduced after every step where a platen
   /// servo reads them at the next one, else once at the end: within the call nothing reads them).
   void step(std::int64_t n = 1);
