@@ -203,7 +203,9 @@ void SectionReader::done() {
   }
 }
 
-void SectionReader::fail(const std::string& what) const { r_->fail("section '" + name_ + "': " + what); }
+void SectionReader::fail(const std::string& what) const {
+  throw StateFileError(source_ + ": section '" + name_ + "': " + what);
+}
 
 // ---- file reader ---------------------------------------------------------------------------
 
@@ -422,7 +424,7 @@ SectionReader StateReader::section(std::string_view name) {
     if (e.name == name) {
       if (e.used) fail("section '" + e.name + "' read twice");
       e.used = true;
-      return SectionReader(this, e.name, bytes_.data() + e.off, e.len);
+      return SectionReader(source_, e.name, bytes_.data() + e.off, e.len);
     }
   fail("missing section '" + std::string(name) + "' (kind '" + header_.kind + "', code version '" +
        header_.code_version + "')");

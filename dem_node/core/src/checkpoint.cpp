@@ -53,67 +53,6 @@ constexpr const char* kKind = "dem";
 
 // ---- writing -------------------------------------------------------------------------------
 
-// Bytes decoded as io::SectionReader decodes them, from a range of a section's content read on
-// its own (the rows of a file read in pieces, StateSource); a short range or bad content throws
-// io::StateFileError naming the file and the section. The row decoders below take either.
-class ByteIn {
- public:
-  ByteIn(std::string bytes, std::string source, std::string section)
-      : b_(std::move(bytes)), source_(std::move(source)), section_(std::move(section)) {}
-  std::uint8_t u8() { return static_cast<std::uint8_t>(*take(1)); }
-  bool b() {
-    const std::uint8_t v = u8();
-    if (v > 1) fail("bool byte " + std::to_string(v));
-    return v != 0;
-  }
-  std::int8_t i8() { return static_cast<std::int8_t>(u8()); }
-  std::uint32_t u32() { return le<std::uint32_t>(); }
-  std::int32_t i32() { return static_cast<std::int32_t>(le<std::uint32_t>()); }
-  std::uint64_t u64() { return le<std::uint64_t>(); }
-  double f64() { return std::bit_cast<double>(le<std::uint64_t>()); }
-  std::uint64_t count(std::size_t min_bytes_each) {
-    const std::uint64_t n = u64();
-    if (min_bytes_each > 0 && n > remaining() / min_bytes_each)
-      fail("count " + std::to_string(n) + " cannot fit in the " + std::to_string(remaining()) + " bytes left");
-    return n;
-  }
-  std::vector<std::uint32_t> u32s() {
-    std::vector<std::uint32_t> v(count(4));
-    for (auto& x : v) x = u32();
-    return v;
-  }
-  std::vector<std::int32_t> i32s() {
-    std::vector<std::int32_t> v(count(4));
-    for (auto& x : v) x = i32();
-    return v;
-  }
-  std::size_t remaining() const { return b_.size() - pos_; }
-  void done() {
-    if (remaining() != 0) fail(std::to_string(remaining()) + " bytes left unread");
-  }
-  [[noreturn]] void fail(const std::string& what) const {
-    throw io::StateFileError(source_ + ": section '" + section_ + "': " + what);
-  }
-
- private:
-  const char* take(std::size_t n) {
-    if (n > remaining())
-      fail("needs " + std::to_string(n) + " more bytes at offset " + std::to_string(pos_) + " of " +
-           std::to_string(b_.size()) + " (section too short)");
-    const char* p = b_.data() + pos_;
-    pos_ += n;
-    return p;
-  }
-  template <class U>
-  U le() {
-    const char* p = take(sizeof(U));
-    U v = 0;
-    for (std::size_t i = 0; i < sizeof(U); ++i) v |= static_cast<U>(static_cast<U>(static_cast<unsigned char>(p[i])) << (8 * i));
-    return v;
-  }
-  std::string b_, source_, section_;
-  std::size_t pos_ = 0;
-};
 
 void put(io::ByteWriter& o, const Vec3& v) {
   o.f64(v.x);
@@ -278,24 +217,22 @@ void put(io::StateWriter& o, const Footing& f) {
 
 // ---- reading -------------------------------------------------------------------------------
 
-template <class In>
-Vec3 get_vec(In& in) {
+Vec3 get_vec(io::SectionReader& in) {
   Vec3 v;
   v.x = in.f64();
   v.y = in.f64();
   v.z = in.f64();
   return v;
 }
-template <class In>
-std::vector<Vec3> get_vecs(In& in) {
+std::vector<Vec3> get_vecs(io::SectionReader& in) {
   std::vector<Vec3> v(in.count(24));
   for (Vec3& x : v) x = get_vec(in);
   return v;
 }
 
 // An enum stored as u8 with values 0..last.
-template <class E, class In>
-E get_enum(In& in, std::uint8_t last, const char* what) {
+template <class E>
+E get_enum(io::SectionReader& in, std::uint8_t last, const char* what) {
   const std::uint8_t v = in.u8();
   if (v > last) in.fail(std::string(what) + " = " + std::to_string(v) + ", expected 0.." + std::to_string(last));
   return static_cast<E>(v);
@@ -367,8 +304,7 @@ WorldParams get_params(io::SectionReader& in) {
   return p;
 }
 
-template <class In>
-ContactHist get_hist(In& in) {
+ContactHist get_hist(io::SectionReader& in) {
   ContactHist h;
   h.fs = get_vec(in);
   h.fn = in.f64();
@@ -381,8 +317,7 @@ ContactHist get_hist(In& in) {
   return h;
 }
 
-template <class In>
-BondHist get_bond(In& in) {
+BondHist get_bond(io::SectionReader& in) {
   BondHist b;
   b.fsb = get_vec(in);
   b.nb = in.f64();
@@ -398,16 +333,14 @@ BondHist get_bond(In& in) {
   return b;
 }
 
-template <class In>
-void get_hists(In& in, std::vector<ContactHist>& h, std::vector<BondHist>& b) {
+void get_hists(io::SectionReader& in, std::vector<ContactHist>& h, std::vector<BondHist>& b) {
   h.resize(in.count(kHistBytes));
   for (ContactHist& x : h) x = get_hist(in);
   b.resize(in.count(kBondBytes));
   for (BondHist& x : b) x = get_bond(in);
 }
 
-template <class In>
-WallContacts get_wall_contacts(In& in) {
+WallContacts get_wall_contacts(io::SectionReader& in) {
   WallContacts wc;
   wc.ball = in.u32s();
   wc.wall = in.u32s();
@@ -479,8 +412,7 @@ Footing get_footing(io::SectionReader& in) {
 
 // Consistency of a wall-contact list with the balls and walls it names (the file passed its
 // checksum, so this only guards against a writer of another build).
-template <class In>
-void check_wall_contacts(In& in, const WallContacts& wc, std::size_t nballs, std::size_t nwalls,
+void check_wall_contacts(io::SectionReader& in, const WallContacts& wc, std::size_t nballs, std::size_t nwalls,
                          bool can_bond, const std::vector<FacetWall>* fwalls) {
   const std::size_t m = wc.ball.size();
   if (wc.wall.size() != m || wc.h.size() != m || wc.facet.size() != m || wc.cand_off.size() != m + 1 ||
@@ -968,7 +900,7 @@ struct StateSource::Impl {
     throw io::StateFileError(file.source() + ": section '" + section + "': " + what);
   }
   std::uint64_t u64_at(const std::string& section, std::uint64_t off) const {
-    ByteIn in(file.read(section, off, 8), file.source(), section);
+    io::SectionReader in(file.read(section, off, 8), file.source(), section);
     return in.u64();
   }
   // A section of columns, each a u64 count and count elements of bytes[k]: the columns' first
@@ -988,8 +920,8 @@ struct StateSource::Impl {
     }
     if (off != len) fail(section, std::to_string(len - off) + " bytes left unread");
   }
-  ByteIn column(const std::string& section, std::uint64_t at, std::size_t bytes, std::uint64_t first, std::size_t count) const {
-    return ByteIn(file.read(section, at + first * bytes, count * bytes), file.source(), section);
+  io::SectionReader column(const std::string& section, std::uint64_t at, std::size_t bytes, std::uint64_t first, std::size_t count) const {
+    return io::SectionReader(file.read(section, at + first * bytes, count * bytes), file.source(), section);
   }
 };
 
@@ -1049,22 +981,22 @@ void StateSource::read_balls(std::uint64_t r0, std::size_t n, Particles& out) co
   out = Particles{};
   std::vector<Vec3>* vecs[8] = {&out.x, &out.v, &out.w, &out.f, &out.t, &out.fa, &out.ta, &out.x_ref};
   for (std::size_t c = 0; c < 8; ++c) {
-    ByteIn in = q.column("balls", q.ball_at[c], 24, r0, n);
+    io::SectionReader in = q.column("balls", q.ball_at[c], 24, r0, n);
     vecs[c]->resize(n);
     for (Vec3& x : *vecs[c]) x = get_vec(in);
   }
   std::vector<double>* dbl[3] = {&out.r, &out.m, &out.inertia};
   for (std::size_t c = 0; c < 3; ++c) {
-    ByteIn in = q.column("balls", q.ball_at[8 + c], 8, r0, n);
+    io::SectionReader in = q.column("balls", q.ball_at[8 + c], 8, r0, n);
     dbl[c]->resize(n);
     for (double& x : *dbl[c]) x = in.f64();
   }
   {
-    ByteIn in = q.column("balls", q.ball_at[11], 8, r0, n);
+    io::SectionReader in = q.column("balls", q.ball_at[11], 8, r0, n);
     out.id.resize(n);
     for (auto& x : out.id) x = in.u64();
   }
-  ByteIn in = q.column("balls", q.ball_at[12], 1, r0, n);
+  io::SectionReader in = q.column("balls", q.ball_at[12], 1, r0, n);
   out.fix.resize(n);
   for (auto& x : out.fix) x = in.u8();
 }
@@ -1073,8 +1005,8 @@ void StateSource::read_positions(std::uint64_t r0, std::size_t n, std::vector<Ve
                                  std::vector<std::uint64_t>& id) const {
   const Impl& q = *p_;
   if (r0 > q.n || n > q.n - r0) q.fail("balls", "rows " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(q.n));
-  ByteIn ix = q.column("balls", q.ball_at[0], 24, r0, n), ir = q.column("balls", q.ball_at[8], 8, r0, n);
-  ByteIn iid = q.column("balls", q.ball_at[11], 8, r0, n);
+  io::SectionReader ix = q.column("balls", q.ball_at[0], 24, r0, n), ir = q.column("balls", q.ball_at[8], 8, r0, n);
+  io::SectionReader iid = q.column("balls", q.ball_at[11], 8, r0, n);
   x.resize(n), r.resize(n), id.resize(n);
   for (std::size_t i = 0; i < n; ++i) x[i] = get_vec(ix), r[i] = ir.f64(), id[i] = iid.u64();
 }
@@ -1083,7 +1015,7 @@ void StateSource::read_pair_rows(std::uint64_t c0, std::size_t n, std::vector<st
                                  std::vector<std::uint32_t>& b) const {
   const Impl& q = *p_;
   if (c0 > q.m || n > q.m - c0) q.fail("pairs", "contacts " + std::to_string(c0) + " + " + std::to_string(n) + " of " + std::to_string(q.m));
-  ByteIn ia = q.column("pairs", q.pair_at[0], 4, c0, n), ib = q.column("pairs", q.pair_at[1], 4, c0, n);
+  io::SectionReader ia = q.column("pairs", q.pair_at[0], 4, c0, n), ib = q.column("pairs", q.pair_at[1], 4, c0, n);
   a.resize(n), b.resize(n);
   for (std::size_t c = 0; c < n; ++c) {
     a[c] = ia.u32(), b[c] = ib.u32();
@@ -1095,14 +1027,14 @@ void StateSource::read_pairs(std::uint64_t c0, std::size_t n, PairContacts& out)
   const Impl& q = *p_;
   out = PairContacts{};
   read_pair_rows(c0, n, out.a, out.b);
-  ByteIn is = q.column("pairs", q.pair_at[2], 4, c0, n), ih = q.column("pairs", q.pair_at[3], kHistBytes, c0, n);
+  io::SectionReader is = q.column("pairs", q.pair_at[2], 4, c0, n), ih = q.column("pairs", q.pair_at[3], kHistBytes, c0, n);
   out.shift.resize(n), out.h.resize(n);
   for (std::size_t c = 0; c < n; ++c) {
     for (std::int8_t& v : out.shift[c]) v = is.i8();
     out.h[c] = get_hist(ih);
   }
   if (q.pair_bonds) {
-    ByteIn ibd = q.column("pairs", q.pair_at[4], kBondBytes, c0, n);
+    io::SectionReader ibd = q.column("pairs", q.pair_at[4], kBondBytes, c0, n);
     out.bond.resize(n);
     for (BondHist& b : out.bond) b = get_bond(ibd);
   }
@@ -1115,7 +1047,7 @@ std::array<WallContacts, 3> StateSource::read_wall_contacts() const {
   const ContactFamilyParams* fam[3] = {&q.params.ball_wall, &q.params.ball_facet, &q.params.ball_footing};
   const std::size_t walls[3] = {q.nplanes, q.fwalls.size(), 1};
   for (std::size_t k = 0; k < 3; ++k) {
-    ByteIn in(q.file.section_bytes(names[k]), q.file.source(), names[k]);
+    io::SectionReader in(q.file.section_bytes(names[k]), q.file.source(), names[k]);
     out[k] = get_wall_contacts(in);
     in.done();
     check_wall_contacts(in, out[k], q.n, walls[k], law_has_bond(fam[k]->model), k == 1 ? &q.fwalls : nullptr);

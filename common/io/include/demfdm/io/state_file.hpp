@@ -162,6 +162,17 @@ class StateReader;
 /// the file and the section).
 class SectionReader {
  public:
+  /// A section's content (or a range of it) read on its own, from a file read in pieces
+  /// (StateFileReader); the reader owns the bytes. `source` and `section` name them in errors.
+  SectionReader(std::string bytes, std::string source, std::string section)
+      : source_(std::move(source)), name_(std::move(section)), own_(std::move(bytes)), owns_(true), p_(own_.data()),
+        end_(own_.size()) {}
+  SectionReader(SectionReader&& o) noexcept
+      : source_(std::move(o.source_)), name_(std::move(o.name_)), own_(std::move(o.own_)), owns_(o.owns_),
+        p_(owns_ ? own_.data() : o.p_), pos_(o.pos_), end_(o.end_) {}
+  SectionReader(const SectionReader&) = delete;
+  SectionReader& operator=(const SectionReader&) = delete;
+
   std::uint8_t u8() { return static_cast<std::uint8_t>(*take(1)); }
   bool b();
   std::int8_t i8() { return static_cast<std::int8_t>(u8()); }
@@ -188,8 +199,8 @@ class SectionReader {
 
  private:
   friend class StateReader;
-  SectionReader(const StateReader* r, std::string name, const char* p, std::size_t n)
-      : r_(r), name_(std::move(name)), p_(p), end_(n) {}
+  SectionReader(std::string source, std::string name, const char* p, std::size_t n)
+      : source_(std::move(source)), name_(std::move(name)), p_(p), end_(n) {}
   const char* take(std::size_t n);
   template <class U>
   U get_le() {
@@ -202,8 +213,9 @@ class SectionReader {
     }
     return v;
   }
-  const StateReader* r_;
-  std::string name_;
+  std::string source_, name_;
+  std::string own_;     // the bytes, when the reader owns them
+  bool owns_ = false;
   const char* p_;
   std::size_t pos_ = 0, end_;
 };
