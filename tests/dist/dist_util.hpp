@@ -78,7 +78,7 @@ inline Snapshot streamed_snapshot(const DistDem& d, std::size_t block) {
 /// the World the ranks were loaded from. The file loaded on the ranks (load_state_file, blocks
 /// of `block` rows) gives every rank the part that load_from_root cuts from the assembled World,
 /// and both step on with the same bits. Then a folder that does not exist: every rank throws,
-/// rank 0 naming the file, and nothing is left. Collective.
+/// rank 0 naming the file, and nothing is left; loading from it, every rank throws. Collective.
 template <class Make>
 inline void expect_same_state_file(const DistDem& d, Make make, std::size_t block) {
   int pid = static_cast<int>(::getpid());
@@ -139,6 +139,18 @@ inline void expect_same_state_file(const DistDem& d, Make make, std::size_t bloc
   }
   EXPECT_NE(what.find(d.rank() == 0 ? "x.state" : "rank 0 could not write"), std::string::npos) << what;
   EXPECT_FALSE(std::filesystem::exists(bad.parent_path()));
+  // Loading that missing file: refused on every rank too (rank 0 naming it, the others naming
+  // rank 0's error), none left waiting.
+  what.clear();
+  try {
+    World frame(d.world().params());
+    DistDem e(MPI_COMM_WORLD, d.world().params(), d.grid());
+    e.load_state_file(frame, bad, meta.scene_hash, nullptr, block);
+  } catch (const std::exception& e) {
+    what = e.what();
+  }
+  EXPECT_NE(what.find("x.state"), std::string::npos) << what;
+  if (d.rank() != 0) EXPECT_NE(what.find("rank 0 could not load the state"), std::string::npos) << what;
 }
 
 /// Two snapshots (a frame's arrays), bit for bit.

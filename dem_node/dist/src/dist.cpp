@@ -3469,9 +3469,9 @@ void share_failure(MPI_Comm comm, int rank, const std::exception_ptr& failed) {
   int len = static_cast<int>(what.size());
   MPI_Bcast(&len, 1, MPI_INT, 0, comm);
   if (len == 0) return;
-  if (rank == 0) std::rethrow_exception(failed);
   what.resize(static_cast<std::size_t>(len));
-  MPI_Bcast(what.data(), len, MPI_CHAR, 0, comm);
+  MPI_Bcast(what.data(), len, MPI_CHAR, 0, comm);  // (before rank 0 throws: the others wait for it)
+  if (rank == 0) std::rethrow_exception(failed);
   throw std::runtime_error("rank 0 could not load the state: " + what);
 }
 
