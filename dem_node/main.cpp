@@ -244,7 +244,7 @@ class DemParticipant : public node::Participant {
     std::unique_ptr<dem::StateSource> src;  // (rank 0: the World's file, opened and checked once)
     if (on_ranks && !part_only()) {
       src = std::make_unique<dem::StateSource>(world_file, how.saved_scene_hash);
-      src->load_frame(world_);  // (is it the block?)
+      src->load_frame(world_);  // (is it the block? and its cell for ranks_grid, its parameters for the ranks)
       on_ranks = !preparing_ || !world_.periodic();
     }
     if (g_ranks.size > 1) {

@@ -920,6 +920,11 @@ struct StateSource::Impl {
     }
     if (off != len) fail(section, std::to_string(len - off) + " bytes left unread");
   }
+  // Rows [r0, r0 + n) of a section of `rows` rows, or a refusal naming them.
+  void check_rows(const std::string& section, const char* what, std::uint64_t r0, std::size_t n, std::uint64_t rows) const {
+    if (r0 > rows || n > rows - r0)
+      fail(section, std::string(what) + " " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(rows));
+  }
   io::SectionReader column(const std::string& section, std::uint64_t at, std::size_t bytes, std::uint64_t first, std::size_t count) const {
     return io::SectionReader(file.read(section, at + first * bytes, count * bytes), file.source(), section);
   }
@@ -977,7 +982,7 @@ std::uint64_t StateSource::pairs() const { return p_->m; }
 
 void StateSource::read_balls(std::uint64_t r0, std::size_t n, Particles& out) const {
   const Impl& q = *p_;
-  if (r0 > q.n || n > q.n - r0) q.fail("balls", "rows " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(q.n));
+  q.check_rows("balls", "rows", r0, n, q.n);
   out = Particles{};
   std::vector<Vec3>* vecs[8] = {&out.x, &out.v, &out.w, &out.f, &out.t, &out.fa, &out.ta, &out.x_ref};
   for (std::size_t c = 0; c < 8; ++c) {
@@ -1004,7 +1009,7 @@ void StateSource::read_balls(std::uint64_t r0, std::size_t n, Particles& out) co
 void StateSource::read_positions(std::uint64_t r0, std::size_t n, std::vector<Vec3>& x, std::vector<double>& r,
                                  std::vector<std::uint64_t>& id) const {
   const Impl& q = *p_;
-  if (r0 > q.n || n > q.n - r0) q.fail("balls", "rows " + std::to_string(r0) + " + " + std::to_string(n) + " of " + std::to_string(q.n));
+  q.check_rows("balls", "rows", r0, n, q.n);
   io::SectionReader ix = q.column("balls", q.ball_at[0], 24, r0, n), ir = q.column("balls", q.ball_at[8], 8, r0, n);
   io::SectionReader iid = q.column("balls", q.ball_at[11], 8, r0, n);
   x.resize(n), r.resize(n), id.resize(n);
@@ -1014,7 +1019,7 @@ void StateSource::read_positions(std::uint64_t r0, std::size_t n, std::vector<Ve
 void StateSource::read_pair_rows(std::uint64_t c0, std::size_t n, std::vector<std::uint32_t>& a,
                                  std::vector<std::uint32_t>& b) const {
   const Impl& q = *p_;
-  if (c0 > q.m || n > q.m - c0) q.fail("pairs", "contacts " + std::to_string(c0) + " + " + std::to_string(n) + " of " + std::to_string(q.m));
+  q.check_rows("pairs", "contacts", c0, n, q.m);
   io::SectionReader ia = q.column("pairs", q.pair_at[0], 4, c0, n), ib = q.column("pairs", q.pair_at[1], 4, c0, n);
   a.resize(n), b.resize(n);
   for (std::size_t c = 0; c < n; ++c) {

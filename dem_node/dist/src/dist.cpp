@@ -2951,6 +2951,29 @@ struct FirstError {
   }
 };
 
+// Rank 0's error, if any, on every rank: rank 0 rethrows its own, the others throw `what_failed`
+// and its message. Collective.
+void share_failure(MPI_Comm comm, int rank, const std::exception_ptr& failed, const std::string& what_failed) {
+  std::string what;
+  if (rank == 0 && failed) {
+    try {
+      std::rethrow_exception(failed);
+    } catch (const std::exception& e) {
+      what = e.what();
+    } catch (...) {
+      what = "an unknown error";
+    }
+    if (what.empty()) what = "an error";
+  }
+  int len = static_cast<int>(what.size());
+  MPI_Bcast(&len, 1, MPI_INT, 0, comm);
+  if (len == 0) return;
+  what.resize(static_cast<std::size_t>(len));
+  MPI_Bcast(what.data(), len, MPI_CHAR, 0, comm);  // (before rank 0 throws: the others wait for it)
+  if (rank == 0) std::rethrow_exception(failed);
+  throw std::runtime_error(what_failed + ": " + what);
+}
+
 // Every rank's numbers of balls and pairs on rank 0, with their totals (empty elsewhere).
 struct RowCounts {
   std::vector<std::uint64_t> balls, pairs;
@@ -3119,6 +3142,27 @@ PairContacts pair_list(const std::vector<PairRec>& recs, bool bonds, RowOf row_o
   return pc;
 }
 
+// Wall contacts from their records, appended to their kinds' lists in the order given: each
+// record's candidate facets from `cand`, its ball a row (`row_of`). close_walls then gives a
+// list without contacts its one offset, as a World's has.
+template <class RowOf>
+void append_wall(std::array<WallContacts, 3>& nwc, const WorldParams& p, const WallFullRec& c, const std::uint32_t* cand,
+                 RowOf row_of) {
+  WallContacts& wc = nwc[c.kind];
+  if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+  wc.ball.push_back(row_of(c.id));
+  wc.wall.push_back(c.wall);
+  wc.facet.push_back(c.facet);
+  wc.cand.insert(wc.cand.end(), cand, cand + c.ncand);
+  wc.cand_off.push_back(static_cast<std::uint32_t>(wc.cand.size()));
+  wc.h.push_back(c.h);
+  if (kind_bonds(p, c.kind)) wc.bond.push_back(c.b);
+  wc.F.push_back(c.F), wc.M.push_back(c.M), wc.TA.push_back(c.TA), wc.xc.push_back(c.xc), wc.bary.push_back(c.bary);
+}
+void close_walls(std::array<WallContacts, 3>& nwc) {
+  for (WallContacts& wc : nwc)
+    if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+}
 
 }  // namespace
 
@@ -3181,23 +3225,8 @@ struct DistDem::Tails {
       return std::tie(walls[x].kind, walls[x].id, walls[x].wall) < std::tie(walls[y].kind, walls[y].id, walls[y].wall);
     });
     std::array<WallContacts, 3> nwc;
-    for (std::uint32_t j : wo) {
-      const WallFullRec& c = walls[j];
-      WallContacts& wc = nwc[c.kind];
-      if (wc.cand_off.empty()) wc.cand_off.push_back(0);
-      wc.ball.push_back(row_of(c.id));
-      wc.wall.push_back(c.wall);
-      wc.facet.push_back(c.facet);
-      wc.cand.insert(wc.cand.end(), cands.begin() + static_cast<std::ptrdiff_t>(cand_at[j]),
-                     cands.begin() + static_cast<std::ptrdiff_t>(cand_at[j] + c.ncand));
-      wc.cand_off.push_back(static_cast<std::uint32_t>(wc.cand.size()));
-      wc.h.push_back(c.h);
-      if (kind_bonds(p, c.kind)) wc.bond.push_back(c.b);
-      wc.F.push_back(c.F), wc.M.push_back(c.M), wc.TA.push_back(c.TA), wc.xc.push_back(c.xc), wc.bary.push_back(c.bary);
-    }
-    // A list without contacts has its one offset, as a World's has.
-    for (WallContacts& wc : nwc)
-      if (wc.cand_off.empty()) wc.cand_off.push_back(0);
+    for (std::uint32_t j : wo) append_wall(nwc, p, walls[j], cands.data() + cand_at[j], row_of);
+    close_walls(nwc);
     return nwc;
   }
 };
@@ -3436,10 +3465,7 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
       const std::array<WallContacts, 3> nwc = tails.lists(w_->params(), row_of);
       st->commit(nwc[0], nwc[1], nwc[2]);
     });
-  int ok = failed ? 0 : 1;
-  MPI_Bcast(&ok, 1, MPI_INT, 0, comm_);
-  if (failed) std::rethrow_exception(failed);
-  if (!ok) throw std::runtime_error("DistDem::save_state_file: rank 0 could not write " + path.string() + " (see rank 0's error).");
+  share_failure(comm_, rank_, failed, "DistDem::save_state_file: rank 0 could not write " + path.string());
 }
 
 // ------------------------------------------------------------------------------------------
@@ -3447,33 +3473,12 @@ void DistDem::save_state_file(World& full, const std::filesystem::path& path, co
 
 namespace {
 constexpr int kTagLoadBalls = 7308, kTagLoadPairs = 7309, kTagLoadWalls = 7310;
+constexpr const char* kLoadFailed = "rank 0 could not load the state";
 
 struct BallLoadRec {
   std::uint64_t row;  // the ball's row in the file
   BallRec b;
 };
-
-// Rank 0's error, if any, on every rank: rank 0 rethrows its own, the others throw its message.
-void share_failure(MPI_Comm comm, int rank, const std::exception_ptr& failed) {
-  std::string what;
-  if (rank == 0 && failed) {
-    try {
-      std::rethrow_exception(failed);
-    } catch (const std::exception& e) {
-      what = e.what();
-    } catch (...) {
-      what = "an unknown error";
-    }
-    if (what.empty()) what = "an error";
-  }
-  int len = static_cast<int>(what.size());
-  MPI_Bcast(&len, 1, MPI_INT, 0, comm);
-  if (len == 0) return;
-  what.resize(static_cast<std::size_t>(len));
-  MPI_Bcast(what.data(), len, MPI_CHAR, 0, comm);  // (before rank 0 throws: the others wait for it)
-  if (rank == 0) std::rethrow_exception(failed);
-  throw std::runtime_error("rank 0 could not load the state: " + what);
-}
 
 // Rank 0 sends `recs` (rank r's records of one phase) to rank r; an empty vector is the phase's end.
 template <class R>
@@ -3522,7 +3527,7 @@ void DistDem::load_state_file(World& frame, const std::filesystem::path& path, s
   std::unique_ptr<StateSource> src;
   FirstError opened;
   if (rank_ == 0) opened([&] { src = std::make_unique<StateSource>(path, scene_hash); });
-  share_failure(comm_, rank_, opened.failed);
+  share_failure(comm_, rank_, opened.failed, kLoadFailed);
   load_state(frame, src.get(), path.string(), scene_hash, ids, block);
 }
 
@@ -3574,7 +3579,7 @@ void DistDem::load_state(World& frame, const StateSource* src, const std::string
       std::sort(extra.begin(), extra.end());
       extra.erase(std::unique(extra.begin(), extra.end()), extra.end());
     });
-  share_failure(comm_, rank_, failed);
+  share_failure(comm_, rank_, failed, kLoadFailed);
   // Every rank: the frame (parameters, counters, effects, walls) and the halo.
   long long fb = static_cast<long long>(frame_bytes.size());
   MPI_Bcast(&fb, 1, MPI_LONG_LONG, 0, comm_);
@@ -3611,7 +3616,7 @@ void DistDem::load_state(World& frame, const StateSource* src, const std::string
       flush();
     }
   }, mine);
-  share_failure(comm_, rank_, failed);
+  share_failure(comm_, rank_, failed, kLoadFailed);
   // The pairs: to the owner of ball A, and with newton off to the owner of ball B too; their
   // ends as file rows (PairRec's ia, ib).
   std::vector<PairRec> pairs;
@@ -3629,7 +3634,7 @@ void DistDem::load_state(World& frame, const StateSource* src, const std::string
       flush();
     }
   }, pairs);
-  share_failure(comm_, rank_, failed);
+  share_failure(comm_, rank_, failed, kLoadFailed);
   // The wall contacts (whole on rank 0): each to its ball's owner, with its candidate facets.
   std::vector<char> walls_in;
   if (rank_ == 0) {
@@ -3664,7 +3669,7 @@ void DistDem::load_state(World& frame, const StateSource* src, const std::string
     walls_in.resize(static_cast<std::size_t>(bytes));
     MPI_Recv(walls_in.data(), bytes, MPI_BYTE, 0, kTagLoadWalls, comm_, MPI_STATUS_IGNORE);
   }
-  share_failure(comm_, rank_, failed);
+  share_failure(comm_, rank_, failed, kLoadFailed);
   owner = {};
   extra = {};
   // This rank's share of the World: its balls in file order, its pairs and wall contacts with
@@ -3686,20 +3691,10 @@ void DistDem::load_state(World& frame, const StateSource* src, const std::string
   std::array<WallContacts, 3> wc;
   std::size_t at = 0;
   for (const WallFullRec& c : wr) {  // (in the file's order, kind by kind)
-    WallContacts& d = wc[c.kind];
-    if (d.cand_off.empty()) d.cand_off.push_back(0);
-    d.ball.push_back(row_of(c.id));
-    d.wall.push_back(c.wall);
-    d.facet.push_back(c.facet);
-    d.cand.insert(d.cand.end(), wcand.begin() + static_cast<std::ptrdiff_t>(at), wcand.begin() + static_cast<std::ptrdiff_t>(at + c.ncand));
+    append_wall(wc, share->params(), c, wcand.data() + at, row_of);
     at += c.ncand;
-    d.cand_off.push_back(static_cast<std::uint32_t>(d.cand.size()));
-    d.h.push_back(c.h);
-    if (kind_bonds(share->params(), c.kind)) d.bond.push_back(c.b);
-    d.F.push_back(c.F), d.M.push_back(c.M), d.TA.push_back(c.TA), d.xc.push_back(c.xc), d.bary.push_back(c.bary);
   }
-  for (WallContacts& d : wc)
-    if (d.cand_off.empty()) d.cand_off.push_back(0);
+  close_walls(wc);
   const World::Counters k = share->counters();
   std::vector<std::uint8_t> no_ghosts;
   share->swap_balls(pt, pc, wc, no_ghosts);
