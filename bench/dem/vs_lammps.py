@@ -488,6 +488,31 @@ def main():
                   hw["isa"], int(hw["lanes"]), hw["addmul_per_ns"], hw["div_per_ns"], hw["sqrt_per_ns"],
                   t_addmul / active, t_divsqrt / active, meas * ghz, ghz))
 
+        # ---- how busy the host was ----
+        # The rounds are interleaved, but a host whose other tenants load the shared cache and
+        # memory slows LAMMPS more than bench_dem (docs/speed.md, session 35: from a quiet to a
+        # busy hour LAMMPS fell 35 %, the linear pass 27 %), so the ratios read high there.
+        def span(vals):
+            return min(vals), max(vals)
+        c0, c1 = span([x["clock_ghz"] for x in hws])
+        w0, w1 = span([x["triad_ws_gbs"] for x in hws])
+        d0, d1 = span([x["triad_dram_gbs"] for x in hws])
+        line = ("host load: over the %d hardware measurements clock %.2f-%.2f GHz, triad %.1f-%.1f GB/s at %.1f MB, "
+                "%.1f-%.1f GB/s at 384 MiB" % (len(hws), c0, c1, w0, w1, inf["working_set_bytes"] / 1e6, d0, d1))
+        busy = d1 > 1.15 * d0 or w1 > 1.15 * w0
+        if lmp:
+            l0, l1 = span([x["per_core"] for x in by("lammps")])
+            line += "; LAMMPS's rounds %.3e-%.3e" % (l0, l1)
+            busy = busy or l1 > 1.15 * l0
+        print()
+        print(line)
+        if busy and lmp:
+            print("  the host was busy (a spread above 15 %): other tenants slow LAMMPS more than bench_dem, so the "
+                  "ratios read high; compare ratios measured at the same host load (docs/speed.md)")
+        elif busy:
+            print("  the host was busy (a spread above 15 %): the figures read low; compare figures measured at the "
+                  "same host load (docs/speed.md)")
+
         # ---- penetration-like run ----
         mv = run_bench(runner, bench, a.packing, "moving", a.steps, a.period)
         mv["round"] = 0

@@ -7,7 +7,8 @@ row of the table is filled and the "LAMMPS not installed" line is absent; withou
 is there and no ratio line is. Run 2 (--lmp pointing nowhere): always the "LAMMPS not installed"
 line, no ratio line, exit 0, our figures. Both: the pair kernel and the CPU's ISA are named, the
 phase shares are within 0-100 % with the pair pass the largest, the hardware-estimate line has
-three positive times and a distance, the moving run reports >= 1 neighbour rebuild and a share,
+three positive times and a distance, the host-load line gives ordered ranges of the hardware
+figures (and LAMMPS's spread exactly when it ran), the moving run reports >= 1 neighbour rebuild and a share,
 and the CSV has one row per run.
 Usage: check_vs_lammps.py REPO_ROOT   (env DEMFDM_BUILD: the build folder holding bin/bench_dem)
 """
@@ -89,6 +90,14 @@ def common(out, out_csv, tag, with_lammps):
         meas, bw, fl, dist = (float(g) for g in m.groups())
         check(meas > 0 and bw > 0 and fl > 0, tag + ": estimate times > 0")
         check(abs(dist - meas / max(bw, fl)) < 0.06 * dist + 0.05, tag + ": distance = measured / larger bound")
+    m = re.search(r"^host load: over the (\d+) hardware measurements clock ([0-9.]+)-([0-9.]+) GHz, triad ([0-9.]+)-"
+                  r"([0-9.]+) GB/s at [0-9.]+ MB, ([0-9.]+)-([0-9.]+) GB/s at 384 MiB(; LAMMPS's rounds ([0-9.e+]+)-"
+                  r"([0-9.e+]+))?$", out, re.M)
+    if check(m is not None, tag + ": host-load line"):
+        check(int(m.group(1)) == 2, tag + ": two hardware measurements in one round")
+        lo_hi = [(float(m.group(i)), float(m.group(i + 1))) for i in (2, 4, 6)]
+        check(all(0 < lo <= hi for lo, hi in lo_hi), tag + ": host-load ranges ordered and positive")
+        check((m.group(8) is not None) == with_lammps, tag + ": LAMMPS's spread exactly when LAMMPS ran")
     m = re.search(r"^moving: rebuilds (\d+) in (\d+) steps .* rebuild share ([0-9.]+) % of the step; target <= 15 %: "
                   r"(met|NOT met)$", out, re.M)
     if check(m is not None, tag + ": moving line"):
