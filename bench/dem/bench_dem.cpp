@@ -26,6 +26,11 @@
 // ≤ 15 %, issue 16 item 3).
 // BENCH_DEM_KERNEL=auto|scalar|baseline|avx2|avx512 selects the ball–ball pass implementation
 // (World::set_pair_kernel; default auto = vectorised with the best instruction set).
+// BENCH_DEM_AB=A,B (kernel names as above) alternates the pass between kernels A and B in blocks
+// of BENCH_DEM_AB_BLOCK steps (default 10; the first BENCH_DEM_AB_SKIP of each, default 1, left
+// out) and prints (stderr) "ab ... ratio_a_over_b=... se=..." (A's pair-phase time over B's,
+// paired by neighbouring blocks; see run_ab). Every kernel gives the same bits, so the run's hash
+// is a plain run's.
 // BENCH_DEM_HASH=1 also prints (stderr) an FNV-1a hash of x, v, ω after the run and the
 // number of ball–ball pairs in the list: two builds compare bit for bit on the same input.
 // BENCH_DEM_DUMP=file writes x, v, ω after the run as raw doubles [n,9] (row order of the
@@ -45,6 +50,7 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -52,6 +58,7 @@
 #include <fstream>
 #include <iostream>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -65,15 +72,97 @@
 using namespace demfdm::dem;
 
 namespace {
-PairKernel kernel_from_env(std::string& name) {
-  const char* k = std::getenv("BENCH_DEM_KERNEL");
-  name = k ? k : "auto";
+PairKernel kernel_named(const std::string& name, const char* var) {
   if (name == "auto") return PairKernel::kAuto;
   if (name == "scalar") return PairKernel::kScalar;
   if (name == "baseline") return PairKernel::kBlockBaseline;
   if (name == "avx2") return PairKernel::kBlockAvx2;
   if (name == "avx512") return PairKernel::kBlockAvx512;
-  throw std::runtime_error("BENCH_DEM_KERNEL must be auto, scalar, baseline, avx2 or avx512, found '" + name + "'");
+  throw std::runtime_error(std::string(var) + ": a kernel must be auto, scalar, baseline, avx2 or avx512, found '" +
+                           name + "'");
+}
+
+PairKernel kernel_from_env(std::string& name) {
+  const char* k = std::getenv("BENCH_DEM_KERNEL");
+  name = k ? k : "auto";
+  return kernel_named(name, "BENCH_DEM_KERNEL");
+}
+
+// BENCH_DEM_AB="A,B" (kernel names): the timed steps alternate the ball-ball pass between kernels
+// A and B in blocks of BENCH_DEM_AB_BLOCK steps (default 10), A first. Each pair of neighbouring
+// blocks (A then B) gives one ratio of A's pair-phase time to B's; the first BENCH_DEM_AB_SKIP
+// steps of every block (default 1) are left out (the switch). Neighbouring blocks share the host's
+// load, so on a busy host the ratio holds to 1-3 % where separate runs scatter by 10-20 %
+// (docs/speed.md, session 35). A candidate pass is compared with the current one by building it
+// as one of the kernels.
+struct AbSpec {
+  std::string a, b;
+  PairKernel ka = PairKernel::kAuto, kb = PairKernel::kAuto;
+  int block = 10, skip = 1;
+};
+
+int env_int(const char* var, int dflt, int lo, int hi) {
+  const char* v = std::getenv(var);
+  if (!v) return dflt;
+  char* end = nullptr;
+  const long x = std::strtol(v, &end, 10);
+  if (end == v || *end != '\0' || x < lo || x > hi)
+    throw std::runtime_error(std::string(var) + ": expected an integer in [" + std::to_string(lo) + ", " +
+                             std::to_string(hi) + "], found '" + v + "'");
+  return static_cast<int>(x);
+}
+
+std::optional<AbSpec> ab_from_env(int steps) {
+  const char* v = std::getenv("BENCH_DEM_AB");
+  if (!v) return std::nullopt;
+  AbSpec ab;
+  const std::string s = v;
+  const auto comma = s.find(',');
+  if (comma == std::string::npos)
+    throw std::runtime_error("BENCH_DEM_AB: expected two kernel names as 'A,B', found '" + s + "'");
+  ab.a = s.substr(0, comma);
+  ab.b = s.substr(comma + 1);
+  ab.ka = kernel_named(ab.a, "BENCH_DEM_AB");
+  ab.kb = kernel_named(ab.b, "BENCH_DEM_AB");
+  ab.block = env_int("BENCH_DEM_AB_BLOCK", 10, 2, 100000);
+  ab.skip = env_int("BENCH_DEM_AB_SKIP", 1, 0, ab.block - 1);
+  if (steps < 4 * ab.block)
+    throw std::runtime_error("BENCH_DEM_AB: " + std::to_string(steps) + " steps hold fewer than two pairs of " +
+                             std::to_string(ab.block) + "-step blocks; give at least " +
+                             std::to_string(4 * ab.block) + " steps");
+  return ab;
+}
+
+// The timed steps of an A/B run; prints the "ab ..." line (stderr).
+void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore) {
+  std::vector<double> t(static_cast<std::size_t>(steps));
+  for (int k = 0; k < steps; ++k) {
+    if (k % ab.block == 0) w.set_pair_kernel((k / ab.block) % 2 == 0 ? ab.ka : ab.kb);
+    const double p0 = w.phase_times().pair;
+    w.step(1);
+    t[static_cast<std::size_t>(k)] = w.phase_times().pair - p0;
+  }
+  w.set_pair_kernel(restore);
+  std::vector<double> r;
+  double sa = 0.0, sb = 0.0;
+  for (int blk = 0; (blk + 2) * ab.block <= steps; blk += 2) {
+    double ta = 0.0, tb = 0.0;
+    for (int j = ab.skip; j < ab.block; ++j) {
+      ta += t[static_cast<std::size_t>(blk * ab.block + j)];
+      tb += t[static_cast<std::size_t>((blk + 1) * ab.block + j)];
+    }
+    r.push_back(ta / tb);
+    sa += ta, sb += tb;
+  }
+  const double n = double(r.size());
+  double m = 0.0, v = 0.0;
+  for (double x : r) m += x / n;
+  for (double x : r) v += (x - m) * (x - m) / (n - 1.0);
+  const double per = double(ab.block - ab.skip) * n;
+  std::fprintf(stderr, "ab kernel_a=%s kernel_b=%s block=%d skip=%d pairs=%zu ratio_a_over_b=%.4f se=%.4f a_ms=%.4f "
+               "b_ms=%.4f\n",
+               ab.a.c_str(), ab.b.c_str(), ab.block, ab.skip, r.size(), m, std::sqrt(v / n), 1e3 * sa / per,
+               1e3 * sb / per);
 }
 
 using demfdm::simd::isa_name;
@@ -369,13 +458,18 @@ int run(const std::string& file, const std::string& model, int threads, int step
     edot = w.skin() / (3.0 * lmax * double(period) * w.dt());
     w.set_strain_rate({edot, -edot, 0.0});
   }
+  const std::optional<AbSpec> ab = ab_from_env(steps);
   w.reset_phase_times();
   const auto reb0 = w.rebuild_count();
   const double dt0 = w.dt();
   timespec c0{}, c1{};
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
   const auto t0 = std::chrono::steady_clock::now();
-  w.step(steps);
+  if (ab) {
+    run_ab(w, *ab, steps, kernel);
+  } else {
+    w.step(steps);
+  }
   const auto t1 = std::chrono::steady_clock::now();
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
   const double cpu = double(c1.tv_sec - c0.tv_sec) + 1e-9 * double(c1.tv_nsec - c0.tv_nsec);

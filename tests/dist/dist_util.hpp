@@ -150,7 +150,9 @@ inline void expect_same_state_file(const DistDem& d, Make make, std::size_t bloc
     what = e.what();
   }
   EXPECT_NE(what.find("x.state"), std::string::npos) << what;
-  if (d.rank() != 0) EXPECT_NE(what.find("rank 0 could not load the state"), std::string::npos) << what;
+  if (d.rank() != 0) {
+    EXPECT_NE(what.find("rank 0 could not load the state"), std::string::npos) << what;
+  }
 }
 
 /// Two snapshots (a frame's arrays), bit for bit.
