@@ -8,8 +8,8 @@ is there and no ratio line is. Run 2 (--lmp pointing nowhere): always the "LAMMP
 line, no ratio line, exit 0, our figures. Both: the pair kernel and the CPU's ISA are named, the
 phase shares are within 0-100 % with the pair pass the largest, the hardware-estimate line has
 three positive times and a distance, the host-load line gives ordered ranges of the hardware
-figures (and LAMMPS's spread exactly when it ran), the moving run reports >= 1 neighbour rebuild and a share,
-and the CSV has one row per run.
+figures (and LAMMPS's spread exactly when it ran), the moving run reports >= 1 neighbour
+rebuild and a share, and the CSV has one row per run.
 Usage: check_vs_lammps.py REPO_ROOT   (env DEMFDM_BUILD: the build folder holding bin/bench_dem)
 """
 import csv
