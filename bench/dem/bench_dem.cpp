@@ -89,8 +89,9 @@ PairKernel kernel_from_env(std::string& name) {
 }
 
 // BENCH_DEM_AB="A,B" (kernel names): the timed steps alternate the ball-ball pass between kernels
-// A and B in blocks of BENCH_DEM_AB_BLOCK steps (default 10), A first. Each pair of neighbouring
-// blocks (A then B) gives one ratio of A's pair-phase time to B's; the first BENCH_DEM_AB_SKIP
+// A and B in blocks of BENCH_DEM_AB_BLOCK steps (default 10), in the order A B B A A B B A ..., so
+// that a drift of the host's speed favours neither. Each pair of neighbouring blocks (A B or B A)
+// gives one ratio of A's pair-phase time to B's; the first BENCH_DEM_AB_SKIP
 // steps of every block (default 1) are left out (the switch). Neighbouring blocks share the host's
 // load, so on a busy host the ratio holds to 1-3 % where separate runs scatter by 10-20 %
 // (docs/speed.md, session 35). A candidate pass is compared with the current one by building it
@@ -136,8 +137,9 @@ std::optional<AbSpec> ab_from_env(int steps) {
 // The timed steps of an A/B run; prints the "ab ..." line (stderr).
 void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore) {
   std::vector<double> t(static_cast<std::size_t>(steps));
+  auto is_a = [](int blk) { return ((blk + 1) / 2) % 2 == 0; };  // blocks A B B A A B B A ...
   for (int k = 0; k < steps; ++k) {
-    if (k % ab.block == 0) w.set_pair_kernel((k / ab.block) % 2 == 0 ? ab.ka : ab.kb);
+    if (k % ab.block == 0) w.set_pair_kernel(is_a(k / ab.block) ? ab.ka : ab.kb);
     const double p0 = w.phase_times().pair;
     w.step(1);
     t[static_cast<std::size_t>(k)] = w.phase_times().pair - p0;
@@ -146,11 +148,12 @@ void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore) {
   std::vector<double> r;
   double sa = 0.0, sb = 0.0;
   for (int blk = 0; (blk + 2) * ab.block <= steps; blk += 2) {
-    double ta = 0.0, tb = 0.0;
+    double t0 = 0.0, t1 = 0.0;  // the pair's first and second block
     for (int j = ab.skip; j < ab.block; ++j) {
-      ta += t[static_cast<std::size_t>(blk * ab.block + j)];
-      tb += t[static_cast<std::size_t>((blk + 1) * ab.block + j)];
+      t0 += t[static_cast<std::size_t>(blk * ab.block + j)];
+      t1 += t[static_cast<std::size_t>((blk + 1) * ab.block + j)];
     }
+    const double ta = is_a(blk) ? t0 : t1, tb = is_a(blk) ? t1 : t0;
     r.push_back(ta / tb);
     sa += ta, sb += tb;
   }
@@ -442,6 +445,7 @@ int hw(double ws_bytes) {
 
 int run(const std::string& file, const std::string& model, int threads, int steps, int period) {
   if (steps <= 0) throw std::runtime_error("steps must be > 0");
+  const std::optional<AbSpec> ab = ab_from_env(steps);  // (refused before the packing is loaded)
   const Packing pk = load(file);
   std::string kname;
   PairKernel kernel;
@@ -458,7 +462,6 @@ int run(const std::string& file, const std::string& model, int threads, int step
     edot = w.skin() / (3.0 * lmax * double(period) * w.dt());
     w.set_strain_rate({edot, -edot, 0.0});
   }
-  const std::optional<AbSpec> ab = ab_from_env(steps);
   w.reset_phase_times();
   const auto reb0 = w.rebuild_count();
   const double dt0 = w.dt();
