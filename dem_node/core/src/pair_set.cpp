@@ -475,7 +475,9 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         H_[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
         CH_[c] |= skip & ((fl & ContactHist::kActive) != 0);
         if (SN_) SN_[c] = 0.0;  // a live lane's is written in stage 3
-        k0[n] = key_(c);  // a live lane's flags are still fl
+        // key_(c) from the flags in hand (a live lane's are still fl): reloading the byte just
+        // stored cost 2 % of the linear pass (BENCH_DEM_AB, session 36).
+        k0[n] = (fl & ContactHist::kActive) | (BD_ ? static_cast<unsigned>(BD_[c].state) << 8 : 0u);
         in.c[n] = c;
         in.a[n] = a;
         in.b[n] = b;
@@ -509,7 +511,9 @@ void PairSet::pass_law(SetContext& cx, double dt) {
           TA = {out.TA[0][l], out.TA[1][l], out.TA[2][l]};
           TB = {out.TB[0][l], out.TB[1][l], out.TB[2][l]};
         }
-        CH_[cl] |= key_(cl) != k0[l];
+        // The key after the law: a lane's from its result (Law::lane_key), without reloading the
+        // records just stored; a lane redone by the scalar law may change anything.
+        CH_[cl] |= (out.scalar[l] ? key_(cl) : Law::lane_key(out, l, k0[l])) != k0[l];
         if (SN_) SN_[cl] = force_norm<Law>(H_[cl], bond_at_(cl));
         if constexpr (Save) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;

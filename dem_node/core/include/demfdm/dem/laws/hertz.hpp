@@ -123,6 +123,7 @@ struct HertzLaw : LawDefaults {
     return c.rescale ? pairblock::hertz_kernel(isa) : nullptr;
   }
   static bool lane_needs_scalar(const BondHist*) { return false; }
+  static unsigned lane_key(const pairblock::Out& out, int l, unsigned k0) { return LinearLaw::lane_key(out, l, k0); }
   static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {
     LinearLaw::store_lane(h, b, out, l);
     h.kn = out.kn[l];

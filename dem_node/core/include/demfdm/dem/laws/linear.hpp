@@ -181,6 +181,11 @@ struct LinearLaw : LawDefaults {
     return c.rescale ? pairblock::linear_kernel(isa) : nullptr;
   }
   static bool lane_needs_scalar(const BondHist* /*b*/) { return false; }
+  /// The key of PairSet's change marks (kActive | bond state << 8) after store_lane, from the
+  /// key before: store_lane sets kActive from the lane's result; no lane changes a bond state.
+  static unsigned lane_key(const pairblock::Out& out, int l, unsigned k0) {
+    return (k0 & ~unsigned{ContactHist::kActive}) | (out.active[l] ? unsigned{ContactHist::kActive} : 0u);
+  }
   static void store_lane(ContactHist& h, BondHist* /*b*/, const pairblock::Out& out, int l) {
     h.fs = {out.fs[0][l], out.fs[1][l], out.fs[2][l]};
     h.fn = out.fn[l];

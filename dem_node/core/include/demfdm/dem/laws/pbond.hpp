@@ -187,6 +187,8 @@ struct PBondLaw : LawDefaults {
     return c.rescale ? pairblock::pbond_kernel(isa) : nullptr;
   }
   static bool lane_needs_scalar(const BondHist* /*b*/) { return false; }
+  /// kActive from the linear part; a lane whose bond breaks is redone by the scalar law.
+  static unsigned lane_key(const pairblock::Out& out, int l, unsigned k0) { return LinearLaw::lane_key(out, l, k0); }
   static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {
     LinearLaw::store_lane(h, b, out, l);
     b->nb = out.nb[l];

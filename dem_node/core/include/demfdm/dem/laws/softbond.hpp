@@ -308,6 +308,8 @@ struct SoftBondLaw : LawDefaults {
   }
   /// Unbonded soft-bond contacts take the scalar law (§3.5 moment limits).
   static bool lane_needs_scalar(const BondHist* b) { return !bonded(b->state); }
+  /// A lane keeps the flags' kActive and the bond state (every change of state is a scalar lane).
+  static unsigned lane_key(const pairblock::Out& /*out*/, int /*l*/, unsigned k0) { return k0; }
   static void store_lane(ContactHist& h, BondHist* b, const pairblock::Out& out, int l) {
     h.fs = {out.fs[0][l], out.fs[1][l], out.fs[2][l]};
     h.fn = out.fn[l];
