@@ -1102,6 +1102,7 @@ class DemParticipant : public node::Participant {
     p.ny = block_.ny;
     p.nz = block_.nz;
     p.keep_periodic = false;
+    p.spatial_order = s_.boolean("dem.spatial_order");
     return p;
   }
   // The replicate stage on the ranks (docs/scaling.md, "the specimen procedures and the coupled

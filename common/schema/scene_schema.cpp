@@ -348,6 +348,14 @@ void declare_dem(config::Section& root) {
             "pair; the results then depend on the rank count (within round-off at first, which the "
             "dynamics amplify). false: each such pair computed on both ranks, one process's bits at any "
             "rank count.");
+  d.boolean("spatial_order", false,
+            "Renumber the balls' rows along a space-filling (Morton) curve of cells 2 R_max wide once the "
+            "replicate stage has built the block (LAMMPS's atom_modify sort, done once), so that a contact's "
+            "two balls lie near each other in memory: the default scene's ball-ball pass took 0.70-0.77 of "
+            "its time at one thread on its gravity-end state (docs/speed.md, session 36). The forces are "
+            "then summed in another order: the results differ from the run without it within round-off at "
+            "first, which the dynamics amplify, as with another thread count. false: the rows stay in the "
+            "order the copies were made (copy by copy). Not with dem.ranks > 1.");
   d.reals("kick", "m/s", std::vector<double>{},
           "Stability studies: velocity [vx, vy, vz] given to the highest ball at the first stage that is not "
           "a specimen-generation stage; empty: none.");
@@ -614,6 +622,9 @@ void check_dem(const config::Scene& sc, config::CheckContext& ctx) {
              "\"contacts\" or \"auto\" with dem.newton = true (newton's results follow the cuts, and cuts "
              "balanced by measured time differ from run to run: two runs of the scene would differ)",
              "\"time\"");
+  // The ranks build their parts of the block themselves (DistDem's replicate): no renumbering.
+  if (sc.boolean("dem.spatial_order") && sc.integer("dem.ranks") > 1)
+    ctx.fail("dem.spatial_order", "false with dem.ranks > 1 (the ranks build their own parts of the block)", "true");
   // A ball that weighs nothing leaves a brick of them without weight (the geometric cut).
   if (const std::int64_t ball = sc.has("dem") ? sc.integers("dem.balance_costs")[0] : 1; ball < 1)
     ctx.fail("dem.balance_costs", "a ball's cost (the first number) of at least 1 ns", std::to_string(ball));

@@ -421,6 +421,10 @@ StageReport replicate(World& w, const ReplicateParams& p) {
   } else {
     w.mutable_params().periodic.enabled = false;
   }
+  // Rows in copy order lie far apart in space; along a space-filling curve a contact's two balls
+  // are near each other in memory (the ball-ball pass of the default scene 0.70-0.77 of its time
+  // at one thread, docs/speed.md session 36). The sums then run in another order.
+  if (p.spatial_order) w.reorder_spatially();
   w.prepare();
   StageReport r;
   r.count = w.num_balls();

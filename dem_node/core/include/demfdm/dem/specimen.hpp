@@ -306,6 +306,7 @@ StageReport install_bonds_to_coordination(World& w, double z_target, double gap_
 struct ReplicateParams {
   int nx = 1, ny = 1, nz = 5;   // [-] copies along x, y, z
   bool keep_periodic = false;   // [-] result stays periodic
+  bool spatial_order = false;   // [-] the block's rows renumbered in Morton order (World::reorder_spatially)
 };
 StageReport replicate(World& w, const ReplicateParams& p);
 
