@@ -476,7 +476,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         CH_[c] |= skip & ((fl & ContactHist::kActive) != 0);
         if (SN_) SN_[c] = 0.0;  // a live lane's is written in stage 3
         // key_(c) from the flags in hand (a live lane's are still fl): reloading the byte just
-        // stored cost 2 % of the linear pass (BENCH_DEM_AB, session 36).
+        // stored cost 2 % of the linear pass, measured inside one run (docs/speed.md, session 36).
         k0[n] = (fl & ContactHist::kActive) | (BD_ ? static_cast<unsigned>(BD_[c].state) << 8 : 0u);
         in.c[n] = c;
         in.a[n] = a;
