@@ -145,6 +145,17 @@ TEST(Specimen, GenerationIsSeeded) {
   EXPECT_NE(a[0].x, c[0].x);
 }
 
+// A copy of a REV made by replaying its balls and contacts (the replication tests).
+static std::unique_ptr<World> clone_rev(const World& w0) {
+  auto w = std::make_unique<World>(w0.params());
+  const auto& pt = w0.balls();
+  for (std::size_t i = 0; i < pt.size(); ++i) w->add_ball(pt.x[i], pt.r[i]);
+  const auto& pc = w0.pair_contacts();
+  for (std::size_t c = 0; c < pc.size(); ++c)
+    w->append_pair(pc.a[c], pc.b[c], pc.shift[c], pc.h[c], pc.bond.empty() ? nullptr : &pc.bond[c]);
+  return w;
+}
+
 // §4.7/§8.9: 2×2×2 periodic replication keeps the stress tensor; opening the faces drops
 // exactly the contacts across them.
 TEST(Specimen, ReplicationPreservesStress) {
@@ -152,15 +163,7 @@ TEST(Specimen, ReplicationPreservesStress) {
   World& w0 = *r.w;
   const Mat3 s0 = cell_stress(w0);
   // copy the REV into two new worlds by replaying its balls and contacts
-  auto clone = [&]() {
-    auto w = std::make_unique<World>(w0.params());
-    const auto& pt = w0.balls();
-    for (std::size_t i = 0; i < pt.size(); ++i) w->add_ball(pt.x[i], pt.r[i]);
-    const auto& pc = w0.pair_contacts();
-    for (std::size_t c = 0; c < pc.size(); ++c)
-      w->append_pair(pc.a[c], pc.b[c], pc.shift[c], pc.h[c], pc.bond.empty() ? nullptr : &pc.bond[c]);
-    return w;
-  };
+  auto clone = [&]() { return clone_rev(w0); };
   auto w1 = clone();
   ReplicateParams rp;
   rp.nx = rp.ny = rp.nz = 2;
@@ -206,15 +209,7 @@ TEST(Specimen, ReplicationPreservesStress) {
 TEST(Specimen, ReplicationInSpatialOrder) {
   Rev& r = shared_rev();
   World& w0 = *r.w;
-  auto clone = [&]() {
-    auto w = std::make_unique<World>(w0.params());
-    const auto& pt = w0.balls();
-    for (std::size_t i = 0; i < pt.size(); ++i) w->add_ball(pt.x[i], pt.r[i]);
-    const auto& pc = w0.pair_contacts();
-    for (std::size_t c = 0; c < pc.size(); ++c)
-      w->append_pair(pc.a[c], pc.b[c], pc.shift[c], pc.h[c], pc.bond.empty() ? nullptr : &pc.bond[c]);
-    return w;
-  };
+  auto clone = [&]() { return clone_rev(w0); };
   ReplicateParams rp;
   rp.nx = 2;
   rp.ny = 1;
