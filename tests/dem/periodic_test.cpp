@@ -163,8 +163,7 @@ TEST(Specimen, ReplicationPreservesStress) {
   World& w0 = *r.w;
   const Mat3 s0 = cell_stress(w0);
   // copy the REV into two new worlds by replaying its balls and contacts
-  auto clone = [&]() { return clone_rev(w0); };
-  auto w1 = clone();
+  auto w1 = clone_rev(w0);
   ReplicateParams rp;
   rp.nx = rp.ny = rp.nz = 2;
   rp.keep_periodic = true;
@@ -189,7 +188,7 @@ TEST(Specimen, ReplicationPreservesStress) {
     if (pc.shift[c][0] != 0 || pc.shift[c][1] != 0) ++cross_xy;
     else if (pc.shift[c][2] != 0) ++cross_z;
   }
-  auto w2 = clone();
+  auto w2 = clone_rev(w0);
   ReplicateParams open;
   open.nx = open.ny = 1;
   open.nz = 3;
@@ -209,12 +208,11 @@ TEST(Specimen, ReplicationPreservesStress) {
 TEST(Specimen, ReplicationInSpatialOrder) {
   Rev& r = shared_rev();
   World& w0 = *r.w;
-  auto clone = [&]() { return clone_rev(w0); };
   ReplicateParams rp;
   rp.nx = 2;
   rp.ny = 1;
   rp.nz = 3;
-  auto plain = clone(), sorted = clone();
+  auto plain = clone_rev(w0), sorted = clone_rev(w0);
   replicate(*plain, rp);
   rp.spatial_order = true;
   replicate(*sorted, rp);

@@ -249,9 +249,11 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   }
   std::uint8_t* __restrict__ CH = chg_.data();
   // The state a contact's stiffness terms depend on that a pass can change.
-  auto key = [=](std::int64_t c) __attribute__((always_inline)) -> unsigned {
-    return (H[c].flags & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
+  // (key_of: the same from flags already in hand, fl = H[c].flags.)
+  auto key_of = [=](std::uint8_t fl, std::int64_t c) __attribute__((always_inline)) -> unsigned {
+    return (fl & ContactHist::kActive) | (BD ? static_cast<unsigned>(BD[c].state) << 8 : 0u);
   };
+  auto key = [=](std::int64_t c) __attribute__((always_inline)) -> unsigned { return key_of(H[c].flags, c); };
   // Every contact's ||F|| for the measurements (keep_force_norms): ||Law::force|| of its history
   // after the update, the scan's formula; +0 for an idle one (F_n = 0 and so F_s = 0, and no
   // bond force: the scan's value too).
@@ -452,6 +454,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     const auto branch_d_ = branch_d;
     const auto idle_ = idle;
     const auto key_ = key;
+    const auto key_of_ = key_of;
     const auto bond_at_ = bond_at;
     constexpr bool Save = decltype(save)::value;
     constexpr int K = pairblock::kLanes;
@@ -477,7 +480,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
         if (SN_) SN_[c] = 0.0;  // a live lane's is written in stage 3
         // key_(c) from the flags in hand (a live lane's are still fl): reloading the byte just
         // stored cost 2 % of the linear pass, measured inside one run (docs/speed.md, session 36).
-        k0[n] = (fl & ContactHist::kActive) | (BD_ ? static_cast<unsigned>(BD_[c].state) << 8 : 0u);
+        k0[n] = key_of_(fl, c);
         in.c[n] = c;
         in.a[n] = a;
         in.b[n] = b;
