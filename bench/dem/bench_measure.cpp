@@ -16,12 +16,19 @@
 // stage (one thread, dem_node/main.cpp step_values); `step_threads` runs the step on that many.
 // The line ends with the step's phases (World::phase_times) and the wall-contact counts; a second
 // line gives a hash of the state after the steps (x, v, ω, the facet walls' vertex sums).
+// BENCH_MEASURE_HOSTED=0 runs the facets in their own pass after the ball-ball pass
+// (World::set_hosted_facets(false)); =ab switches between the two every 10 steps inside the run
+// (blocks hosted, own, own, hosted, ...: the same bits either way) and prints the ratio of the
+// step's time, hosted over own, per pair of neighbouring blocks (mean and standard error).
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <sstream>
 #include <string>
+#include <vector>
 
 #include "coordinator/core/checkpoint.hpp"
 #include "demfdm/dem/checkpoint.hpp"
@@ -57,6 +64,12 @@ int main(int argc, char** argv) try {
     // As the DEM node: the pass keeps the force norms for the scan (BENCH_MEASURE_NORMS=0: not).
     const char* kn = std::getenv("BENCH_MEASURE_NORMS");
     w.keep_force_norms(!(kn && std::string(kn) == "0"));
+    const char* hv = std::getenv("BENCH_MEASURE_HOSTED");
+    const std::string hosted_mode = hv ? hv : "1";
+    const bool ab = hosted_mode == "ab";
+    w.set_hosted_facets(hosted_mode != "0");
+    constexpr int kBlock = 10;
+    std::vector<double> block_ms;  // (ab) the step's time per block of kBlock steps
     const int step_threads = w.params().threads;
     const int mt = measure_threads > 0 ? measure_threads : step_threads;
     // The escape test's box: the balls' extent at the start, one diameter wider.
@@ -73,9 +86,15 @@ int main(int argc, char** argv) try {
       // The step and the guard on the World's threads (the node's guard runs before the forces
       // go out), the measurements on `mt`.
       w.mutable_params().threads = step_threads;
+      const int blk = s / kBlock;
+      if (ab) w.set_hosted_facets(blk % 4 == 0 || blk % 4 == 3);
       const auto t0 = Clock::now();
       w.step();
       const auto t1 = Clock::now();
+      if (ab) {
+        if (static_cast<int>(block_ms.size()) <= blk) block_ms.resize(static_cast<std::size_t>(blk) + 1, 0.0);
+        block_ms[static_cast<std::size_t>(blk)] += ms(t0, t1);
+      }
       // The guard's tests one by one (the node before session 16) and in one pass (screen_balls),
       // first the one, then the other on alternate steps (the second finds the rows in cache).
       double ke = 0.0;
@@ -134,6 +153,21 @@ int main(int argc, char** argv) try {
         sink, 1e3 * ph.rebuild / n, 1e3 * ph.pair / n, 1e3 * ph.facet / n, 1e3 * ph.footing / n, 1e3 * ph.plane / n,
         1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
         w.footing_contacts().size());
+    if (ab) {
+      // Block pairs (0,1), (2,3), ...: hosted/own, own/hosted alternately; complete blocks only.
+      std::vector<double> q;
+      for (std::size_t b = 0; b + 1 < block_ms.size() && (b + 2) * kBlock <= static_cast<std::size_t>(steps); b += 2) {
+        const bool first_hosted = b % 4 == 0;
+        q.push_back(first_hosted ? block_ms[b] / block_ms[b + 1] : block_ms[b + 1] / block_ms[b]);
+      }
+      double mean = 0.0, var = 0.0;
+      for (double x : q) mean += x;
+      mean /= std::max<std::size_t>(1, q.size());
+      for (double x : q) var += (x - mean) * (x - mean);
+      const double se = q.size() > 1 ? std::sqrt(var / static_cast<double>(q.size() - 1) / static_cast<double>(q.size())) : 0.0;
+      std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
+                  mean, se, q.size(), kBlock);
+    }
     // The state after the steps, for comparing builds bit for bit: x, v, ω of every ball and the
     // facet walls' vertex forces and stiffnesses.
     std::uint64_t h = demfdm::io::fnv1a64(w.balls().x.data(), w.num_balls() * sizeof(Vec3));

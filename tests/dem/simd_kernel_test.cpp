@@ -302,6 +302,8 @@ struct WallRun {
   std::vector<double> vforce, vstiff;
   Vec3 footing, plane0, plane1;
   int count[5] = {0, 0, 0, 0, 0};
+  std::size_t pairs = 0;           // ball-ball contacts at the end
+  std::int64_t facets_hosted = 0;  // PhaseTimes::facets_hosted
 };
 
 bool same_bytes(const void* a, const void* b, std::size_t n) { return std::memcmp(a, b, n) == 0; }
@@ -351,7 +353,7 @@ std::string bond_diff(const std::vector<BondHist>& a, const std::vector<BondHist
 }
 
 WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls = ContactModel::kLinear,
-                  ContactModel facets = ContactModel::kLinearPBond) {
+                  ContactModel facets = ContactModel::kLinearPBond, int layers = 3, bool hosted = true) {
   WorldParams p;
   p.threads = threads;
   p.ball_wall.model = p.ball_footing.model = walls;
@@ -364,8 +366,9 @@ WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls 
   p.ball_facet.pbond.coh = 2e7;
   World w(p);
   w.set_pair_kernel(kernel);
+  w.set_hosted_facets(hosted);
   const double R = 1e-4, s = 2.002 * R;
-  const int nx = 20, ny = 16, nz = 3;
+  const int nx = 20, ny = 16, nz = layers;
   std::mt19937_64 rng(77);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   for (int k = 0; k < nz; ++k)
@@ -448,7 +451,33 @@ WallRun run_walls(PairKernel kernel, int threads, int steps, ContactModel walls 
   r.footing = w.footing_reaction();
   r.plane0 = w.plane(0).reaction;
   r.plane1 = w.plane(1).reaction;
+  r.pairs = w.pair_contacts().size();
+  r.facets_hosted = w.phase_times().facets_hosted;
   return r;
+}
+
+// Every result of two wall runs: balls, the three wall kinds' contacts, the interface bonds, the
+// vertex sums and the walls' reactions.
+void expect_same_walls(const WallRun& r, const WallRun& ref) {
+  EXPECT_TRUE(same_bits(r.balls.x, ref.balls.x)) << "x differs by " << rel_diff(r.balls.x, ref.balls.x);
+  EXPECT_TRUE(same_bits(r.balls.v, ref.balls.v)) << "v differs by " << rel_diff(r.balls.v, ref.balls.v);
+  EXPECT_TRUE(same_bits(r.balls.w, ref.balls.w)) << "w differs by " << rel_diff(r.balls.w, ref.balls.w);
+  EXPECT_TRUE(same_bits(r.balls.f, ref.balls.f)) << "f differs by " << rel_diff(r.balls.f, ref.balls.f);
+  EXPECT_TRUE(same_bits(r.balls.t, ref.balls.t)) << "t differs by " << rel_diff(r.balls.t, ref.balls.t);
+  for (int kind = 0; kind < 3; ++kind) {
+    SCOPED_TRACE("wall kind " + std::to_string(kind));
+    EXPECT_EQ(hist_diff(r.h[kind], ref.h[kind]), "");
+    EXPECT_TRUE(same_vec(r.F[kind], ref.F[kind]));
+    EXPECT_TRUE(same_vec(r.M[kind], ref.M[kind]));
+    EXPECT_TRUE(same_vec(r.TA[kind], ref.TA[kind]));
+    EXPECT_TRUE(same_vec(r.xc[kind], ref.xc[kind]));
+  }
+  EXPECT_EQ(bond_diff(r.bond, ref.bond), "");
+  EXPECT_TRUE(same_vec(r.vforce, ref.vforce));
+  EXPECT_TRUE(same_vec(r.vstiff, ref.vstiff));
+  EXPECT_TRUE(same_bytes(&r.footing, &ref.footing, sizeof(Vec3)));
+  EXPECT_TRUE(same_bytes(&r.plane0, &ref.plane0, sizeof(Vec3)));
+  EXPECT_TRUE(same_bytes(&r.plane1, &ref.plane1, sizeof(Vec3)));
 }
 
 void check_walls(int threads, int steps, ContactModel walls = ContactModel::kLinear,
@@ -468,25 +497,7 @@ void check_walls(int threads, int steps, ContactModel walls = ContactModel::kLin
   for (PairKernel k : vector_kernels()) {
     SCOPED_TRACE(std::string("walls kernel ") + kernel_name(k) + ", threads " + std::to_string(threads));
     const WallRun r = run_walls(k, threads, steps, walls, facets);
-    EXPECT_TRUE(same_bits(r.balls.x, ref.balls.x)) << "x differs by " << rel_diff(r.balls.x, ref.balls.x);
-    EXPECT_TRUE(same_bits(r.balls.v, ref.balls.v)) << "v differs by " << rel_diff(r.balls.v, ref.balls.v);
-    EXPECT_TRUE(same_bits(r.balls.w, ref.balls.w)) << "w differs by " << rel_diff(r.balls.w, ref.balls.w);
-    EXPECT_TRUE(same_bits(r.balls.f, ref.balls.f)) << "f differs by " << rel_diff(r.balls.f, ref.balls.f);
-    EXPECT_TRUE(same_bits(r.balls.t, ref.balls.t)) << "t differs by " << rel_diff(r.balls.t, ref.balls.t);
-    for (int kind = 0; kind < 3; ++kind) {
-      SCOPED_TRACE("wall kind " + std::to_string(kind));
-      EXPECT_EQ(hist_diff(r.h[kind], ref.h[kind]), "");
-      EXPECT_TRUE(same_vec(r.F[kind], ref.F[kind]));
-      EXPECT_TRUE(same_vec(r.M[kind], ref.M[kind]));
-      EXPECT_TRUE(same_vec(r.TA[kind], ref.TA[kind]));
-      EXPECT_TRUE(same_vec(r.xc[kind], ref.xc[kind]));
-    }
-    EXPECT_EQ(bond_diff(r.bond, ref.bond), "");
-    EXPECT_TRUE(same_vec(r.vforce, ref.vforce));
-    EXPECT_TRUE(same_vec(r.vstiff, ref.vstiff));
-    EXPECT_TRUE(same_bytes(&r.footing, &ref.footing, sizeof(Vec3)));
-    EXPECT_TRUE(same_bytes(&r.plane0, &ref.plane0, sizeof(Vec3)));
-    EXPECT_TRUE(same_bytes(&r.plane1, &ref.plane1, sizeof(Vec3)));
+    expect_same_walls(r, ref);
   }
 }
 
@@ -515,4 +526,29 @@ TEST(SimdKernel, SoftBondFacetContactsBitIdentical) {
   EXPECT_GT(r.count[static_cast<int>(BondState::kIntact)], 0);
   EXPECT_GT(r.count[static_cast<int>(BondState::kBrokenTension)] + r.count[static_cast<int>(BondState::kBrokenShear)],
             0);
+}
+
+// The interface facets' contacts as side units of the ball-ball pass (World::set_hosted_facets,
+// the default) against their own pass after it: the same bits, on one thread and on two, with a
+// ball-ball pass too small to be cut into chunks (3 layers) and one cut in two (6 layers: more
+// than 4,096 pairs), the vector kernels and the scalar loops, bonds breaking.
+TEST(SimdKernel, HostedFacetsBitIdentical) {
+  for (int threads : {1, 2})
+    for (int layers : {3, 6})
+      for (PairKernel k : {PairKernel::kAuto, PairKernel::kScalar})
+        for (ContactModel facets : {ContactModel::kLinearPBond, ContactModel::kSoftBond}) {
+          SCOPED_TRACE(std::string("threads ") + std::to_string(threads) + ", layers " + std::to_string(layers) +
+                       ", kernel " + kernel_name(k) + ", facets " + law_name(facets));
+          const WallRun ref = run_walls(k, threads, 150, ContactModel::kLinear, facets, layers, false);
+          const WallRun r = run_walls(k, threads, 150, ContactModel::kLinear, facets, layers, true);
+          if (layers == 6) {
+            ASSERT_GT(ref.pairs, 4096u);  // the threaded ball-ball pass at 2 threads
+          } else {
+            ASSERT_LE(ref.pairs, 4096u);
+          }
+          ASSERT_GT(ref.h[1].size(), 256u);  // the facets' own loop at 2 threads
+          EXPECT_EQ(ref.facets_hosted, 0);
+          EXPECT_EQ(r.facets_hosted, 151);  // prepare() and 150 steps
+          expect_same_walls(r, ref);
+        }
 }

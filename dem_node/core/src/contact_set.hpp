@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "demfdm/dem/laws/registry.hpp"
@@ -29,6 +30,18 @@ struct SetContext {
   bool newton = false;          // a pair is listed only where its lower-id ball is not a ghost
 };
 
+/// A set's per-contact work handed to another set's pass (World::force_pass): `units`
+/// independent units (a few contacts each), which the ball-ball pass's threads take in any order
+/// once their own chunk is done, filling the time a thread would wait at the barrier. A unit
+/// writes only its own contacts' records, so the order in which units run changes no bit.
+struct SideWork {
+  std::int64_t units = 0;
+  void (*run)(void* ctx, std::int64_t unit) = nullptr;
+  void* ctx = nullptr;
+  bool parallel = false;  // worth a parallel loop of its own where the host pass runs on one thread
+  double thread_s = 0.0;  // [s] summed over the threads: the time spent in the units (for the phases)
+};
+
 /// One set of contacts, in the cycle's order: the ball-ball pairs first, then the wall kinds.
 class ContactSet {
  public:
@@ -45,6 +58,15 @@ class ContactSet {
   virtual void idle() {}
   /// Force-displacement of every contact (docs/theory.md 1.4-1.7, 2-3).
   virtual void pass(SetContext& cx, double dt) = 0;
+  /// Whether pass_hosted may run: the set's per-contact work is independent units.
+  virtual bool shares_work() const { return false; }
+  /// The same pass, its per-contact units handed to `host`, which runs them (all of them, in any
+  /// order, on any threads) before it returns: the set's work before and after the units runs here.
+  virtual void pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host) {
+    pass(cx, dt);
+    SideWork none;
+    host(none);
+  }
   /// Add the contact forces and torques onto the balls, serially in contact order (the pairs
   /// add theirs in the pass).
   virtual void gather(Particles&) const {}

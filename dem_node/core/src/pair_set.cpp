@@ -4,6 +4,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <numeric>
@@ -197,11 +198,11 @@ template <class L>
 }
 }  // namespace
 
-void PairSet::pass(SetContext& cx, double dt) {
+void PairSet::pass(SetContext& cx, double dt, SideWork* side) {
   const bool per = cx.p.periodic.enabled;
   visit_law(cx.p.ball_ball.model, [&](auto law) {
     using L = decltype(law);
-    per ? pass_law<L, true>(cx, dt) : pass_law<L, false>(cx, dt);
+    per ? pass_law<L, true>(cx, dt, side) : pass_law<L, false>(cx, dt, side);
   });
 }
 
@@ -225,7 +226,7 @@ void PairSet::pass(SetContext& cx, double dt) {
 // pass bit for bit at any thread count (tests/dem/thread_count_test.cpp); a list that is not
 // sorted (never seen by a pass in practice: a rebuild sorts it) runs on one thread.
 template <class Law, bool Periodic>
-void PairSet::pass_law(SetContext& cx, double dt) {
+void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   const std::int64_t m = static_cast<std::int64_t>(contacts.size());
   const std::size_t n = cx.pt.size();
   const LawConst lc = detail::law_const(cx.p.ball_ball, cx.p.rescale_shear, false);
@@ -536,6 +537,13 @@ void PairSet::pass_law(SetContext& cx, double dt) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
     std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
     run(std::false_type{}, 0, m, cx.pt.f.data(), cx.pt.t.data(), ChunkCursor{});
+    if (side && side->units > 0) {  // the side units after it, in a loop of their own
+      const double t0 = omp_get_wtime();
+      const SideWork& w = *side;
+#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && w.parallel)
+      for (std::int64_t u = 0; u < w.units; ++u) w.run(w.ctx, u);
+      side->thread_s += (omp_get_wtime() - t0) * (nt > 1 && w.parallel ? nt : 1);
+    }
     return;
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));
@@ -558,9 +566,17 @@ void PairSet::pass_law(SetContext& cx, double dt) {
   const std::uint32_t* __restrict__ EO = ev_off_.data();
   const std::uint32_t* __restrict__ EV = ev_.data();
   const std::int32_t* __restrict__ K0 = first_.data();
+  // The side units: taken kSideGrab at a time from a shared counter by each thread once its own
+  // chunks are done. The chunks of the threads finish apart by up to a millisecond from pass to
+  // pass on this project's 2-vCPU machines (docs/speed.md, session 37): the first thread done
+  // fills that wait, and the last one takes what is left.
+  constexpr std::int64_t kSideGrab = 4;
+  std::atomic<std::int64_t> side_next{0};
+  double side_s = 0.0;
   // One parallel region per pass: the chunks (chunk k on thread k mod T, so the chunks, and the
-  // bits, do not depend on how many threads the runtime grants), a barrier, then the fixed-order
-  // reduction of the chunk buffers split by particle rows, which also finishes the split balls.
+  // bits, do not depend on how many threads the runtime grants), the side units, a barrier, then
+  // the fixed-order reduction of the chunk buffers split by particle rows, which also finishes the
+  // split balls.
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num(), T = omp_get_num_threads();
@@ -585,6 +601,18 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       }
       if (threaded) run(std::true_type{}, c0, c1, f, t, cursor(k));
       else run(std::false_type{}, c0, c1, f, t, ChunkCursor{});
+    }
+    if (side) {
+      const double t0 = omp_get_wtime();
+      const SideWork& w = *side;
+      for (;;) {
+        const std::int64_t u0 = side_next.fetch_add(kSideGrab, std::memory_order_relaxed);
+        if (u0 >= w.units) break;
+        for (std::int64_t u = u0, e = std::min(w.units, u0 + kSideGrab); u < e; ++u) w.run(w.ctx, u);
+      }
+      const double ts = omp_get_wtime() - t0;
+#pragma omp atomic
+      side_s += ts;
     }
 #pragma omp barrier
     std::size_t rlo = n, rhi = 0;
@@ -636,6 +664,7 @@ void PairSet::pass_law(SetContext& cx, double dt) {
       }
     }
   }
+  if (side) side->thread_s += side_s;
 }
 
 // The plan of a threaded pass in `chunks` chunks (see pass_law): the chunk boundaries, the split

@@ -22,7 +22,10 @@ class PairSet final : public ContactSet {
   PairContacts contacts;  // the contacts, sorted by (a, b) after a rebuild
 
   void rebuild(SetContext& cx) override;
-  void pass(SetContext& cx, double dt) override;
+  void pass(SetContext& cx, double dt) override { pass(cx, dt, nullptr); }
+  /// The pass, with another set's units (`side`, may be null) run by its threads once their own
+  /// chunk is done (World::force_pass): all of them before it returns.
+  void pass(SetContext& cx, double dt, SideWork* side);
   void scan(const SetContext& cx, bool critical_step, bool mean_force) override;
   void add_force_norms(double& sum, std::size_t& count) const override;
   void add_stiffness(const SetContext& cx, double* kt, double* kr) const override;
@@ -85,7 +88,7 @@ class PairSet final : public ContactSet {
 
  private:
   template <class Law, bool Periodic>
-  void pass_law(SetContext& cx, double dt);
+  void pass_law(SetContext& cx, double dt, SideWork* side);
 
   // Plan of the threaded pass for its chunk count (pass_law, plan_split).
   void plan_split(std::size_t n, int chunks);

@@ -45,6 +45,8 @@ class WallSet final : public ContactSet {
   bool present() const override { return kind.present(); }
   void idle() override { kind.idle(); }
   void pass(SetContext& cx, double dt) override;
+  bool shares_work() const override { return Kind::kParallel; }
+  void pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host) override;
   void gather(Particles& pt) const override;
   void move(double dt) override { kind.move(dt); }
   double travel() const override { return kind.travel(); }
@@ -57,7 +59,8 @@ class WallSet final : public ContactSet {
 
  private:
   template <class Law>
-  void pass_law(SetContext& cx, const ContactFamilyParams& fam, double dt);
+  void pass_law(SetContext& cx, const ContactFamilyParams& fam, double dt,
+                const std::function<void(SideWork&)>* host);
 };
 
 /// Planar walls (platens, boxes): one-sided inside their rectangle; reaction and the sum of the

@@ -463,12 +463,23 @@ Vec3 wall_contact(const Particles& pt, WallContacts& wc, std::int64_t c, const V
 template <class Kind>
 void WallSet<Kind>::pass(SetContext& cx, double dt) {
   const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
-  visit_law(fam.model, [&](auto law) { pass_law<decltype(law)>(cx, fam, dt); });
+  visit_law(fam.model, [&](auto law) { pass_law<decltype(law)>(cx, fam, dt, nullptr); });
+}
+
+template <class Kind>
+void WallSet<Kind>::pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host) {
+  if constexpr (!Kind::kParallel) {
+    ContactSet::pass_hosted(cx, dt, host);  // (no units: the kind's contacts run in order)
+    return;
+  }
+  const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
+  visit_law(fam.model, [&](auto law) { pass_law<decltype(law)>(cx, fam, dt, &host); });
 }
 
 template <class Kind>
 template <class Law>
-void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, double dt) {
+void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, double dt,
+                             const std::function<void(SideWork&)>* host) {
   const LawConst lc = detail::law_const(fam, cx.p.rescale_shear, true);
   WallContacts& wc = contacts;
   const std::int64_t m = static_cast<std::int64_t>(wc.size());
@@ -547,7 +558,23 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
     const int nt = cx.threads;
     // Each contact writes only its own records, so the split changes no bit; a few hundred
     // contacts (the interface facets of a coupled block) already pay for the fork.
-    if (kern) {
+    if (host) {
+      // Units of K contacts (a lane block, or K contacts one by one) run by the host pass's
+      // threads, in any order (World::force_pass).
+      auto unit = [&](std::int64_t u) {
+        if (kern) {
+          block(u * K);
+        } else {
+          for (std::int64_t c = u * K, e = std::min(m, c + K); c < e; ++c) one(c);
+        }
+      };
+      SideWork w;
+      w.units = nb;
+      w.run = [](void* p, std::int64_t u) { (*static_cast<decltype(unit)*>(p))(u); };
+      w.ctx = &unit;
+      w.parallel = nt > 1 && m > 256;
+      (*host)(w);
+    } else if (kern) {
 #pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)
       for (std::int64_t b = 0; b < nb; ++b) block(b * K);
     } else {

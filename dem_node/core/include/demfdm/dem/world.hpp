@@ -206,6 +206,7 @@ struct PhaseTimes {
   /// share a name (gravity switched off and on) share the entry.
   std::vector<std::pair<std::string, double>> effect;
   std::int64_t steps = 0;           // step() calls timed
+  std::int64_t facets_hosted = 0;   // force passes that ran the facets inside the ball-ball pass
   const char* pair_model = "";      // to_string(params().ball_ball.model)
   /// Sum of the phases above (effects counted once, through effects_total).
   double total() const { return rebuild + pair + plane + facet + footing + gather + motion + effects_total; }
@@ -413,6 +414,10 @@ class World {
   /// Choose the implementation of the contact passes and the law of motion (throws
   /// std::invalid_argument if this CPU lacks the instruction set).
   void set_pair_kernel(PairKernel k);
+  /// The interface facets' contacts run inside the ball-ball pass, on the threads that finish
+  /// their part of it first (World::force_pass; default on). The same bits either way
+  /// (tests/dem/simd_kernel_test.cpp compares the two); off: the facets' own pass after it.
+  void set_hosted_facets(bool on) { hosted_facets_ = on; }
   PairKernel pair_kernel() const { return kernel_; }
   /// True if `k` can run on this CPU.
   static bool pair_kernel_available(PairKernel k);
@@ -589,6 +594,7 @@ class World {
   double e_slip_dead_ = 0.0, e_soft_dead_ = 0.0;
   PhaseTimes times_;
   PairKernel kernel_ = PairKernel::kAuto;
+  bool hosted_facets_ = true;  // set_hosted_facets
 };
 
 /// Gravity as an optional force effect (§1.2).
