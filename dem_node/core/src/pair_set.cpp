@@ -567,9 +567,9 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   const std::uint32_t* __restrict__ EV = ev_.data();
   const std::int32_t* __restrict__ K0 = first_.data();
   // The side units: taken kSideGrab at a time from a shared counter by each thread once its own
-  // chunks are done. The chunks of the threads finish apart by up to a millisecond from pass to
-  // pass on this project's 2-vCPU machines (docs/speed.md, session 37): the first thread done
-  // fills that wait, and the last one takes what is left.
+  // chunks are done. On a 2-vCPU virtual machine the threads' chunks finished 0.7-1.0 ms apart on
+  // average, the late thread changing from pass to pass (docs/speed.md, session 37): the first
+  // thread done fills that wait, and the last one takes what is left.
   constexpr std::int64_t kSideGrab = 4;
   std::atomic<std::int64_t> side_next{0};
   double side_s = 0.0;
