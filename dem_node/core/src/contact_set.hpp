@@ -5,8 +5,9 @@
 // per pass, never one per contact: inside, each set runs a template instantiation per law.
 #pragma once
 
+#include <omp.h>
+
 #include <cstdint>
-#include <functional>
 #include <vector>
 
 #include "demfdm/dem/laws/registry.hpp"
@@ -38,9 +39,19 @@ struct SideWork {
   std::int64_t units = 0;
   void (*run)(void* ctx, std::int64_t unit) = nullptr;
   void* ctx = nullptr;
-  bool parallel = false;  // worth a parallel loop of its own where the host pass runs on one thread
+  bool parallel = false;  // worth a parallel loop of its own (run_side_work)
   double thread_s = 0.0;  // [s] summed over the threads: the time spent in the units (for the phases)
 };
+
+/// Runs every unit of `w` here: a parallel loop on `threads` where w.parallel, else in order;
+/// adds the time to w.thread_s.
+inline void run_side_work(SideWork& w, int threads) {
+  const bool par = threads > 1 && w.parallel;
+  const double t0 = omp_get_wtime();
+#pragma omp parallel for schedule(static) num_threads(threads) if (par)
+  for (std::int64_t u = 0; u < w.units; ++u) w.run(w.ctx, u);
+  w.thread_s += (omp_get_wtime() - t0) * (par ? threads : 1);
+}
 
 /// One set of contacts, in the cycle's order: the ball-ball pairs first, then the wall kinds.
 class ContactSet {
@@ -58,15 +69,6 @@ class ContactSet {
   virtual void idle() {}
   /// Force-displacement of every contact (docs/theory.md 1.4-1.7, 2-3).
   virtual void pass(SetContext& cx, double dt) = 0;
-  /// Whether pass_hosted may run: the set's per-contact work is independent units.
-  virtual bool shares_work() const { return false; }
-  /// The same pass, its per-contact units handed to `host`, which runs them (all of them, in any
-  /// order, on any threads) before it returns: the set's work before and after the units runs here.
-  virtual void pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host) {
-    pass(cx, dt);
-    SideWork none;
-    host(none);
-  }
   /// Add the contact forces and torques onto the balls, serially in contact order (the pairs
   /// add theirs in the pass).
   virtual void gather(Particles&) const {}

@@ -537,13 +537,7 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
     std::fill(cx.pt.t.begin(), cx.pt.t.end(), Vec3{});
     run(std::false_type{}, 0, m, cx.pt.f.data(), cx.pt.t.data(), ChunkCursor{});
-    if (side && side->units > 0) {  // the side units after it, in a loop of their own
-      const double t0 = omp_get_wtime();
-      const SideWork& w = *side;
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && w.parallel)
-      for (std::int64_t u = 0; u < w.units; ++u) w.run(w.ctx, u);
-      side->thread_s += (omp_get_wtime() - t0) * (nt > 1 && w.parallel ? nt : 1);
-    }
+    if (side) run_side_work(*side, nt);  // the side units after it, in a loop of their own
     return;
   }
   if (tbuf_.size() < static_cast<std::size_t>(nt)) tbuf_.resize(static_cast<std::size_t>(nt));

@@ -20,6 +20,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "contact_set.hpp"
@@ -45,8 +46,11 @@ class WallSet final : public ContactSet {
   bool present() const override { return kind.present(); }
   void idle() override { kind.idle(); }
   void pass(SetContext& cx, double dt) override;
-  bool shares_work() const override { return Kind::kParallel; }
-  void pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host) override;
+  /// The pass with its per-contact units handed to `host`, which runs them all (in any order, on
+  /// any threads) before it returns; the kind's work before and after them runs here
+  /// (World::force_pass: the facets inside the ball-ball pass).
+  void pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host)
+    requires Kind::kParallel;
   void gather(Particles& pt) const override;
   void move(double dt) override { kind.move(dt); }
   double travel() const override { return kind.travel(); }

@@ -467,11 +467,9 @@ void WallSet<Kind>::pass(SetContext& cx, double dt) {
 }
 
 template <class Kind>
-void WallSet<Kind>::pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host) {
-  if constexpr (!Kind::kParallel) {
-    ContactSet::pass_hosted(cx, dt, host);  // (no units: the kind's contacts run in order)
-    return;
-  }
+void WallSet<Kind>::pass_hosted(SetContext& cx, double dt, const std::function<void(SideWork&)>& host)
+  requires Kind::kParallel
+{
   const ContactFamilyParams& fam = cx.p.*Kind::kFamily;
   visit_law(fam.model, [&](auto law) { pass_law<decltype(law)>(cx, fam, dt, &host); });
 }
@@ -553,40 +551,26 @@ void WallSet<Kind>::pass_law(SetContext& cx, const ContactFamilyParams& fam, dou
       kind.after_law(cx, wc, c);
     }
   };
-  const std::int64_t nb = (m + K - 1) / K;
-  if constexpr (Kind::kParallel) {
-    const int nt = cx.threads;
-    // Each contact writes only its own records, so the split changes no bit; a few hundred
-    // contacts (the interface facets of a coupled block) already pay for the fork.
-    if (host) {
-      // Units of K contacts (a lane block, or K contacts one by one) run by the host pass's
-      // threads, in any order (World::force_pass).
-      auto unit = [&](std::int64_t u) {
-        if (kern) {
-          block(u * K);
-        } else {
-          for (std::int64_t c = u * K, e = std::min(m, c + K); c < e; ++c) one(c);
-        }
-      };
-      SideWork w;
-      w.units = nb;
-      w.run = [](void* p, std::int64_t u) { (*static_cast<decltype(unit)*>(p))(u); };
-      w.ctx = &unit;
-      w.parallel = nt > 1 && m > 256;
-      (*host)(w);
-    } else if (kern) {
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)
-      for (std::int64_t b = 0; b < nb; ++b) block(b * K);
-    } else {
-#pragma omp parallel for schedule(static) num_threads(nt) if (nt > 1 && m > 256)
-      for (std::int64_t c = 0; c < m; ++c) one(c);
-    }
-  } else {
+  // Units of K contacts: a lane block, or K contacts one by one. Each contact writes only its own
+  // records, so the units may run in any order, on any threads, without changing a bit: in a
+  // parallel loop (kinds with kParallel, from a few hundred contacts, the interface facets of a
+  // coupled block, which already pay for the fork), else in order, or by `host` (pass_hosted).
+  auto unit = [&](std::int64_t u) {
     if (kern) {
-      for (std::int64_t b = 0; b < nb; ++b) block(b * K);
+      block(u * K);
     } else {
-      for (std::int64_t c = 0; c < m; ++c) one(c);
+      for (std::int64_t c = u * K, e = std::min(m, c + K); c < e; ++c) one(c);
     }
+  };
+  SideWork w;
+  w.units = (m + K - 1) / K;
+  w.run = [](void* p, std::int64_t u) { (*static_cast<decltype(unit)*>(p))(u); };
+  w.ctx = &unit;
+  w.parallel = Kind::kParallel && m > 256;
+  if (host) {
+    (*host)(w);
+  } else {
+    run_side_work(w, cx.threads);
   }
   for (std::int64_t c = 0; c < m; ++c) kind.add(Kind::rec(wc, c));
   kind.end(cx, wc);

@@ -266,29 +266,29 @@ void World::force_pass(double dt) {
   // forking again for the facets. Each unit writes only its own contacts' records and the facets'
   // sums follow in contact order, so this changes no bit. Not on ranks, whose Newton reverse
   // communication follows the ball-ball pass.
-  ContactSet* guest = hosted_facets_ && !newton_reverse_ && facets_->present() && facets_->shares_work() ? facets_.get() : nullptr;
+  const bool hosted = hosted_facets_ && !newton_reverse_ && facets_->present();
   Lap lap;
   for (ContactSet* set : sets_) {
     if (!set->present()) {
       set->idle();
       continue;
     }
-    if (set == guest) continue;  // (ran inside the ball-ball pass)
-    if (set == pairs_.get() && guest) {
-      double hosted = 0.0, units_s = 0.0;
-      guest->pass_hosted(cx, dt, [&](SideWork& w) {
+    if (hosted && set == facets_.get()) continue;  // (ran inside the ball-ball pass)
+    if (hosted && set == pairs_.get()) {
+      double host_s = 0.0, units_s = 0.0;
+      facets_->pass_hosted(cx, dt, [&](SideWork& w) {
         Lap in;
         pairs_->pass(cx, dt, &w);
-        in(hosted);
+        in(host_s);
         units_s = w.thread_s;
       });
       double both = 0.0;
       lap(both);
       // The phases: the units' thread time over the threads goes to the facets, with the facet
       // pass's own work before and after them; the rest of the ball-ball pass to the pairs.
-      const double units = std::min(hosted, units_s / std::max(1, cx.threads));
-      times_.pair += hosted - units;
-      times_.facet += both - hosted + units;
+      const double units = std::min(host_s, units_s / std::max(1, cx.threads));
+      times_.pair += host_s - units;
+      times_.facet += both - host_s + units;
       ++times_.facets_hosted;
       continue;
     }
