@@ -67,6 +67,7 @@
 #include "demfdm/dem/measure.hpp"
 #include "demfdm/dem/pair_block.hpp"
 #include "demfdm/dem/world.hpp"
+#include "ab_blocks.hpp"
 #include "packing.hpp"
 
 using namespace demfdm::dem;
@@ -137,35 +138,24 @@ std::optional<AbSpec> ab_from_env(int steps) {
 // The timed steps of an A/B run; prints the "ab ..." line (stderr).
 void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore) {
   std::vector<double> t(static_cast<std::size_t>(steps));
-  auto is_a = [](int blk) { return ((blk + 1) / 2) % 2 == 0; };  // blocks A B B A A B B A ...
   for (int k = 0; k < steps; ++k) {
-    if (k % ab.block == 0) w.set_pair_kernel(is_a(k / ab.block) ? ab.ka : ab.kb);
+    if (k % ab.block == 0) w.set_pair_kernel(demfdm::bench::ab_block_is_a(k / ab.block) ? ab.ka : ab.kb);
     const double p0 = w.phase_times().pair;
     w.step(1);
     t[static_cast<std::size_t>(k)] = w.phase_times().pair - p0;
   }
   w.set_pair_kernel(restore);
-  std::vector<double> r;
-  double sa = 0.0, sb = 0.0;
-  for (int blk = 0; (blk + 2) * ab.block <= steps; blk += 2) {
-    double t0 = 0.0, t1 = 0.0;  // the pair's first and second block
-    for (int j = ab.skip; j < ab.block; ++j) {
-      t0 += t[static_cast<std::size_t>(blk * ab.block + j)];
-      t1 += t[static_cast<std::size_t>((blk + 1) * ab.block + j)];
-    }
-    const double ta = is_a(blk) ? t0 : t1, tb = is_a(blk) ? t1 : t0;
-    r.push_back(ta / tb);
-    sa += ta, sb += tb;
+  std::vector<double> block;  // each complete block's time, its first `skip` steps left out
+  for (int blk = 0; (blk + 1) * ab.block <= steps; ++blk) {
+    double s = 0.0;
+    for (int j = ab.skip; j < ab.block; ++j) s += t[static_cast<std::size_t>(blk * ab.block + j)];
+    block.push_back(s);
   }
-  const double n = double(r.size());
-  double m = 0.0, v = 0.0;
-  for (double x : r) m += x / n;
-  for (double x : r) v += (x - m) * (x - m) / (n - 1.0);
-  const double per = double(ab.block - ab.skip) * n;
+  const demfdm::bench::AbRatios r = demfdm::bench::ab_ratios(block);
+  const double per = double(ab.block - ab.skip) * double(r.pairs);
   std::fprintf(stderr, "ab kernel_a=%s kernel_b=%s block=%d skip=%d pairs=%zu ratio_a_over_b=%.4f se=%.4f a_ms=%.4f "
                "b_ms=%.4f\n",
-               ab.a.c_str(), ab.b.c_str(), ab.block, ab.skip, r.size(), m, std::sqrt(v / n), 1e3 * sa / per,
-               1e3 * sb / per);
+               ab.a.c_str(), ab.b.c_str(), ab.block, ab.skip, r.pairs, r.mean, r.se, 1e3 * r.a / per, 1e3 * r.b / per);
 }
 
 using demfdm::simd::isa_name;

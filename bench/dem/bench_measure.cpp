@@ -18,11 +18,9 @@
 // line gives a hash of the state after the steps (x, v, ω, the facet walls' vertex sums).
 // BENCH_MEASURE_HOSTED=0 runs the facets in their own pass after the ball-ball pass
 // (World::set_hosted_facets(false)); =ab switches between the two every 10 steps inside the run
-// (blocks hosted, own, own, hosted, ...: the same bits either way) and prints the ratio of the
-// step's time, hosted over own, per pair of neighbouring blocks (mean and standard error).
-#include <algorithm>
+// (ab_blocks.hpp: A = hosted; the same bits either way) and prints the ratio of the step's time,
+// hosted over own, per pair of neighbouring blocks (mean and standard error).
 #include <chrono>
-#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -36,6 +34,7 @@
 #include "demfdm/dem/procedures.hpp"
 #include "demfdm/dem/world.hpp"
 #include "demfdm/io/state_file.hpp"
+#include "ab_blocks.hpp"
 
 using namespace demfdm::dem;
 using Clock = std::chrono::steady_clock;
@@ -87,7 +86,7 @@ int main(int argc, char** argv) try {
       // go out), the measurements on `mt`.
       w.mutable_params().threads = step_threads;
       const int blk = s / kBlock;
-      if (ab) w.set_hosted_facets(blk % 4 == 0 || blk % 4 == 3);
+      if (ab) w.set_hosted_facets(demfdm::bench::ab_block_is_a(blk));
       const auto t0 = Clock::now();
       w.step();
       const auto t1 = Clock::now();
@@ -154,19 +153,10 @@ int main(int argc, char** argv) try {
         1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
         w.footing_contacts().size());
     if (ab) {
-      // Block pairs (0,1), (2,3), ...: hosted/own, own/hosted alternately; complete blocks only.
-      std::vector<double> q;
-      for (std::size_t b = 0; b + 1 < block_ms.size() && (b + 2) * kBlock <= static_cast<std::size_t>(steps); b += 2) {
-        const bool first_hosted = b % 4 == 0;
-        q.push_back(first_hosted ? block_ms[b] / block_ms[b + 1] : block_ms[b + 1] / block_ms[b]);
-      }
-      double mean = 0.0, var = 0.0;
-      for (double x : q) mean += x;
-      mean /= std::max<std::size_t>(1, q.size());
-      for (double x : q) var += (x - mean) * (x - mean);
-      const double se = q.size() > 1 ? std::sqrt(var / static_cast<double>(q.size() - 1) / static_cast<double>(q.size())) : 0.0;
+      block_ms.resize(static_cast<std::size_t>(steps / kBlock));  // complete blocks only
+      const demfdm::bench::AbRatios r = demfdm::bench::ab_ratios(block_ms);
       std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
-                  mean, se, q.size(), kBlock);
+                  r.mean, r.se, r.pairs, kBlock);
     }
     // The state after the steps, for comparing builds bit for bit: x, v, ω of every ball and the
     // facet walls' vertex forces and stiffnesses.
