@@ -48,7 +48,8 @@ World::~World() = default;
 SetContext World::context() {
   return SetContext{pt_,           p_,           skin_,          edot_,
                     thread_count(), kernel_,      e_slip_dead_,   e_soft_dead_,
-                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), bool(newton_reverse_)};
+                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), bool(newton_reverse_),
+                    moving_rows_ < pt_.size() ? HUGE_VAL : max_disp2_};
 }
 
 PairContacts& World::pair_contacts() {
@@ -146,6 +147,9 @@ void World::set_pair_kernel(PairKernel k) {
     throw std::invalid_argument("set_pair_kernel: this CPU lacks the instruction set of the requested kernel.");
   kernel_ = k;
 }
+
+void World::set_skip_idle(bool on) { pairs_->set_skip_idle(on); }
+std::size_t World::pair_entries_visited() const { return pairs_->visited(); }
 
 const PhaseTimes& World::phase_times() const { return times_; }
 
@@ -299,6 +303,10 @@ void World::force_pass(double dt) {
       double comm = 0.0;
       lap(comm);
     }
+  }
+  if (pairs_->present()) {
+    times_.pair_listed += static_cast<std::int64_t>(pairs_->contacts.size());
+    times_.pair_visited += static_cast<std::int64_t>(pairs_->visited());
   }
   if (p_.order_free_sums && !wall_sums_by_caller_) order_free_wall_sums();
   Lap lap_gather;
