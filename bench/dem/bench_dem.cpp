@@ -97,25 +97,11 @@ PairKernel kernel_from_env(std::string& name) {
 // load, so on a busy host the ratio holds to 1-3 % where separate runs scatter by 10-20 %
 // (docs/speed.md, session 35). A candidate pass is compared with the current one by building it
 // as one of the kernels.
-// A name may end in "+noskip": that variant's pass also visits the idle pairs that cannot touch
-// (World::set_skip_idle(false)), e.g. BENCH_DEM_AB=auto,auto+noskip.
 struct AbSpec {
   std::string a, b;
   PairKernel ka = PairKernel::kAuto, kb = PairKernel::kAuto;
-  bool skip_a = true, skip_b = true;  // World::set_skip_idle
   int block = 10, skip = 1;
 };
-
-// "kernel[+noskip]": the kernel, and whether the pass skips idle pairs.
-PairKernel variant_named(const std::string& name, const char* var, bool& skip_idle) {
-  const std::string suffix = "+noskip";
-  skip_idle = true;
-  if (name.size() > suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0) {
-    skip_idle = false;
-    return kernel_named(name.substr(0, name.size() - suffix.size()), var);
-  }
-  return kernel_named(name, var);
-}
 
 int env_int(const char* var, int dflt, int lo, int hi) {
   const char* v = std::getenv(var);
@@ -138,8 +124,8 @@ std::optional<AbSpec> ab_from_env(int steps) {
     throw std::runtime_error("BENCH_DEM_AB: expected two kernel names as 'A,B', found '" + s + "'");
   ab.a = s.substr(0, comma);
   ab.b = s.substr(comma + 1);
-  ab.ka = variant_named(ab.a, "BENCH_DEM_AB", ab.skip_a);
-  ab.kb = variant_named(ab.b, "BENCH_DEM_AB", ab.skip_b);
+  ab.ka = kernel_named(ab.a, "BENCH_DEM_AB");
+  ab.kb = kernel_named(ab.b, "BENCH_DEM_AB");
   ab.block = env_int("BENCH_DEM_AB_BLOCK", 10, 2, 100000);
   ab.skip = env_int("BENCH_DEM_AB_SKIP", 1, 0, ab.block - 1);
   if (steps < 4 * ab.block)
@@ -153,17 +139,12 @@ std::optional<AbSpec> ab_from_env(int steps) {
 void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore) {
   std::vector<double> t(static_cast<std::size_t>(steps));
   for (int k = 0; k < steps; ++k) {
-    if (k % ab.block == 0) {
-      const bool is_a = demfdm::bench::ab_block_is_a(k / ab.block);
-      w.set_pair_kernel(is_a ? ab.ka : ab.kb);
-      w.set_skip_idle(is_a ? ab.skip_a : ab.skip_b);
-    }
+    if (k % ab.block == 0) w.set_pair_kernel(demfdm::bench::ab_block_is_a(k / ab.block) ? ab.ka : ab.kb);
     const double p0 = w.phase_times().pair;
     w.step(1);
     t[static_cast<std::size_t>(k)] = w.phase_times().pair - p0;
   }
   w.set_pair_kernel(restore);
-  w.set_skip_idle(true);
   std::vector<double> block;  // each complete block's time, its first `skip` steps left out
   for (int blk = 0; (blk + 1) * ab.block <= steps; ++blk) {
     double s = 0.0;
@@ -516,11 +497,10 @@ int run(const std::string& file, const std::string& model, int threads, int step
                  t.effects_total, t.total());
     std::fprintf(stderr, "phases_kv model=%s threads=%d steps=%lld wall=%.6f cpu=%.6f rebuild=%.6f pair=%.6f "
                  "plane=%.6f facet=%.6f footing=%.6f gather=%.6f motion=%.6f effects=%.6f sum=%.6f rebuilds=%lld "
-                 "list=%zu active=%zu balls=%zu dt=%.6e kernel_isa=%s visited_share=%.4f\n",
+                 "list=%zu active=%zu balls=%zu dt=%.6e kernel_isa=%s\n",
                  model.c_str(), threads, static_cast<long long>(t.steps), sec, cpu, t.rebuild, t.pair, t.plane,
                  t.facet, t.footing, t.gather, t.motion, t.effects_total, t.total(), rebuilds,
-                 w.pair_contacts().size(), z.active, w.num_balls(), dt0, kernel_isa(kernel),
-                 t.pair_listed > 0 ? double(t.pair_visited) / double(t.pair_listed) : 1.0);
+                 w.pair_contacts().size(), z.active, w.num_balls(), dt0, kernel_isa(kernel));
   }
   if (model == "moving") {
     const double share = t.total() > 0 ? t.rebuild / t.total() : 0.0;

@@ -20,10 +20,6 @@
 // (World::set_hosted_facets(false)); =ab switches between the two every 10 steps inside the run
 // (ab_blocks.hpp: A = hosted; the same bits either way) and prints the ratio of the step's time,
 // hosted over own, per pair of neighbouring blocks (mean and standard error).
-// BENCH_MEASURE_SKIP=0 makes the ball-ball pass visit every pair of its list
-// (World::set_skip_idle(false)); =ab switches between skipping (A) and not in the same way and
-// prints the ratio of the step's time, skipping over not. The first line also gives the share of
-// list entries the passes visited.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -71,11 +67,6 @@ int main(int argc, char** argv) try {
     const std::string hosted_mode = hv ? hv : "1";
     const bool ab = hosted_mode == "ab";
     w.set_hosted_facets(hosted_mode != "0");
-    const char* sv = std::getenv("BENCH_MEASURE_SKIP");
-    const std::string skip_mode = sv ? sv : "1";
-    const bool ab_skip = skip_mode == "ab";
-    if (ab && ab_skip) throw std::runtime_error("BENCH_MEASURE_HOSTED=ab and BENCH_MEASURE_SKIP=ab: one A/B at a time");
-    w.set_skip_idle(skip_mode != "0");
     constexpr int kBlock = 10;
     std::vector<double> block_ms;  // (ab) the step's time per block of kBlock steps
     const int step_threads = w.params().threads;
@@ -96,11 +87,10 @@ int main(int argc, char** argv) try {
       w.mutable_params().threads = step_threads;
       const int blk = s / kBlock;
       if (ab) w.set_hosted_facets(demfdm::bench::ab_block_is_a(blk));
-      if (ab_skip) w.set_skip_idle(demfdm::bench::ab_block_is_a(blk));
       const auto t0 = Clock::now();
       w.step();
       const auto t1 = Clock::now();
-      if (ab || ab_skip) {
+      if (ab) {
         if (static_cast<int>(block_ms.size()) <= blk) block_ms.resize(static_cast<std::size_t>(blk) + 1, 0.0);
         block_ms[static_cast<std::size_t>(blk)] += ms(t0, t1);
       }
@@ -156,22 +146,17 @@ int main(int argc, char** argv) try {
         "(separate tests %.3f) scan %.3f ratio %.3f skeleton %.3f (both in one pass %.3f) measurements %.3f total %.3f "
         "(checksum %.17g) | "
         "step phases ms/step: rebuild %.3f pair %.3f facet %.3f footing %.3f plane %.3f gather %.3f motion %.3f "
-        "effects %.3f | facet contacts %zu footing contacts %zu | pair entries visited %.4f\n",
+        "effects %.3f | facet contacts %zu footing contacts %zu\n",
         w.num_balls(), w.pair_contacts().size(), step_threads, mt, steps, t_step / n, t_screen / n, t_sep / n,
         t_scan / n, t_ratio / n, t_skel / n, t_both / n, (t_scan + t_both) / n, (t_step + t_screen + t_scan + t_both) / n,
         sink, 1e3 * ph.rebuild / n, 1e3 * ph.pair / n, 1e3 * ph.facet / n, 1e3 * ph.footing / n, 1e3 * ph.plane / n,
         1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
-        w.footing_contacts().size(), ph.pair_listed > 0 ? double(ph.pair_visited) / double(ph.pair_listed) : 1.0);
-    if (ab || ab_skip) {
+        w.footing_contacts().size());
+    if (ab) {
       block_ms.resize(static_cast<std::size_t>(steps / kBlock));  // complete blocks only
       const demfdm::bench::AbRatios r = demfdm::bench::ab_ratios(block_ms);
-      if (ab)
-        std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
-                    r.mean, r.se, r.pairs, kBlock);
-      else
-        std::printf("bench_measure idle pairs: step time skipping/visiting %.4f (s.e. %.4f) over %zu block pairs of %d "
-                    "steps\n",
-                    r.mean, r.se, r.pairs, kBlock);
+      std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
+                  r.mean, r.se, r.pairs, kBlock);
     }
     // The state after the steps, for comparing builds bit for bit: x, v, ω of every ball and the
     // facet walls' vertex forces and stiffnesses.

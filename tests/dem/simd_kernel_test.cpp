@@ -43,7 +43,6 @@ struct Scene {
   double bond_gap = 0.0;  // bond pairs with gap ≤ bond_gap R̄
   int threads = 1;
   int steps = 400;
-  bool skip_idle = true;  // World::set_skip_idle
 };
 
 struct Result : test::BallState {
@@ -51,8 +50,6 @@ struct Result : test::BallState {
   std::size_t pairs = 0;
   int count[5] = {0, 0, 0, 0, 0};  // by BondState
   Energy e;
-  std::int64_t listed = 0, visited = 0;  // PhaseTimes::pair_listed, pair_visited
-  std::int64_t rebuilds = 0;
 };
 
 // Soft-bond runs: a lattice with small gaps, bonded across them, pulled apart slowly: bonds
@@ -86,7 +83,6 @@ Result run(const Scene& sc, PairKernel kernel) {
   p.ball_ball.softbond.soft = 20.0;  // ζ: bonds break after a short softening branch
   World w(p);
   w.set_pair_kernel(kernel);
-  w.set_skip_idle(sc.skip_idle);
   std::mt19937_64 rng(2024);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const Vec3 c{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
@@ -111,9 +107,6 @@ Result run(const Scene& sc, PairKernel kernel) {
     ++r.count[static_cast<int>(b.state)];
   }
   r.e = w.energy();
-  r.listed = w.phase_times().pair_listed;
-  r.visited = w.phase_times().pair_visited;
-  r.rebuilds = w.rebuild_count();
   return r;
 }
 
@@ -288,145 +281,6 @@ TEST(SimdKernel, TwoThreadsBitIdentical) {
     sc.threads = 2;
     sc.steps = 30;
     check_scene(sc);
-  }
-}
-
-// The pass skips the idle pairs that cannot touch before the next rebuild (PairSet::pass_law,
-// prepare_visits): the same bits as a pass that visits every pair, for every law, scalar and
-// lane kernels, 1 and 2 threads, periodic cells that strain and free packings that fly apart or
-// collapse fast (pairs closing by a good part of the skin per step, so the displacement bound
-// decides), across neighbour rebuilds and bonding. The runs must skip some pairs and the
-// reference none, and the collapsing packing must form new contacts from skipped ones.
-TEST(SimdKernel, SkippedIdlePairsBitIdentical) {
-  struct Case {
-    Scene sc;
-    bool expect_rebuilds;
-  };
-  std::vector<Case> cases;
-  {
-    Scene sc;
-    sc.name = "linear free, flying apart";
-    sc.periodic = false;
-    cases.push_back({sc, true});
-    sc.name = "linear free, collapsing";
-    sc.spacing = 2.3;  // gaps between the balls, closed by the converging field
-    sc.rate = -300.0;
-    cases.push_back({sc, true});
-    sc.name = "linear periodic, the cell squeezed in x and y";  // (and stretched in z)
-    sc.periodic = true;
-    sc.rate = -400.0;
-    cases.push_back({sc, true});
-    sc.name = "hertz free, collapsing";
-    sc.model = ContactModel::kHertz;
-    cases.push_back({sc, true});
-  }
-  for (ContactModel m : {ContactModel::kSoftBond, ContactModel::kLinearPBond}) {
-    Scene sc;
-    bonded_setup(sc);
-    sc.model = m;
-    sc.name = std::string(law_name(m)) + " periodic, bonds breaking";
-    sc.rate = 600.0;
-    sc.steps = 600;
-    cases.push_back({sc, false});
-  }
-  {
-    Scene sc;
-    sc.name = "linear 2 threads, collapsing";
-    sc.periodic = false;
-    sc.spacing = 2.3;
-    sc.rate = -300.0;
-    sc.nside = 16;  // > 4096 pairs: the threaded branch of the pass runs
-    sc.threads = 2;
-    sc.rate = -600.0;
-    sc.steps = 150;
-    cases.push_back({sc, true});
-  }
-  for (const Case& cs : cases) {
-    for (PairKernel k : {PairKernel::kScalar, PairKernel::kAuto}) {
-      Scene full = cs.sc;
-      full.skip_idle = false;
-      SCOPED_TRACE(cs.sc.name + " kernel " + kernel_name(k));
-      const Result ref = run(full, k);
-      const Result r = run(cs.sc, k);
-      std::printf("%s, %s: %zu pairs, %lld rebuilds, visited %.3f of the list entries (reference %.3f)\n",
-                  cs.sc.name.c_str(), kernel_name(k), r.pairs, static_cast<long long>(r.rebuilds),
-                  double(r.visited) / double(r.listed), double(ref.visited) / double(ref.listed));
-      EXPECT_EQ(ref.visited, ref.listed);
-      EXPECT_LT(r.visited, r.listed);  // some pairs were skipped
-      if (cs.expect_rebuilds) {
-        EXPECT_GE(r.rebuilds, 2);
-      }
-      EXPECT_TRUE(same_bits(r.x, ref.x)) << "x differs by " << rel_diff(r.x, ref.x);
-      EXPECT_TRUE(same_bits(r.v, ref.v)) << "v differs by " << rel_diff(r.v, ref.v);
-      EXPECT_TRUE(same_bits(r.w, ref.w)) << "w differs by " << rel_diff(r.w, ref.w);
-      EXPECT_TRUE(same_bits(r.f, ref.f)) << "f differs by " << rel_diff(r.f, ref.f);
-      EXPECT_TRUE(same_bits(r.t, ref.t)) << "t differs by " << rel_diff(r.t, ref.t);
-      EXPECT_EQ(r.state, ref.state);
-      EXPECT_EQ(r.pairs, ref.pairs);
-      EXPECT_TRUE(same_bits(r.e.friction, ref.e.friction));
-      EXPECT_TRUE(same_bits(r.e.softening, ref.e.softening));
-      EXPECT_TRUE(same_bits(r.e.strain, ref.e.strain));
-    }
-  }
-}
-
-// The displacement bound is tight for pairs that meet head-on: both balls move at the largest
-// speed, so the gap closes by exactly 2 max ||x − x_ref||. Pairs with gaps across the skin fly
-// at each other and touch before the next rebuild; a bound that counted one ball's travel only
-// would skip some of them through their first contact. Same bits as visiting every pair.
-TEST(SimdKernel, SkippedIdlePairsHeadOn) {
-  auto run_pairs = [](bool skip, PairKernel kernel, int& touching) {
-    const double R = 1e-4;
-    WorldParams p;
-    p.skin = 0.2 * R;
-    World w(p);
-    w.set_pair_kernel(kernel);
-    w.set_skip_idle(skip);
-    std::mt19937_64 rng(7);
-    std::uniform_real_distribution<double> u(0.0, 1.0);
-    const int n = 12;  // n x n pairs on a grid, far apart from each other
-    std::vector<double> gap;
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) {
-        const Vec3 o{0.0, 6.0 * R * i, 6.0 * R * j};
-        const double g = p.skin * (0.05 + 0.9 * u(rng));  // in the list, idle
-        w.add_ball(o, R);
-        w.add_ball(o + Vec3{2.0 * R + g, 0.0, 0.0}, R);
-      }
-    w.prepare();
-    const int steps = 300;
-    // every ball travels 0.45 skin in the run: the pairs meet, the list is not rebuilt
-    const double v = 0.45 * w.skin() / (w.dt() * steps);
-    for (std::size_t i = 0; i < w.num_balls(); ++i) w.balls().v[i] = Vec3{i % 2 == 0 ? v : -v, 0.0, 0.0};
-    const World& cw = w;
-    std::vector<char> met(cw.pair_contacts().size(), 0);  // (no rebuild: the list stays)
-    for (int k = 0; k < steps; ++k) {
-      w.step(1);
-      for (std::size_t c = 0; c < met.size(); ++c) met[c] |= cw.pair_contacts().h[c].fn != 0.0;
-    }
-    touching = 0;
-    for (char m : met) touching += m;
-    Result r;
-    static_cast<test::BallState&>(r) = test::ball_state(w);
-    r.listed = w.phase_times().pair_listed;
-    r.visited = w.phase_times().pair_visited;
-    r.rebuilds = w.rebuild_count();
-    return r;
-  };
-  for (PairKernel k : {PairKernel::kScalar, PairKernel::kAuto}) {
-    SCOPED_TRACE(kernel_name(k));
-    int t_ref = 0, t = 0;
-    const Result ref = run_pairs(false, k, t_ref);
-    const Result r = run_pairs(true, k, t);
-    std::printf("head-on pairs, %s: %d of 144 met, %lld rebuilds, visited %.3f of the list entries\n",
-                kernel_name(k), t, static_cast<long long>(r.rebuilds), double(r.visited) / double(r.listed));
-    EXPECT_GT(t_ref, 50);  // most pairs met
-    EXPECT_EQ(t, t_ref);
-    EXPECT_EQ(r.rebuilds, 1);  // prepare()'s only
-    EXPECT_LT(r.visited, r.listed);
-    EXPECT_TRUE(same_bits(r.x, ref.x)) << "x differs by " << rel_diff(r.x, ref.x);
-    EXPECT_TRUE(same_bits(r.v, ref.v)) << "v differs by " << rel_diff(r.v, ref.v);
-    EXPECT_TRUE(same_bits(r.f, ref.f)) << "f differs by " << rel_diff(r.f, ref.f);
   }
 }
 

@@ -29,8 +29,6 @@ struct SetContext {
   std::int64_t& bond_failures;  // ball-ball bonds that left the intact state
   const std::uint8_t* ghost;    // per row: a ghost (a copy of another rank's ball), or null
   bool newton = false;          // a pair is listed only where its lower-id ball is not a ghost
-  double max_disp2 = 0.0;       // [m²] the largest ||x − x_ref||² of a ball since the last rebuild
-                                // (+∞ where rows move otherwise than by this world's law of motion)
 };
 
 /// A set's per-contact work handed to another set's pass (World::force_pass): `units`

@@ -260,16 +260,9 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   // bond force: the scan's value too).
   if (keep_norms_ && norm_.size() != contacts.size()) norm_.resize(contacts.size());
   double* __restrict__ SN = keep_norms_ ? norm_.data() : nullptr;
-  pn_ok_ = keep_norms_;  // (the pass writes every entry below, or leaves an idle one's +0)
+  pn_ok_ = keep_norms_;  // (the pass writes every entry below)
   pn_gen_ = gen_;
   pn_model_ = cx.p.ball_ball.model;
-  // The pairs that provably stay idle are not visited (prepare_visits): the pass walks the visit
-  // list VL (nvl places, ascending contacts), or records every contact's room in RM.
-  prepare_visits(cx, lc.rgap, Periodic, SN != nullptr);
-  const std::uint32_t* const VL = visit_on_ ? visit_.data() : nullptr;
-  const std::int64_t nvl = static_cast<std::int64_t>(visit_.size());
-  double* const RM = room_rec_ ? room_.data() : nullptr;
-  visited_ = VL ? visit_.size() : contacts.size();
   std::int64_t* const fails = &cx.bond_failures;  // bonds that leave the intact state
   const std::uint8_t* const G = cx.ghost;          // ghost rows (a rank's world), or null
   const double rgap = lc.rgap;
@@ -310,22 +303,17 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   // in the soft-bond pass, callgrind, the same state hash).
   // Software prefetch (see kPrefetchB/H): the scattered B rows, and the history records
   // (96 B, plus 104 B of bond state) that the loop streams through.
-  // (p: the entry's place in the walk, p1 its end; the contact at place q is q, or VL[q] when
-  // the pass walks the visit list.)
-  auto prefetch = [=](auto listed, std::int64_t p, std::int64_t p1, const Vec3* f, const Vec3* t)
-                      __attribute__((always_inline)) {
-    constexpr bool Listed = decltype(listed)::value;
-    if (p + kPrefetchH < p1) {
-      const std::int64_t ch = Listed ? std::int64_t{VL[p + kPrefetchH]} : p + kPrefetchH;
-      __builtin_prefetch(reinterpret_cast<const char*>(H + ch), 1);
-      __builtin_prefetch(reinterpret_cast<const char*>(H + ch) + 64, 1);
+  auto prefetch = [=](std::int64_t c, std::int64_t c1, const Vec3* f, const Vec3* t) __attribute__((always_inline)) {
+    if (c + kPrefetchH < c1) {
+      __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH), 1);
+      __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH) + 64, 1);
       if (BD) {
-        __builtin_prefetch(reinterpret_cast<const char*>(BD + ch), 1);
-        __builtin_prefetch(reinterpret_cast<const char*>(BD + ch) + 64, 1);
+        __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH), 1);
+        __builtin_prefetch(reinterpret_cast<const char*>(BD + c + kPrefetchH) + 64, 1);
       }
     }
-    if (p + kPrefetchB < p1) {
-      const std::uint32_t bp = B[Listed ? std::int64_t{VL[p + kPrefetchB]} : p + kPrefetchB];
+    if (c + kPrefetchB < c1) {
+      const std::uint32_t bp = B[c + kPrefetchB];
       __builtin_prefetch(X + bp);
       __builtin_prefetch(V + bp);
       __builtin_prefetch(W + bp);
@@ -415,27 +403,18 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   // One contact at a time (the reference).
   // `save` (std::bool_constant): store every contact's force and torques in its save slot.
   // (Save: `cur` is the chunk's cursors, see ChunkCursor.)
-  // `listed` (std::bool_constant): walk places [p0, p1) of the visit list VL, else contacts
-  // [p0, p1) (and record their room in RM where RM is set).
-  auto body = [=](auto save, auto listed, std::int64_t p0, std::int64_t p1, Vec3* __restrict__ f,
-                  Vec3* __restrict__ t, ChunkCursor cur) {
+  auto body = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
+                  ChunkCursor cur) {
     constexpr bool Save = decltype(save)::value;
-    constexpr bool Listed = decltype(listed)::value;
-    auto at = [=](std::int64_t p) __attribute__((always_inline)) -> std::int64_t {
-      return Listed ? std::int64_t{VL[p]} : p;
-    };
-    BallSums<Save> sums{f, t, p0 < p1 ? A[at(p0)] : 0u, cur.run_row, cur.run_rec, RS, stamp};
-    for (std::int64_t p = p0; p < p1; ++p) {
-      const std::int64_t c = at(p);
+    BallSums<Save> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
+    for (std::int64_t c = c0; c < c1; ++c) {
       const std::uint32_t a = A[c], b = B[c];
-      prefetch(listed, p, p1, f, t);
+      prefetch(c, c1, f, t);
       sums.at(a);
       Vec3 d;
       double d2;
       branch_d(c, a, b, d, d2);
-      const bool skip = idle(c, a, b, d2);
-      if (!Listed && RM) RM[c] = skip ? std::sqrt(d2) - (R[a] + R[b] + rgap) : -HUGE_VAL;
-      if (skip) {
+      if (idle(c, a, b, d2)) {
         if (H[c].flags & ContactHist::kActive) {
           H[c].flags &= static_cast<std::uint8_t>(~kActSlip);
           CH[c] = 1;
@@ -454,13 +433,13 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
       }
       sums.add(b, F, TA, TB);
     }
-    if (p0 < p1) sums.flush();
+    if (c0 < c1) sums.flush();
   };
   // Blocks of kLanes live contacts: stage 1 (lane list), stage 2 (kern), stage 3 (histories
   // and sums in contact order; lanes flagged `scalar` are redone by the scalar law from their
   // untouched history).
-  auto body_block = [=](auto save, auto listed, std::int64_t p0, std::int64_t p1, Vec3* __restrict__ f,
-                        Vec3* __restrict__ t, ChunkCursor cur) {
+  auto body_block = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
+                        ChunkCursor cur) {
     // Local copies of the closure's pointers and helpers: the byte stores below (a contact's
     // flags, its change mark) may alias any object as far as GCC knows, the closure's members
     // included, so that it reloaded every captured pointer after each of them; locals whose
@@ -472,8 +451,6 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     BondHist* const BD_ = BD;
     std::uint8_t* const CH_ = CH;
     double* const SN_ = SN;
-    double* const RM_ = RM;
-    const std::uint32_t* const VL_ = VL;
     const auto prefetch_ = prefetch;
     const auto branch_d_ = branch_d;
     const auto idle_ = idle;
@@ -481,29 +458,23 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     const auto key_of_ = key_of;
     const auto bond_at_ = bond_at;
     constexpr bool Save = decltype(save)::value;
-    constexpr bool Listed = decltype(listed)::value;
     constexpr int K = pairblock::kLanes;
-    auto at = [=](std::int64_t p) __attribute__((always_inline)) -> std::int64_t {
-      return Listed ? std::int64_t{VL_[p]} : p;
-    };
-    BallSums<Save> sums{f, t, p0 < p1 ? A_[at(p0)] : 0u, cur.run_row, cur.run_rec, RS, stamp};
+    BallSums<Save> sums{f, t, c0 < c1 ? A_[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
     pairblock::In in;
     pairblock::Out out;
     unsigned k0[K];  // each lane's key() before the law
-    std::int64_t p = p0;
-    while (p < p1) {
+    std::int64_t c = c0;
+    while (c < c1) {
       int n = 0;
-      for (; p < p1 && n < K; ++p) {
-        const std::int64_t c = at(p);
+      for (; c < c1 && n < K; ++c) {
         const std::uint32_t a = A_[c], b = B_[c];
-        prefetch_(listed, p, p1, f, t);
+        prefetch_(c, c1, f, t);
         Vec3 d;
         double d2;
         branch_d_(c, a, b, d, d2);
         // Branch-free: the lane is written for every contact and kept (n advances) only for a
         // live one; an idle contact gets kActive and kSlip cleared (the same flags as `body`).
         const bool skip = idle_(c, a, b, d2);
-        if (!Listed && RM_) RM_[c] = skip ? std::sqrt(d2) - (R[a] + R[b] + rgap) : -HUGE_VAL;
         const std::uint8_t fl = H_[c].flags;
         H_[c].flags = skip ? static_cast<std::uint8_t>(fl & ~kActSlip) : fl;
         CH_[c] |= skip & ((fl & ContactHist::kActive) != 0);
@@ -556,19 +527,11 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
         sums.add(b, F, TA, TB);
       }
     }
-    if (p0 < p1) sums.flush();
+    if (c0 < c1) sums.flush();
   };
-  // Contacts [c0, c1): through the visit list's places that fall in it, or all of them.
   auto run = [&](auto save, std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t, ChunkCursor cur) {
-    if (VL) {
-      const std::int64_t p0 = std::lower_bound(VL, VL + nvl, static_cast<std::uint32_t>(c0)) - VL;
-      const std::int64_t p1 = std::lower_bound(VL, VL + nvl, static_cast<std::uint32_t>(c1)) - VL;
-      if (kern) body_block(save, std::true_type{}, p0, p1, f, t, cur);
-      else body(save, std::true_type{}, p0, p1, f, t, cur);
-    } else {
-      if (kern) body_block(save, std::false_type{}, c0, c1, f, t, cur);
-      else body(save, std::false_type{}, c0, c1, f, t, cur);
-    }
+    if (kern) body_block(save, c0, c1, f, t, cur);
+    else body(save, c0, c1, f, t, cur);
   };
   if (!par || (ti && !threaded)) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
@@ -696,68 +659,6 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     }
   }
   if (side) side->thread_s += side_s;
-}
-
-// Idle pairs that cannot touch (docs/speed.md, session 38). An idle contact (separated beyond its
-// reach R_A + R_B + g_r and force-free: Law::idle) is left as it is by the pass: its kActive and
-// kSlip are already clear (the pass that found it idle cleared them), its kept norm is +0, and it
-// adds nothing to the sums. Its history changes only in the pass or in what clears room_ok_ or
-// bumps gen_ (a new or touched list, bonding, refreshed constants), so it stays idle while it
-// stays separated. Between the recording pass and now a ball has moved by at most
-// ||x − x_rec|| <= ||x − x_ref|| + ||x_rec − x_ref|| (x_ref is fixed until the next rebuild),
-// and a periodic image by at most s_max ||L − L_rec|| (s_max the largest image shift), so a pair's
-// centre distance has shrunk by at most
-//     shrink = 2 (sqrt(max_disp2) + room_disp_) + s_max ||L − L_rec||.
-// A contact whose room (centre distance minus reach at the recording) exceeds shrink plus a
-// margin for the rounding of the distances is still idle, and the pass does not visit it. The
-// visit list keeps the contacts whose room is at most shrink + skin/8 (+ the margin), so it is
-// rebuilt a few times between two neighbour rebuilds (2 sqrt(max_disp2) reaches the skin there).
-// The same bits as a full pass: tests/dem/simd_kernel_test.cpp. Not on a rank's world with ghosts
-// (their rows are replaced by the owners' state, not moved by this world's law of motion).
-void PairSet::prepare_visits(const SetContext& cx, double rgap, bool periodic, bool norms) {
-  const std::size_t m = contacts.size();
-  visit_on_ = false;
-  room_rec_ = false;
-  if (!skip_idle_ || cx.ghost || m == 0 || m >= std::size_t{UINT32_MAX} || !std::isfinite(cx.max_disp2)) {
-    room_ok_ = false;
-    return;
-  }
-  const ContactModel model = cx.p.ball_ball.model;
-  if (!(room_ok_ && room_gen_ == gen_ && room_rgap_ == rgap && room_model_ == model && room_per_ == periodic &&
-        room_norms_ == norms && room_.size() == m)) {
-    room_.resize(m);
-    room_rec_ = true;  // this pass records every contact's room
-    room_ok_ = true;
-    room_gen_ = gen_;
-    room_rgap_ = rgap;
-    room_model_ = model;
-    room_per_ = periodic;
-    room_norms_ = norms;
-    room_disp_ = std::sqrt(cx.max_disp2);
-    room_len_ = cx.p.periodic.length;
-    room_smax_ = 0.0;
-    if (periodic)
-      for (const auto& sh : contacts.shift)
-        for (int k = 0; k < 3; ++k) room_smax_ = std::max(room_smax_, std::abs(double(sh[k])));
-    visit_t_ = -HUGE_VAL;  // the visit list is built at the next pass
-    visit_.clear();
-    return;
-  }
-  const double lshift = periodic ? norm(cx.p.periodic.length - room_len_) : 0.0;
-  const double shrink = 2.0 * (std::sqrt(cx.max_disp2) + room_disp_) + room_smax_ * lshift;
-  if (!(shrink <= visit_t_)) {
-    // Margin: far above the rounding of a centre distance (a few ulp of the coordinates).
-    double scale = cx.skin + (periodic ? norm(cx.p.periodic.length) : 0.0);
-    for (const Vec3& x : cx.pt.x) scale = std::max({scale, std::abs(x.x), std::abs(x.y), std::abs(x.z)});
-    const double margin = 1e-9 * cx.skin + 1e-12 * scale;
-    const double t = shrink + cx.skin / 8.0 + margin;
-    visit_.clear();
-    const double* __restrict__ RM = room_.data();
-    for (std::size_t c = 0; c < m; ++c)
-      if (!(RM[c] > t)) visit_.push_back(static_cast<std::uint32_t>(c));
-    visit_t_ = t - margin;
-  }
-  visit_on_ = visit_.size() < m;
 }
 
 // The plan of a threaded pass in `chunks` chunks (see pass_law): the chunk boundaries, the split
@@ -1113,7 +1014,6 @@ void PairSet::remap(const std::vector<std::uint32_t>& newrow) {
 void PairSet::refresh(const SetContext& cx) {
   terms_ok_ = false;  // the histories change
   pn_ok_ = false;
-  room_ok_ = false;
   const bool bb = law_has_bond(cx.p.ball_ball.model);
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c)
@@ -1160,7 +1060,6 @@ void PairSet::append(std::uint32_t a, std::uint32_t b, const std::array<std::int
 std::size_t PairSet::bond(const SetContext& cx, double lo, double hi) {
   terms_ok_ = false;  // the histories change
   pn_ok_ = false;
-  room_ok_ = false;
   std::size_t cnt = 0;
   PairContacts& pc = contacts;
   for (std::size_t c = 0; c < pc.size(); ++c) {

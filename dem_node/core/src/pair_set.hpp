@@ -52,15 +52,7 @@ class PairSet final : public ContactSet {
   void keep_force_norms(bool on) {
     keep_norms_ = on;
     pn_ok_ = false;
-    room_ok_ = false;  // the skipped pairs' norms were not written
   }
-  /// Skip the pairs that provably stay idle (pass_law, World::set_skip_idle).
-  void set_skip_idle(bool on) {
-    if (on != skip_idle_) room_ok_ = false;
-    skip_idle_ = on;
-  }
-  /// List entries the last pass visited.
-  std::size_t visited() const { return visited_; }
   /// The pass's norms hold for the present list and histories under model m.
   bool pass_norms(ContactModel m) const {
     return pn_ok_ && pn_gen_ == gen_ && pn_model_ == m && norm_.size() == contacts.size();
@@ -80,7 +72,6 @@ class PairSet final : public ContactSet {
   void touch() {
     ++gen_;
     pn_ok_ = false;  // the caller may change histories too
-    room_ok_ = false;
   }
   /// A split ball's run sum (its contacts as A) in the threaded pass, and the pass that wrote it.
   struct RunSave {
@@ -110,25 +101,6 @@ class PairSet final : public ContactSet {
                                               // all zero between passes
   std::vector<std::size_t> row_lo_, row_hi_;  // rows touched by each chunk
   std::uint64_t gen_ = 0;                     // bumped whenever the pairs (a, b) may change
-  // Idle pairs skipped by the pass (pass_law): room_ the distance a contact's gap had beyond
-  // its idle reach at the recording pass (−∞ where it was not idle), valid while room_ok_ and
-  // the list, rgap, model, cell kind and norms are those of the recording; room_disp_ the balls'
-  // largest displacement from x_ref then, room_len_ the cell then, room_smax_ the largest image
-  // shift. visit_ the entries still
-  // visited, those whose room is not above visit_t_.
-  void prepare_visits(const SetContext& cx, double rgap, bool periodic, bool norms);
-  bool skip_idle_ = true;
-  bool room_ok_ = false;
-  bool room_rec_ = false;                     // this pass records room_
-  std::uint64_t room_gen_ = 0;
-  double room_rgap_ = 0.0, room_disp_ = 0.0, room_smax_ = 0.0, visit_t_ = 0.0;
-  Vec3 room_len_{};
-  ContactModel room_model_ = ContactModel::kLinear;
-  bool room_per_ = false, room_norms_ = false;
-  std::vector<double> room_;
-  std::vector<std::uint32_t> visit_;
-  bool visit_on_ = false;                     // this pass walks visit_
-  std::size_t visited_ = 0;
   PairContacts spare_;                        // rebuild: the list before last, its memory kept for the next
   std::vector<PairCandidate> cand_;           // rebuild: the candidates, memory kept
   std::uint64_t plan_gen_ = ~std::uint64_t{0};

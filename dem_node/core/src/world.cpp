@@ -48,8 +48,7 @@ World::~World() = default;
 SetContext World::context() {
   return SetContext{pt_,           p_,           skin_,          edot_,
                     thread_count(), kernel_,      e_slip_dead_,   e_soft_dead_,
-                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), bool(newton_reverse_),
-                    moving_rows_ < pt_.size() ? HUGE_VAL : max_disp2_};
+                    bond_failures_, ghost_.empty() ? nullptr : ghost_.data(), bool(newton_reverse_)};
 }
 
 PairContacts& World::pair_contacts() {
@@ -147,9 +146,6 @@ void World::set_pair_kernel(PairKernel k) {
     throw std::invalid_argument("set_pair_kernel: this CPU lacks the instruction set of the requested kernel.");
   kernel_ = k;
 }
-
-void World::set_skip_idle(bool on) { pairs_->set_skip_idle(on); }
-std::size_t World::pair_entries_visited() const { return pairs_->visited(); }
 
 const PhaseTimes& World::phase_times() const { return times_; }
 
@@ -303,10 +299,6 @@ void World::force_pass(double dt) {
       double comm = 0.0;
       lap(comm);
     }
-  }
-  if (pairs_->present()) {
-    times_.pair_listed += static_cast<std::int64_t>(pairs_->contacts.size());
-    times_.pair_visited += static_cast<std::int64_t>(pairs_->visited());
   }
   if (p_.order_free_sums && !wall_sums_by_caller_) order_free_wall_sums();
   Lap lap_gather;

@@ -207,8 +207,6 @@ struct PhaseTimes {
   std::vector<std::pair<std::string, double>> effect;
   std::int64_t steps = 0;           // step() calls timed
   std::int64_t facets_hosted = 0;   // force passes that ran the facets inside the ball-ball pass
-  std::int64_t pair_listed = 0;     // ball-ball list entries over the timed passes
-  std::int64_t pair_visited = 0;    // of which the passes visited (the rest: idle pairs skipped)
   const char* pair_model = "";      // to_string(params().ball_ball.model)
   /// Sum of the phases above (effects counted once, through effects_total).
   double total() const { return rebuild + pair + plane + facet + footing + gather + motion + effects_total; }
@@ -420,13 +418,6 @@ class World {
   /// their part of it first (World::force_pass; default on). The same bits either way
   /// (tests/dem/simd_kernel_test.cpp compares the two); off: the facets' own pass after it.
   void set_hosted_facets(bool on) { hosted_facets_ = on; }
-  /// The ball-ball pass skips the pairs of its list that are idle and cannot touch before the
-  /// next rebuild or list change, by the balls' largest displacement (PairSet::pass_law; default
-  /// on, not on a rank's world with ghosts). The same bits either way
-  /// (tests/dem/simd_kernel_test.cpp compares the two).
-  void set_skip_idle(bool on);
-  /// List entries the last ball-ball pass visited (all of them without skipping).
-  std::size_t pair_entries_visited() const;
   PairKernel pair_kernel() const { return kernel_; }
   /// True if `k` can run on this CPU.
   static bool pair_kernel_available(PairKernel k);
