@@ -48,8 +48,12 @@ struct SideWork {
 inline void run_side_work(SideWork& w, int threads) {
   const bool par = threads > 1 && w.parallel;
   const double t0 = omp_get_wtime();
-#pragma omp parallel for schedule(static) num_threads(threads) if (par)
-  for (std::int64_t u = 0; u < w.units; ++u) w.run(w.ctx, u);
+  if (par) {
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (std::int64_t u = 0; u < w.units; ++u) w.run(w.ctx, u);
+  } else {  // (no parallel region at all: the planes and the footing run here every pass)
+    for (std::int64_t u = 0; u < w.units; ++u) w.run(w.ctx, u);
+  }
   w.thread_s += (omp_get_wtime() - t0) * (par ? threads : 1);
 }
 
