@@ -30,13 +30,15 @@
 // of BENCH_DEM_AB_BLOCK steps (default 10; the first BENCH_DEM_AB_SKIP of each, default 1, left
 // out) and prints (stderr) "ab ... ratio_a_over_b=... se=..." (A's pair-phase time over B's,
 // paired by neighbouring blocks; see run_ab). Every kernel gives the same bits, so the run's hash
-// is a plain run's.
+// is a plain run's. A name ending in "+nosteal" (e.g. avx512+nosteal) runs that side's threaded
+// pass without work stealing; BENCH_DEM_STEAL=0 does so for the whole run.
 // BENCH_DEM_HASH=1 also prints (stderr) an FNV-1a hash of x, v, ω after the run and the
 // number of ball–ball pairs in the list: two builds compare bit for bit on the same input.
 // BENCH_DEM_DUMP=file writes x, v, ω after the run as raw doubles [n,9] (row order of the
 // world): two builds that differ by rounding are compared with bench/dem/compare_dumps.py.
 // BENCH_DEM_PHASES=1 prints (stderr) World::phase_times() of the timed window, as a sentence
-// and as one "phases_kv key=value ..." line (seconds; list size, active contacts, dt).
+// and as one "phases_kv key=value ..." line (seconds; list size, active contacts, dt), and the
+// threaded pass's blocks taken by another thread ("steal on=... blocks_stolen=... blocks=...").
 // Output: one CSV line per configuration:
 //   model,threads,steps,wall_s,cpu_s,particle_steps_per_s_wall,particle_steps_per_s_per_core_cpu,rebuilds_in_window,contacts,peak_rss_mib,pair_kernel,omp_wait_policy,kernel_isa
 // (kernel_isa: the instruction set the ball–ball pass ran with: scalar, baseline, avx2 or avx512.)
@@ -97,9 +99,12 @@ PairKernel kernel_from_env(std::string& name) {
 // load, so on a busy host the ratio holds to 1-3 % where separate runs scatter by 10-20 %
 // (docs/speed.md, session 35). A candidate pass is compared with the current one by building it
 // as one of the kernels.
+// A name may end in "+nosteal": that side runs the threaded pass without work stealing
+// (World::set_pair_stealing; the same bits).
 struct AbSpec {
   std::string a, b;
   PairKernel ka = PairKernel::kAuto, kb = PairKernel::kAuto;
+  bool steal_a = true, steal_b = true;
   int block = 10, skip = 1;
 };
 
@@ -124,8 +129,13 @@ std::optional<AbSpec> ab_from_env(int steps) {
     throw std::runtime_error("BENCH_DEM_AB: expected two kernel names as 'A,B', found '" + s + "'");
   ab.a = s.substr(0, comma);
   ab.b = s.substr(comma + 1);
-  ab.ka = kernel_named(ab.a, "BENCH_DEM_AB");
-  ab.kb = kernel_named(ab.b, "BENCH_DEM_AB");
+  auto strip = [](const std::string& n, bool& steal) {
+    const std::string tag = "+nosteal";
+    steal = !(n.size() > tag.size() && n.compare(n.size() - tag.size(), tag.size(), tag) == 0);
+    return steal ? n : n.substr(0, n.size() - tag.size());
+  };
+  ab.ka = kernel_named(strip(ab.a, ab.steal_a), "BENCH_DEM_AB");
+  ab.kb = kernel_named(strip(ab.b, ab.steal_b), "BENCH_DEM_AB");
   ab.block = env_int("BENCH_DEM_AB_BLOCK", 10, 2, 100000);
   ab.skip = env_int("BENCH_DEM_AB_SKIP", 1, 0, ab.block - 1);
   if (steps < 4 * ab.block)
@@ -136,15 +146,20 @@ std::optional<AbSpec> ab_from_env(int steps) {
 }
 
 // The timed steps of an A/B run; prints the "ab ..." line (stderr).
-void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore) {
+void run_ab(World& w, const AbSpec& ab, int steps, PairKernel restore, bool steal) {
   std::vector<double> t(static_cast<std::size_t>(steps));
   for (int k = 0; k < steps; ++k) {
-    if (k % ab.block == 0) w.set_pair_kernel(demfdm::bench::ab_block_is_a(k / ab.block) ? ab.ka : ab.kb);
+    if (k % ab.block == 0) {
+      const bool is_a = demfdm::bench::ab_block_is_a(k / ab.block);
+      w.set_pair_kernel(is_a ? ab.ka : ab.kb);
+      w.set_pair_stealing(is_a ? ab.steal_a : ab.steal_b);
+    }
     const double p0 = w.phase_times().pair;
     w.step(1);
     t[static_cast<std::size_t>(k)] = w.phase_times().pair - p0;
   }
   w.set_pair_kernel(restore);
+  w.set_pair_stealing(steal);
   std::vector<double> block;  // each complete block's time, its first `skip` steps left out
   for (int blk = 0; (blk + 1) * ab.block <= steps; ++blk) {
     double s = 0.0;
@@ -441,6 +456,9 @@ int run(const std::string& file, const std::string& model, int threads, int step
   PairKernel kernel;
   auto wp = make_world(pk, model, threads, kname, kernel);
   World& w = *wp;
+  // BENCH_DEM_STEAL=0: the threaded pass without work stealing (World::set_pair_stealing).
+  const bool steal = env_int("BENCH_DEM_STEAL", 1, 0, 1) == 1;
+  w.set_pair_stealing(steal);
   double edot = 0.0;
   if (model == "moving") {
     // Plane strain at the rate that moves the cell edge by skin/3 in `period` steps: the
@@ -459,7 +477,7 @@ int run(const std::string& file, const std::string& model, int threads, int step
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
   const auto t0 = std::chrono::steady_clock::now();
   if (ab) {
-    run_ab(w, *ab, steps, kernel);
+    run_ab(w, *ab, steps, kernel, steal);
   } else {
     w.step(steps);
   }
@@ -501,6 +519,9 @@ int run(const std::string& file, const std::string& model, int threads, int step
                  model.c_str(), threads, static_cast<long long>(t.steps), sec, cpu, t.rebuild, t.pair, t.plane,
                  t.facet, t.footing, t.gather, t.motion, t.effects_total, t.total(), rebuilds,
                  w.pair_contacts().size(), z.active, w.num_balls(), dt0, kernel_isa(kernel));
+    const auto st = w.pair_blocks_stolen();
+    std::fprintf(stderr, "steal on=%d blocks_stolen=%llu blocks=%llu\n", steal ? 1 : 0,
+                 static_cast<unsigned long long>(st.first), static_cast<unsigned long long>(st.second));
   }
   if (model == "moving") {
     const double share = t.total() > 0 ? t.rebuild / t.total() : 0.0;

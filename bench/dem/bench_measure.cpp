@@ -67,6 +67,15 @@ int main(int argc, char** argv) try {
     const std::string hosted_mode = hv ? hv : "1";
     const bool ab = hosted_mode == "ab";
     w.set_hosted_facets(hosted_mode != "0");
+    // BENCH_MEASURE_STEAL=0: the threaded ball-ball pass without work stealing; =ab: with (A) and
+    // without (B) in alternate blocks, as the hosted facets' ab.
+    const char* sv = std::getenv("BENCH_MEASURE_STEAL");
+    const std::string steal_mode = sv ? sv : "1";
+    if (steal_mode != "0" && steal_mode != "1" && steal_mode != "ab")
+      throw std::runtime_error("BENCH_MEASURE_STEAL must be 0, 1 or ab, found '" + steal_mode + "'");
+    const bool ab_steal = steal_mode == "ab";
+    if (ab && ab_steal) throw std::runtime_error("BENCH_MEASURE_HOSTED=ab and BENCH_MEASURE_STEAL=ab: one at a time");
+    w.set_pair_stealing(steal_mode != "0");
     constexpr int kBlock = 10;
     std::vector<double> block_ms;  // (ab) the step's time per block of kBlock steps
     const int step_threads = w.params().threads;
@@ -87,10 +96,11 @@ int main(int argc, char** argv) try {
       w.mutable_params().threads = step_threads;
       const int blk = s / kBlock;
       if (ab) w.set_hosted_facets(demfdm::bench::ab_block_is_a(blk));
+      if (ab_steal) w.set_pair_stealing(demfdm::bench::ab_block_is_a(blk));
       const auto t0 = Clock::now();
       w.step();
       const auto t1 = Clock::now();
-      if (ab) {
+      if (ab || ab_steal) {
         if (static_cast<int>(block_ms.size()) <= blk) block_ms.resize(static_cast<std::size_t>(blk) + 1, 0.0);
         block_ms[static_cast<std::size_t>(blk)] += ms(t0, t1);
       }
@@ -152,12 +162,19 @@ int main(int argc, char** argv) try {
         sink, 1e3 * ph.rebuild / n, 1e3 * ph.pair / n, 1e3 * ph.facet / n, 1e3 * ph.footing / n, 1e3 * ph.plane / n,
         1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
         w.footing_contacts().size());
-    if (ab) {
+    if (ab || ab_steal) {
       block_ms.resize(static_cast<std::size_t>(steps / kBlock));  // complete blocks only
       const demfdm::bench::AbRatios r = demfdm::bench::ab_ratios(block_ms);
-      std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
-                  r.mean, r.se, r.pairs, kBlock);
+      if (ab)
+        std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
+                    r.mean, r.se, r.pairs, kBlock);
+      else
+        std::printf("bench_measure stealing: step time with/without %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
+                    r.mean, r.se, r.pairs, kBlock);
     }
+    const auto st = w.pair_blocks_stolen();
+    std::printf("bench_measure blocks stolen %llu of %llu (%.2f %%)\n", static_cast<unsigned long long>(st.first),
+                static_cast<unsigned long long>(st.second), st.second ? 100.0 * double(st.first) / double(st.second) : 0.0);
     // The state after the steps, for comparing builds bit for bit: x, v, ω of every ball and the
     // facet walls' vertex forces and stiffnesses.
     std::uint64_t h = demfdm::io::fnv1a64(w.balls().x.data(), w.num_balls() * sizeof(Vec3));

@@ -43,11 +43,14 @@ struct Scene {
   double bond_gap = 0.0;  // bond pairs with gap ≤ bond_gap R̄
   int threads = 1;
   int steps = 400;
+  int steal = 1;  // the threaded pass's work stealing: 0 off, 1 on, 2 forced (World::set_pair_stealing's hold)
 };
 
 struct Result : test::BallState {
   std::vector<BondState> state;
+  std::vector<ContactHist> h;
   std::size_t pairs = 0;
+  std::uint64_t stolen = 0;  // blocks of the threaded pass taken by another thread
   int count[5] = {0, 0, 0, 0, 0};  // by BondState
   Energy e;
 };
@@ -83,6 +86,7 @@ Result run(const Scene& sc, PairKernel kernel) {
   p.ball_ball.softbond.soft = 20.0;  // ζ: bonds break after a short softening branch
   World w(p);
   w.set_pair_kernel(kernel);
+  w.set_pair_stealing(sc.steal != 0, sc.steal == 2 ? 2e-3 : 0.0);
   std::mt19937_64 rng(2024);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const Vec3 c{0.5 * ns * s, 0.5 * ns * s, 0.5 * ns * s};
@@ -102,6 +106,8 @@ Result run(const Scene& sc, PairKernel kernel) {
   Result r;
   static_cast<test::BallState&>(r) = test::ball_state(w);
   r.pairs = w.pair_contacts().size();
+  r.h = w.pair_contacts().h;
+  r.stolen = w.pair_blocks_stolen().first;
   for (const BondHist& b : w.pair_contacts().bond) {
     r.state.push_back(b.state);
     ++r.count[static_cast<int>(b.state)];
@@ -282,6 +288,52 @@ TEST(SimdKernel, TwoThreadsBitIdentical) {
     sc.steps = 30;
     check_scene(sc);
   }
+}
+
+// Work stealing in the threaded pass (World::set_pair_stealing): the owner of the first chunk is
+// held 2 ms per pass, so the other thread takes all but one of its blocks and the owner adds their
+// contacts to the ball sums in contact order. Every ball, contact history, bond state and energy
+// must be the bits of the pass without stealing, with the lane kernels and the scalar loop.
+TEST(SimdKernel, TwoThreadsStealingBitIdentical) {
+  for (ContactModel m : {ContactModel::kLinear, ContactModel::kSoftBond, ContactModel::kLinearPBond})
+    for (PairKernel k : {PairKernel::kAuto, PairKernel::kScalar}) {
+      Scene sc;
+      sc.name = std::string(law_name(m)) + " 2 threads stealing";
+      SCOPED_TRACE(sc.name + " kernel " + kernel_name(k));
+      if (m != ContactModel::kLinear) bonded_setup(sc);
+      sc.model = m;
+      sc.nside = 12;  // > 4096 pairs: the threaded branch of the pass runs
+      sc.threads = 2;
+      sc.steps = 30;
+      sc.steal = 0;
+      const Result ref = run(sc, k);
+      sc.steal = 2;
+      const Result r = run(sc, k);
+      ASSERT_GT(ref.pairs, 4096u);
+      EXPECT_EQ(ref.stolen, 0u);
+      EXPECT_GT(r.stolen, 30u);  // most passes had blocks taken
+      EXPECT_TRUE(same_bits(r.x, ref.x)) << "x differs by " << rel_diff(r.x, ref.x);
+      EXPECT_TRUE(same_bits(r.v, ref.v)) << "v differs by " << rel_diff(r.v, ref.v);
+      EXPECT_TRUE(same_bits(r.w, ref.w)) << "w differs by " << rel_diff(r.w, ref.w);
+      EXPECT_TRUE(same_bits(r.f, ref.f)) << "f differs by " << rel_diff(r.f, ref.f);
+      EXPECT_TRUE(same_bits(r.t, ref.t)) << "t differs by " << rel_diff(r.t, ref.t);
+      ASSERT_EQ(r.h.size(), ref.h.size());
+      std::size_t differ = 0;  // field by field (the records' padding is not state)
+      for (std::size_t c = 0; c < r.h.size(); ++c) {
+        const ContactHist &p = r.h[c], &q = ref.h[c];
+        const bool same = same_bits(p.fs.x, q.fs.x) && same_bits(p.fs.y, q.fs.y) && same_bits(p.fs.z, q.fs.z) &&
+                          same_bits(p.fn, q.fn) && same_bits(p.n_old.x, q.n_old.x) &&
+                          same_bits(p.n_old.y, q.n_old.y) && same_bits(p.n_old.z, q.n_old.z) &&
+                          same_bits(p.kn, q.kn) && same_bits(p.ks, q.ks) && same_bits(p.mu, q.mu) &&
+                          same_bits(p.e_slip, q.e_slip) && p.flags == q.flags;
+        differ += !same;
+      }
+      EXPECT_EQ(differ, 0u) << "contact histories differ";
+      EXPECT_EQ(r.state, ref.state);
+      EXPECT_TRUE(same_bits(r.e.friction, ref.e.friction));
+      EXPECT_TRUE(same_bits(r.e.softening, ref.e.softening));
+      EXPECT_TRUE(same_bits(r.e.strain, ref.e.strain));
+    }
 }
 
 // The wall contacts' lane kernels (pair_block.hpp WallIn): a slab of balls on a floor of facets

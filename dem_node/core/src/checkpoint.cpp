@@ -41,7 +41,7 @@ static_assert(sizeof(PairContacts) == 5 * 24, "PairContacts changed: update the 
 static_assert(sizeof(WallContacts) == 12 * 24, "WallContacts changed: update the checkpoint");
 static_assert(sizeof(World) == 2208, "World changed: is the new member state? update the checkpoint");  // + measurement scratch (not state; the order-free force norms and walls' sums too), ghost rows and the rows integrated (a rank's: refused), step reduction and newton hooks (a rank driver's), the facets hosted by the ball-ball pass (a choice of how, not state)
 // The contact sets: vtable, phase, contacts, the kind's walls (PairSet: + pass and measurement scratch, not state).
-static_assert(sizeof(PairSet) == 1096, "PairSet changed: is the new member state? update the checkpoint");  // + the threaded pass plan, the kept stiffness terms, the serial scan's norm sum (derived), the pass's force norms (derived), the rebuild's kept arrays (scratch)
+static_assert(sizeof(PairSet) == 1184, "PairSet changed: is the new member state? update the checkpoint");  // + the threaded pass plan and its work stealing, the kept stiffness terms, the serial scan's norm sum (derived), the pass's force norms (derived), the rebuild's kept arrays (scratch)
 static_assert(sizeof(WallSet<PlaneKind>) == 328, "WallSet<PlaneKind> changed: update the checkpoint");
 static_assert(sizeof(WallSet<FacetKind>) == 360, "WallSet<FacetKind> changed: update the checkpoint");  // + restore_linear, the vertex-sum terms (per pass)
 static_assert(sizeof(WallSet<FootingKind>) == 432, "WallSet<FootingKind> changed: update the checkpoint");

@@ -5,9 +5,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <numeric>
+#include <thread>
 #include <tuple>
 
 #include "demfdm/dem/neighbour_grid.hpp"
@@ -189,6 +191,9 @@ namespace {
 // the history stream is not kept in flight by the hardware prefetcher alone (+20 % measured).
 constexpr std::int64_t kPrefetchB = 12;  // contacts ahead for the B rows
 constexpr std::int64_t kPrefetchH = 24;  // contacts ahead for the history records
+// Contacts in a block of the threaded pass's work stealing (pass_law): the owner's atomic take
+// per block costs about 0.1 % of the block's time, a late thread waits at most about a block.
+constexpr std::int64_t kStealBlock = 2048;
 
 // A contact's ||F|| from its history: the term of the mean contact force, formed by the scan or,
 // with keep_force_norms, by the pass (one formula, so the same bits).
@@ -303,7 +308,9 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   // in the soft-bond pass, callgrind, the same state hash).
   // Software prefetch (see kPrefetchB/H): the scattered B rows, and the history records
   // (96 B, plus 104 B of bond state) that the loop streams through.
-  auto prefetch = [=](std::int64_t c, std::int64_t c1, const Vec3* f, const Vec3* t) __attribute__((always_inline)) {
+  // (`sums` false: not the ball sums' rows f, t; a stolen block adds nothing to them.)
+  auto prefetch = [=](auto sums, std::int64_t c, std::int64_t c1, const Vec3* f, const Vec3* t)
+                      __attribute__((always_inline)) {
     if (c + kPrefetchH < c1) {
       __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH), 1);
       __builtin_prefetch(reinterpret_cast<const char*>(H + c + kPrefetchH) + 64, 1);
@@ -318,8 +325,10 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
       __builtin_prefetch(V + bp);
       __builtin_prefetch(W + bp);
       __builtin_prefetch(R + bp);
-      __builtin_prefetch(f + bp, 1);
-      __builtin_prefetch(t + bp, 1);
+      if constexpr (decltype(sums)::value) {
+        __builtin_prefetch(f + bp, 1);
+        __builtin_prefetch(t + bp, 1);
+      }
     }
   };
   // Branch vector d (periodic image) and its square.
@@ -403,14 +412,22 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   // One contact at a time (the reference).
   // `save` (std::bool_constant): store every contact's force and torques in its save slot.
   // (Save: `cur` is the chunk's cursors, see ChunkCursor.)
-  auto body = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
-                  ChunkCursor cur) {
+  // Contacts [c0, c1) of a chunk that ends at ce, added to the ball sums `sums_io` (kept in a
+  // local copy meanwhile, so that the run sums stay in registers). `steal` (std::bool_constant):
+  // a stolen block; its live contacts go to se[nse++] instead of the sums (StealEntry).
+  auto body = [=](auto save, auto steal, std::int64_t c0, std::int64_t c1, std::int64_t ce, auto& sums_io,
+                  ChunkCursor cur, StealEntry* __restrict__ se, std::uint32_t& nse) {
     constexpr bool Save = decltype(save)::value;
-    BallSums<Save> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
+    constexpr bool Steal = decltype(steal)::value;
+    static_assert(!(Save && Steal), "a stolen block saves nothing");
+    auto sums = sums_io;
+    Vec3* __restrict__ const f = sums.f;
+    Vec3* __restrict__ const t = sums.t;
+    std::uint32_t ns = nse;
     for (std::int64_t c = c0; c < c1; ++c) {
       const std::uint32_t a = A[c], b = B[c];
-      prefetch(c, c1, f, t);
-      sums.at(a);
+      prefetch(std::bool_constant<!Steal>{}, c, ce, f, t);
+      if constexpr (!Steal) sums.at(a);
       Vec3 d;
       double d2;
       branch_d(c, a, b, d, d2);
@@ -431,15 +448,18 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
         while (*cur.c < static_cast<std::uint64_t>(c)) ++cur.c;
         if (*cur.c == static_cast<std::uint64_t>(c)) SV[cur.c - cur.c0] = {F, TB, stamp};
       }
-      sums.add(b, F, TA, TB);
+      if constexpr (Steal) se[ns++] = {a, b, F, TA, TB};
+      else sums.add(b, F, TA, TB);
     }
-    if (c0 < c1) sums.flush();
+    sums_io = sums;
+    nse = ns;
   };
   // Blocks of kLanes live contacts: stage 1 (lane list), stage 2 (kern), stage 3 (histories
   // and sums in contact order; lanes flagged `scalar` are redone by the scalar law from their
   // untouched history).
-  auto body_block = [=](auto save, std::int64_t c0, std::int64_t c1, Vec3* __restrict__ f, Vec3* __restrict__ t,
-                        ChunkCursor cur) {
+  // (The arguments as body's.)
+  auto body_block = [=](auto save, auto steal, std::int64_t c0, std::int64_t c1, std::int64_t ce, auto& sums_io,
+                        ChunkCursor cur, StealEntry* __restrict__ se, std::uint32_t& nse) {
     // Local copies of the closure's pointers and helpers: the byte stores below (a contact's
     // flags, its change mark) may alias any object as far as GCC knows, the closure's members
     // included, so that it reloaded every captured pointer after each of them; locals whose
@@ -458,8 +478,14 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     const auto key_of_ = key_of;
     const auto bond_at_ = bond_at;
     constexpr bool Save = decltype(save)::value;
+    constexpr bool Steal = decltype(steal)::value;
+    static_assert(!(Save && Steal), "a stolen block saves nothing");
     constexpr int K = pairblock::kLanes;
-    BallSums<Save> sums{f, t, c0 < c1 ? A_[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
+    auto sums = sums_io;
+    Vec3* __restrict__ const f = sums.f;
+    Vec3* __restrict__ const t = sums.t;
+    StealEntry* __restrict__ const se_ = se;
+    std::uint32_t ns = nse;
     pairblock::In in;
     pairblock::Out out;
     unsigned k0[K];  // each lane's key() before the law
@@ -468,7 +494,7 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
       int n = 0;
       for (; c < c1 && n < K; ++c) {
         const std::uint32_t a = A_[c], b = B_[c];
-        prefetch_(c, c1, f, t);
+        prefetch_(std::bool_constant<!Steal>{}, c, ce, f, t);
         Vec3 d;
         double d2;
         branch_d_(c, a, b, d, d2);
@@ -523,15 +549,28 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
           while (*cur.c < static_cast<std::uint64_t>(cl)) ++cur.c;
           if (*cur.c == static_cast<std::uint64_t>(cl)) SV[cur.c - cur.c0] = {F, TB, stamp};
         }
-        sums.at(a);
-        sums.add(b, F, TA, TB);
+        if constexpr (Steal) {
+          se_[ns++] = {a, b, F, TA, TB};
+        } else {
+          sums.at(a);
+          sums.add(b, F, TA, TB);
+        }
       }
     }
-    if (c0 < c1) sums.flush();
+    sums_io = sums;
+    nse = ns;
+  };
+  // Contacts [c0, c1) of a chunk (or of a block of it that ends the chunk at ce) onto the sums.
+  auto part = [&](auto save, auto steal, std::int64_t c0, std::int64_t c1, std::int64_t ce, auto& sums,
+                  ChunkCursor cur, StealEntry* se, std::uint32_t& nse) {
+    if (kern) body_block(save, steal, c0, c1, ce, sums, cur, se, nse);
+    else body(save, steal, c0, c1, ce, sums, cur, se, nse);
   };
   auto run = [&](auto save, std::int64_t c0, std::int64_t c1, Vec3* f, Vec3* t, ChunkCursor cur) {
-    if (kern) body_block(save, c0, c1, f, t, cur);
-    else body(save, c0, c1, f, t, cur);
+    BallSums<decltype(save)::value> sums{f, t, c0 < c1 ? A[c0] : 0u, cur.run_row, cur.run_rec, RS, stamp};
+    std::uint32_t nse = 0;
+    part(save, std::false_type{}, c0, c1, c1, sums, cur, nullptr, nse);
+    if (c0 < c1) sums.flush();
   };
   if (!par || (ti && !threaded)) {
     std::fill(cx.pt.f.begin(), cx.pt.f.end(), Vec3{});
@@ -557,6 +596,108 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     plan_gen_ = ~std::uint64_t{0};  // the plan's cuts are gone
   }
   const std::int64_t* CB = cut_.data();
+  // Work stealing (the chunks at m k / threads only): chunk k's blocks of kStealBlock contacts,
+  // [lo, hi) in steal_range_[k]; block j of chunk k is block steal_base(k) + j of the buffers.
+  const bool steal = steal_on_ && !threaded;
+  auto blocks_of = [CB](int k) { return (CB[k + 1] - CB[k] + kStealBlock - 1) / kStealBlock; };
+  auto steal_base = [&blocks_of](int k) {
+    std::int64_t b = 0;
+    for (int i = 0; i < k; ++i) b += blocks_of(i);
+    return b;
+  };
+  if (steal) {
+    const std::size_t nb = static_cast<std::size_t>(steal_base(nt));
+    if (steal_blocks_ < nb) {
+      steal_done_.reset(new std::atomic<std::uint64_t>[nb]());  // stamps 0: no pass's
+      steal_cnt_.reset(new std::uint32_t[nb]);
+      steal_blocks_ = nb;
+    }
+    const std::size_t cap = nb * static_cast<std::size_t>(kStealBlock);
+    if (steal_cap_ < cap) {
+      steal_buf_.reset(new StealEntry[cap]);
+      steal_cap_ = cap;
+    }
+    if (steal_chunks_ < nt) {
+      steal_range_.reset(new StealRange[static_cast<std::size_t>(nt)]);
+      steal_chunks_ = nt;
+    }
+    for (int k = 0; k < nt; ++k)
+      steal_range_[static_cast<std::size_t>(k)].v.store(static_cast<std::uint64_t>(blocks_of(k)) << 32,
+                                                        std::memory_order_relaxed);
+  }
+  StealRange* const SR = steal ? steal_range_.get() : nullptr;
+  std::atomic<std::uint64_t>* const SD = steal ? steal_done_.get() : nullptr;
+  std::uint32_t* const SC = steal ? steal_cnt_.get() : nullptr;
+  StealEntry* const SB = steal ? steal_buf_.get() : nullptr;
+  // The owner of chunk k takes its next block from the bottom, another thread one from the top
+  // (while at least two are left, so that the owner has work meanwhile); -1: none.
+  auto take_low = [SR](int k) -> std::int64_t {
+    std::atomic<std::uint64_t>& r = SR[k].v;
+    std::uint64_t v = r.load(std::memory_order_relaxed);
+    while (static_cast<std::uint32_t>(v) < static_cast<std::uint32_t>(v >> 32))
+      if (r.compare_exchange_weak(v, v + 1, std::memory_order_relaxed)) return static_cast<std::uint32_t>(v);
+    return -1;
+  };
+  auto take_high = [SR](int k) -> std::int64_t {
+    std::atomic<std::uint64_t>& r = SR[k].v;
+    std::uint64_t v = r.load(std::memory_order_relaxed);
+    while (static_cast<std::uint32_t>(v) + 1 < static_cast<std::uint32_t>(v >> 32))
+      if (r.compare_exchange_weak(v, v - (std::uint64_t{1} << 32), std::memory_order_relaxed))
+        return static_cast<std::uint32_t>(v >> 32) - 1;
+    return -1;
+  };
+  // Chunk k by its owner onto (f, t): its blocks from the bottom until the rest is taken, then
+  // the taken blocks' contacts in contact order (waiting for a block still being computed), so
+  // that every ball's sums run as in one walk of the chunk.
+  auto own_chunk = [&](int k, Vec3* f, Vec3* t) {
+    const std::int64_t c0 = CB[k], c1 = CB[k + 1];
+    BallSums<false> sums{f, t, c0 < c1 ? A[c0] : 0u, nullptr, nullptr, nullptr, stamp};
+    std::uint32_t nse = 0;
+    for (std::int64_t j; (j = take_low(k)) >= 0;) {
+      const std::int64_t b0 = c0 + j * kStealBlock;
+      part(std::false_type{}, std::false_type{}, b0, std::min(c1, b0 + kStealBlock), c1, sums, ChunkCursor{}, nullptr,
+           nse);
+    }
+    const std::int64_t base = steal_base(k), nbk = blocks_of(k);
+    for (std::int64_t j = static_cast<std::uint32_t>(SR[k].v.load(std::memory_order_relaxed) >> 32); j < nbk; ++j) {
+      const std::size_t g = static_cast<std::size_t>(base + j);
+      for (unsigned spin = 0; SD[g].load(std::memory_order_acquire) != stamp; ++spin)
+        if (spin % 1024 == 1023) std::this_thread::yield();
+        else __builtin_ia32_pause();
+      const StealEntry* e = SB + g * kStealBlock;
+      for (std::uint32_t q = 0, nq = SC[g]; q < nq; ++q) {
+        sums.at(e[q].a);
+        sums.add(e[q].b, e[q].F, e[q].TA, e[q].TB);
+      }
+    }
+    if (c0 < c1) sums.flush();
+  };
+  // Blocks taken from the top of the chunks with most left, until none has two.
+  std::atomic<std::uint64_t> stolen{0};
+  auto thieve = [&]() {
+    BallSums<false> none{nullptr, nullptr, 0u, nullptr, nullptr, nullptr, stamp};  // (not used)
+    std::uint64_t mine = 0;
+    for (;;) {
+      int best = -1;
+      std::uint32_t most = 1;
+      for (int k = 0; k < nt; ++k) {
+        const std::uint64_t v = SR[k].v.load(std::memory_order_relaxed);
+        const std::uint32_t left = static_cast<std::uint32_t>(v >> 32) - static_cast<std::uint32_t>(v);
+        if (left > most) most = left, best = k;
+      }
+      if (best < 0) break;
+      const std::int64_t j = take_high(best);
+      if (j < 0) continue;
+      const std::size_t g = static_cast<std::size_t>(steal_base(best) + j);
+      const std::int64_t b0 = CB[best] + j * kStealBlock, b1 = std::min(CB[best + 1], b0 + kStealBlock);
+      std::uint32_t nse = 0;
+      part(std::false_type{}, std::true_type{}, b0, b1, b1, none, ChunkCursor{}, SB + g * kStealBlock, nse);
+      SC[g] = nse;
+      SD[g].store(stamp, std::memory_order_release);
+      ++mine;
+    }
+    stolen.fetch_add(mine, std::memory_order_relaxed);
+  };
   const std::uint32_t* __restrict__ EO = ev_off_.data();
   const std::uint32_t* __restrict__ EV = ev_.data();
   const std::int32_t* __restrict__ K0 = first_.data();
@@ -594,6 +735,10 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
         row_hi_[uk] = c0 < c1 ? std::size_t{hi} + 1 : 0;
       }
       if (threaded) run(std::true_type{}, c0, c1, f, t, cursor(k));
+      else if (steal) {
+        if (k == 0 && steal_hold_s_ > 0.0) std::this_thread::sleep_for(std::chrono::duration<double>(steal_hold_s_));
+        own_chunk(k, f, t);
+      }
       else run(std::false_type{}, c0, c1, f, t, ChunkCursor{});
     }
     if (side) {
@@ -608,6 +753,7 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
 #pragma omp atomic
       side_s += ts;
     }
+    if (steal) thieve();
 #pragma omp barrier
     std::size_t rlo = n, rhi = 0;
     for (int k = 1; k < nt; ++k) {
@@ -659,6 +805,10 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     }
   }
   if (side) side->thread_s += side_s;
+  if (steal) {
+    stolen_ += stolen.load(std::memory_order_relaxed);
+    stealable_ += static_cast<std::uint64_t>(steal_base(nt));
+  }
 }
 
 // The plan of a threaded pass in `chunks` chunks (see pass_law): the chunk boundaries, the split

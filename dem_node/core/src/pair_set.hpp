@@ -6,7 +6,9 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -78,6 +80,23 @@ class PairSet final : public ContactSet {
     Vec3 f, t;
     std::uint64_t stamp = 0;
   };
+  /// The threaded pass takes blocks of another thread's chunk once its own work is done (work
+  /// stealing, pass_law; default on). The same bits either way (tests/dem/simd_kernel_test.cpp).
+  /// `hold_s` > 0 (tests): the owner of the first chunk starts that late in every threaded pass,
+  /// so that another thread takes most of its blocks.
+  void set_stealing(bool on, double hold_s = 0.0) {
+    steal_on_ = on;
+    steal_hold_s_ = hold_s;
+  }
+  /// Blocks taken from another thread's chunk so far, and the blocks of the passes that could
+  /// (the threaded passes without a plan).
+  std::uint64_t blocks_stolen() const { return stolen_; }
+  std::uint64_t blocks_stealable() const { return stealable_; }
+  /// A live contact of a stolen block: its balls and what the ball sums add (pass_law).
+  struct StealEntry {
+    std::uint32_t a, b;
+    Vec3 F, TA, TB;
+  };
   /// A chunk's cursors into its save lists (pass_law); empty for the one-thread pass.
   struct ChunkCursor {
     const std::uint64_t* c0 = nullptr;  // the save list's start: record of *c = c - c0
@@ -120,6 +139,24 @@ class PairSet final : public ContactSet {
   std::vector<std::size_t> sc_off_, rr_off_;
   std::vector<BSave> save_;
   std::vector<RunSave> run_;
+  // Work stealing in the threaded pass without a plan (pass_law): chunk k's blocks of kStealBlock
+  // contacts are [lo, hi) of steal_range_[k] (lo | hi << 32), its owner takes them from the
+  // bottom, another thread from the top. A stolen block's live contacts go to its slice of
+  // steal_buf_ (count in steal_cnt_), and steal_done_ holds the pass's stamp once it is
+  // complete; the owner then adds them to the ball sums in contact order.
+  struct alignas(64) StealRange {
+    std::atomic<std::uint64_t> v{0};
+  };
+  bool steal_on_ = true;
+  double steal_hold_s_ = 0.0;                // set_stealing's hold (tests)
+  std::unique_ptr<StealEntry[]> steal_buf_;  // (not value-initialised: pages only where used)
+  std::size_t steal_cap_ = 0;                // entries in steal_buf_
+  std::unique_ptr<std::atomic<std::uint64_t>[]> steal_done_;
+  std::unique_ptr<std::uint32_t[]> steal_cnt_;
+  std::size_t steal_blocks_ = 0;             // blocks in steal_done_ / steal_cnt_
+  std::unique_ptr<StealRange[]> steal_range_;
+  int steal_chunks_ = 0;                     // chunks in steal_range_
+  std::uint64_t stolen_ = 0, stealable_ = 0;  // blocks_stolen, blocks_stealable
   // Scratch of the O(contacts) measurements (kept to avoid an allocation per call).
   std::vector<double> norm_;             // per-contact ||F||
   // The pass's norms (keep_norms_): norm_ holds ||Law::force|| of every contact for the list of

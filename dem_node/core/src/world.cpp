@@ -141,6 +141,12 @@ void World::keep_force_norms(bool on) { pairs_->keep_force_norms(on); }
 
 bool World::force_norms_kept() const { return pairs_->pass_norms(p_.ball_ball.model); }
 
+void World::set_pair_stealing(bool on, double hold_s) { pairs_->set_stealing(on, hold_s); }
+
+std::pair<std::uint64_t, std::uint64_t> World::pair_blocks_stolen() const {
+  return {pairs_->blocks_stolen(), pairs_->blocks_stealable()};
+}
+
 void World::set_pair_kernel(PairKernel k) {
   if (!pair_kernel_available(k))
     throw std::invalid_argument("set_pair_kernel: this CPU lacks the instruction set of the requested kernel.");

@@ -418,6 +418,13 @@ class World {
   /// their part of it first (World::force_pass; default on). The same bits either way
   /// (tests/dem/simd_kernel_test.cpp compares the two); off: the facets' own pass after it.
   void set_hosted_facets(bool on) { hosted_facets_ = on; }
+  /// A thread that has done its part of the threaded ball-ball pass takes blocks of the others'
+  /// parts (default on); their ball sums still run in contact order, so the bits are the same
+  /// either way (tests/dem/simd_kernel_test.cpp). `hold_s` > 0 (tests): the owner of the first
+  /// part starts that late in every pass, so that another thread takes most of it.
+  void set_pair_stealing(bool on, double hold_s = 0.0);
+  /// Blocks of that pass taken by another thread so far, of the blocks it had (both cumulative).
+  std::pair<std::uint64_t, std::uint64_t> pair_blocks_stolen() const;
   PairKernel pair_kernel() const { return kernel_; }
   /// True if `k` can run on this CPU.
   static bool pair_kernel_available(PairKernel k);
