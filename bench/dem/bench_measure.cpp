@@ -20,6 +20,9 @@
 // (World::set_hosted_facets(false)); =ab switches between the two every 10 steps inside the run
 // (ab_blocks.hpp: A = hosted; the same bits either way) and prints the ratio of the step's time,
 // hosted over own, per pair of neighbouring blocks (mean and standard error).
+// BENCH_MEASURE_STEAL=0 runs the threaded ball-ball pass without work stealing
+// (World::set_pair_stealing(false)); =ab switches it on (A) and off (B) the same way (not together
+// with BENCH_MEASURE_HOSTED=ab). A last line gives the blocks of that pass other threads took.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>

@@ -709,9 +709,9 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
   std::atomic<std::int64_t> side_next{0};
   double side_s = 0.0;
   // One parallel region per pass: the chunks (chunk k on thread k mod T, so the chunks, and the
-  // bits, do not depend on how many threads the runtime grants), the side units, a barrier, then
-  // the fixed-order reduction of the chunk buffers split by particle rows, which also finishes the
-  // split balls.
+  // bits, do not depend on how many threads the runtime grants), the side units, blocks of the
+  // chunks still being walked (steal), a barrier, then the fixed-order reduction of the chunk
+  // buffers split by particle rows, which also finishes the split balls.
 #pragma omp parallel num_threads(nt)
   {
     const int tid = omp_get_thread_num(), T = omp_get_num_threads();
