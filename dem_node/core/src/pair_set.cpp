@@ -661,9 +661,12 @@ void PairSet::pass_law(SetContext& cx, double dt, SideWork* side) {
     const std::int64_t base = steal_base(k), nbk = blocks_of(k);
     for (std::int64_t j = static_cast<std::uint32_t>(SR[k].v.load(std::memory_order_relaxed) >> 32); j < nbk; ++j) {
       const std::size_t g = static_cast<std::size_t>(base + j);
-      for (unsigned spin = 0; SD[g].load(std::memory_order_acquire) != stamp; ++spin)
+      for (unsigned spin = 0; SD[g].load(std::memory_order_acquire) != stamp; ++spin) {
         if (spin % 1024 == 1023) std::this_thread::yield();
+#if defined(__x86_64__) || defined(__i386__)
         else __builtin_ia32_pause();
+#endif
+      }
       const StealEntry* e = SB + g * kStealBlock;
       for (std::uint32_t q = 0, nq = SC[g]; q < nq; ++q) {
         sums.at(e[q].a);
