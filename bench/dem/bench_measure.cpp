@@ -23,6 +23,8 @@
 // BENCH_MEASURE_STEAL=0 runs the threaded ball-ball pass without work stealing
 // (World::set_pair_stealing(false)); =ab switches it on (A) and off (B) the same way (not together
 // with BENCH_MEASURE_HOSTED=ab). A last line gives the blocks of that pass other threads took.
+// BENCH_MEASURE_NORMS=0 runs the pass without keeping the contacts' force norms (the scan forms
+// them); =ab with (A) and without (B), the same way (one =ab at a time).
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -64,8 +66,14 @@ int main(int argc, char** argv) try {
     load_state_file(w, dir / "dem.world.state", hash);
     if (step_threads_arg > 0) w.mutable_params().threads = step_threads_arg;
     // As the DEM node: the pass keeps the force norms for the scan (BENCH_MEASURE_NORMS=0: not).
+    // =ab: with (A) and without (B) in alternate blocks, as the hosted facets' ab (the step's time
+    // only: without them the scan forms the norms itself).
     const char* kn = std::getenv("BENCH_MEASURE_NORMS");
-    w.keep_force_norms(!(kn && std::string(kn) == "0"));
+    const std::string norms_mode = kn ? kn : "1";
+    if (norms_mode != "0" && norms_mode != "1" && norms_mode != "ab")
+      throw std::runtime_error("BENCH_MEASURE_NORMS must be 0, 1 or ab, found '" + norms_mode + "'");
+    const bool ab_norms = norms_mode == "ab";
+    w.keep_force_norms(norms_mode != "0");
     const char* hv = std::getenv("BENCH_MEASURE_HOSTED");
     const std::string hosted_mode = hv ? hv : "1";
     const bool ab = hosted_mode == "ab";
@@ -77,7 +85,8 @@ int main(int argc, char** argv) try {
     if (steal_mode != "0" && steal_mode != "1" && steal_mode != "ab")
       throw std::runtime_error("BENCH_MEASURE_STEAL must be 0, 1 or ab, found '" + steal_mode + "'");
     const bool ab_steal = steal_mode == "ab";
-    if (ab && ab_steal) throw std::runtime_error("BENCH_MEASURE_HOSTED=ab and BENCH_MEASURE_STEAL=ab: one at a time");
+    if (int(ab) + int(ab_steal) + int(ab_norms) > 1)
+      throw std::runtime_error("BENCH_MEASURE_HOSTED, BENCH_MEASURE_STEAL and BENCH_MEASURE_NORMS: one =ab at a time");
     w.set_pair_stealing(steal_mode != "0");
     constexpr int kBlock = 10;
     std::vector<double> block_ms;  // (ab) the step's time per block of kBlock steps
@@ -100,10 +109,11 @@ int main(int argc, char** argv) try {
       const int blk = s / kBlock;
       if (ab) w.set_hosted_facets(demfdm::bench::ab_block_is_a(blk));
       if (ab_steal) w.set_pair_stealing(demfdm::bench::ab_block_is_a(blk));
+      if (ab_norms) w.keep_force_norms(demfdm::bench::ab_block_is_a(blk));
       const auto t0 = Clock::now();
       w.step();
       const auto t1 = Clock::now();
-      if (ab || ab_steal) {
+      if (ab || ab_steal || ab_norms) {
         if (static_cast<int>(block_ms.size()) <= blk) block_ms.resize(static_cast<std::size_t>(blk) + 1, 0.0);
         block_ms[static_cast<std::size_t>(blk)] += ms(t0, t1);
       }
@@ -165,14 +175,17 @@ int main(int argc, char** argv) try {
         sink, 1e3 * ph.rebuild / n, 1e3 * ph.pair / n, 1e3 * ph.facet / n, 1e3 * ph.footing / n, 1e3 * ph.plane / n,
         1e3 * ph.gather / n, 1e3 * ph.motion / n, 1e3 * ph.effects_total / n, w.facet_contacts().size(),
         w.footing_contacts().size());
-    if (ab || ab_steal) {
+    if (ab || ab_steal || ab_norms) {
       block_ms.resize(static_cast<std::size_t>(steps / kBlock));  // complete blocks only
       const demfdm::bench::AbRatios r = demfdm::bench::ab_ratios(block_ms);
       if (ab)
         std::printf("bench_measure hosted facets: step time hosted/own %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
                     r.mean, r.se, r.pairs, kBlock);
-      else
+      else if (ab_steal)
         std::printf("bench_measure stealing: step time with/without %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
+                    r.mean, r.se, r.pairs, kBlock);
+      else
+        std::printf("bench_measure force norms: step time kept/not %.4f (s.e. %.4f) over %zu block pairs of %d steps\n",
                     r.mean, r.se, r.pairs, kBlock);
     }
     const auto st = w.pair_blocks_stolen();
