@@ -24,7 +24,8 @@
 // (World::set_pair_stealing(false)); =ab switches it on (A) and off (B) the same way (not together
 // with BENCH_MEASURE_HOSTED=ab). A last line gives the blocks of that pass other threads took.
 // BENCH_MEASURE_NORMS=0 runs the pass without keeping the contacts' force norms (the scan forms
-// them); =ab with (A) and without (B), the same way (one =ab at a time).
+// them); =ab with (A) and without (B), the same way. Each switch takes 0, 1 (the default) or ab,
+// one ab at a time.
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -48,6 +49,19 @@ namespace {
 
 double ms(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
 
+// A BENCH_MEASURE_* switch: 0 (off), 1 (on, the default) or ab (on in the A blocks, off in the B
+// blocks, ab_blocks.hpp).
+struct Switch {
+  bool on = true, ab = false;
+};
+Switch switch_of(const char* var) {
+  const char* v = std::getenv(var);
+  const std::string m = v ? v : "1";
+  if (m != "0" && m != "1" && m != "ab")
+    throw std::runtime_error(std::string(var) + " must be 0, 1 or ab, found '" + m + "'");
+  return {m != "0", m == "ab"};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) try {
@@ -61,33 +75,19 @@ int main(int argc, char** argv) try {
   const int measure_threads = argc > 4 ? std::stoi(argv[4]) : 0;  // 0: the World's own
   const int step_threads_arg = argc > 5 ? std::stoi(argv[5]) : 0;  // 0: the World's own
   const std::uint64_t hash = demfdm::coord::verify_checkpoint(dir).scene_hash;
+  const Switch hosted = switch_of("BENCH_MEASURE_HOSTED"), steal = switch_of("BENCH_MEASURE_STEAL"),
+               norms = switch_of("BENCH_MEASURE_NORMS");
+  const bool ab = hosted.ab, ab_steal = steal.ab, ab_norms = norms.ab;
+  if (int(ab) + int(ab_steal) + int(ab_norms) > 1)
+    throw std::runtime_error("BENCH_MEASURE_HOSTED, BENCH_MEASURE_STEAL and BENCH_MEASURE_NORMS: one =ab at a time");
   for (int r = 0; r < rounds; ++r) {
     World w{WorldParams{}};
     load_state_file(w, dir / "dem.world.state", hash);
     if (step_threads_arg > 0) w.mutable_params().threads = step_threads_arg;
-    // As the DEM node: the pass keeps the force norms for the scan (BENCH_MEASURE_NORMS=0: not).
-    // =ab: with (A) and without (B) in alternate blocks, as the hosted facets' ab (the step's time
-    // only: without them the scan forms the norms itself).
-    const char* kn = std::getenv("BENCH_MEASURE_NORMS");
-    const std::string norms_mode = kn ? kn : "1";
-    if (norms_mode != "0" && norms_mode != "1" && norms_mode != "ab")
-      throw std::runtime_error("BENCH_MEASURE_NORMS must be 0, 1 or ab, found '" + norms_mode + "'");
-    const bool ab_norms = norms_mode == "ab";
-    w.keep_force_norms(norms_mode != "0");
-    const char* hv = std::getenv("BENCH_MEASURE_HOSTED");
-    const std::string hosted_mode = hv ? hv : "1";
-    const bool ab = hosted_mode == "ab";
-    w.set_hosted_facets(hosted_mode != "0");
-    // BENCH_MEASURE_STEAL=0: the threaded ball-ball pass without work stealing; =ab: with (A) and
-    // without (B) in alternate blocks, as the hosted facets' ab.
-    const char* sv = std::getenv("BENCH_MEASURE_STEAL");
-    const std::string steal_mode = sv ? sv : "1";
-    if (steal_mode != "0" && steal_mode != "1" && steal_mode != "ab")
-      throw std::runtime_error("BENCH_MEASURE_STEAL must be 0, 1 or ab, found '" + steal_mode + "'");
-    const bool ab_steal = steal_mode == "ab";
-    if (int(ab) + int(ab_steal) + int(ab_norms) > 1)
-      throw std::runtime_error("BENCH_MEASURE_HOSTED, BENCH_MEASURE_STEAL and BENCH_MEASURE_NORMS: one =ab at a time");
-    w.set_pair_stealing(steal_mode != "0");
+    // As the DEM node: hosted facets, work stealing, the pass keeps the force norms for the scan.
+    w.set_hosted_facets(hosted.on);
+    w.set_pair_stealing(steal.on);
+    w.keep_force_norms(norms.on);
     constexpr int kBlock = 10;
     std::vector<double> block_ms;  // (ab) the step's time per block of kBlock steps
     const int step_threads = w.params().threads;
